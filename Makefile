@@ -1,0 +1,50 @@
+# evloc: top-level commands. See README.md.
+#   make test   install missing packages, configure (Release with assertions), build, run every test
+#   make build  configure and build only
+#   make demo   end to end on built-in data (see docs/demo.md)
+#   make bench  build and run the benchmarks
+#   make fuzz   build the libFuzzer targets with clang (see docs/reliability.md)
+#   make clean  remove build outputs
+
+BUILD_DIR ?= build
+JOBS ?= $(shell nproc)
+CMAKE_GENERATOR := $(shell command -v ninja >/dev/null 2>&1 && echo Ninja || echo "Unix Makefiles")
+CCACHE := $(shell command -v ccache 2>/dev/null)
+CMAKE_FLAGS := -DCMAKE_BUILD_TYPE=Release -DEVLOC_ASSERTIONS=ON \
+  $(if $(CCACHE),-DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_C_COMPILER_LAUNCHER=ccache,)
+
+.PHONY: deps configure build test test-long bench fuzz demo clean format
+
+deps:
+	@scripts/install-deps.sh
+
+configure: deps
+	@cmake -S . -B $(BUILD_DIR) -G "$(CMAKE_GENERATOR)" $(CMAKE_FLAGS) >/dev/null || \
+	  { echo "make: cmake configure failed; rerun 'cmake -S . -B $(BUILD_DIR)' to see why" >&2; exit 1; }
+
+build: configure
+	@cmake --build $(BUILD_DIR) -j $(JOBS)
+
+test: build
+	@cd $(BUILD_DIR) && ctest --output-on-failure -j $(JOBS) -LE long
+
+test-long: build
+	@cd $(BUILD_DIR) && ctest --output-on-failure -L long
+
+bench: build
+	@scripts/run-benchmarks.sh $(BUILD_DIR)
+
+fuzz: deps
+	@cmake -S . -B build-fuzz -G "$(CMAKE_GENERATOR)" -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+	  -DCMAKE_C_COMPILER=clang -DCMAKE_CXX_COMPILER=clang++ -DEVLOC_FUZZ=ON \
+	  $(if $(CCACHE),-DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_C_COMPILER_LAUNCHER=ccache,) >/dev/null
+	@cmake --build build-fuzz -j $(JOBS) --target evloc_fuzzers
+
+demo: build
+	@scripts/demo.sh
+
+clean:
+	rm -rf $(BUILD_DIR) build-fuzz
+
+format:
+	@git ls-files '*.h' '*.cc' | xargs clang-format -i

@@ -1,0 +1,68 @@
+#!/usr/bin/env bash
+# Installs every Debian 12 package evloc needs to build, test and run.
+# Idempotent: packages already present are skipped; nothing is installed with recommends.
+# Usage: scripts/install-deps.sh [--check]   (--check only lists what is missing; exit 1 if any)
+set -euo pipefail
+
+PACKAGES=(
+  # toolchain
+  build-essential cmake ninja-build pkg-config ccache git clang clang-format libclang-rt-14-dev
+  # core libraries
+  libeigen3-dev libopencv-dev libyaml-cpp-dev nlohmann-json3-dev libhdf5-dev
+  # mapping
+  colmap libceres-dev libpcl-dev
+  # service
+  libgrpc++-dev libprotobuf-dev protobuf-compiler protobuf-compiler-grpc
+  # tests and benchmarks
+  libgtest-dev libgmock-dev libbenchmark-dev
+  # python client example and its test
+  python3 python3-grpcio python3-protobuf python3-numpy
+)
+
+missing=()
+for pkg in "${PACKAGES[@]}"; do
+  if ! dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed"; then
+    missing+=("$pkg")
+  fi
+done
+
+if [[ ${#missing[@]} -eq 0 ]]; then
+  echo "install-deps: all ${#PACKAGES[@]} packages are installed."
+  exit 0
+fi
+
+if [[ "${1:-}" == "--check" ]]; then
+  echo "install-deps: missing packages: ${missing[*]}"
+  exit 1
+fi
+
+echo "install-deps: installing ${#missing[@]} missing packages: ${missing[*]}"
+
+if ! command -v apt-get >/dev/null 2>&1; then
+  echo "install-deps: error: apt-get not found. evloc's install script supports Debian 12 (bookworm)." >&2
+  echo "  Install these packages with your system's package manager: ${missing[*]}" >&2
+  exit 2
+fi
+
+SUDO=""
+if [[ "$(id -u)" -ne 0 ]]; then
+  if command -v sudo >/dev/null 2>&1 && sudo -n true 2>/dev/null; then
+    SUDO="sudo"
+  else
+    echo "install-deps: error: installing packages needs root (you are $(id -un))." >&2
+    echo "  Run as root, or: sudo $0" >&2
+    exit 2
+  fi
+fi
+
+export DEBIAN_FRONTEND=noninteractive
+# A fresh machine has no package lists; refresh them when apt cannot see the first missing package.
+if ! apt-cache show "${missing[0]}" >/dev/null 2>&1 || [[ -z "$(ls -A /var/lib/apt/lists 2>/dev/null | grep -v lock)" ]]; then
+  $SUDO apt-get update -q || { echo "install-deps: error: 'apt-get update' failed (network or sources.list?)" >&2; exit 2; }
+fi
+if ! $SUDO apt-get install -y -q --no-install-recommends "${missing[@]}"; then
+  echo "install-deps: error: 'apt-get install' failed for: ${missing[*]}" >&2
+  echo "  Check the messages above (package not found in this release, disk full, dpkg lock held)." >&2
+  exit 2
+fi
+echo "install-deps: done."
