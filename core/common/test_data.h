@@ -28,9 +28,9 @@ std::filesystem::path MakeTempDir(const std::string& prefix);
 
 // Skips the current test with a visible reason when a shared data file is absent; otherwise
 // declares `var` as its path.
-#define EVLOC_REQUIRE_SHARED_DATA(var, relative)                              \
-  const auto var##_optional = ::evloc::testing::SharedDataFile(relative);     \
-  if (!var##_optional) {                                                      \
-    GTEST_SKIP() << ::evloc::testing::MissingDataReason(relative);            \
-  }                                                                           \
+#define EVLOC_REQUIRE_SHARED_DATA(var, relative)                          \
+  const auto var##_optional = ::evloc::testing::SharedDataFile(relative); \
+  if (!var##_optional) {                                                  \
+    GTEST_SKIP() << ::evloc::testing::MissingDataReason(relative);        \
+  }                                                                       \
   const std::filesystem::path var = *var##_optional

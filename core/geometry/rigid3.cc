@@ -39,9 +39,7 @@ Rigid3d Rigid3d::Inverse() const {
   return Rigid3d(inverse_rotation, -(inverse_rotation * translation));
 }
 
-bool Rigid3d::IsFinite() const {
-  return rotation.coeffs().allFinite() && translation.allFinite();
-}
+bool Rigid3d::IsFinite() const { return rotation.coeffs().allFinite() && translation.allFinite(); }
 
 Rigid3d operator*(const Rigid3d& c_from_b, const Rigid3d& b_from_a) {
   return Rigid3d(c_from_b.rotation * b_from_a.rotation,
@@ -186,8 +184,7 @@ Sim3d AlignUmeyama(const Eigen::Matrix3Xd& source, const Eigen::Matrix3Xd& targe
   }
   Eigen::Vector3d signs = Eigen::Vector3d::Ones();
   if ((svd.matrixU().determinant() * svd.matrixV().determinant()) < 0) signs(2) = -1;
-  const Eigen::Matrix3d rotation =
-      svd.matrixU() * signs.asDiagonal() * svd.matrixV().transpose();
+  const Eigen::Matrix3d rotation = svd.matrixU() * signs.asDiagonal() * svd.matrixV().transpose();
 
   Sim3d result;
   result.rotation = Eigen::Quaterniond(rotation).normalized();

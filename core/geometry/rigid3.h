@@ -96,7 +96,6 @@ double AngleBetween(const Eigen::Quaterniond& a, const Eigen::Quaterniond& b);
 // sum |target_i - T(source_i)|^2. With `with_scale` false the scale is fixed to 1 (SE(3)).
 // Throws InvalidArgumentError when the point sets differ in size, have fewer than 3 points, or
 // are degenerate (collinear or coincident), so that the rotation is not determined.
-Sim3d AlignUmeyama(const Eigen::Matrix3Xd& source, const Eigen::Matrix3Xd& target,
-                   bool with_scale);
+Sim3d AlignUmeyama(const Eigen::Matrix3Xd& source, const Eigen::Matrix3Xd& target, bool with_scale);
 
 }  // namespace evloc

@@ -108,8 +108,8 @@ TEST(Interpolate, EndPointsAndMidpoint) {
   ExpectNear(Interpolate(a, b, 0.0), a, 1e-12);
   ExpectNear(Interpolate(a, b, 1.0), b, 1e-9);
   const Rigid3d middle = Interpolate(a, b, 0.5);
-  EXPECT_NEAR(AngleBetween(a.rotation, middle.rotation),
-              AngleBetween(middle.rotation, b.rotation), 1e-9);
+  EXPECT_NEAR(AngleBetween(a.rotation, middle.rotation), AngleBetween(middle.rotation, b.rotation),
+              1e-9);
   EXPECT_LT((middle.translation - 0.5 * (a.translation + b.translation)).norm(), 1e-12);
 }
 
