@@ -1,0 +1,67 @@
+// A per-pixel look-up table that undistorts events in O(1): built once per camera (per session),
+// it stores for every integer sensor pixel the undistorted normalised coordinates and the pixel in
+// the ideal pinhole camera with the same fx fy cx cy. See docs/camera.md, "Undistortion table".
+#pragma once
+
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "core/camera/camera.h"
+
+namespace evloc {
+
+// Undistorts integer sensor pixels by table look-up.
+class UndistortionTable {
+ public:
+  // One sensor pixel's undistortion.
+  struct Entry {
+    // Undistorted normalised coordinates (x/z, y/z) of the pixel's ray.
+    Eigen::Vector2f normalized = Eigen::Vector2f::Zero();
+    // The same ray as a pixel of the ideal pinhole camera (fx * x/z + cx, fy * y/z + cy); it may
+    // lie outside the sensor for strong barrel distortion.
+    Eigen::Vector2f ideal_pixel = Eigen::Vector2f::Zero();
+    // False when Camera::Unproject fails for this pixel; the coordinates are then zero.
+    bool valid = false;
+  };
+
+  // Builds the table for every pixel of `camera` (which must pass Check(), else
+  // InvalidArgumentError). Costs width * height Newton undistortions.
+  explicit UndistortionTable(const Camera& camera);
+
+  // The camera the table was built for.
+  const Camera& camera() const { return camera_; }
+  // The ideal pinhole camera of ideal_pixel (same size, fx, fy, cx, cy).
+  const Camera& ideal_camera() const { return ideal_camera_; }
+  // Sensor width, pixels.
+  int width() const { return camera_.width; }
+  // Sensor height, pixels.
+  int height() const { return camera_.height; }
+  // Number of pixels whose entry is valid.
+  int num_valid() const { return num_valid_; }
+
+  // True when (x, y) is a sensor pixel: 0 <= x < width and 0 <= y < height.
+  bool Contains(int x, int y) const {
+    return x >= 0 && y >= 0 && x < camera_.width && y < camera_.height;
+  }
+
+  // The entry of sensor pixel (x, y); the caller guarantees Contains(x, y) (asserted).
+  const Entry& At(int x, int y) const;
+
+  // The entry of pixel (x, y), or nullptr when the pixel is outside the sensor or its entry is
+  // not valid.
+  const Entry* Find(int x, int y) const {
+    if (!Contains(x, y)) return nullptr;
+    const Entry& entry = entries_[static_cast<size_t>(y) * camera_.width + x];
+    return entry.valid ? &entry : nullptr;
+  }
+
+ private:
+  Camera camera_;
+  Camera ideal_camera_;
+  // Row-major, width * height entries.
+  std::vector<Entry> entries_;
+  int num_valid_ = 0;
+};
+
+}  // namespace evloc
