@@ -1,0 +1,58 @@
+// A camera trajectory: poses world_from_cam at strictly increasing times, with interpolation.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <optional>
+#include <vector>
+
+#include "core/geometry/rigid3.h"
+
+namespace evloc {
+
+// One pose of a trajectory: where the camera was at time t_ns.
+struct TimedPose {
+  // Time, nanoseconds (the clock of the source: sensor, simulator or ground truth).
+  int64_t t_ns = 0;
+  // Camera pose: maps camera coordinates to world (map) coordinates.
+  Rigid3d world_from_cam;
+};
+
+// A sequence of poses at strictly increasing times. Poses between samples are interpolated with
+// Interpolate() from core/geometry (slerp of rotation, linear translation).
+class Trajectory {
+ public:
+  // An empty trajectory.
+  Trajectory() = default;
+  // Takes `poses`; throws InvalidArgumentError unless their times strictly increase and every
+  // pose is finite.
+  explicit Trajectory(std::vector<TimedPose> poses);
+
+  // The samples, in time order.
+  const std::vector<TimedPose>& poses() const { return poses_; }
+  // Appends a sample; throws InvalidArgumentError unless pose.t_ns > end_ns() and it is finite.
+  void Append(const TimedPose& pose);
+
+  // Number of samples.
+  size_t size() const { return poses_.size(); }
+  // True when there are no samples.
+  bool empty() const { return poses_.empty(); }
+  // Time of the first sample; throws InvalidArgumentError when empty.
+  int64_t start_ns() const;
+  // Time of the last sample; throws InvalidArgumentError when empty.
+  int64_t end_ns() const;
+  // Duration end_ns() - start_ns(), 0 when empty.
+  int64_t duration_ns() const;
+
+  // The pose at t_ns, interpolated between the two samples around it (exactly a sample's pose at
+  // its time); std::nullopt outside [start_ns(), end_ns()] or when empty.
+  std::optional<Rigid3d> Lookup(int64_t t_ns) const;
+
+  // Index of the last sample with time <= t_ns; std::nullopt when t_ns < start_ns() or empty.
+  std::optional<size_t> IndexAtOrBefore(int64_t t_ns) const;
+
+ private:
+  std::vector<TimedPose> poses_;
+};
+
+}  // namespace evloc
