@@ -1,0 +1,166 @@
+// The evloc map (docs/method.md §2, docs/map-format.md): semi-dense, gradient-augmented points
+// of appearance edges, the keyframes they were built from, and the cameras of those keyframes.
+// This is the contract between the mapper and the localizer.
+#pragma once
+
+#include <Eigen/Core>
+#include <cstddef>
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "core/camera/camera.h"
+#include "core/geometry/rigid3.h"
+
+namespace evloc {
+
+// Marks a point that was not triangulated in any keyframe (for example an imported PCD point).
+inline constexpr uint32_t kNoKeyframe = 0xffffffff;
+
+// The current (and only) format version of .evmap files written by SaveMap.
+inline constexpr uint32_t kMapFormatVersion = 1;
+
+// A camera pose from which part of the map was built.
+struct Keyframe {
+  // Pose: p_cam = cam_from_world * p_world.
+  Rigid3d cam_from_world;
+  // Index into Map::cameras.
+  uint32_t camera_index = 0;
+  // Capture time, nanoseconds.
+  int64_t t_ns = 0;
+  // Name of the source image (relative path as given to the mapper); may be empty.
+  std::string image_name;
+  // Indices into the point arrays of the points this keyframe sees, strictly increasing.
+  std::vector<uint32_t> visible_points;
+};
+
+// Who made a map, from what, and when.
+struct MapProvenance {
+  // Program that wrote the map, e.g. "evloc-mapper import-pcd".
+  std::string tool;
+  // Version of that program.
+  std::string tool_version;
+  // Creation time, UTC, ISO 8601 with a trailing Z ("2024-05-01T12:00:00Z").
+  std::string created_utc;
+  // Command line that produced the map.
+  std::string command_line;
+  // Input files or data sets the map was built from.
+  std::vector<std::string> inputs;
+};
+
+// A semi-dense point map. Per-point data is struct-of-arrays: every per-point vector has size().
+struct Map {
+  // Positions p_world, metres.
+  std::vector<Eigen::Vector3f> positions;
+  // Unit 3D gradient directions g_world (method.md §3.4).
+  std::vector<Eigen::Vector3f> gradients;
+  // Standard deviation of the inverse depth, 1/m; 0 when unknown.
+  std::vector<float> inverse_depth_sigma;
+  // Image gradient modulus at the source pixel (intensity in [0, 1] per pixel); 0 when unknown.
+  std::vector<float> gradient_magnitude;
+  // Index into keyframes of the point's source keyframe, or kNoKeyframe.
+  std::vector<uint32_t> source_keyframe;
+  // Keyframes; empty for imported maps.
+  std::vector<Keyframe> keyframes;
+  // Cameras referenced by Keyframe::camera_index.
+  std::vector<Camera> cameras;
+  // How the map was made.
+  MapProvenance provenance;
+
+  // Number of points.
+  size_t size() const { return positions.size(); }
+  // Appends one point with the given attributes.
+  void AddPoint(const Eigen::Vector3f& position, const Eigen::Vector3f& gradient,
+                float point_inverse_depth_sigma = 0.0f, float point_gradient_magnitude = 0.0f,
+                uint32_t point_source_keyframe = kNoKeyframe);
+  // Pre-allocates room for `count` points.
+  void Reserve(size_t count);
+  // Throws InvalidArgumentError naming the first bad element unless: every per-point vector has
+  // size() entries; positions are finite; gradients are unit vectors (|g| within 1e-3 of 1);
+  // sigmas and magnitudes are finite and >= 0; source keyframes are valid indices or
+  // kNoKeyframe; keyframe poses are finite with unit quaternions, camera indices valid, visible
+  // points valid and strictly increasing; every camera passes Camera::Check().
+  void Check() const;
+};
+
+// Allowed deviation of |gradient| from 1 in Map::Check().
+inline constexpr float kGradientNormTolerance = 1e-3f;
+
+// CRC32C (Castagnoli) of the map content (points, keyframes, cameras; not provenance) in the
+// canonical little-endian layout of docs/map-format.md. Equal content gives an equal value.
+uint32_t ComputeMapContentChecksum(const Map& map);
+
+// Writes `map` to a .evmap file (header + protobuf payload, docs/map-format.md), atomically: a
+// crash or error never leaves a half-written `path`. Calls map.Check() first (throws
+// InvalidArgumentError) and throws IoError when the file cannot be written.
+void SaveMap(const std::filesystem::path& path, const Map& map);
+
+// Reads a .evmap file and verifies it: magic ("not an evloc map"), format version, payload length
+// (truncated files), payload checksum, content checksum, and Map::Check(). Throws IoError when the
+// file cannot be read and ParseError naming the file and byte offset when it is not a valid map.
+Map LoadMap(const std::filesystem::path& path);
+
+// The fixed-size header of a .evmap file.
+struct MapFileHeader {
+  // Format version of the payload.
+  uint32_t format_version = 0;
+  // Payload length, bytes.
+  uint64_t payload_length = 0;
+  // CRC32C of the payload bytes.
+  uint32_t payload_crc32c = 0;
+};
+
+// Size of the .evmap header, bytes.
+inline constexpr size_t kMapFileHeaderSize = 32;
+
+// Reads and validates only the header of a .evmap file (magic, version, header checksum, and that
+// the file holds payload_length bytes after it). Throws like LoadMap.
+MapFileHeader ReadMapFileHeader(const std::filesystem::path& path);
+
+// A summary of a map for humans and logs.
+struct MapInfo {
+  // Number of points.
+  size_t num_points = 0;
+  // Number of keyframes.
+  size_t num_keyframes = 0;
+  // Number of cameras.
+  size_t num_cameras = 0;
+  // Sum over keyframes of their visible point counts.
+  size_t num_visibility_entries = 0;
+  // Points with a known (non-zero) inverse-depth sigma.
+  size_t num_points_with_inverse_depth_sigma = 0;
+  // Points with a known (non-zero) gradient magnitude.
+  size_t num_points_with_gradient_magnitude = 0;
+  // Points with a source keyframe.
+  size_t num_points_with_source_keyframe = 0;
+  // Axis-aligned bounding box of the positions, metres (zero for an empty map).
+  Eigen::Vector3f bounding_box_min = Eigen::Vector3f::Zero();
+  // Upper corner of the bounding box, metres.
+  Eigen::Vector3f bounding_box_max = Eigen::Vector3f::Zero();
+  // Median inverse-depth sigma over points where it is known, 1/m; 0 when none is.
+  float median_inverse_depth_sigma = 0.0f;
+  // Earliest and latest keyframe time, nanoseconds (0 without keyframes).
+  int64_t first_keyframe_t_ns = 0;
+  // Latest keyframe time, nanoseconds.
+  int64_t last_keyframe_t_ns = 0;
+  // ComputeMapContentChecksum of the map.
+  uint32_t content_crc32c = 0;
+  // Format version the map is (or would be) stored with.
+  uint32_t format_version = kMapFormatVersion;
+  // Provenance of the map.
+  MapProvenance provenance;
+  // Cameras, as one line each ("pinhole 640x480 fx=... ").
+  std::vector<std::string> camera_descriptions;
+
+  // bounding_box_max - bounding_box_min, metres.
+  Eigen::Vector3f Extent() const { return bounding_box_max - bounding_box_min; }
+};
+
+// Summarises a map.
+MapInfo SummarizeMap(const Map& map);
+
+// A readable multi-line description of `info`, for the CLI and logs.
+std::string FormatMapInfo(const MapInfo& info);
+
+}  // namespace evloc

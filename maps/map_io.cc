@@ -1,0 +1,375 @@
+// SaveMap / LoadMap: the .evmap container (docs/map-format.md).
+#include <array>
+#include <cerrno>
+#include <cstring>
+#include <fstream>
+#include <string_view>
+
+#include "core/common/error.h"
+#include "core/common/file_util.h"
+#include "evloc/map.pb.h"
+#include "maps/crc32c.h"
+#include "maps/map.h"
+
+namespace evloc {
+namespace {
+
+namespace pb = ::evloc::map_format;
+
+constexpr std::string_view kMagic = "EVLOCMAP";
+constexpr uint32_t kSupportedVersions[] = {1};
+constexpr const char* kLengthUnit = "m";
+constexpr const char* kTimeUnit = "ns";
+
+// Header layout (little-endian): magic[8] version u32 | payload_crc32c u32 | payload_length u64 |
+// header_crc32c u32 (over bytes 0..23) | reserved u32 (0).
+constexpr size_t kVersionOffset = 8;
+constexpr size_t kPayloadCrcOffset = 12;
+constexpr size_t kPayloadLengthOffset = 16;
+constexpr size_t kHeaderCrcOffset = 24;
+constexpr size_t kReservedOffset = 28;
+static_assert(kReservedOffset + 4 == kMapFileHeaderSize);
+
+using HeaderBytes = std::array<unsigned char, kMapFileHeaderSize>;
+
+template <typename T>
+void PutLittleEndian(HeaderBytes& bytes, size_t offset, T value) {
+  for (size_t i = 0; i < sizeof(T); ++i) {
+    bytes[offset + i] = static_cast<unsigned char>(static_cast<uint64_t>(value) >> (8 * i));
+  }
+}
+
+template <typename T>
+T GetLittleEndian(const HeaderBytes& bytes, size_t offset) {
+  uint64_t value = 0;
+  for (size_t i = 0; i < sizeof(T); ++i)
+    value |= static_cast<uint64_t>(bytes[offset + i]) << (8 * i);
+  return static_cast<T>(value);
+}
+
+HeaderBytes EncodeHeader(const MapFileHeader& header) {
+  HeaderBytes bytes{};
+  std::memcpy(bytes.data(), kMagic.data(), kMagic.size());
+  PutLittleEndian<uint32_t>(bytes, kVersionOffset, header.format_version);
+  PutLittleEndian<uint32_t>(bytes, kPayloadCrcOffset, header.payload_crc32c);
+  PutLittleEndian<uint64_t>(bytes, kPayloadLengthOffset, header.payload_length);
+  PutLittleEndian<uint32_t>(bytes, kHeaderCrcOffset,
+                            ExtendCrc32c(0, bytes.data(), kHeaderCrcOffset));
+  PutLittleEndian<uint32_t>(bytes, kReservedOffset, 0);
+  return bytes;
+}
+
+std::string SupportedVersionsText() {
+  std::string text;
+  for (const uint32_t version : kSupportedVersions) {
+    text += (text.empty() ? "" : ", ") + std::to_string(version);
+  }
+  return text;
+}
+
+// Opens `path` and validates its header against the file size. Leaves `stream` at the payload.
+MapFileHeader ReadAndCheckHeader(const std::filesystem::path& path, std::ifstream& stream) {
+  const std::string source = path.string();
+  std::error_code error;
+  if (std::filesystem::is_directory(path, error)) {
+    throw IoError("cannot read map '" + source + "': it is a directory (pass the .evmap file)");
+  }
+  stream.open(path, std::ios::binary);
+  if (!stream) {
+    throw IoError("cannot open map '" + source + "': " + std::strerror(errno));
+  }
+  const uint64_t file_size = std::filesystem::file_size(path, error);
+  if (error) throw IoError("cannot read the size of map '" + source + "': " + error.message());
+
+  HeaderBytes bytes{};
+  const size_t header_bytes_read =
+      static_cast<size_t>(std::min<uint64_t>(file_size, kMapFileHeaderSize));
+  stream.read(reinterpret_cast<char*>(bytes.data()),
+              static_cast<std::streamsize>(header_bytes_read));
+  if (static_cast<size_t>(stream.gcount()) != header_bytes_read) {
+    throw IoError("cannot read map '" + source + "': read error in the header");
+  }
+  const size_t magic_bytes = std::min(header_bytes_read, kMagic.size());
+  if (file_size == 0 || std::memcmp(bytes.data(), kMagic.data(), magic_bytes) != 0) {
+    throw ParseError::AtByte(source, 0,
+                             "not an evloc map (the file does not start with \"EVLOCMAP\"); "
+                             "pass a .evmap file written by evloc-mapper");
+  }
+  if (file_size < kMapFileHeaderSize) {
+    throw ParseError::AtByte(source, file_size,
+                             "truncated evloc map: the header needs " +
+                                 std::to_string(kMapFileHeaderSize) + " bytes but the file has " +
+                                 std::to_string(file_size) + "; rewrite or re-copy the map");
+  }
+  const uint32_t header_crc = GetLittleEndian<uint32_t>(bytes, kHeaderCrcOffset);
+  if (header_crc != ExtendCrc32c(0, bytes.data(), kHeaderCrcOffset)) {
+    throw ParseError::AtByte(source, kHeaderCrcOffset,
+                             "corrupted evloc map header (header checksum mismatch); "
+                             "re-copy or rebuild the map");
+  }
+  MapFileHeader header;
+  header.format_version = GetLittleEndian<uint32_t>(bytes, kVersionOffset);
+  header.payload_crc32c = GetLittleEndian<uint32_t>(bytes, kPayloadCrcOffset);
+  header.payload_length = GetLittleEndian<uint64_t>(bytes, kPayloadLengthOffset);
+  if (std::find(std::begin(kSupportedVersions), std::end(kSupportedVersions),
+                header.format_version) == std::end(kSupportedVersions)) {
+    throw ParseError::AtByte(
+        source, kVersionOffset,
+        "evloc map format version " + std::to_string(header.format_version) +
+            " is not supported; this build reads version(s) " + SupportedVersionsText() +
+            (header.format_version > kMapFormatVersion ? "; update evloc to read it"
+                                                       : "; rebuild the map"));
+  }
+  const uint64_t actual_payload = file_size - kMapFileHeaderSize;
+  if (actual_payload < header.payload_length) {
+    throw ParseError::AtByte(source, file_size,
+                             "truncated evloc map: expected " +
+                                 std::to_string(kMapFileHeaderSize + header.payload_length) +
+                                 " bytes but the file has " + std::to_string(file_size) +
+                                 "; the copy or write was interrupted, re-copy or rebuild it");
+  }
+  if (actual_payload > header.payload_length) {
+    throw ParseError::AtByte(source, kMapFileHeaderSize + header.payload_length,
+                             "evloc map has " +
+                                 std::to_string(actual_payload - header.payload_length) +
+                                 " unexpected bytes after the payload (expected " +
+                                 std::to_string(kMapFileHeaderSize + header.payload_length) +
+                                 " bytes, file has " + std::to_string(file_size) + ")");
+  }
+  return header;
+}
+
+pb::CameraModel ToProto(CameraModel model) {
+  switch (model) {
+    case CameraModel::kPinhole:
+      return pb::CAMERA_MODEL_PINHOLE;
+    case CameraModel::kRadialTangential:
+      return pb::CAMERA_MODEL_RADIAL_TANGENTIAL;
+    case CameraModel::kEquidistant:
+      return pb::CAMERA_MODEL_EQUIDISTANT;
+  }
+  return pb::CAMERA_MODEL_UNSPECIFIED;
+}
+
+template <typename Element, typename Value>
+void CopyToRepeated(const std::vector<Element>& values,
+                    google::protobuf::RepeatedField<Value>* field) {
+  static_assert(sizeof(Element) % sizeof(Value) == 0);
+  const size_t count = values.size() * (sizeof(Element) / sizeof(Value));
+  field->Resize(static_cast<int>(count), Value{});
+  if (count > 0) std::memcpy(field->mutable_data(), values.data(), count * sizeof(Value));
+}
+
+pb::MapFile ToProto(const Map& map) {
+  pb::MapFile file;
+  file.set_format_version(kMapFormatVersion);
+  file.mutable_units()->set_length(kLengthUnit);
+  file.mutable_units()->set_time(kTimeUnit);
+  pb::Provenance* provenance = file.mutable_provenance();
+  provenance->set_tool(map.provenance.tool);
+  provenance->set_tool_version(map.provenance.tool_version);
+  provenance->set_created_utc(map.provenance.created_utc);
+  provenance->set_command_line(map.provenance.command_line);
+  for (const std::string& input : map.provenance.inputs) provenance->add_inputs(input);
+  for (const Camera& camera : map.cameras) {
+    pb::Camera* out = file.add_cameras();
+    out->set_model(ToProto(camera.model));
+    out->set_width(static_cast<uint32_t>(camera.width));
+    out->set_height(static_cast<uint32_t>(camera.height));
+    out->set_fx(camera.fx);
+    out->set_fy(camera.fy);
+    out->set_cx(camera.cx);
+    out->set_cy(camera.cy);
+    for (const double coefficient : camera.distortion) out->add_distortion(coefficient);
+  }
+  for (const Keyframe& keyframe : map.keyframes) {
+    pb::Keyframe* out = file.add_keyframes();
+    pb::Quaternion* rotation = out->mutable_cam_from_world()->mutable_rotation();
+    rotation->set_w(keyframe.cam_from_world.rotation.w());
+    rotation->set_x(keyframe.cam_from_world.rotation.x());
+    rotation->set_y(keyframe.cam_from_world.rotation.y());
+    rotation->set_z(keyframe.cam_from_world.rotation.z());
+    pb::Vector3* translation = out->mutable_cam_from_world()->mutable_translation();
+    translation->set_x(keyframe.cam_from_world.translation.x());
+    translation->set_y(keyframe.cam_from_world.translation.y());
+    translation->set_z(keyframe.cam_from_world.translation.z());
+    out->set_camera_index(keyframe.camera_index);
+    out->set_t_ns(keyframe.t_ns);
+    out->set_image_name(keyframe.image_name);
+    CopyToRepeated(keyframe.visible_points, out->mutable_visible_points());
+  }
+  pb::Points* points = file.mutable_points();
+  points->set_count(map.size());
+  CopyToRepeated(map.positions, points->mutable_positions());
+  CopyToRepeated(map.gradients, points->mutable_gradients());
+  CopyToRepeated(map.inverse_depth_sigma, points->mutable_inverse_depth_sigma());
+  CopyToRepeated(map.gradient_magnitude, points->mutable_gradient_magnitude());
+  CopyToRepeated(map.source_keyframe, points->mutable_source_keyframe());
+  file.set_content_crc32c(ComputeMapContentChecksum(map));
+  return file;
+}
+
+// Copies a packed field into a vector of `count` elements; false when the sizes disagree.
+template <typename Element, typename Value>
+bool CopyFromRepeated(const google::protobuf::RepeatedField<Value>& field, uint64_t count,
+                      std::vector<Element>* values) {
+  constexpr size_t kValuesPerElement = sizeof(Element) / sizeof(Value);
+  if (static_cast<uint64_t>(field.size()) != count * kValuesPerElement) return false;
+  values->resize(count);
+  if (count > 0)
+    std::memcpy(static_cast<void*>(values->data()), field.data(), count * sizeof(Element));
+  return true;
+}
+
+Map FromProto(const pb::MapFile& file, const std::string& source) {
+  const auto payload_error = [&source](const std::string& what) {
+    return ParseError::AtByte(source, kMapFileHeaderSize, "invalid evloc map payload: " + what);
+  };
+  if (file.units().length() != kLengthUnit || file.units().time() != kTimeUnit) {
+    throw payload_error("units are length '" + file.units().length() + "', time '" +
+                        file.units().time() + "'; expected 'm' and 'ns'");
+  }
+  Map map;
+  map.provenance.tool = file.provenance().tool();
+  map.provenance.tool_version = file.provenance().tool_version();
+  map.provenance.created_utc = file.provenance().created_utc();
+  map.provenance.command_line = file.provenance().command_line();
+  map.provenance.inputs.assign(file.provenance().inputs().begin(),
+                               file.provenance().inputs().end());
+  for (int i = 0; i < file.cameras_size(); ++i) {
+    const pb::Camera& in = file.cameras(i);
+    Camera camera;
+    switch (in.model()) {
+      case pb::CAMERA_MODEL_PINHOLE:
+        camera.model = CameraModel::kPinhole;
+        break;
+      case pb::CAMERA_MODEL_RADIAL_TANGENTIAL:
+        camera.model = CameraModel::kRadialTangential;
+        break;
+      case pb::CAMERA_MODEL_EQUIDISTANT:
+        camera.model = CameraModel::kEquidistant;
+        break;
+      default:
+        throw payload_error("camera " + std::to_string(i) + " has unknown model code " +
+                            std::to_string(static_cast<int>(in.model())));
+    }
+    camera.width = static_cast<int>(in.width());
+    camera.height = static_cast<int>(in.height());
+    camera.fx = in.fx();
+    camera.fy = in.fy();
+    camera.cx = in.cx();
+    camera.cy = in.cy();
+    camera.distortion.assign(in.distortion().begin(), in.distortion().end());
+    map.cameras.push_back(std::move(camera));
+  }
+  map.keyframes.resize(static_cast<size_t>(file.keyframes_size()));
+  for (int i = 0; i < file.keyframes_size(); ++i) {
+    const pb::Keyframe& in = file.keyframes(i);
+    Keyframe& keyframe = map.keyframes[static_cast<size_t>(i)];
+    const pb::Quaternion& rotation = in.cam_from_world().rotation();
+    const pb::Vector3& translation = in.cam_from_world().translation();
+    // Assigned directly (not through the normalising constructor) so that values round-trip
+    // bit for bit.
+    keyframe.cam_from_world.rotation =
+        Eigen::Quaterniond(rotation.w(), rotation.x(), rotation.y(), rotation.z());
+    keyframe.cam_from_world.translation =
+        Eigen::Vector3d(translation.x(), translation.y(), translation.z());
+    keyframe.camera_index = in.camera_index();
+    keyframe.t_ns = in.t_ns();
+    keyframe.image_name = in.image_name();
+    const auto& visible = in.visible_points();
+    keyframe.visible_points.assign(visible.begin(), visible.end());
+  }
+  const pb::Points& points = file.points();
+  const uint64_t count = points.count();
+  const auto check = [&](bool ok, const char* name, int actual, int per_point) {
+    if (!ok) {
+      throw payload_error(std::string(name) + " has " + std::to_string(actual) +
+                          " values; expected " + std::to_string(per_point) + " x " +
+                          std::to_string(count) + " points");
+    }
+  };
+  check(CopyFromRepeated(points.positions(), count, &map.positions), "positions",
+        points.positions_size(), 3);
+  check(CopyFromRepeated(points.gradients(), count, &map.gradients), "gradients",
+        points.gradients_size(), 3);
+  check(CopyFromRepeated(points.inverse_depth_sigma(), count, &map.inverse_depth_sigma),
+        "inverse_depth_sigma", points.inverse_depth_sigma_size(), 1);
+  check(CopyFromRepeated(points.gradient_magnitude(), count, &map.gradient_magnitude),
+        "gradient_magnitude", points.gradient_magnitude_size(), 1);
+  check(CopyFromRepeated(points.source_keyframe(), count, &map.source_keyframe), "source_keyframe",
+        points.source_keyframe_size(), 1);
+  return map;
+}
+
+}  // namespace
+
+void SaveMap(const std::filesystem::path& path, const Map& map) {
+  map.Check();
+  std::string payload;
+  if (!ToProto(map).SerializeToString(&payload)) {
+    throw InvalidArgumentError("cannot serialise map for '" + path.string() +
+                               "': the payload exceeds the protobuf limit of 2 GiB");
+  }
+  MapFileHeader header;
+  header.format_version = kMapFormatVersion;
+  header.payload_length = payload.size();
+  header.payload_crc32c = Crc32c(payload);
+  const HeaderBytes header_bytes = EncodeHeader(header);
+  WriteFileAtomically(path, [&](std::ostream& stream) {
+    stream.write(reinterpret_cast<const char*>(header_bytes.data()), header_bytes.size());
+    stream.write(payload.data(), static_cast<std::streamsize>(payload.size()));
+  });
+}
+
+MapFileHeader ReadMapFileHeader(const std::filesystem::path& path) {
+  std::ifstream stream;
+  return ReadAndCheckHeader(path, stream);
+}
+
+Map LoadMap(const std::filesystem::path& path) {
+  const std::string source = path.string();
+  std::ifstream stream;
+  const MapFileHeader header = ReadAndCheckHeader(path, stream);
+  if (header.payload_length > static_cast<uint64_t>(std::numeric_limits<int>::max())) {
+    throw ParseError::AtByte(source, kPayloadLengthOffset,
+                             "evloc map payload of " + std::to_string(header.payload_length) +
+                                 " bytes exceeds the protobuf limit of 2 GiB");
+  }
+  std::string payload(header.payload_length, '\0');
+  stream.read(payload.data(), static_cast<std::streamsize>(payload.size()));
+  if (static_cast<uint64_t>(stream.gcount()) != header.payload_length) {
+    throw IoError("cannot read map '" + source + "': read error in the payload");
+  }
+  if (Crc32c(payload) != header.payload_crc32c) {
+    throw ParseError::AtByte(source, kMapFileHeaderSize,
+                             "corrupted evloc map: payload checksum mismatch (the file was "
+                             "damaged after it was written); re-copy or rebuild the map");
+  }
+  pb::MapFile file;
+  if (!file.ParseFromString(payload)) {
+    throw ParseError::AtByte(source, kMapFileHeaderSize,
+                             "invalid evloc map payload: not a valid MapFile protobuf");
+  }
+  if (file.format_version() != header.format_version) {
+    throw ParseError::AtByte(
+        source, kMapFileHeaderSize,
+        "invalid evloc map payload: format version " + std::to_string(file.format_version()) +
+            " differs from the header's " + std::to_string(header.format_version));
+  }
+  Map map = FromProto(file, source);
+  if (ComputeMapContentChecksum(map) != file.content_crc32c()) {
+    throw ParseError::AtByte(source, kMapFileHeaderSize,
+                             "invalid evloc map payload: content checksum mismatch (the writer "
+                             "or reader is broken; report it)");
+  }
+  try {
+    map.Check();
+  } catch (const InvalidArgumentError& error) {
+    throw ParseError::AtByte(source, kMapFileHeaderSize,
+                             std::string("invalid evloc map content: ") + error.what());
+  }
+  return map;
+}
+
+}  // namespace evloc
