@@ -1,0 +1,47 @@
+#include "core/events/event.h"
+
+#include <string>
+
+#include "core/common/error.h"
+
+namespace evloc {
+
+void SensorSize::Check() const {
+  if (width <= 0 || height <= 0 || width > 65535 || height > 65535) {
+    throw InvalidArgumentError("sensor size " + std::to_string(width) + "x" +
+                               std::to_string(height) +
+                               " is invalid: width and height must be in 1..65535");
+  }
+}
+
+void EventBuffer::clear() {
+  t_ns.clear();
+  x.clear();
+  y.clear();
+  polarity.clear();
+}
+
+void EventBuffer::reserve(size_t count) {
+  t_ns.reserve(count);
+  x.reserve(count);
+  y.reserve(count);
+  polarity.reserve(count);
+}
+
+void EventBuffer::Append(const EventBuffer& other) {
+  Append(other.t_ns.data(), other.x.data(), other.y.data(), other.polarity.data(), other.size());
+}
+
+void EventBuffer::Append(const int64_t* t_ns_values, const uint16_t* x_values,
+                         const uint16_t* y_values, const int8_t* polarity_values, size_t count) {
+  t_ns.insert(t_ns.end(), t_ns_values, t_ns_values + count);
+  x.insert(x.end(), x_values, x_values + count);
+  y.insert(y.end(), y_values, y_values + count);
+  polarity.insert(polarity.end(), polarity_values, polarity_values + count);
+}
+
+bool EventBuffer::IsConsistent() const {
+  return x.size() == t_ns.size() && y.size() == t_ns.size() && polarity.size() == t_ns.size();
+}
+
+}  // namespace evloc
