@@ -1,6 +1,7 @@
 #include "core/camera/camera.h"
 
 #include <yaml-cpp/yaml.h>
+#include <Eigen/LU>
 
 #include <algorithm>
 #include <array>
