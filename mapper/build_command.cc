@@ -1,0 +1,223 @@
+#include "mapper/build_command.h"
+
+#include <charconv>
+#include <cmath>
+#include <iomanip>
+#include <iostream>
+#include <sstream>
+
+#include <opencv2/imgcodecs.hpp>
+
+#include "core/common/error.h"
+
+namespace evloc::mapper {
+namespace {
+
+double ParseNumber(const std::string& flag, const std::string& text) {
+  double value = 0.0;
+  const auto result = std::from_chars(text.data(), text.data() + text.size(), value);
+  if (result.ec != std::errc() || result.ptr != text.data() + text.size() ||
+      !std::isfinite(value)) {
+    throw InvalidArgumentError(flag + ": '" + text + "' is not a number");
+  }
+  return value;
+}
+
+int ParseInt(const std::string& flag, const std::string& text) {
+  int value = 0;
+  const auto result = std::from_chars(text.data(), text.data() + text.size(), value);
+  if (result.ec != std::errc() || result.ptr != text.data() + text.size()) {
+    throw InvalidArgumentError(flag + ": '" + text + "' is not an integer");
+  }
+  return value;
+}
+
+// Renders progress lines on stderr.
+class StderrProgress : public ProgressListener {
+ public:
+  void OnProgress(const ProgressUpdate& update) override {
+    std::ostringstream line;
+    line << "[" << std::fixed << std::setprecision(1) << std::setw(7) << update.elapsed_seconds
+         << " s] " << update.stage << " " << update.done << "/" << update.total;
+    std::cerr << line.str() << std::endl;
+  }
+};
+
+}  // namespace
+
+Camera ParseCameraFlag(const std::string& value, int width, int height) {
+  const size_t colon = value.find(':');
+  if (colon == std::string::npos) {
+    throw InvalidArgumentError(
+        "--camera: expected MODEL:p1,p2,... (e.g. pinhole:fx,fy,cx,cy), got '" + value + "'");
+  }
+  Camera camera;
+  camera.model = ParseCameraModel(value.substr(0, colon));
+  std::vector<double> params;
+  std::istringstream stream(value.substr(colon + 1));
+  std::string token;
+  while (std::getline(stream, token, ',')) params.push_back(ParseNumber("--camera", token));
+  const size_t expected = 4 + NumDistortionCoefficients(camera.model);
+  if (params.size() != expected) {
+    throw InvalidArgumentError("--camera: model " + CameraModelName(camera.model) + " takes " +
+                               std::to_string(expected) + " parameters (fx,fy,cx,cy then " +
+                               "distortion), got " + std::to_string(params.size()));
+  }
+  camera.fx = params[0];
+  camera.fy = params[1];
+  camera.cx = params[2];
+  camera.cy = params[3];
+  camera.distortion.assign(params.begin() + 4, params.end());
+  camera.width = width;
+  camera.height = height;
+  return camera;
+}
+
+std::string BuildCommandUsage() {
+  return R"(Usage: evloc-mapper build --images DIR --out MAPDIR [options]
+
+Builds a semi-dense edge map from images (docs/mapper.md).
+
+Required:
+  --images DIR             folder of the input images
+  --out MAPDIR             map folder to create (must not exist or be empty)
+Inputs:
+  --images-list FILE       `t_s path` per image (ECD images.txt); default: all images, by name
+  --camera MODEL:PARAMS    fixed intrinsics, evloc convention (pixel centres at integers):
+                           pinhole:fx,fy,cx,cy | radtan:fx,fy,cx,cy,k1,k2,p1,p2,k3 |
+                           equidistant:fx,fy,cx,cy,k1,k2,k3,k4
+  --calib FILE             fixed intrinsics from an evloc YAML or an ECD calib.txt
+  --known-poses FILE       world_from_cam per image: TUM `t tx ty tz qx qy qz qw` (needs
+                           --images-list) or `IMAGE_NAME tx ty tz qx qy qz qw`; COLMAP only
+                           triangulates (needs --camera or --calib)
+  --align-to FILE          reference poses (same layouts): Sim(3) alignment of the model
+COLMAP:
+  --matcher M              sequential | exhaustive | auto (default auto: exhaustive up to 50 images)
+  --colmap PATH            COLMAP executable (default: colmap in PATH)
+  --colmap-workspace DIR   workspace kept for re-runs (default: MAPDIR.colmap-workspace)
+  --threads N              threads for COLMAP and the semi-dense stage (default 2)
+  --max-features N         SIFT features per image (default 8192)
+Map:
+  --max-keyframes N        at most N keyframes (default: no limit)
+  --neighbours N           stereo neighbours per keyframe (default 6)
+  --min-confirmations K    keyframes that must confirm a point (default 2)
+  --voxel-size METRES      duplicate-merge voxel (default: 1 pixel at the median depth)
+Output:
+  --quiet                  no progress output
+  --help                   this text
+)";
+}
+
+BuildCommandLine ParseBuildCommandLine(const std::vector<std::string>& arguments) {
+  BuildCommandLine command_line;
+  MapBuilderOptions& options = command_line.options;
+  std::optional<std::string> camera_flag;
+  std::string recorded = "evloc-mapper build";
+  for (size_t i = 1; i < arguments.size(); ++i) {
+    const std::string& flag = arguments[i];
+    recorded += " " + flag;
+    if (flag == "--quiet") {
+      command_line.quiet = true;
+      continue;
+    }
+    if (flag == "--help" || flag == "-h") {
+      command_line.help = true;
+      continue;
+    }
+    if (flag.rfind("--", 0) != 0) {
+      throw InvalidArgumentError("unexpected argument '" + flag + "'");
+    }
+    if (i + 1 >= arguments.size()) throw InvalidArgumentError(flag + " needs a value");
+    const std::string value = arguments[++i];
+    recorded += " " + value;
+    if (flag == "--images") {
+      options.image_dir = value;
+    } else if (flag == "--out") {
+      options.output_dir = value;
+    } else if (flag == "--images-list") {
+      options.image_list = value;
+    } else if (flag == "--camera") {
+      camera_flag = value;
+    } else if (flag == "--calib") {
+      options.calibration_file = value;
+    } else if (flag == "--known-poses") {
+      options.known_poses = value;
+    } else if (flag == "--align-to") {
+      options.align_to = value;
+    } else if (flag == "--matcher") {
+      options.colmap.matcher = ParseMatcherType(value);
+    } else if (flag == "--colmap") {
+      options.colmap.executable = value;
+    } else if (flag == "--colmap-workspace") {
+      options.colmap_workspace = value;
+    } else if (flag == "--threads") {
+      options.colmap.num_threads = ParseInt(flag, value);
+      options.semidense.num_threads = options.colmap.num_threads;
+    } else if (flag == "--max-features") {
+      options.colmap.max_num_features = ParseInt(flag, value);
+    } else if (flag == "--max-keyframes") {
+      options.keyframes.max_keyframes = ParseInt(flag, value);
+    } else if (flag == "--neighbours") {
+      options.keyframes.num_neighbours = ParseInt(flag, value);
+    } else if (flag == "--min-confirmations") {
+      options.semidense.min_keyframe_confirmations = ParseInt(flag, value);
+    } else if (flag == "--voxel-size") {
+      options.merge.voxel_size = ParseNumber(flag, value);
+    } else {
+      throw InvalidArgumentError("unknown flag '" + flag + "' (see --help)");
+    }
+  }
+  options.command_line = recorded;
+  if (command_line.help) return command_line;
+  if (options.image_dir.empty()) throw InvalidArgumentError("--images DIR is required");
+  if (options.output_dir.empty()) throw InvalidArgumentError("--out MAPDIR is required");
+  if (camera_flag) {
+    // The camera size is the images' size.
+    const std::vector<InputImage> images = ListInputImages(options.image_dir, options.image_list);
+    const cv::Mat first =
+        cv::imread((options.image_dir / images[0].name).string(), cv::IMREAD_UNCHANGED);
+    if (first.empty()) {
+      throw InvalidArgumentError("cannot read image " +
+                                 (options.image_dir / images[0].name).string());
+    }
+    options.camera = ParseCameraFlag(*camera_flag, first.cols, first.rows);
+  }
+  return command_line;
+}
+
+int RunBuildCommand(int argc, char** argv) {
+  const std::vector<std::string> arguments(argv, argv + argc);
+  BuildCommandLine command_line;
+  try {
+    command_line = ParseBuildCommandLine(arguments);
+  } catch (const Error& error) {
+    std::cerr << "evloc-mapper build: " << error.what() << "\n\n" << BuildCommandUsage();
+    return 2;
+  }
+  if (command_line.help) {
+    std::cout << BuildCommandUsage();
+    return 0;
+  }
+  try {
+    StderrProgress progress;
+    const MapBuildReport report =
+        BuildMap(command_line.options, command_line.quiet ? nullptr : &progress);
+    std::cout << "map written to " << command_line.options.output_dir.string() << ": "
+              << report.num_points << " points, " << report.num_keyframes << " keyframes, "
+              << report.num_registered << "/" << report.num_images << " images registered";
+    if (report.alignment_rms_m) {
+      std::cout << ", alignment RMS " << *report.alignment_rms_m << " m (scale "
+                << *report.alignment_scale << ")";
+    }
+    std::cout << "\n";
+    return 0;
+  } catch (const Error& error) {
+    std::cerr << "evloc-mapper build: error: " << error.what() << "\n";
+    return 1;
+  } catch (const std::exception& error) {
+    std::cerr << "evloc-mapper build: internal error: " << error.what() << "\n";
+    return 1;
+  }
+}
+
+}  // namespace evloc::mapper

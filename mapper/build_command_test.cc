@@ -1,0 +1,170 @@
+#include "mapper/build_command.h"
+
+#include <gtest/gtest.h>
+
+#include <fstream>
+
+#include <opencv2/imgcodecs.hpp>
+
+#include "core/common/error.h"
+#include "core/common/test_data.h"
+#include "maps/map.h"
+#include "mapper/middlebury_test_util.h"
+
+namespace evloc::mapper {
+namespace {
+
+namespace fs = std::filesystem;
+
+int Run(std::vector<std::string> arguments) {
+  arguments.insert(arguments.begin(), "build");
+  arguments.push_back("--quiet");
+  std::vector<char*> argv;
+  for (std::string& argument : arguments) argv.push_back(argument.data());
+  return RunBuildCommand(static_cast<int>(argv.size()), argv.data());
+}
+
+void WriteImage(const fs::path& path, int width, int height) {
+  cv::Mat image(height, width, CV_8U, cv::Scalar(0));
+  cv::rectangle(image, cv::Rect(width / 4, height / 4, width / 2, height / 2), cv::Scalar(200),
+                cv::FILLED);
+  ASSERT_TRUE(cv::imwrite(path.string(), image));
+}
+
+TEST(BuildCommand, HelpAndUnknownFlags) {
+  EXPECT_EQ(Run({"--help"}), 0);
+  EXPECT_EQ(Run({"--images", "x", "--out", "y", "--no-such-flag", "1"}), 2);
+  EXPECT_EQ(Run({"--out", "y"}), 2);
+  EXPECT_EQ(Run({"--images", "x", "--out", "y", "--matcher", "fancy"}), 2);
+}
+
+TEST(BuildCommand, ParsesFlagsIntoOptions) {
+  const fs::path directory = evloc::testing::MakeTempDir("build_flags");
+  WriteImage(directory / "a.png", 64, 48);
+  const BuildCommandLine command_line = ParseBuildCommandLine(
+      {"build", "--images", directory.string(), "--out", (directory / "map").string(), "--camera",
+       "pinhole:50,51,31.5,23.5", "--matcher", "sequential", "--max-keyframes", "7", "--threads",
+       "1", "--voxel-size", "0.002", "--quiet"});
+  const MapBuilderOptions& options = command_line.options;
+  EXPECT_TRUE(command_line.quiet);
+  ASSERT_TRUE(options.camera.has_value());
+  EXPECT_EQ(options.camera->width, 64);
+  EXPECT_EQ(options.camera->height, 48);
+  EXPECT_DOUBLE_EQ(options.camera->fy, 51.0);
+  EXPECT_EQ(options.colmap.matcher, MatcherType::kSequential);
+  EXPECT_EQ(options.keyframes.max_keyframes, 7);
+  EXPECT_EQ(options.semidense.num_threads, 1);
+  EXPECT_EQ(options.merge.voxel_size, 0.002);
+  EXPECT_NE(options.command_line.find("--max-keyframes 7"), std::string::npos);
+  EXPECT_THROW(ParseCameraFlag("pinhole:1,2,3", 10, 10), InvalidArgumentError);
+  EXPECT_THROW(ParseCameraFlag("radtan1,2,3,4", 10, 10), InvalidArgumentError);
+  EXPECT_EQ(ParseCameraFlag("radtan:1,2,3,4,0.1,0,0,0,0", 10, 10).distortion.size(), 5u);
+  fs::remove_all(directory);
+}
+
+TEST(BuildCommand, BadInputsFailWithoutWritingAnything) {
+  const fs::path directory = evloc::testing::MakeTempDir("build_errors");
+  const fs::path out = directory / "map";
+  // Missing and empty image folders.
+  EXPECT_EQ(Run({"--images", (directory / "missing").string(), "--out", out.string()}), 1);
+  fs::create_directories(directory / "empty");
+  EXPECT_EQ(Run({"--images", (directory / "empty").string(), "--out", out.string()}), 1);
+  // Unreadable and mixed-size images.
+  fs::create_directories(directory / "broken");
+  { std::ofstream(directory / "broken" / "a.png") << "not a png"; }
+  EXPECT_EQ(Run({"--images", (directory / "broken").string(), "--out", out.string()}), 1);
+  fs::create_directories(directory / "mixed");
+  WriteImage(directory / "mixed" / "a.png", 64, 48);
+  WriteImage(directory / "mixed" / "b.png", 64, 50);
+  EXPECT_EQ(Run({"--images", (directory / "mixed").string(), "--out", out.string()}), 1);
+  // COLMAP missing.
+  fs::create_directories(directory / "good");
+  WriteImage(directory / "good" / "a.png", 64, 48);
+  WriteImage(directory / "good" / "b.png", 64, 48);
+  EXPECT_EQ(Run({"--images", (directory / "good").string(), "--out", out.string(), "--colmap",
+                 (directory / "no-colmap").string()}),
+            1);
+  EXPECT_EQ(Run({"--images", (directory / "good").string(), "--out", out.string(), "--colmap",
+                 "evloc-no-such-colmap"}),
+            1);
+  // Known poses that do not match the images.
+  { std::ofstream(directory / "poses.txt") << "a.png 0 0 0 0 0 0 1\nc.png 0 0 0 0 0 0 1\n"; }
+  EXPECT_EQ(Run({"--images", (directory / "good").string(), "--out", out.string(), "--camera",
+                 "pinhole:50,50,31.5,23.5", "--known-poses", (directory / "poses.txt").string()}),
+            1);
+  { std::ofstream(directory / "poses.txt") << "a.png 0 0 0 0 0 0 1\n"; }
+  EXPECT_EQ(Run({"--images", (directory / "good").string(), "--out", out.string(), "--camera",
+                 "pinhole:50,50,31.5,23.5", "--known-poses", (directory / "poses.txt").string()}),
+            1);
+  // Known poses without intrinsics.
+  EXPECT_EQ(Run({"--images", (directory / "good").string(), "--out", out.string(),
+                 "--known-poses", (directory / "poses.txt").string()}),
+            1);
+  EXPECT_FALSE(fs::exists(out));
+  EXPECT_FALSE(fs::exists(directory / "map.colmap-workspace"));
+  // A directory that already holds a map is left alone.
+  fs::create_directories(out);
+  { std::ofstream(out / "map.evmap") << "previous map"; }
+  EXPECT_EQ(Run({"--images", (directory / "good").string(), "--out", out.string()}), 1);
+  EXPECT_EQ(ReadFileToString(out / "map.evmap"), "previous map");
+  fs::remove_all(directory);
+}
+
+// The short end-to-end run of the default suite: the real templeSparseRing photos with their
+// calibrated poses (COLMAP triangulates only), then a re-run reusing the COLMAP workspace.
+TEST(BuildCommand, TempleWithKnownPosesEndToEnd) {
+  EVLOC_REQUIRE_SHARED_DATA(parameters, "middlebury/templeSparseRing/templeSR_par.txt");
+  const fs::path image_dir = parameters.parent_path();
+  const std::vector<testing::MiddleburyView> views =
+      testing::ReadMiddleburyParameters(parameters);
+  ASSERT_EQ(views.size(), 16u);
+  const fs::path directory = evloc::testing::MakeTempDir("build_temple_known");
+  testing::WriteNamedPoses(directory / "poses.txt", views);
+  const Eigen::Matrix3d& k = views[0].calibration;
+  const std::string camera = "pinhole:" + std::to_string(k(0, 0)) + "," +
+                             std::to_string(k(1, 1)) + "," + std::to_string(k(0, 2)) + "," +
+                             std::to_string(k(1, 2));
+  const fs::path out = directory / "map";
+  const fs::path workspace = directory / "workspace";
+  ASSERT_EQ(Run({"--images", image_dir.string(), "--out", out.string(), "--camera", camera,
+                 "--known-poses", (directory / "poses.txt").string(), "--colmap-workspace",
+                 workspace.string()}),
+            0);
+  for (const char* name : {"map.evmap", "map.ply", "preview.png", "report.json",
+                           "colmap/images.txt", "colmap/logs/feature_extractor.log"}) {
+    EXPECT_TRUE(fs::exists(out / name)) << name;
+  }
+  const Map map = LoadMap(out / "map.evmap");
+  EXPECT_EQ(map.keyframes.size(), 16u);
+  EXPECT_GT(map.size(), 2000u);
+  // Keyframe poses are the calibrated ones.
+  for (const Keyframe& keyframe : map.keyframes) {
+    const auto view = std::find_if(views.begin(), views.end(), [&](const auto& candidate) {
+      return candidate.name == keyframe.image_name;
+    });
+    ASSERT_NE(view, views.end());
+    EXPECT_LT((keyframe.cam_from_world.translation - view->cam_from_world.translation).norm(),
+              1e-9);
+  }
+  const std::vector<double> distances = testing::EdgeDistances(map, image_dir);
+  ASSERT_GT(distances.size(), 1000u);
+  const double median = distances[distances.size() / 2];
+  std::cout << "templeSparseRing known poses: " << map.size() << " points, median edge distance "
+            << median << " px, 90th percentile " << distances[distances.size() * 9 / 10]
+            << " px\n";
+  EXPECT_LE(median, 1.0);
+
+  // Re-run into another directory: COLMAP stages are reused.
+  const fs::path second = directory / "map2";
+  ASSERT_EQ(Run({"--images", image_dir.string(), "--out", second.string(), "--camera", camera,
+                 "--known-poses", (directory / "poses.txt").string(), "--colmap-workspace",
+                 workspace.string()}),
+            0);
+  const std::string report = ReadFileToString(second / "report.json");
+  EXPECT_NE(report.find("\"reused\": true"), std::string::npos) << report;
+  EXPECT_EQ(LoadMap(second / "map.evmap").size(), map.size());
+  fs::remove_all(directory);
+}
+
+}  // namespace
+}  // namespace evloc::mapper

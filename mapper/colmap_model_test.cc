@@ -1,0 +1,173 @@
+#include "mapper/colmap_model.h"
+
+#include <gtest/gtest.h>
+
+#include <fstream>
+
+#include "core/common/error.h"
+#include "core/common/test_data.h"
+#include "mapper/colmap_runner.h"
+
+namespace evloc::mapper {
+namespace {
+
+ColmapModel MakeModel() {
+  ColmapModel model;
+  model.cameras[1] = ColmapCamera{1, "PINHOLE", 640, 480, {500.0, 510.0, 320.5, 240.5}};
+  ColmapImage first;
+  first.image_id = 3;
+  first.camera_id = 1;
+  first.name = "a.png";
+  first.cam_from_world =
+      Rigid3d(Eigen::Quaterniond(Eigen::AngleAxisd(0.3, Eigen::Vector3d(1, 2, 3).normalized())),
+              Eigen::Vector3d(0.1, -0.2, 0.3));
+  first.keypoints = {{10.25, 20.5}, {100.0, 200.0}};
+  first.point3d_ids = {7, kNoPoint3D};
+  ColmapImage second;
+  second.image_id = 5;
+  second.camera_id = 1;
+  second.name = "b.png";
+  second.keypoints = {{11.0, 21.0}};
+  second.point3d_ids = {7};
+  model.images[3] = first;
+  model.images[5] = second;
+  ColmapPoint3D point;
+  point.point3d_id = 7;
+  point.position = Eigen::Vector3d(1.0, 2.0, 3.5);
+  point.color = Eigen::Vector3i(10, 20, 30);
+  point.error = 0.75;
+  point.track = {{3, 0}, {5, 0}};
+  model.points[7] = point;
+  return model;
+}
+
+TEST(ColmapModel, TextRoundTripKeepsEverything) {
+  const std::filesystem::path directory = testing::MakeTempDir("colmap_model");
+  const ColmapModel model = MakeModel();
+  WriteColmapTextModel(directory, model);
+  const ColmapModel read = ReadColmapTextModel(directory);
+  ASSERT_EQ(read.cameras.size(), 1u);
+  EXPECT_EQ(read.cameras.at(1).params, model.cameras.at(1).params);
+  ASSERT_EQ(read.images.size(), 2u);
+  const ColmapImage& first = read.images.at(3);
+  EXPECT_EQ(first.name, "a.png");
+  EXPECT_TRUE(first.cam_from_world.rotation.isApprox(model.images.at(3).cam_from_world.rotation));
+  EXPECT_TRUE(
+      first.cam_from_world.translation.isApprox(model.images.at(3).cam_from_world.translation));
+  ASSERT_EQ(first.keypoints.size(), 2u);
+  EXPECT_EQ(first.keypoints[0], Eigen::Vector2d(10.25, 20.5));
+  EXPECT_EQ(first.point3d_ids[1], kNoPoint3D);
+  ASSERT_EQ(read.points.size(), 1u);
+  EXPECT_EQ(read.points.at(7).track.size(), 2u);
+  EXPECT_DOUBLE_EQ(read.MeanReprojectionError(), 0.75);
+  EXPECT_EQ(read.FindImageId("b.png"), 5u);
+  EXPECT_EQ(read.FindImageId("c.png"), 0u);
+  std::filesystem::remove_all(directory);
+}
+
+TEST(ColmapModel, KeypointsShiftByHalfAPixelOnDisk) {
+  const std::filesystem::path directory = testing::MakeTempDir("colmap_model_shift");
+  WriteColmapTextModel(directory, MakeModel());
+  std::ifstream images(directory / "images.txt");
+  std::string text((std::istreambuf_iterator<char>(images)), std::istreambuf_iterator<char>());
+  // evloc (10.25, 20.5) is COLMAP (10.75, 21).
+  EXPECT_NE(text.find("10.75 21 7"), std::string::npos) << text;
+  std::filesystem::remove_all(directory);
+}
+
+TEST(ColmapModel, MalformedImageLineNamesFileAndLine) {
+  const std::filesystem::path directory = testing::MakeTempDir("colmap_model_bad");
+  WriteColmapTextModel(directory, MakeModel());
+  {
+    std::ofstream images(directory / "images.txt");
+    images << "# header\n1 1 0 0 0 0 0 0 1\n\n";
+  }
+  try {
+    ReadColmapTextModel(directory);
+    FAIL() << "expected ParseError";
+  } catch (const ParseError& error) {
+    EXPECT_NE(std::string(error.what()).find("images.txt: line 2"), std::string::npos)
+        << error.what();
+  }
+  std::filesystem::remove_all(directory);
+}
+
+TEST(ColmapModel, TrackToUnknownImageIsRejected) {
+  const std::filesystem::path directory = testing::MakeTempDir("colmap_model_track");
+  ColmapModel model = MakeModel();
+  model.points.at(7).track.push_back({99, 0});
+  WriteColmapTextModel(directory, model);
+  EXPECT_THROW(ReadColmapTextModel(directory), ParseError);
+  std::filesystem::remove_all(directory);
+}
+
+TEST(ColmapCamera, PixelConventionsDifferByHalfAPixel) {
+  const Camera pinhole = CameraFromColmap({1, "PINHOLE", 640, 480, {500, 510, 320.5, 240.5}});
+  EXPECT_EQ(pinhole.model, CameraModel::kPinhole);
+  EXPECT_DOUBLE_EQ(pinhole.cx, 320.0);
+  EXPECT_DOUBLE_EQ(pinhole.cy, 240.0);
+  const ColmapCamera back = ColmapCameraFromCamera(pinhole, 4);
+  EXPECT_EQ(back.model_name, "PINHOLE");
+  EXPECT_EQ(back.camera_id, 4u);
+  EXPECT_EQ(back.params, (std::vector<double>{500, 510, 320.5, 240.5}));
+}
+
+TEST(ColmapCamera, ModelsMapBothWays) {
+  const Camera simple_radial = CameraFromColmap({1, "SIMPLE_RADIAL", 100, 80, {90, 50, 40, 0.1}});
+  EXPECT_EQ(simple_radial.model, CameraModel::kRadialTangential);
+  EXPECT_EQ(simple_radial.fx, simple_radial.fy);
+  EXPECT_EQ(simple_radial.distortion, (std::vector<double>{0.1, 0, 0, 0, 0}));
+
+  Camera radtan = Camera::Pinhole(100, 80, 90, 91, 49.5, 39.5);
+  radtan.model = CameraModel::kRadialTangential;
+  radtan.distortion = {0.1, -0.02, 0.001, 0.002, 0.0};
+  EXPECT_EQ(ColmapCameraFromCamera(radtan, 1).model_name, "OPENCV");
+  EXPECT_EQ(CameraFromColmap(ColmapCameraFromCamera(radtan, 1)), radtan);
+  radtan.distortion[4] = 0.003;
+  EXPECT_EQ(ColmapCameraFromCamera(radtan, 1).model_name, "FULL_OPENCV");
+  EXPECT_EQ(CameraFromColmap(ColmapCameraFromCamera(radtan, 1)), radtan);
+
+  Camera fisheye = Camera::Pinhole(100, 80, 90, 91, 49.5, 39.5);
+  fisheye.model = CameraModel::kEquidistant;
+  fisheye.distortion = {0.01, 0.02, 0.03, 0.04};
+  EXPECT_EQ(ColmapCameraFromCamera(fisheye, 1).model_name, "OPENCV_FISHEYE");
+  EXPECT_EQ(CameraFromColmap(ColmapCameraFromCamera(fisheye, 1)), fisheye);
+
+  EXPECT_THROW(CameraFromColmap({1, "FOV", 100, 80, {90, 90, 50, 40, 0.1}}), InvalidArgumentError);
+  EXPECT_THROW(CameraFromColmap({1, "PINHOLE", 100, 80, {90, 50, 40}}), InvalidArgumentError);
+}
+
+TEST(ColmapRunner, MissingExecutableIsAnIoError) {
+  EXPECT_THROW(FindExecutable("evloc-no-such-colmap-binary"), IoError);
+  EXPECT_THROW(FindExecutable("/nonexistent/colmap"), IoError);
+  EXPECT_NO_THROW(FindExecutable("sh"));
+}
+
+TEST(ColmapRunner, FailedCommandQuotesItsLog) {
+  const std::filesystem::path directory = testing::MakeTempDir("colmap_runner_log");
+  const std::filesystem::path log = directory / "run.log";
+  RunLoggedCommand({"/bin/sh", "-c", "echo first run"}, log);
+  try {
+    RunLoggedCommand({"/bin/sh", "-c", "echo something broke; exit 3"}, log);
+    FAIL() << "expected IoError";
+  } catch (const IoError& error) {
+    const std::string message = error.what();
+    EXPECT_NE(message.find("exited with status 3"), std::string::npos) << message;
+    EXPECT_NE(message.find("something broke"), std::string::npos) << message;
+  }
+  // The log keeps both runs.
+  std::ifstream stream(log);
+  std::string text((std::istreambuf_iterator<char>(stream)), std::istreambuf_iterator<char>());
+  EXPECT_NE(text.find("first run"), std::string::npos);
+  std::filesystem::remove_all(directory);
+}
+
+TEST(ColmapRunner, MatcherNamesParse) {
+  EXPECT_EQ(ParseMatcherType("auto"), MatcherType::kAuto);
+  EXPECT_EQ(ParseMatcherType("sequential"), MatcherType::kSequential);
+  EXPECT_EQ(ParseMatcherType("exhaustive"), MatcherType::kExhaustive);
+  EXPECT_THROW(ParseMatcherType("vocab_tree"), InvalidArgumentError);
+}
+
+}  // namespace
+}  // namespace evloc::mapper

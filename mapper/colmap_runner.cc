@@ -1,0 +1,341 @@
+#include "mapper/colmap_runner.h"
+
+#include <fcntl.h>
+#include <spawn.h>
+#include <sqlite3.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cstdlib>
+#include <cstring>
+#include <deque>
+#include <fstream>
+#include <sstream>
+
+#include "core/common/error.h"
+#include "core/common/file_util.h"
+#include "mapper/colmap_model.h"
+
+extern char** environ;
+
+namespace evloc::mapper {
+namespace {
+
+// The last `count` lines of a text file (empty when unreadable).
+std::string TailOfFile(const std::filesystem::path& path, size_t count) {
+  std::ifstream stream(path);
+  std::deque<std::string> lines;
+  std::string line;
+  while (std::getline(stream, line)) {
+    if (line.empty()) continue;
+    lines.push_back(line);
+    if (lines.size() > count) lines.pop_front();
+  }
+  std::string text;
+  for (const std::string& kept : lines) text += "\n  " + kept;
+  return text;
+}
+
+bool IsExecutableFile(const std::filesystem::path& path) {
+  std::error_code error;
+  return std::filesystem::is_regular_file(path, error) && ::access(path.c_str(), X_OK) == 0;
+}
+
+void CreateDirectories(const std::filesystem::path& path) {
+  std::error_code error;
+  std::filesystem::create_directories(path, error);
+  if (error) throw IoError("cannot create directory " + path.string() + ": " + error.message());
+}
+
+// Opens a COLMAP database read-only; closes it on destruction.
+class Database {
+ public:
+  explicit Database(const std::filesystem::path& path) : path_(path) {
+    if (!std::filesystem::exists(path)) {
+      throw IoError("COLMAP database " + path.string() + " does not exist");
+    }
+    if (sqlite3_open_v2(path.c_str(), &handle_, SQLITE_OPEN_READONLY, nullptr) != SQLITE_OK) {
+      const std::string message = handle_ ? sqlite3_errmsg(handle_) : "out of memory";
+      sqlite3_close(handle_);
+      throw IoError("cannot open COLMAP database " + path.string() + ": " + message);
+    }
+  }
+  ~Database() { sqlite3_close(handle_); }
+  Database(const Database&) = delete;
+  Database& operator=(const Database&) = delete;
+
+  // Runs `sql`, calling `row` for each result row.
+  template <typename RowFunction>
+  void Query(const std::string& sql, RowFunction row) const {
+    sqlite3_stmt* statement = nullptr;
+    if (sqlite3_prepare_v2(handle_, sql.c_str(), -1, &statement, nullptr) != SQLITE_OK) {
+      throw IoError("cannot read COLMAP database " + path_.string() + ": " +
+                    sqlite3_errmsg(handle_));
+    }
+    int status = SQLITE_ROW;
+    while ((status = sqlite3_step(statement)) == SQLITE_ROW) row(statement);
+    sqlite3_finalize(statement);
+    if (status != SQLITE_DONE) {
+      throw IoError("cannot read COLMAP database " + path_.string() + ": " +
+                    sqlite3_errmsg(handle_));
+    }
+  }
+
+ private:
+  std::filesystem::path path_;
+  sqlite3* handle_ = nullptr;
+};
+
+}  // namespace
+
+MatcherType ParseMatcherType(const std::string& name) {
+  if (name == "auto") return MatcherType::kAuto;
+  if (name == "sequential") return MatcherType::kSequential;
+  if (name == "exhaustive") return MatcherType::kExhaustive;
+  throw InvalidArgumentError("unknown matcher '" + name +
+                             "' (expected sequential, exhaustive or auto)");
+}
+
+std::string MatcherTypeName(MatcherType type) {
+  switch (type) {
+    case MatcherType::kAuto:
+      return "auto";
+    case MatcherType::kSequential:
+      return "sequential";
+    case MatcherType::kExhaustive:
+      return "exhaustive";
+  }
+  return "auto";
+}
+
+void ColmapOptions::Check() const {
+  if (executable.empty()) throw InvalidArgumentError("COLMAP executable must not be empty");
+  if (num_threads < 1) throw InvalidArgumentError("COLMAP num_threads must be at least 1");
+  if (exhaustive_max_images < 2) {
+    throw InvalidArgumentError("COLMAP exhaustive_max_images must be at least 2");
+  }
+  if (sequential_overlap < 1) {
+    throw InvalidArgumentError("COLMAP sequential_overlap must be at least 1");
+  }
+  if (max_num_features < 100) {
+    throw InvalidArgumentError("COLMAP max_num_features must be at least 100");
+  }
+  if (camera) camera->Check();
+}
+
+std::filesystem::path FindExecutable(const std::string& executable) {
+  if (executable.find('/') != std::string::npos) {
+    if (!IsExecutableFile(executable)) {
+      throw IoError("COLMAP executable " + executable + " does not exist or is not executable");
+    }
+    return std::filesystem::absolute(executable);
+  }
+  const char* path_variable = std::getenv("PATH");
+  std::istringstream directories(path_variable ? path_variable : "");
+  std::string directory;
+  while (std::getline(directories, directory, ':')) {
+    if (directory.empty()) continue;
+    const std::filesystem::path candidate = std::filesystem::path(directory) / executable;
+    if (IsExecutableFile(candidate)) return candidate;
+  }
+  throw IoError("'" + executable +
+                "' was not found in PATH: install COLMAP 3.8 (apt-get install colmap) or pass "
+                "the executable's path with --colmap");
+}
+
+void RunLoggedCommand(const std::vector<std::string>& arguments,
+                      const std::filesystem::path& log_path) {
+  if (arguments.empty()) throw InvalidArgumentError("RunLoggedCommand: no program given");
+  std::vector<char*> argv;
+  for (const std::string& argument : arguments) argv.push_back(const_cast<char*>(argument.c_str()));
+  argv.push_back(nullptr);
+
+  posix_spawn_file_actions_t actions;
+  posix_spawn_file_actions_init(&actions);
+  posix_spawn_file_actions_addopen(&actions, STDIN_FILENO, "/dev/null", O_RDONLY, 0);
+  posix_spawn_file_actions_addopen(&actions, STDOUT_FILENO, log_path.c_str(),
+                                   O_WRONLY | O_CREAT | O_APPEND, 0644);
+  posix_spawn_file_actions_adddup2(&actions, STDOUT_FILENO, STDERR_FILENO);
+  std::string command_line;
+  for (const std::string& argument : arguments)
+    command_line += (command_line.empty() ? "" : " ") + argument;
+  {
+    std::ofstream log(log_path, std::ios::app);
+    log << "$ " << command_line << "\n";
+    if (!log) throw IoError("cannot write the log file " + log_path.string());
+  }
+  pid_t pid = 0;
+  const int spawn_status = posix_spawn(&pid, argv[0], &actions, nullptr, argv.data(), environ);
+  posix_spawn_file_actions_destroy(&actions);
+  if (spawn_status != 0) {
+    throw IoError("cannot start " + arguments[0] + ": " + std::strerror(spawn_status));
+  }
+  int status = 0;
+  while (::waitpid(pid, &status, 0) < 0) {
+    if (errno != EINTR) throw IoError("waiting for " + arguments[0] + " failed");
+  }
+  if (WIFEXITED(status) && WEXITSTATUS(status) == 0) return;
+  const std::string how = WIFEXITED(status)
+                              ? "exited with status " + std::to_string(WEXITSTATUS(status))
+                              : "was killed by signal " + std::to_string(WTERMSIG(status));
+  throw IoError("command `" + command_line + "` " + how + "; see " + log_path.string() +
+                ", which ends with:" + TailOfFile(log_path, 6));
+}
+
+std::string ColmapVersion(const ColmapOptions& options) {
+  const std::filesystem::path executable = FindExecutable(options.executable);
+  char log_template[] = "/tmp/evloc-colmap-version-XXXXXX";
+  const int descriptor = ::mkstemp(log_template);
+  if (descriptor < 0) throw IoError("cannot create a temporary file in /tmp");
+  ::close(descriptor);
+  const std::filesystem::path log_path(log_template);
+  try {
+    RunLoggedCommand({executable.string(), "help"}, log_path);
+  } catch (...) {
+    std::filesystem::remove(log_path);
+    throw;
+  }
+  std::ifstream stream(log_path);
+  std::string line;
+  std::string version;
+  while (std::getline(stream, line)) {
+    if (line.rfind("COLMAP", 0) == 0) {
+      version = line;
+      break;
+    }
+  }
+  std::filesystem::remove(log_path);
+  if (version.empty()) throw IoError(executable.string() + " help did not print a COLMAP version");
+  return version;
+}
+
+ColmapRunner::ColmapRunner(ColmapOptions options, std::filesystem::path workspace,
+                           std::filesystem::path image_dir)
+    : options_(std::move(options)),
+      workspace_(std::move(workspace)),
+      image_dir_(std::move(image_dir)) {
+  options_.Check();
+  executable_ = FindExecutable(options_.executable);
+}
+
+void ColmapRunner::Run(const std::string& command,
+                       const std::vector<std::string>& arguments) const {
+  CreateDirectories(LogDir());
+  std::vector<std::string> full = {executable_.string(), command};
+  full.insert(full.end(), arguments.begin(), arguments.end());
+  RunLoggedCommand(full, LogDir() / (command + ".log"));
+}
+
+void ColmapRunner::ExtractFeatures(const std::vector<std::string>& image_names) const {
+  CreateDirectories(workspace_);
+  const std::filesystem::path list_path = workspace_ / "image_list.txt";
+  std::string list;
+  for (const std::string& name : image_names) list += name + "\n";
+  WriteFileAtomically(list_path, list);
+  std::vector<std::string> arguments = {"--database_path",
+                                        DatabasePath().string(),
+                                        "--image_path",
+                                        image_dir_.string(),
+                                        "--image_list_path",
+                                        list_path.string(),
+                                        "--ImageReader.single_camera",
+                                        "1",
+                                        "--SiftExtraction.use_gpu",
+                                        "0",
+                                        "--SiftExtraction.num_threads",
+                                        std::to_string(options_.num_threads),
+                                        "--SiftExtraction.max_num_features",
+                                        std::to_string(options_.max_num_features)};
+  if (options_.camera) {
+    const ColmapCamera colmap_camera = ColmapCameraFromCamera(*options_.camera, 1);
+    arguments.insert(arguments.end(),
+                     {"--ImageReader.camera_model", colmap_camera.model_name,
+                      "--ImageReader.camera_params", FormatColmapParams(colmap_camera.params)});
+  } else {
+    arguments.insert(arguments.end(), {"--ImageReader.camera_model", "SIMPLE_RADIAL"});
+  }
+  Run("feature_extractor", arguments);
+}
+
+MatcherType ColmapRunner::EffectiveMatcher(size_t num_images) const {
+  if (options_.matcher != MatcherType::kAuto) return options_.matcher;
+  return num_images <= static_cast<size_t>(options_.exhaustive_max_images)
+             ? MatcherType::kExhaustive
+             : MatcherType::kSequential;
+}
+
+void ColmapRunner::MatchFeatures(size_t num_images) const {
+  const std::vector<std::string> common = {"--database_path",
+                                           DatabasePath().string(),
+                                           "--SiftMatching.use_gpu",
+                                           "0",
+                                           "--SiftMatching.num_threads",
+                                           std::to_string(options_.num_threads)};
+  if (EffectiveMatcher(num_images) == MatcherType::kExhaustive) {
+    Run("exhaustive_matcher", common);
+  } else {
+    std::vector<std::string> arguments = common;
+    arguments.insert(arguments.end(),
+                     {"--SequentialMatching.overlap", std::to_string(options_.sequential_overlap),
+                      "--SequentialMatching.loop_detection", "0"});
+    Run("sequential_matcher", arguments);
+  }
+}
+
+void ColmapRunner::Map(const std::filesystem::path& output_dir) const {
+  CreateDirectories(output_dir);
+  std::vector<std::string> arguments = {
+      "--database_path",      DatabasePath().string(),
+      "--image_path",         image_dir_.string(),
+      "--output_path",        output_dir.string(),
+      "--Mapper.num_threads", std::to_string(options_.num_threads)};
+  if (options_.camera) {
+    arguments.insert(arguments.end(),
+                     {"--Mapper.ba_refine_focal_length", "0", "--Mapper.ba_refine_principal_point",
+                      "0", "--Mapper.ba_refine_extra_params", "0"});
+  }
+  Run("mapper", arguments);
+}
+
+void ColmapRunner::Triangulate(const std::filesystem::path& input_model,
+                               const std::filesystem::path& output_model) const {
+  CreateDirectories(output_model);
+  Run("point_triangulator",
+      {"--database_path", DatabasePath().string(), "--image_path", image_dir_.string(),
+       "--input_path", input_model.string(), "--output_path", output_model.string(),
+       "--Mapper.ba_refine_focal_length", "0", "--Mapper.ba_refine_principal_point", "0",
+       "--Mapper.ba_refine_extra_params", "0", "--Mapper.num_threads",
+       std::to_string(options_.num_threads)});
+}
+
+void ColmapRunner::ConvertToText(const std::filesystem::path& input_model,
+                                 const std::filesystem::path& output_dir) const {
+  CreateDirectories(output_dir);
+  Run("model_converter", {"--input_path", input_model.string(), "--output_path",
+                          output_dir.string(), "--output_type", "TXT"});
+}
+
+std::map<std::string, uint32_t> ReadDatabaseImageIds(const std::filesystem::path& database_path) {
+  const Database database(database_path);
+  std::map<std::string, uint32_t> ids;
+  database.Query("SELECT image_id, name FROM images", [&](sqlite3_stmt* row) {
+    const uint32_t id = static_cast<uint32_t>(sqlite3_column_int64(row, 0));
+    const unsigned char* name = sqlite3_column_text(row, 1);
+    ids[name ? reinterpret_cast<const char*>(name) : ""] = id;
+  });
+  return ids;
+}
+
+std::vector<uint32_t> ReadDatabaseCameraIds(const std::filesystem::path& database_path) {
+  const Database database(database_path);
+  std::vector<uint32_t> ids;
+  database.Query("SELECT camera_id FROM cameras ORDER BY camera_id", [&](sqlite3_stmt* row) {
+    ids.push_back(static_cast<uint32_t>(sqlite3_column_int64(row, 0)));
+  });
+  return ids;
+}
+
+}  // namespace evloc::mapper

@@ -1,0 +1,118 @@
+// Runs the COLMAP 3.8 command line (CPU only) for the mapper: feature extraction, matching,
+// incremental mapping, triangulation with known poses and conversion to the TXT layout
+// (docs/method.md §3.1, docs/mapper.md). Every command's output goes to a log file; nothing is
+// printed.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/camera/camera.h"
+
+namespace evloc::mapper {
+
+// How image pairs are chosen for feature matching.
+enum class MatcherType {
+  // Exhaustive for small sets (ColmapOptions::exhaustive_max_images), sequential otherwise.
+  kAuto,
+  // Every image against the next ones in name order (video-like sequences).
+  kSequential,
+  // Every pair (small unordered sets).
+  kExhaustive,
+};
+
+// Parses "auto", "sequential" or "exhaustive"; throws InvalidArgumentError otherwise.
+MatcherType ParseMatcherType(const std::string& name);
+
+// The name ParseMatcherType accepts for `type`.
+std::string MatcherTypeName(MatcherType type);
+
+// Options of the COLMAP runs.
+struct ColmapOptions {
+  // The COLMAP executable: a path, or a name looked up in PATH.
+  std::string executable = "colmap";
+  // Threads for extraction, matching and mapping.
+  int num_threads = 2;
+  // Pair selection for matching.
+  MatcherType matcher = MatcherType::kAuto;
+  // With kAuto, exhaustive matching up to this many images, sequential above.
+  int exhaustive_max_images = 50;
+  // Sequential matching: how many following images each image is matched with.
+  int sequential_overlap = 10;
+  // Maximum number of SIFT features per image.
+  int max_num_features = 8192;
+  // Fixed intrinsics shared by every image; std::nullopt lets COLMAP estimate one camera
+  // (SIMPLE_RADIAL) shared by all images.
+  std::optional<Camera> camera;
+
+  // Throws InvalidArgumentError on a bad value.
+  void Check() const;
+};
+
+// The absolute path of `executable` (kept as given when it contains a '/', else looked up in
+// PATH). Throws IoError naming the executable when it cannot be found or is not executable.
+std::filesystem::path FindExecutable(const std::string& executable);
+
+// The first line of `colmap help` (e.g. "COLMAP 3.8 -- Structure-from-Motion and Multi-View
+// Stereo"), the version recorded in reports. Throws IoError when COLMAP cannot be run.
+std::string ColmapVersion(const ColmapOptions& options);
+
+// Runs `arguments` (arguments[0] is the program) with stdout and stderr appended to `log_path`
+// and waits for it. Throws IoError when the program cannot be started, or exits non-zero or by a
+// signal; the message names the command and the log file and quotes the log's last lines.
+void RunLoggedCommand(const std::vector<std::string>& arguments,
+                      const std::filesystem::path& log_path);
+
+// The COLMAP commands used by the mapper, on one workspace. Each writes into the workspace and
+// appends to `<workspace>/logs/<command>.log`.
+class ColmapRunner {
+ public:
+  // `workspace` holds database.db, the models and the logs; `image_dir` is COLMAP's image_path.
+  // Checks the options and finds the executable (throws like FindExecutable).
+  ColmapRunner(ColmapOptions options, std::filesystem::path workspace,
+               std::filesystem::path image_dir);
+
+  // The database path.
+  std::filesystem::path DatabasePath() const { return workspace_ / "database.db"; }
+  // The folder of the logs.
+  std::filesystem::path LogDir() const { return workspace_ / "logs"; }
+
+  // feature_extractor on `image_names` (relative to the image folder): one camera for all
+  // images, fixed to options.camera when given.
+  void ExtractFeatures(const std::vector<std::string>& image_names) const;
+  // sequential_matcher or exhaustive_matcher, by the options and the number of images.
+  void MatchFeatures(size_t num_images) const;
+  // The effective matcher for `num_images` images (kAuto resolved).
+  MatcherType EffectiveMatcher(size_t num_images) const;
+  // mapper into `<output_dir>/0, 1, ...`; intrinsics are not refined when options.camera is set.
+  void Map(const std::filesystem::path& output_dir) const;
+  // point_triangulator: triangulates points for the fixed poses of `input_model` (TXT or BIN)
+  // into `output_model`; poses are not moved.
+  void Triangulate(const std::filesystem::path& input_model,
+                   const std::filesystem::path& output_model) const;
+  // model_converter --output_type TXT.
+  void ConvertToText(const std::filesystem::path& input_model,
+                     const std::filesystem::path& output_dir) const;
+
+ private:
+  // Runs `colmap <command> <arguments...>` logging to LogDir()/<command>.log.
+  void Run(const std::string& command, const std::vector<std::string>& arguments) const;
+
+  ColmapOptions options_;
+  std::filesystem::path executable_;
+  std::filesystem::path workspace_;
+  std::filesystem::path image_dir_;
+};
+
+// Image ids of a COLMAP database by image name (table `images`). Throws IoError when the database
+// cannot be opened or read.
+std::map<std::string, uint32_t> ReadDatabaseImageIds(const std::filesystem::path& database_path);
+
+// Camera ids of a COLMAP database, in increasing order.
+std::vector<uint32_t> ReadDatabaseCameraIds(const std::filesystem::path& database_path);
+
+}  // namespace evloc::mapper

@@ -1,0 +1,185 @@
+#include "mapper/mapper_cli.h"
+
+#include <gtest/gtest.h>
+
+#include <sys/wait.h>
+#include <cstdio>
+#include <cstdlib>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "core/common/file_util.h"
+#include "core/common/test_data.h"
+#include "maps/map.h"
+
+namespace evloc {
+namespace {
+
+// The outcome of one CLI run.
+struct CliResult {
+  int exit_code = -1;
+  std::string out;
+  std::string err;
+};
+
+CliResult RunCli(std::vector<std::string> arguments) {
+  arguments.insert(arguments.begin(), "evloc-mapper");
+  std::vector<const char*> argv;
+  for (const std::string& argument : arguments) argv.push_back(argument.c_str());
+  std::ostringstream out, err;
+  CliResult result;
+  result.exit_code = RunMapperCli(static_cast<int>(argv.size()), argv.data(), out, err);
+  result.out = out.str();
+  result.err = err.str();
+  return result;
+}
+
+bool Contains(const std::string& text, const std::string& fragment) {
+  return text.find(fragment) != std::string::npos;
+}
+
+const char kPcd[] =
+    "# .PCD v0.7 - Point Cloud Data file format\n"
+    "VERSION 0.7\n"
+    "FIELDS x y z normal_x normal_y normal_z\n"
+    "SIZE 4 4 4 4 4 4\nTYPE F F F F F F\nCOUNT 1 1 1 1 1 1\n"
+    "WIDTH 3\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 3\nDATA ascii\n"
+    "0 0 1 0.02 0 1\n"
+    "1 2 3 1 2 3\n"
+    "-1 0.5 2 -1 0.5 2.025\n";
+
+class MapperCliTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    directory_ = testing::MakeTempDir("mapper_cli_test");
+    pcd_ = directory_ / "map.pcd";
+    WriteFileAtomically(pcd_, std::string(kPcd));
+  }
+  void TearDown() override { std::filesystem::remove_all(directory_); }
+  std::filesystem::path directory_;
+  std::filesystem::path pcd_;
+};
+
+TEST_F(MapperCliTest, ImportPcdThenInfo) {
+  const std::filesystem::path map_dir = directory_ / "out";
+  const CliResult import = RunCli({"import-pcd", pcd_.string(), "--out", map_dir.string()});
+  ASSERT_EQ(import.exit_code, 0) << import.err;
+  EXPECT_TRUE(Contains(import.out, "imported 2 of 3 points")) << import.out;
+  EXPECT_TRUE(Contains(import.out, "dropped 1 with a zero-length gradient")) << import.out;
+  EXPECT_TRUE(std::filesystem::exists(map_dir / "map.ply"));
+  const Map map = LoadMap(map_dir / "map.evmap");
+  ASSERT_EQ(map.size(), 2u);
+  EXPECT_EQ(map.gradients[1], Eigen::Vector3f(0, 0, 1));
+  EXPECT_EQ(map.provenance.tool, "evloc-mapper import-pcd");
+  EXPECT_TRUE(Contains(map.provenance.command_line, "import-pcd")) << map.provenance.command_line;
+  ASSERT_EQ(map.provenance.inputs.size(), 1u);
+  EXPECT_TRUE(Contains(map.provenance.inputs[0], "map.pcd"));
+  EXPECT_EQ(map.provenance.created_utc.size(), 20u) << map.provenance.created_utc;
+
+  for (const std::filesystem::path& target : {map_dir, map_dir / "map.evmap"}) {
+    const CliResult info = RunCli({"info", target.string()});
+    ASSERT_EQ(info.exit_code, 0) << info.err;
+    EXPECT_TRUE(Contains(info.out, "points:           2")) << info.out;
+    EXPECT_TRUE(Contains(info.out, "keyframes:        0")) << info.out;
+    EXPECT_TRUE(Contains(info.out, "verified")) << info.out;
+    EXPECT_TRUE(Contains(info.out, "evloc-mapper import-pcd")) << info.out;
+  }
+}
+
+TEST_F(MapperCliTest, ImportRefusesAnExistingMapUnlessForced) {
+  const std::filesystem::path map_dir = directory_ / "out";
+  ASSERT_EQ(RunCli({"import-pcd", pcd_.string(), "--out", map_dir.string()}).exit_code, 0);
+  const CliResult again = RunCli({"import-pcd", pcd_.string(), "--out", map_dir.string()});
+  EXPECT_EQ(again.exit_code, 1);
+  EXPECT_TRUE(Contains(again.err, "already holds a map")) << again.err;
+  EXPECT_TRUE(Contains(again.err, "--force")) << again.err;
+  EXPECT_EQ(RunCli({"import-pcd", pcd_.string(), "--out", map_dir.string(), "--force"}).exit_code,
+            0);
+}
+
+TEST_F(MapperCliTest, BadInputsGiveAClearMessageAndNonZeroExit) {
+  const std::filesystem::path map_dir = directory_ / "out";
+  CliResult result =
+      RunCli({"import-pcd", (directory_ / "missing.pcd").string(), "--out", map_dir.string()});
+  EXPECT_EQ(result.exit_code, 1);
+  EXPECT_TRUE(Contains(result.err, "missing.pcd' does not exist")) << result.err;
+  EXPECT_FALSE(std::filesystem::exists(map_dir));
+
+  WriteFileAtomically(directory_ / "bad.pcd", std::string(kPcd).substr(0, 300) + "\n1 2 x\n");
+  result = RunCli({"import-pcd", (directory_ / "bad.pcd").string(), "--out", map_dir.string()});
+  EXPECT_EQ(result.exit_code, 1);
+  EXPECT_TRUE(Contains(result.err, "bad.pcd: line")) << result.err;
+  EXPECT_FALSE(std::filesystem::exists(map_dir)) << "nothing is written on error";
+
+  result = RunCli({"info", (directory_ / "missing.evmap").string()});
+  EXPECT_EQ(result.exit_code, 1);
+  EXPECT_TRUE(Contains(result.err, "cannot open map")) << result.err;
+
+  result = RunCli({"info", pcd_.string()});
+  EXPECT_EQ(result.exit_code, 1);
+  EXPECT_TRUE(Contains(result.err, "not an evloc map")) << result.err;
+
+  ASSERT_EQ(RunCli({"import-pcd", pcd_.string(), "--out", map_dir.string()}).exit_code, 0);
+  const std::string bytes = ReadFileToString(map_dir / "map.evmap");
+  WriteFileAtomically(directory_ / "truncated.evmap", bytes.substr(0, bytes.size() - 10));
+  result = RunCli({"info", (directory_ / "truncated.evmap").string()});
+  EXPECT_EQ(result.exit_code, 1);
+  EXPECT_TRUE(Contains(result.err,
+                       "truncated evloc map: expected " + std::to_string(bytes.size()) + " bytes"))
+      << result.err;
+
+  result = RunCli({"info", directory_.string()});
+  EXPECT_EQ(result.exit_code, 1);
+  EXPECT_TRUE(Contains(result.err, "without map.evmap")) << result.err;
+}
+
+TEST_F(MapperCliTest, UsageErrorsAndHelp) {
+  CliResult result = RunCli({});
+  EXPECT_EQ(result.exit_code, 2);
+  EXPECT_TRUE(Contains(result.err, "import-pcd")) << result.err;
+  result = RunCli({"--help"});
+  EXPECT_EQ(result.exit_code, 0);
+  EXPECT_TRUE(Contains(result.out, "info")) << result.out;
+  result = RunCli({"frobnicate"});
+  EXPECT_EQ(result.exit_code, 2);
+  EXPECT_TRUE(Contains(result.err, "unknown subcommand 'frobnicate'")) << result.err;
+  result = RunCli({"import-pcd", pcd_.string()});
+  EXPECT_EQ(result.exit_code, 2);
+  EXPECT_TRUE(Contains(result.err, "needs --out MAPDIR")) << result.err;
+  result = RunCli({"import-pcd", pcd_.string(), "--out", "x", "--min-gradient-offset", "abc"});
+  EXPECT_EQ(result.exit_code, 2);
+  EXPECT_TRUE(Contains(result.err, "needs a number, got 'abc'")) << result.err;
+  result = RunCli({"info", "--bogus"});
+  EXPECT_EQ(result.exit_code, 2);
+  for (const char* subcommand : {"import-pcd", "info"}) {
+    result = RunCli({subcommand, "--help"});
+    EXPECT_EQ(result.exit_code, 0);
+    EXPECT_TRUE(Contains(result.out, std::string("usage: evloc-mapper ") + subcommand));
+  }
+}
+
+TEST_F(MapperCliTest, TheBinaryExitsNonZeroOnAForeignFile) {
+  const std::string command = std::string(EVLOC_MAPPER_BINARY) + " info '" + pcd_.string() +
+                              "' > '" + (directory_ / "stdout.txt").string() + "' 2> '" +
+                              (directory_ / "stderr.txt").string() + "'";
+  const int status = std::system(command.c_str());
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 1);
+  EXPECT_TRUE(Contains(ReadFileToString(directory_ / "stderr.txt"), "not an evloc map"));
+}
+
+TEST(MapperCliRealData, ImportsTheCannyEvtMap) {
+  EVLOC_REQUIRE_SHARED_DATA(pcd, "canny-evt-maps/vector_robot_fast.pcd");
+  const std::filesystem::path directory = testing::MakeTempDir("mapper_cli_real");
+  const CliResult result =
+      RunCli({"import-pcd", pcd.string(), "--out", (directory / "m").string()});
+  ASSERT_EQ(result.exit_code, 0) << result.err;
+  EXPECT_TRUE(Contains(result.out, "of 40946 points")) << result.out;
+  const CliResult info = RunCli({"info", (directory / "m").string()});
+  EXPECT_EQ(info.exit_code, 0) << info.err;
+  std::filesystem::remove_all(directory);
+}
+
+}  // namespace
+}  // namespace evloc

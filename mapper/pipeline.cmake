@@ -1,0 +1,36 @@
+# evloc_mapper_pipeline: `evloc-mapper build` (docs/mapper.md): COLMAP runs and TXT models,
+# keyframe selection, semi-dense edge depth, merging, the pipeline and its command line.
+# Included from mapper/CMakeLists.txt.
+find_package(PCL 1.13 REQUIRED COMPONENTS common kdtree filters)
+find_package(SQLite3 REQUIRED)
+
+add_library(evloc_mapper_pipeline
+  ${CMAKE_CURRENT_LIST_DIR}/colmap_model.cc
+  ${CMAKE_CURRENT_LIST_DIR}/colmap_runner.cc
+  ${CMAKE_CURRENT_LIST_DIR}/keyframe_selection.cc
+  ${CMAKE_CURRENT_LIST_DIR}/semidense_depth.cc
+  ${CMAKE_CURRENT_LIST_DIR}/map_merge.cc
+  ${CMAKE_CURRENT_LIST_DIR}/map_builder.cc
+  ${CMAKE_CURRENT_LIST_DIR}/build_command.cc)
+target_include_directories(evloc_mapper_pipeline PUBLIC ${PROJECT_SOURCE_DIR})
+target_link_libraries(evloc_mapper_pipeline
+  PUBLIC evloc_maps evloc_camera evloc_geometry evloc_common ${OpenCV_LIBS}
+  PRIVATE evloc_trajectory nlohmann_json::nlohmann_json SQLite::SQLite3 Threads::Threads
+          ${PCL_LIBRARIES})
+target_compile_definitions(evloc_mapper_pipeline PRIVATE EVLOC_VERSION="${PROJECT_VERSION}")
+# PCL headers are included by map_merge.cc only; SYSTEM keeps their warnings out.
+target_include_directories(evloc_mapper_pipeline SYSTEM PRIVATE ${PCL_INCLUDE_DIRS})
+target_compile_definitions(evloc_mapper_pipeline PRIVATE ${PCL_DEFINITIONS})
+
+evloc_add_test(NAME evloc_mapper_pipeline_test
+  SOURCES ${CMAKE_CURRENT_LIST_DIR}/colmap_model_test.cc
+          ${CMAKE_CURRENT_LIST_DIR}/keyframe_selection_test.cc
+          ${CMAKE_CURRENT_LIST_DIR}/semidense_depth_test.cc
+          ${CMAKE_CURRENT_LIST_DIR}/map_merge_test.cc
+          ${CMAKE_CURRENT_LIST_DIR}/build_command_test.cc
+  LIBS evloc_mapper_pipeline evloc_trajectory)
+
+evloc_add_test(NAME evloc_mapper_accuracy_test
+  SOURCES ${CMAKE_CURRENT_LIST_DIR}/map_builder_accuracy_test.cc
+  LIBS evloc_mapper_pipeline
+  LABELS long)
