@@ -88,7 +88,7 @@ struct PanelMapping {
 void DrawAxes(cv::Mat& image, const PanelMapping& mapping, const std::string& u_label,
               const std::string& v_label) {
   const double u_step = NiceStep(mapping.UMax() - mapping.u_min, 8);
-  const double v_step = NiceStep(mapping.VMax() - mapping.v_min, 5);
+  const double v_step = NiceStep(mapping.VMax() - mapping.v_min, 7);
   const int bottom = mapping.rect.y + mapping.rect.height;
   for (double u = std::ceil(mapping.u_min / u_step) * u_step; u <= mapping.UMax() + 1e-12;
        u += u_step) {
@@ -219,7 +219,8 @@ cv::Mat RenderEvaluationPlot(const Trajectory& ground_truth, const Trajectory& e
   view.u_min = 0.5 * (lower[axes[0]] + upper[axes[0]]) - 0.5 * view.rect.width / pixels_per_metre;
   view.v_min = 0.5 * (lower[axes[1]] + upper[axes[1]]) - 0.5 * view.rect.height / pixels_per_metre;
   DrawAxes(image, view, std::string(axis_names[axes[0]]) + " [m]",
-           std::string(axis_names[axes[1]]) + " [m]   (top view, ground-truth frame)");
+           std::string(axis_names[axes[1]]) + " [m]   (projection along " +
+               axis_names[dropped_axis] + ", the axis of least extent; ground-truth frame)");
   const int64_t max_gap_ns = std::llround(evaluation.coverage_max_gap_s * 1e9);
   const auto project = [&](const std::vector<Eigen::Vector3d>& positions) {
     std::vector<cv::Point> points;
@@ -244,7 +245,10 @@ cv::Mat RenderEvaluationPlot(const Trajectory& ground_truth, const Trajectory& e
   PutText(image, "ground truth (circle: start)", {legend.x + 55, legend.y + 23}, 0.45, kBlack);
   cv::line(image, {legend.x + 10, legend.y + 42}, {legend.x + 45, legend.y + 42}, kEstimateColor, 2,
            cv::LINE_AA);
-  PutText(image, "estimate (" + AlignmentName(evaluation.alignment) + " aligned)",
+  PutText(image,
+          evaluation.alignment == Alignment::kNone
+              ? std::string("estimate (no alignment)")
+              : "estimate (" + AlignmentName(evaluation.alignment) + "-aligned)",
           {legend.x + 55, legend.y + 47}, 0.45, kBlack);
 
   // Translation error over time.
@@ -271,12 +275,18 @@ cv::Mat RenderEvaluationPlot(const Trajectory& ground_truth, const Trajectory& e
   const int threshold_y = errors.ToPixel(0.0, evaluation.fail_cm).y;
   DrawDashedLine(image, {errors.rect.x, threshold_y},
                  {errors.rect.x + errors.rect.width, threshold_y}, kThresholdColor);
-  PutRightText(image, "fail threshold " + FormatNumber(evaluation.fail_cm, 1) + " cm",
-               errors.rect.x + errors.rect.width - 6, threshold_y - 6, 0.45, kThresholdColor);
+  PutText(image, "fail threshold " + FormatNumber(evaluation.fail_cm, 1) + " cm",
+          {errors.rect.x + 6, threshold_y - 6}, 0.45, kThresholdColor);
   if (result.failed_at_s) {
     const int x = errors.ToPixel(*result.failed_at_s, 0.0).x;
     DrawDashedLine(image, {x, errors.rect.y}, {x, errors.rect.y + errors.rect.height},
                    kThresholdColor);
+    const std::string label = "failed at " + FormatNumber(*result.failed_at_s, 2) + " s";
+    if (x > errors.rect.x + errors.rect.width / 2) {
+      PutRightText(image, label, x - 6, errors.rect.y + 16, 0.45, kThresholdColor);
+    } else {
+      PutText(image, label, {x + 6, errors.rect.y + 16}, 0.45, kThresholdColor);
+    }
   }
   return image;
 }

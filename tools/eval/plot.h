@@ -1,5 +1,6 @@
-// The evaluation figure: a top view of the ground-truth and estimated trajectories above the
-// translation error over time, titled with the main figures. Drawn with OpenCV.
+// The evaluation figure: a top view (projection along the axis of least extent) of the ground-truth
+// and estimated trajectories above the translation error over time, titled with the main figures.
+// Drawn with OpenCV.
 #pragma once
 
 #include <filesystem>
