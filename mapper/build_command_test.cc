@@ -7,16 +7,17 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "core/common/error.h"
+#include "core/common/file_util.h"
 #include "core/common/test_data.h"
-#include "maps/map.h"
 #include "mapper/middlebury_test_util.h"
+#include "maps/map.h"
 
 namespace evloc::mapper {
 namespace {
 
 namespace fs = std::filesystem;
 
-int Run(std::vector<std::string> arguments) {
+int RunBuild(std::vector<std::string> arguments) {
   arguments.insert(arguments.begin(), "build");
   arguments.push_back("--quiet");
   std::vector<char*> argv;
@@ -32,10 +33,10 @@ void WriteImage(const fs::path& path, int width, int height) {
 }
 
 TEST(BuildCommand, HelpAndUnknownFlags) {
-  EXPECT_EQ(Run({"--help"}), 0);
-  EXPECT_EQ(Run({"--images", "x", "--out", "y", "--no-such-flag", "1"}), 2);
-  EXPECT_EQ(Run({"--out", "y"}), 2);
-  EXPECT_EQ(Run({"--images", "x", "--out", "y", "--matcher", "fancy"}), 2);
+  EXPECT_EQ(RunBuild({"--help"}), 0);
+  EXPECT_EQ(RunBuild({"--images", "x", "--out", "y", "--no-such-flag", "1"}), 2);
+  EXPECT_EQ(RunBuild({"--out", "y"}), 2);
+  EXPECT_EQ(RunBuild({"--images", "x", "--out", "y", "--matcher", "fancy"}), 2);
 }
 
 TEST(BuildCommand, ParsesFlagsIntoOptions) {
@@ -66,46 +67,48 @@ TEST(BuildCommand, BadInputsFailWithoutWritingAnything) {
   const fs::path directory = evloc::testing::MakeTempDir("build_errors");
   const fs::path out = directory / "map";
   // Missing and empty image folders.
-  EXPECT_EQ(Run({"--images", (directory / "missing").string(), "--out", out.string()}), 1);
+  EXPECT_EQ(RunBuild({"--images", (directory / "missing").string(), "--out", out.string()}), 1);
   fs::create_directories(directory / "empty");
-  EXPECT_EQ(Run({"--images", (directory / "empty").string(), "--out", out.string()}), 1);
+  EXPECT_EQ(RunBuild({"--images", (directory / "empty").string(), "--out", out.string()}), 1);
   // Unreadable and mixed-size images.
   fs::create_directories(directory / "broken");
   { std::ofstream(directory / "broken" / "a.png") << "not a png"; }
-  EXPECT_EQ(Run({"--images", (directory / "broken").string(), "--out", out.string()}), 1);
+  EXPECT_EQ(RunBuild({"--images", (directory / "broken").string(), "--out", out.string()}), 1);
   fs::create_directories(directory / "mixed");
   WriteImage(directory / "mixed" / "a.png", 64, 48);
   WriteImage(directory / "mixed" / "b.png", 64, 50);
-  EXPECT_EQ(Run({"--images", (directory / "mixed").string(), "--out", out.string()}), 1);
+  EXPECT_EQ(RunBuild({"--images", (directory / "mixed").string(), "--out", out.string()}), 1);
   // COLMAP missing.
   fs::create_directories(directory / "good");
   WriteImage(directory / "good" / "a.png", 64, 48);
   WriteImage(directory / "good" / "b.png", 64, 48);
-  EXPECT_EQ(Run({"--images", (directory / "good").string(), "--out", out.string(), "--colmap",
-                 (directory / "no-colmap").string()}),
+  EXPECT_EQ(RunBuild({"--images", (directory / "good").string(), "--out", out.string(), "--colmap",
+                      (directory / "no-colmap").string()}),
             1);
-  EXPECT_EQ(Run({"--images", (directory / "good").string(), "--out", out.string(), "--colmap",
-                 "evloc-no-such-colmap"}),
+  EXPECT_EQ(RunBuild({"--images", (directory / "good").string(), "--out", out.string(), "--colmap",
+                      "evloc-no-such-colmap"}),
             1);
   // Known poses that do not match the images.
   { std::ofstream(directory / "poses.txt") << "a.png 0 0 0 0 0 0 1\nc.png 0 0 0 0 0 0 1\n"; }
-  EXPECT_EQ(Run({"--images", (directory / "good").string(), "--out", out.string(), "--camera",
-                 "pinhole:50,50,31.5,23.5", "--known-poses", (directory / "poses.txt").string()}),
-            1);
+  EXPECT_EQ(
+      RunBuild({"--images", (directory / "good").string(), "--out", out.string(), "--camera",
+                "pinhole:50,50,31.5,23.5", "--known-poses", (directory / "poses.txt").string()}),
+      1);
   { std::ofstream(directory / "poses.txt") << "a.png 0 0 0 0 0 0 1\n"; }
-  EXPECT_EQ(Run({"--images", (directory / "good").string(), "--out", out.string(), "--camera",
-                 "pinhole:50,50,31.5,23.5", "--known-poses", (directory / "poses.txt").string()}),
-            1);
+  EXPECT_EQ(
+      RunBuild({"--images", (directory / "good").string(), "--out", out.string(), "--camera",
+                "pinhole:50,50,31.5,23.5", "--known-poses", (directory / "poses.txt").string()}),
+      1);
   // Known poses without intrinsics.
-  EXPECT_EQ(Run({"--images", (directory / "good").string(), "--out", out.string(),
-                 "--known-poses", (directory / "poses.txt").string()}),
+  EXPECT_EQ(RunBuild({"--images", (directory / "good").string(), "--out", out.string(),
+                      "--known-poses", (directory / "poses.txt").string()}),
             1);
   EXPECT_FALSE(fs::exists(out));
   EXPECT_FALSE(fs::exists(directory / "map.colmap-workspace"));
   // A directory that already holds a map is left alone.
   fs::create_directories(out);
   { std::ofstream(out / "map.evmap") << "previous map"; }
-  EXPECT_EQ(Run({"--images", (directory / "good").string(), "--out", out.string()}), 1);
+  EXPECT_EQ(RunBuild({"--images", (directory / "good").string(), "--out", out.string()}), 1);
   EXPECT_EQ(ReadFileToString(out / "map.evmap"), "previous map");
   fs::remove_all(directory);
 }
@@ -115,20 +118,18 @@ TEST(BuildCommand, BadInputsFailWithoutWritingAnything) {
 TEST(BuildCommand, TempleWithKnownPosesEndToEnd) {
   EVLOC_REQUIRE_SHARED_DATA(parameters, "middlebury/templeSparseRing/templeSR_par.txt");
   const fs::path image_dir = parameters.parent_path();
-  const std::vector<testing::MiddleburyView> views =
-      testing::ReadMiddleburyParameters(parameters);
+  const std::vector<testing::MiddleburyView> views = testing::ReadMiddleburyParameters(parameters);
   ASSERT_EQ(views.size(), 16u);
   const fs::path directory = evloc::testing::MakeTempDir("build_temple_known");
   testing::WriteNamedPoses(directory / "poses.txt", views);
   const Eigen::Matrix3d& k = views[0].calibration;
-  const std::string camera = "pinhole:" + std::to_string(k(0, 0)) + "," +
-                             std::to_string(k(1, 1)) + "," + std::to_string(k(0, 2)) + "," +
-                             std::to_string(k(1, 2));
+  const std::string camera = "pinhole:" + std::to_string(k(0, 0)) + "," + std::to_string(k(1, 1)) +
+                             "," + std::to_string(k(0, 2)) + "," + std::to_string(k(1, 2));
   const fs::path out = directory / "map";
   const fs::path workspace = directory / "workspace";
-  ASSERT_EQ(Run({"--images", image_dir.string(), "--out", out.string(), "--camera", camera,
-                 "--known-poses", (directory / "poses.txt").string(), "--colmap-workspace",
-                 workspace.string()}),
+  ASSERT_EQ(RunBuild({"--images", image_dir.string(), "--out", out.string(), "--camera", camera,
+                      "--known-poses", (directory / "poses.txt").string(), "--colmap-workspace",
+                      workspace.string()}),
             0);
   for (const char* name : {"map.evmap", "map.ply", "preview.png", "report.json",
                            "colmap/images.txt", "colmap/logs/feature_extractor.log"}) {
@@ -150,15 +151,14 @@ TEST(BuildCommand, TempleWithKnownPosesEndToEnd) {
   ASSERT_GT(distances.size(), 1000u);
   const double median = distances[distances.size() / 2];
   std::cout << "templeSparseRing known poses: " << map.size() << " points, median edge distance "
-            << median << " px, 90th percentile " << distances[distances.size() * 9 / 10]
-            << " px\n";
+            << median << " px, 90th percentile " << distances[distances.size() * 9 / 10] << " px\n";
   EXPECT_LE(median, 1.0);
 
   // Re-run into another directory: COLMAP stages are reused.
   const fs::path second = directory / "map2";
-  ASSERT_EQ(Run({"--images", image_dir.string(), "--out", second.string(), "--camera", camera,
-                 "--known-poses", (directory / "poses.txt").string(), "--colmap-workspace",
-                 workspace.string()}),
+  ASSERT_EQ(RunBuild({"--images", image_dir.string(), "--out", second.string(), "--camera", camera,
+                      "--known-poses", (directory / "poses.txt").string(), "--colmap-workspace",
+                      workspace.string()}),
             0);
   const std::string report = ReadFileToString(second / "report.json");
   EXPECT_NE(report.find("\"reused\": true"), std::string::npos) << report;

@@ -82,8 +82,8 @@ inline Camera MiddleburyCamera(const MiddleburyView& view, int width, int height
 inline std::vector<double> EdgeDistances(const Map& map, const std::filesystem::path& image_dir) {
   std::vector<double> distances;
   for (const Keyframe& keyframe : map.keyframes) {
-    const cv::Mat gray = cv::imread((image_dir / keyframe.image_name).string(),
-                                    cv::IMREAD_GRAYSCALE);
+    const cv::Mat gray =
+        cv::imread((image_dir / keyframe.image_name).string(), cv::IMREAD_GRAYSCALE);
     cv::Mat edges;
     cv::Canny(gray, edges, 40, 100, 3, true);
     cv::Mat distance;
@@ -100,10 +100,10 @@ inline std::vector<double> EdgeDistances(const Map& map, const std::filesystem::
       const int y0 = std::clamp(static_cast<int>(pixel.y()), 0, camera.height - 2);
       const double ax = pixel.x() - x0;
       const double ay = pixel.y() - y0;
-      const double value = (1 - ay) * ((1 - ax) * distance.at<float>(y0, x0) +
-                                       ax * distance.at<float>(y0, x0 + 1)) +
-                           ay * ((1 - ax) * distance.at<float>(y0 + 1, x0) +
-                                 ax * distance.at<float>(y0 + 1, x0 + 1));
+      const double value =
+          (1 - ay) * ((1 - ax) * distance.at<float>(y0, x0) + ax * distance.at<float>(y0, x0 + 1)) +
+          ay *
+              ((1 - ax) * distance.at<float>(y0 + 1, x0) + ax * distance.at<float>(y0 + 1, x0 + 1));
       distances.push_back(value);
     }
   }

@@ -1,0 +1,117 @@
+// Accuracy of `evloc-mapper build` on real photos (docs/mapper.md, "Measured figures"): the
+// Middlebury templeSparseRing images with calibrated intrinsics and poses. Label `long`.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <iostream>
+#include <numbers>
+
+#include "core/common/test_data.h"
+#include "mapper/map_builder.h"
+#include "mapper/middlebury_test_util.h"
+#include "maps/map.h"
+
+namespace evloc::mapper {
+namespace {
+
+namespace fs = std::filesystem;
+
+void PrintTimings(const MapBuildReport& report) {
+  for (const StageTiming& timing : report.timings) {
+    std::cout << "  " << timing.stage << ": " << timing.seconds << " s"
+              << (timing.reused ? " (reused)" : "") << "\n";
+  }
+  std::cout << "  COLMAP total " << report.TotalSeconds("colmap") << " s, semi-dense total "
+            << report.TotalSeconds("semidense") << " s\n";
+}
+
+struct TempleFixture {
+  fs::path image_dir;
+  std::vector<testing::MiddleburyView> views;
+  Camera camera;
+};
+
+TempleFixture LoadTemple(const fs::path& parameters) {
+  TempleFixture temple;
+  temple.image_dir = parameters.parent_path();
+  temple.views = testing::ReadMiddleburyParameters(parameters);
+  temple.camera = testing::MiddleburyCamera(temple.views.at(0), 640, 480);
+  return temple;
+}
+
+TEST(MapBuilderAccuracy, TempleKnownPosesMapLiesOnImageEdges) {
+  EVLOC_REQUIRE_SHARED_DATA(parameters, "middlebury/templeSparseRing/templeSR_par.txt");
+  const TempleFixture temple = LoadTemple(parameters);
+  const fs::path directory = evloc::testing::MakeTempDir("accuracy_temple_known");
+  testing::WriteNamedPoses(directory / "poses.txt", temple.views);
+  MapBuilderOptions options;
+  options.image_dir = temple.image_dir;
+  options.output_dir = directory / "map";
+  options.camera = temple.camera;
+  options.known_poses = directory / "poses.txt";
+  const MapBuildReport report = BuildMap(options);
+  const Map map = LoadMap(options.output_dir / "map.evmap");
+  const std::vector<double> distances = testing::EdgeDistances(map, temple.image_dir);
+  ASSERT_GT(distances.size(), 1000u);
+  const double median = distances[distances.size() / 2];
+  std::cout << "templeSparseRing, known poses: " << report.num_registered << "/"
+            << report.num_images << " images, " << report.num_keyframes << " keyframes, "
+            << report.num_sparse_points << " sparse points (mean reprojection error "
+            << report.colmap_mean_reprojection_error_px << " px), " << report.num_keyframe_points
+            << " keyframe points, " << map.size() << " map points\n"
+            << "  edge distance of visible points: median " << median << " px, 75th "
+            << distances[distances.size() * 3 / 4] << " px, 90th "
+            << distances[distances.size() * 9 / 10] << " px over " << distances.size()
+            << " projections\n";
+  PrintTimings(report);
+  EXPECT_LE(median, 1.0);
+  EXPECT_LE(report.TotalSeconds("semidense"), report.TotalSeconds("colmap"));
+  fs::remove_all(directory);
+}
+
+TEST(MapBuilderAccuracy, TempleEstimatedPosesAgreeWithCalibration) {
+  EVLOC_REQUIRE_SHARED_DATA(parameters, "middlebury/templeSparseRing/templeSR_par.txt");
+  const TempleFixture temple = LoadTemple(parameters);
+  const fs::path directory = evloc::testing::MakeTempDir("accuracy_temple_estimated");
+  testing::WriteNamedPoses(directory / "poses.txt", temple.views);
+  MapBuilderOptions options;
+  options.image_dir = temple.image_dir;
+  options.output_dir = directory / "map";
+  options.camera = temple.camera;
+  options.align_to = directory / "poses.txt";
+  const MapBuildReport report = BuildMap(options);
+  EXPECT_EQ(report.num_registered, 16u);
+  ASSERT_TRUE(report.alignment_rms_m.has_value());
+  const Map map = LoadMap(options.output_dir / "map.evmap");
+  Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+  for (const Eigen::Vector3f& position : map.positions) centroid += position.cast<double>();
+  centroid /= static_cast<double>(map.size());
+  double max_rotation_deg = 0.0;
+  double max_relative_position = 0.0;
+  for (const testing::MiddleburyView& view : temple.views) {
+    const auto estimated = report.world_from_cams.find(view.name);
+    ASSERT_NE(estimated, report.world_from_cams.end()) << view.name;
+    const Rigid3d truth = view.cam_from_world.Inverse();
+    const double rotation_deg =
+        AngleBetween(estimated->second.rotation, truth.rotation) * 180.0 / std::numbers::pi;
+    const double object_distance = (truth.translation - centroid).norm();
+    const double relative =
+        (estimated->second.translation - truth.translation).norm() / object_distance;
+    max_rotation_deg = std::max(max_rotation_deg, rotation_deg);
+    max_relative_position = std::max(max_relative_position, relative);
+  }
+  const std::vector<double> distances = testing::EdgeDistances(map, temple.image_dir);
+  std::cout << "templeSparseRing, estimated poses (fixed intrinsics, Sim(3) to calibration): "
+            << report.num_registered << "/16 registered, alignment RMS "
+            << *report.alignment_rms_m * 1000.0 << " mm (scale " << *report.alignment_scale
+            << "), max rotation error " << max_rotation_deg << " deg, max position error "
+            << 100.0 * max_relative_position << " % of the object distance; " << map.size()
+            << " points, median edge distance " << distances[distances.size() / 2] << " px\n";
+  PrintTimings(report);
+  EXPECT_LT(max_rotation_deg, 1.0);
+  EXPECT_LT(max_relative_position, 0.01);
+  fs::remove_all(directory);
+}
+
+}  // namespace
+}  // namespace evloc::mapper
