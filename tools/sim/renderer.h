@@ -21,16 +21,25 @@ struct RenderOptions {
   // Samples per pixel and axis (ss x ss box-filter samples) where a pixel straddles an edge;
   // 1 disables anti-aliasing.
   int supersampling = 3;
-  // Worker threads for cv::parallel_for_ (0 = OpenCV's default).
-  int num_threads = 2;
+  // Render tiles in parallel on OpenCV's thread pool (cv::parallel_for_; its size is set by
+  // cv::setNumThreads); false renders serially in the calling thread.
+  bool parallel = true;
   // Rays hitting a surface closer than this to the camera centre are ignored, metres.
   double near_clip_m = 1e-3;
   // Irradiance of pixels whose ray hits nothing, in [0, 1].
   float background = 0.0f;
 
-  // Throws InvalidArgumentError when supersampling is outside [1, 8], num_threads is negative,
-  // near_clip_m is not positive or background is outside [0, 1].
+  // Throws InvalidArgumentError when supersampling is outside [1, 8], near_clip_m is not positive
+  // or background is outside [0, 1].
   void Check() const;
+};
+
+// Figures about one Render call, for benchmarks.
+struct RenderStats {
+  // Fraction of pixels that were supersampled, in [0, 1].
+  double supersampled_fraction = 0;
+  // Mean number of candidate surfaces per tile after culling.
+  double mean_candidates_per_tile = 0;
 };
 
 // What a single ray hits.
@@ -54,17 +63,21 @@ std::optional<RayHit> CastRay(const Scene& scene, const Eigen::Vector3d& origin,
 // const and may be called from several threads.
 class Renderer {
  public:
-  // Keeps a copy of the scene and the camera. Throws InvalidArgumentError when the scene, the
-  // camera or the options fail Check().
+  // Keeps a copy of the scene and the camera (not copyable: it indexes its own scene copy). Throws
+  // InvalidArgumentError when the scene, the camera or the options fail Check().
   Renderer(const Scene& scene, const Camera& camera, RenderOptions options = {});
+
+  Renderer(const Renderer&) = delete;
+  Renderer& operator=(const Renderer&) = delete;
 
   // Renders the view from `world_from_cam`: linear irradiance in [0, 1] as gray CV_32FC1
   // (required), rgb CV_32FC3 in R, G, B channel order (optional), depth = z of the nearest hit in
   // the camera frame, metres, CV_32FC1, 0 where nothing is hit (optional; taken at the pixel
   // centre, not averaged). Pixels whose ray cannot be unprojected through the lens are 0.
-  // Throws InvalidArgumentError when `gray` is null or the pose is not finite.
+  // Fills `stats` when it is not null. Throws InvalidArgumentError when `gray` is null or the
+  // pose is not finite.
   void Render(const Rigid3d& world_from_cam, cv::Mat* gray, cv::Mat* rgb = nullptr,
-              cv::Mat* depth = nullptr) const;
+              cv::Mat* depth = nullptr, RenderStats* stats = nullptr) const;
 
   // The scene being rendered.
   const Scene& scene() const { return scene_; }
@@ -72,27 +85,33 @@ class Renderer {
   const Camera& camera() const { return camera_; }
   // The options.
   const RenderOptions& options() const { return options_; }
-  // Fraction of pixels supersampled by the last Render call (for benchmarks), in [0, 1].
-  double last_supersampled_fraction() const { return last_supersampled_fraction_; }
 
  private:
-  // A square block of pixels with the cone that contains all its sample rays.
+  // A square block of pixels with the cone that contains all its sample rays (camera frame).
   struct Tile {
-    int x0, y0, x1, y1;
-    Eigen::Vector3d axis;    // unit cone axis, camera frame
-    double half_angle;       // radians
-    double angle_per_pixel;  // max angle between neighbouring pixel rays in the tile
+    // Pixel range [x0, x1) x [y0, y1).
+    int x0 = 0, y0 = 0, x1 = 0, y1 = 0;
+    // Unit cone axis.
+    Eigen::Vector3d axis = Eigen::Vector3d::UnitZ();
+    // Cone half-angle, radians (below 90 degrees).
+    double half_angle = 0;
+    // Largest angle between neighbouring pixel-centre rays in the tile, radians.
+    double angle_per_pixel = 0;
+    // False when no ray of the tile could be unprojected.
+    bool valid = false;
   };
 
   Scene scene_;
+  // One index per surface texture (pointing into scene_).
+  std::vector<IndexedTexture> textures_;
   Camera camera_;
   RenderOptions options_;
   // Unit-z ray (x/z, y/z) per pixel centre, row-major; NaN when the pixel cannot be unprojected.
   std::vector<Eigen::Vector2f> center_rays_;
   // Unit-z rays of the ss x ss sub-samples, (width * ss) x (height * ss) row-major.
   std::vector<Eigen::Vector2f> sample_rays_;
+  // Tiles covering the image, row-major.
   std::vector<Tile> tiles_;
-  mutable double last_supersampled_fraction_ = 0;
 };
 
 }  // namespace evloc::sim

@@ -112,6 +112,40 @@ struct Texture {
   void Check(const std::string& where) const;
 };
 
+// A texture prepared for fast repeated evaluation: layer bounds and polygon edge lines are
+// precomputed and a uniform grid over the texture domain lists, per cell, the layers that may
+// paint within `max_radius` of it. Gives the same results as Texture::ColorAt.
+class IndexedTexture {
+ public:
+  // Indexes `texture` (which must outlive this object and stay unchanged) over the domain
+  // [0, width] x [0, height] with square cells of `cell_size` metres; queries with a radius above
+  // `max_radius` or outside the domain fall back to testing every layer.
+  IndexedTexture(const Texture& texture, double width, double height, double cell_size = 0.05,
+                 double max_radius = 0.02);
+  // The colour at (u, v).
+  Color ColorAt(const Eigen::Vector2d& uv) const;
+  // The colour at (u, v) and whether a region boundary passes within `radius` (as
+  // Texture::ColorAt).
+  Color ColorAt(const Eigen::Vector2d& uv, double radius, bool* near_boundary) const;
+
+ private:
+  struct PreparedLayer {
+    const TextureLayer* layer = nullptr;
+    Eigen::AlignedBox2d bounds;
+    // Polygons: outward unit normals and offsets of the edge lines (n . p <= offset inside).
+    std::vector<Eigen::Vector3d> edge_lines;
+  };
+  Color Evaluate(const Eigen::Vector2d& uv, double radius, bool* near_boundary,
+                 const std::vector<int>* cell) const;
+
+  const Texture* texture_;
+  std::vector<PreparedLayer> layers_;
+  double cell_size_, max_radius_;
+  int columns_ = 0, rows_ = 0;
+  // Layer indices per cell, ascending.
+  std::vector<std::vector<int>> cells_;
+};
+
 // A textured rectangle in the world: the points origin + u * u_axis + v * v_axis for u in
 // [0, width], v in [0, height]. Rendered from both sides.
 struct Surface {
