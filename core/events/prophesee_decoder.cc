@@ -17,14 +17,28 @@ static_assert(std::endian::native == std::endian::little,
 // The largest address either format can encode (11-bit coordinates).
 constexpr uint32_t kFormatAddressLimit = 2048;
 
-// Events decoded into fixed arrays first and appended to the output in blocks, so the hot loop
-// writes without capacity checks.
+// Events are decoded into a fixed-size staging buffer (owned by the decoder, allocated once)
+// and appended to the output in blocks, so the hot loop writes without capacity checks.
 class StagingArea {
  public:
-  // Room left after which Flush() must be called before decoding another word (a word gives at
-  // most 12 events).
+  // Capacity of the staging buffer; Flush() is due when fewer than 12 slots (the most events
+  // one word gives) are left.
   static constexpr size_t kCapacity = 4096;
   static constexpr size_t kFlushThreshold = kCapacity - 12;
+
+  // Sizes `storage` to the capacity once and writes into it.
+  explicit StagingArea(EventBuffer* storage) {
+    if (storage->size() != kCapacity) {
+      storage->t_ns.resize(kCapacity);
+      storage->x.resize(kCapacity);
+      storage->y.resize(kCapacity);
+      storage->polarity.resize(kCapacity);
+    }
+    t_ns_ = storage->t_ns.data();
+    x_ = storage->x.data();
+    y_ = storage->y.data();
+    polarity_ = storage->polarity.data();
+  }
 
   void Emit(int64_t t_ns, uint32_t x, uint32_t y, int8_t polarity) {
     t_ns_[count_] = t_ns;
@@ -43,10 +57,10 @@ class StagingArea {
   }
 
  private:
-  int64_t t_ns_[kCapacity];
-  uint16_t x_[kCapacity];
-  uint16_t y_[kCapacity];
-  int8_t polarity_[kCapacity];
+  int64_t* t_ns_;
+  uint16_t* x_;
+  uint16_t* y_;
+  int8_t* polarity_;
   size_t count_ = 0;
 };
 
@@ -107,7 +121,7 @@ void Evt3Decoder::Decode(const uint8_t* data, size_t size, EventBuffer* out) {
 
 void Evt3Decoder::DecodeWords(const uint8_t* bytes, size_t word_count, uint64_t offset,
                               EventBuffer* out, std::optional<uint64_t>* first_malformed_offset) {
-  StagingArea staging;
+  StagingArea staging(&staging_);
   // Local copies of the state let the compiler keep it in registers.
   bool has_time_high = has_time_high_;
   bool has_y = has_y_;
@@ -121,7 +135,7 @@ void Evt3Decoder::DecodeWords(const uint8_t* bytes, size_t word_count, uint64_t 
   int8_t vector_polarity = vector_polarity_;
   const uint32_t width_limit = width_limit_;
   const uint32_t height_limit = height_limit_;
-  int64_t t_ns = static_cast<int64_t>(static_cast<uint64_t>(last_time_us) * 1000u);
+  int64_t t_ns = current_t_ns_;
   uint64_t appended = 0;
 
   // Recomposes the current time; `at_time_low` compares it with the previous EVT_TIME_LOW's time
@@ -234,6 +248,7 @@ void Evt3Decoder::DecodeWords(const uint8_t* bytes, size_t word_count, uint64_t 
   time_low_ = time_low;
   time_epoch_ = time_epoch;
   last_time_us_ = last_time_us;
+  current_t_ns_ = t_ns;
   y_ = y;
   vector_base_x_ = vector_base_x;
   vector_polarity_ = vector_polarity;
@@ -284,7 +299,7 @@ void Evt2Decoder::Decode(const uint8_t* data, size_t size, EventBuffer* out) {
 
 void Evt2Decoder::DecodeWords(const uint8_t* bytes, size_t word_count, uint64_t offset,
                               EventBuffer* out, std::optional<uint64_t>* first_malformed_offset) {
-  StagingArea staging;
+  StagingArea staging(&staging_);
   bool has_time_high = has_time_high_;
   uint32_t time_high = time_high_;
   uint64_t time_epoch = time_epoch_;

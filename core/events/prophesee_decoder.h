@@ -89,6 +89,8 @@ class Evt3Decoder final : public EventStreamDecoder {
   uint32_t width_limit_;
   uint32_t height_limit_;
   DecoderStatistics statistics_;
+  // Staging storage for decoded events (see the .cc file).
+  EventBuffer staging_;
   bool has_pending_byte_ = false;
   uint8_t pending_byte_ = 0;
   bool has_time_high_ = false;
@@ -97,7 +99,10 @@ class Evt3Decoder final : public EventStreamDecoder {
   uint32_t time_high_ = 0;
   uint32_t time_low_ = 0;
   uint64_t time_epoch_ = 0;
+  // Time of the previous EVT_TIME_LOW, microseconds (for counting regressions).
   int64_t last_time_us_ = 0;
+  // Time given to the next events, nanoseconds.
+  int64_t current_t_ns_ = 0;
   uint32_t y_ = 0;
   uint32_t vector_base_x_ = 0;
   int8_t vector_polarity_ = 1;
@@ -122,6 +127,8 @@ class Evt2Decoder final : public EventStreamDecoder {
   uint32_t width_limit_;
   uint32_t height_limit_;
   DecoderStatistics statistics_;
+  // Staging storage for decoded events (see the .cc file).
+  EventBuffer staging_;
   uint8_t pending_[4] = {0, 0, 0, 0};
   size_t pending_size_ = 0;
   bool has_time_high_ = false;

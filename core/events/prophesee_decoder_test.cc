@@ -183,6 +183,20 @@ TEST(Evt3Decoder, ChunkSplitsAtEveryByteGiveIdenticalOutput) {
   EXPECT_GT(decoder.statistics().time_wraps, 0u);
 }
 
+// Regression (fuzzer, evt3 crash-7e08a46): events right after an EVT_TIME_HIGH with no
+// EVT_TIME_LOW took a stale time when a chunk boundary fell between the two words.
+TEST(Evt3Decoder, TimeHighWithoutTimeLowSurvivesChunkSplits) {
+  std::vector<uint16_t> words;
+  for (uint16_t step = 0; step < 60; ++step) {
+    words.push_back(static_cast<uint16_t>(0x8000 | (step * 5)));
+    if (step % 3 == 0) words.push_back(static_cast<uint16_t>(0x6000 | step));
+    words.push_back(static_cast<uint16_t>(0x0000 | step));
+    words.push_back(static_cast<uint16_t>(0x2800 | step));
+    words.push_back(static_cast<uint16_t>(0x2000 | (step + 100)));
+  }
+  ExpectChunkingInvariant<Evt3Decoder>(Evt3Bytes(words));
+}
+
 TEST(Evt2Decoder, ChunkSplitsAtEveryByteGiveIdenticalOutput) {
   const auto bytes = MixedEvt2Stream();
   ExpectChunkingInvariant<Evt2Decoder>(bytes);

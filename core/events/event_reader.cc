@@ -1,0 +1,71 @@
+#include "core/events/event_reader.h"
+
+#include <algorithm>
+#include <cctype>
+#include <cstring>
+#include <fstream>
+
+#include "core/common/error.h"
+#include "core/events/dsec_hdf5.h"
+#include "core/events/ecd_text.h"
+#include "core/events/evb.h"
+#include "core/events/prophesee_raw.h"
+
+namespace evloc {
+
+const char* EventFileFormatName(EventFileFormat format) {
+  switch (format) {
+    case EventFileFormat::kEcdText:
+      return "ECD text";
+    case EventFileFormat::kPropheseeRaw:
+      return "Prophesee .raw";
+    case EventFileFormat::kDsecHdf5:
+      return "DSEC HDF5";
+    case EventFileFormat::kEvb:
+      return "evloc .evb";
+  }
+  return "unknown";
+}
+
+EventFileFormat DetectEventFileFormat(const std::filesystem::path& path) {
+  std::ifstream file(path, std::ios::binary);
+  if (!file) throw IoError(path.string() + ": cannot open");
+  char start[8] = {0};
+  file.read(start, sizeof(start));
+  const auto size = static_cast<size_t>(file.gcount());
+  if (size == 8 && std::memcmp(start, "EVLOCEVB", 8) == 0) return EventFileFormat::kEvb;
+  if (size == 8 && std::memcmp(start, "\x89HDF\r\n\x1a\n", 8) == 0) {
+    return EventFileFormat::kDsecHdf5;
+  }
+  if (size >= 2 && start[0] == '%' && start[1] == ' ') return EventFileFormat::kPropheseeRaw;
+  std::string extension = path.extension().string();
+  std::transform(extension.begin(), extension.end(), extension.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  if (extension == ".raw") return EventFileFormat::kPropheseeRaw;
+  if (extension == ".h5" || extension == ".hdf5") return EventFileFormat::kDsecHdf5;
+  if (extension == ".evb") return EventFileFormat::kEvb;
+  // ECD text: a digit, '#' or blank line first.
+  if (extension == ".txt" ||
+      (size > 0 && (std::isdigit(static_cast<unsigned char>(start[0])) || start[0] == '#'))) {
+    return EventFileFormat::kEcdText;
+  }
+  throw ParseError::AtByte(path.string(), 0,
+                           "unknown event file format (evloc reads .evb, Prophesee .raw with a "
+                           "'% ' header, DSEC HDF5 .h5 and ECD text 't x y p')");
+}
+
+std::unique_ptr<EventReader> OpenEventFile(const std::filesystem::path& path) {
+  switch (DetectEventFileFormat(path)) {
+    case EventFileFormat::kEcdText:
+      return std::make_unique<EcdTextReader>(path);
+    case EventFileFormat::kPropheseeRaw:
+      return std::make_unique<PropheseeRawReader>(path);
+    case EventFileFormat::kDsecHdf5:
+      return std::make_unique<DsecHdf5Reader>(path);
+    case EventFileFormat::kEvb:
+      return std::make_unique<EvbReader>(path);
+  }
+  throw InvalidArgumentError("OpenEventFile: unhandled format");
+}
+
+}  // namespace evloc

@@ -1,0 +1,53 @@
+// Streaming readers of event files and the format dispatcher (docs/event-formats.md).
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <filesystem>
+#include <memory>
+#include <optional>
+#include <string>
+
+#include "core/events/event.h"
+
+namespace evloc {
+
+// Reads the events of a file (or stream) in order, a bounded number at a time: no reader ever
+// holds the whole file in memory.
+class EventReader {
+ public:
+  virtual ~EventReader() = default;
+  // Appends up to `max_events` events to `out` and returns how many; 0 only at the end.
+  // Throws ParseError (naming the source and the line or byte offset) on malformed content and
+  // IoError when the underlying file fails.
+  virtual size_t Read(size_t max_events, EventBuffer* out) = 0;
+  // The sensor size when the format records it (or the reader could infer it), else nullopt.
+  virtual std::optional<SensorSize> sensor_size() const = 0;
+  // Events present in the source but not returned (outside the sensor, or before the stream
+  // gave their time base); 0 for formats that never drop. See docs/event-formats.md.
+  virtual uint64_t dropped_event_count() const { return 0; }
+};
+
+// The event file formats evloc reads.
+enum class EventFileFormat {
+  // Event Camera Dataset text, `t[s] x y p` per line.
+  kEcdText,
+  // Prophesee .raw with a `% ...` header, EVT 2.0 or EVT 3.0 payload.
+  kPropheseeRaw,
+  // DSEC-style HDF5: /events/{x,y,p,t}, /t_offset.
+  kDsecHdf5,
+  // evloc's compact binary format (.evb).
+  kEvb,
+};
+
+// Human-readable name of a format ("ECD text", ...).
+const char* EventFileFormatName(EventFileFormat format);
+
+// Detects the format of `path` from its first bytes, falling back to the extension for text.
+// Throws IoError when the file cannot be read and ParseError (at byte 0) for unknown content.
+EventFileFormat DetectEventFileFormat(const std::filesystem::path& path);
+
+// Opens `path` with the reader of its detected format.
+std::unique_ptr<EventReader> OpenEventFile(const std::filesystem::path& path);
+
+}  // namespace evloc
