@@ -123,6 +123,13 @@ void ColmapOptions::Check() const {
   if (max_num_features < 100) {
     throw InvalidArgumentError("COLMAP max_num_features must be at least 100");
   }
+  if (abs_pose_min_num_inliers < 4) {
+    throw InvalidArgumentError("COLMAP abs_pose_min_num_inliers must be at least 4");
+  }
+  if (!(abs_pose_min_inlier_ratio > 0.0 && abs_pose_min_inlier_ratio <= 1.0)) {
+    throw InvalidArgumentError("COLMAP abs_pose_min_inlier_ratio must be in (0, 1]");
+  }
+  if (min_num_matches < 4) throw InvalidArgumentError("COLMAP min_num_matches must be at least 4");
   if (camera) camera->Check();
 }
 
@@ -287,11 +294,20 @@ void ColmapRunner::MatchFeatures(size_t num_images) const {
 
 void ColmapRunner::Map(const std::filesystem::path& output_dir) const {
   CreateDirectories(output_dir);
-  std::vector<std::string> arguments = {
-      "--database_path",      DatabasePath().string(),
-      "--image_path",         image_dir_.string(),
-      "--output_path",        output_dir.string(),
-      "--Mapper.num_threads", std::to_string(options_.num_threads)};
+  std::vector<std::string> arguments = {"--database_path",
+                                        DatabasePath().string(),
+                                        "--image_path",
+                                        image_dir_.string(),
+                                        "--output_path",
+                                        output_dir.string(),
+                                        "--Mapper.num_threads",
+                                        std::to_string(options_.num_threads),
+                                        "--Mapper.abs_pose_min_num_inliers",
+                                        std::to_string(options_.abs_pose_min_num_inliers),
+                                        "--Mapper.abs_pose_min_inlier_ratio",
+                                        std::to_string(options_.abs_pose_min_inlier_ratio),
+                                        "--Mapper.min_num_matches",
+                                        std::to_string(options_.min_num_matches)};
   if (options_.camera) {
     arguments.insert(arguments.end(),
                      {"--Mapper.ba_refine_focal_length", "0", "--Mapper.ba_refine_principal_point",

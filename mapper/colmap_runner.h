@@ -45,6 +45,13 @@ struct ColmapOptions {
   int sequential_overlap = 10;
   // Maximum number of SIFT features per image.
   int max_num_features = 8192;
+  // mapper: minimum inliers to register an image (COLMAP's default 30 leaves images of weakly
+  // textured objects such as the Middlebury temple unregistered).
+  int abs_pose_min_num_inliers = 15;
+  // mapper: minimum inlier ratio to register an image (COLMAP's default 0.25).
+  double abs_pose_min_inlier_ratio = 0.1;
+  // mapper: minimum matches for an image pair to be used (COLMAP's default 15).
+  int min_num_matches = 10;
   // Fixed intrinsics shared by every image; std::nullopt lets COLMAP estimate one camera
   // (SIMPLE_RADIAL) shared by all images.
   std::optional<Camera> camera;
