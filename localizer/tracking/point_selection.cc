@@ -1,0 +1,115 @@
+#include "localizer/tracking/point_selection.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "core/common/error.h"
+
+namespace evloc::tracking {
+namespace {
+
+// A fixed 32-bit mix (Murmur3 finaliser): the in-bucket order, independent of the input order.
+uint32_t Mix(uint32_t value) {
+  value ^= value >> 16;
+  value *= 0x85ebca6bu;
+  value ^= value >> 13;
+  value *= 0xc2b2ae35u;
+  value ^= value >> 16;
+  return value;
+}
+
+}  // namespace
+
+std::vector<uint32_t> SelectEvenly(const Map& map, const std::vector<uint32_t>& candidates,
+                                   const PinholeIntrinsics& intrinsics, int width, int height,
+                                   const Rigid3d& cam_from_world,
+                                   const PointSelectionOptions& options) {
+  if (options.max_points < 1 || options.bucket_size_px < 1 || width < 1 || height < 1) {
+    throw InvalidArgumentError(
+        "SelectEvenly: max_points, bucket size and image size must be >= 1.");
+  }
+  const int buckets_x = (width + options.bucket_size_px - 1) / options.bucket_size_px;
+  const int buckets_y = (height + options.bucket_size_px - 1) / options.bucket_size_px;
+  struct Candidate {
+    uint32_t bucket;
+    uint32_t order;
+    uint32_t index;
+  };
+  std::vector<Candidate> visible;
+  visible.reserve(candidates.size());
+  const Eigen::Matrix3d rotation = cam_from_world.RotationMatrix();
+  for (const uint32_t index : candidates) {
+    if (index >= map.size()) throw InvalidArgumentError("SelectEvenly: candidate out of range.");
+    const Eigen::Vector3d point_in_cam =
+        rotation * map.positions[index].cast<double>() + cam_from_world.translation;
+    if (!(point_in_cam.z() >= options.min_depth_m && point_in_cam.z() <= options.max_depth_m)) {
+      continue;
+    }
+    Eigen::Vector2d pixel;
+    if (!intrinsics.Project(point_in_cam, &pixel)) continue;
+    const double margin = options.image_margin_px;
+    if (!(pixel.x() >= margin && pixel.y() >= margin && pixel.x() <= width - 1 - margin &&
+          pixel.y() <= height - 1 - margin)) {
+      continue;
+    }
+    const int bucket_x =
+        std::min(static_cast<int>(pixel.x()) / options.bucket_size_px, buckets_x - 1);
+    const int bucket_y =
+        std::min(static_cast<int>(pixel.y()) / options.bucket_size_px, buckets_y - 1);
+    visible.push_back({static_cast<uint32_t>(bucket_y * buckets_x + bucket_x), Mix(index), index});
+  }
+  std::vector<uint32_t> selected;
+  if (visible.size() <= static_cast<size_t>(options.max_points)) {
+    selected.reserve(visible.size());
+    for (const Candidate& candidate : visible) selected.push_back(candidate.index);
+    std::sort(selected.begin(), selected.end());
+    return selected;
+  }
+  std::sort(visible.begin(), visible.end(), [](const Candidate& a, const Candidate& b) {
+    if (a.bucket != b.bucket) return a.bucket < b.bucket;
+    if (a.order != b.order) return a.order < b.order;
+    return a.index < b.index;
+  });
+  // Bucket ranges in `visible`.
+  std::vector<size_t> bucket_begin;
+  for (size_t i = 0; i < visible.size(); ++i) {
+    if (i == 0 || visible[i].bucket != visible[i - 1].bucket) bucket_begin.push_back(i);
+  }
+  bucket_begin.push_back(visible.size());
+  const size_t num_buckets = bucket_begin.size() - 1;
+  // The largest per-bucket share `level` with sum(min(count, level)) <= max_points.
+  auto taken_at = [&](size_t level) {
+    size_t total = 0;
+    for (size_t b = 0; b < num_buckets; ++b) {
+      total += std::min(bucket_begin[b + 1] - bucket_begin[b], level);
+    }
+    return total;
+  };
+  size_t low = 0;
+  size_t high = visible.size();
+  while (low < high) {
+    const size_t middle = (low + high + 1) / 2;
+    if (taken_at(middle) <= static_cast<size_t>(options.max_points)) {
+      low = middle;
+    } else {
+      high = middle - 1;
+    }
+  }
+  const size_t level = low;
+  selected.reserve(options.max_points);
+  for (size_t b = 0; b < num_buckets; ++b) {
+    const size_t end = std::min(bucket_begin[b + 1], bucket_begin[b] + level);
+    for (size_t i = bucket_begin[b]; i < end; ++i) selected.push_back(visible[i].index);
+  }
+  // Fill the remainder with the next point of the buckets that have one, in bucket order.
+  for (size_t b = 0; b < num_buckets && selected.size() < static_cast<size_t>(options.max_points);
+       ++b) {
+    if (bucket_begin[b + 1] - bucket_begin[b] > level) {
+      selected.push_back(visible[bucket_begin[b] + level].index);
+    }
+  }
+  std::sort(selected.begin(), selected.end());
+  return selected;
+}
+
+}  // namespace evloc::tracking

@@ -1,0 +1,38 @@
+// Point selection (method.md §4.2): the map points visible from the predicted pose, within a
+// depth range and the image, subsampled to a budget with even image coverage (buckets).
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "core/geometry/rigid3.h"
+#include "localizer/tracking/registration.h"
+#include "maps/map.h"
+
+namespace evloc::tracking {
+
+// Options of SelectEvenly.
+struct PointSelectionOptions {
+  // Maximum number of points returned.
+  int max_points = 2500;
+  // Side of the square buckets, pixels.
+  int bucket_size_px = 16;
+  // Points nearer than this (camera z) are rejected, metres.
+  double min_depth_m = 0.1;
+  // Points farther than this are rejected, metres.
+  double max_depth_m = 50.0;
+  // Points projecting closer than this to the border are rejected, pixels.
+  double image_margin_px = 2.0;
+};
+
+// From `candidates` (indices into map.positions), the points in front of the camera within the
+// depth range that project inside the width x height image, subsampled to max_points: every
+// non-empty bucket gets the same share (round robin over buckets, in a fixed pseudo-random order
+// inside each bucket so that one bucket's points spread along its curves). Deterministic; the
+// result is sorted ascending.
+std::vector<uint32_t> SelectEvenly(const Map& map, const std::vector<uint32_t>& candidates,
+                                   const PinholeIntrinsics& intrinsics, int width, int height,
+                                   const Rigid3d& cam_from_world,
+                                   const PointSelectionOptions& options);
+
+}  // namespace evloc::tracking

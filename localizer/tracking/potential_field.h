@@ -1,0 +1,84 @@
+// Potential fields sampled by the registration: small values on the current edges, 1 far from
+// them. Pixel centres at integer coordinates; values between pixels by bilinear interpolation.
+#pragma once
+
+#include <cmath>
+
+#include <Eigen/Core>
+#include <opencv2/core.hpp>
+
+namespace evloc::tracking {
+
+// A scalar field on the image of the ideal pinhole camera, sampled with bilinear interpolation.
+class PotentialField {
+ public:
+  virtual ~PotentialField() = default;
+
+  // Field width, pixels.
+  virtual int width() const = 0;
+  // Field height, pixels.
+  virtual int height() const = 0;
+
+  // The bilinearly interpolated value at (u, v) and, when `gradient` is not null, its exact
+  // derivative (d/du, d/dv) inside the pixel cell. Returns false (outputs untouched) when the
+  // 2x2 cell around (u, v) is not inside the image. Not const: lazy fields memoise.
+  virtual bool Sample(double u, double v, double* value, Eigen::Vector2d* gradient) = 0;
+};
+
+// Bilinear interpolation of a field given by a value function of integer pixels; the derivative
+// is the exact derivative of the interpolant. `value_at(x, y)` returns float.
+template <typename ValueAt>
+inline bool SampleBilinear(int width, int height, double u, double v, ValueAt&& value_at,
+                           double* value, Eigen::Vector2d* gradient) {
+  if (!(u >= 0 && v >= 0 && u <= width - 1 && v <= height - 1)) return false;
+  int x0 = static_cast<int>(u);
+  int y0 = static_cast<int>(v);
+  // On the last row or column, use the cell to the left (or above).
+  if (x0 >= width - 1) x0 = width - 2;
+  if (y0 >= height - 1) y0 = height - 2;
+  if (x0 < 0 || y0 < 0) return false;
+  const double a = u - x0;
+  const double b = v - y0;
+  const double f00 = value_at(x0, y0);
+  const double f10 = value_at(x0 + 1, y0);
+  const double f01 = value_at(x0, y0 + 1);
+  const double f11 = value_at(x0 + 1, y0 + 1);
+  *value = (1 - b) * ((1 - a) * f00 + a * f10) + b * ((1 - a) * f01 + a * f11);
+  if (gradient != nullptr) {
+    (*gradient)(0) = (1 - b) * (f10 - f00) + b * (f11 - f01);
+    (*gradient)(1) = (1 - a) * (f01 - f00) + a * (f11 - f10);
+  }
+  return true;
+}
+
+// A field stored as a full float image (CV_32FC1).
+class DenseField : public PotentialField {
+ public:
+  DenseField() = default;
+  // Wraps `values` (CV_32FC1, shared, not copied). Throws InvalidArgumentError for another type
+  // or an image smaller than 2x2.
+  explicit DenseField(cv::Mat values);
+
+  // The stored image.
+  const cv::Mat& values() const { return values_; }
+  int width() const override { return values_.cols; }
+  int height() const override { return values_.rows; }
+  bool Sample(double u, double v, double* value, Eigen::Vector2d* gradient) override;
+
+ private:
+  cv::Mat values_;
+};
+
+// The 5x5 binomial kernel [1 4 6 4 1] / 16 per axis (OpenCV's Gaussian for ksize 5, sigma 0),
+// used both by the dense and by the lazy smoothing so that they agree.
+inline constexpr float kSmoothingKernel[5] = {1.f / 16, 4.f / 16, 6.f / 16, 4.f / 16, 1.f / 16};
+
+// Smooths a CV_32FC1 image with kSmoothingKernel per axis, replicating the border.
+cv::Mat SmoothField(const cv::Mat& values);
+
+// The Canny-VT field of a binary edge image (CV_8UC1, non-zero = edge): the Euclidean distance to
+// the nearest edge pixel, truncated at `truncation_px` and divided by it (0 on edges, 1 far
+// away), optionally smoothed. An image without edges gives 1 everywhere.
+cv::Mat TruncatedDistanceField(const cv::Mat& edges, double truncation_px, bool smooth);
+
+}  // namespace evloc::tracking

@@ -1,0 +1,176 @@
+#include "localizer/tracking/registration.h"
+
+#include <cmath>
+#include <random>
+
+#include <gtest/gtest.h>
+#include <Eigen/Eigenvalues>
+
+#include "core/common/error.h"
+
+#include "localizer/tracking/potential_field.h"
+#include "localizer/tracking/testing/synthetic_scene.h"
+
+namespace evloc::tracking {
+namespace {
+
+// A smooth field sampled on a grid, wrapped as a DenseField.
+DenseField SmoothDenseField(int width, int height) {
+  cv::Mat values(height, width, CV_32FC1);
+  for (int y = 0; y < height; ++y) {
+    for (int x = 0; x < width; ++x) {
+      values.at<float>(y, x) =
+          static_cast<float>(0.5 + 0.3 * std::sin(x / 7.0) * std::cos(y / 5.0));
+    }
+  }
+  return DenseField(values);
+}
+
+// The field of projected map points: truncated distance to their rounded pixels, smoothed.
+DenseField ProjectedEdgeField(const Map& map, const PinholeIntrinsics& intrinsics, int width,
+                              int height, const Rigid3d& cam_from_world) {
+  cv::Mat edges = cv::Mat::zeros(height, width, CV_8UC1);
+  for (const Eigen::Vector3f& position : map.positions) {
+    Eigen::Vector2d pixel;
+    if (!intrinsics.Project(cam_from_world * position.cast<double>(), &pixel)) continue;
+    const int x = static_cast<int>(std::lround(pixel.x()));
+    const int y = static_cast<int>(std::lround(pixel.y()));
+    if (x >= 0 && y >= 0 && x < width && y < height) edges.at<uint8_t>(y, x) = 255;
+  }
+  return DenseField(TruncatedDistanceField(edges, 10.0, false));
+}
+
+TEST(Registration, AnalyticJacobianMatchesNumericalDifferences) {
+  DenseField field = SmoothDenseField(320, 240);
+  const PinholeIntrinsics intrinsics{250.0, 260.0, 160.3, 119.7};
+  const Rigid3d cam_from_world(ExpSO3(Eigen::Vector3d(0.1, -0.2, 0.05)),
+                               Eigen::Vector3d(0.1, -0.05, 0.3));
+  std::mt19937 random(7);
+  std::uniform_real_distribution<double> lateral(-0.6, 0.6);
+  std::uniform_real_distribution<double> depth(1.0, 4.0);
+  int checked = 0;
+  for (int trial = 0; trial < 200; ++trial) {
+    const Eigen::Vector3d position(lateral(random), lateral(random), depth(random));
+    // Skip points within 1e-3 px of a cell boundary, where the bilinear derivative jumps.
+    Eigen::Vector2d pixel;
+    ASSERT_TRUE(intrinsics.Project(cam_from_world * position, &pixel));
+    const Eigen::Vector2d fraction = pixel - pixel.array().floor().matrix();
+    if (fraction.minCoeff() < 1e-3 || fraction.maxCoeff() > 1 - 1e-3) continue;
+    double residual;
+    RowVector6d analytic;
+    if (!EvaluatePointResidual(field, intrinsics, cam_from_world, position, 2.0, &residual,
+                               &analytic)) {
+      continue;
+    }
+    RowVector6d numeric;
+    const double step = 1e-6;
+    for (int k = 0; k < 6; ++k) {
+      Vector6d delta = Vector6d::Zero();
+      delta(k) = step;
+      double plus, minus;
+      ASSERT_TRUE(EvaluatePointResidual(field, intrinsics, ExpSE3(delta) * cam_from_world, position,
+                                        2.0, &plus, nullptr));
+      ASSERT_TRUE(EvaluatePointResidual(field, intrinsics, ExpSE3(-delta) * cam_from_world,
+                                        position, 2.0, &minus, nullptr));
+      numeric(k) = (plus - minus) / (2 * step);
+    }
+    EXPECT_LT((analytic - numeric).norm(), 1e-5 * std::max(1.0, numeric.norm()))
+        << "analytic " << analytic << "\nnumeric  " << numeric;
+    ++checked;
+  }
+  EXPECT_GT(checked, 100);
+}
+
+TEST(Registration, ProjectionJacobianMatchesNumericalDifferences) {
+  const PinholeIntrinsics intrinsics{250.0, 260.0, 160.3, 119.7};
+  const Eigen::Vector3d point(0.3, -0.2, 1.7);
+  Eigen::Vector2d pixel;
+  Eigen::Matrix<double, 2, 3> analytic;
+  ASSERT_TRUE(intrinsics.Project(point, &pixel, &analytic));
+  for (int k = 0; k < 3; ++k) {
+    Eigen::Vector3d offset = Eigen::Vector3d::Zero();
+    offset(k) = 1e-6;
+    Eigen::Vector2d plus, minus;
+    ASSERT_TRUE(intrinsics.Project(point + offset, &plus));
+    ASSERT_TRUE(intrinsics.Project(point - offset, &minus));
+    EXPECT_LT((analytic.col(k) - (plus - minus) / 2e-6).norm(), 1e-4);
+  }
+}
+
+TEST(Registration, RobustWeightsAndCosts) {
+  EXPECT_DOUBLE_EQ(RobustWeight(RobustLoss::kHuber, 0.2, 0.1), 1.0);
+  EXPECT_DOUBLE_EQ(RobustWeight(RobustLoss::kHuber, 0.2, 0.8), 0.25);
+  EXPECT_DOUBLE_EQ(RobustWeight(RobustLoss::kCauchy, 0.2, 0.2), 0.5);
+  // The Huber cost is continuous at the threshold and the weight is rho'(r) / r.
+  EXPECT_NEAR(RobustCost(RobustLoss::kHuber, 0.2, 0.2 - 1e-12),
+              RobustCost(RobustLoss::kHuber, 0.2, 0.2 + 1e-12), 1e-9);
+  for (const RobustLoss loss : {RobustLoss::kHuber, RobustLoss::kCauchy}) {
+    const double r = 0.5;
+    const double derivative =
+        (RobustCost(loss, 0.2, r + 1e-7) - RobustCost(loss, 0.2, r - 1e-7)) / 2e-7;
+    EXPECT_NEAR(derivative / r, RobustWeight(loss, 0.2, r), 1e-6);
+  }
+}
+
+class RegistrationConvergence : public ::testing::TestWithParam<RobustLoss> {};
+
+TEST_P(RegistrationConvergence, ConvergesFromTwoCentimetresAndOneDegree) {
+  const Camera camera = Camera::Pinhole(320, 240, 260.0, 260.0, 159.5, 119.5);
+  const PinholeIntrinsics intrinsics = PinholeIntrinsics::FromCamera(camera);
+  const Map map = testing::MakeRectangleMap(testing::DefaultRectangles(), 0.005);
+  const Rigid3d true_cam_from_world = testing::SmoothMotion(200'000'000).Inverse();
+  DenseField field =
+      ProjectedEdgeField(map, intrinsics, camera.width, camera.height, true_cam_from_world);
+  std::vector<RegistrationPoint> points;
+  for (const Eigen::Vector3f& position : map.positions) {
+    points.push_back({position.cast<double>(), &field});
+  }
+  RegistrationOptions options;
+  options.loss = GetParam();
+  options.max_iterations = 20;
+  const double degree = M_PI / 180.0;
+  const Vector6d perturbations[] = {
+      (Vector6d() << 0.02, 0, 0, 0, 0, 1 * degree).finished(),
+      (Vector6d() << 0, -0.02, 0, 1 * degree, 0, 0).finished(),
+      (Vector6d() << 0.012, 0.012, -0.01, 0, -1 * degree, 0).finished(),
+  };
+  for (const Vector6d& perturbation : perturbations) {
+    const Rigid3d start = ExpSE3(perturbation) * true_cam_from_world;
+    const RegistrationResult result = RegisterPoints(points, intrinsics, start, options);
+    // The minimum of this field (edges rounded to pixels) lies ~2 mm from the truth: every start
+    // must reach the same minimum as a start at the truth.
+    const RegistrationResult from_truth =
+        RegisterPoints(points, intrinsics, true_cam_from_world, options);
+    EXPECT_TRUE(result.converged);
+    EXPECT_LT(result.iterations, 12);
+    EXPECT_LT((result.cam_from_world.translation - from_truth.cam_from_world.translation).norm(),
+              1e-4);
+    EXPECT_NEAR(result.cost, from_truth.cost, 1e-6 * from_truth.cost);
+    const Rigid3d error = result.cam_from_world * true_cam_from_world.Inverse();
+    // Camera-centre error and orientation error.
+    const double centre_error =
+        (result.cam_from_world.Inverse().translation - true_cam_from_world.Inverse().translation)
+            .norm();
+    EXPECT_LT(centre_error, 0.003) << perturbation.transpose();
+    EXPECT_LT(LogSO3(error.rotation).norm(), 0.1 * degree) << perturbation.transpose();
+    EXPECT_GT(result.points_used, 1000);
+    EXPECT_TRUE(result.well_conditioned);
+    // The covariance is symmetric positive definite and small for this many points.
+    EXPECT_LT((result.covariance - result.covariance.transpose()).norm(), 1e-12);
+    EXPECT_GT(Eigen::SelfAdjointEigenSolver<Matrix6d>(result.covariance).eigenvalues().minCoeff(),
+              0);
+    EXPECT_LT(std::sqrt(result.covariance(0, 0)), 0.01);
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(Losses, RegistrationConvergence,
+                         ::testing::Values(RobustLoss::kHuber, RobustLoss::kCauchy));
+
+TEST(Registration, PointsWithoutFieldAreRejected) {
+  std::vector<RegistrationPoint> points(1);
+  EXPECT_THROW(RegisterPoints(points, PinholeIntrinsics{}, Rigid3d(), RegistrationOptions{}),
+               InvalidArgumentError);
+}
+
+}  // namespace
+}  // namespace evloc::tracking

@@ -1,0 +1,59 @@
+// Synthetic scenes for the tracking tests and benchmark: bright planar rectangles at several
+// depths (their outlines as map points with in-plane gradients pointing inwards, towards the
+// bright side), a smooth camera motion, ideal edge events and rendered frames.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+
+#include <opencv2/core.hpp>
+
+#include "core/camera/camera.h"
+#include "core/events/event.h"
+#include "core/geometry/rigid3.h"
+#include "maps/map.h"
+
+namespace evloc::tracking::testing {
+
+// A camera trajectory: world_from_cam at a time.
+using TrajectoryFunction = std::function<Rigid3d(int64_t t_ns)>;
+
+// One bright rectangle: centre, two orthonormal in-plane axes, half sizes.
+struct Rectangle {
+  // Centre in the world, metres.
+  Eigen::Vector3d centre;
+  // Unit in-plane axis of the first side.
+  Eigen::Vector3d axis_u;
+  // Unit in-plane axis of the second side (orthogonal to axis_u).
+  Eigen::Vector3d axis_v;
+  // Half length along axis_u, metres.
+  double half_u;
+  // Half length along axis_v, metres.
+  double half_v;
+};
+
+// The rectangles of the default scene, in front of a camera at the origin looking down +z
+// (depths 1.5 to 3.5 m, two of them tilted so that every pose direction is observable).
+std::vector<Rectangle> DefaultRectangles();
+
+// The outlines of `rectangles` sampled every `spacing_m`, gradients pointing inwards.
+Map MakeRectangleMap(const std::vector<Rectangle>& rectangles, double spacing_m);
+
+// A smooth motion starting at the identity: translation (0.3, 0.1, 0.15) m/s with a slow
+// sinusoid, rotation rates (0.15, -0.25, 0.1) rad/s, scaled by `speed`.
+Rigid3d SmoothMotion(int64_t t_ns, double speed = 1.0);
+
+// Ideal edge events of the map points seen by a pinhole `camera` moving along `trajectory`:
+// rendered every `render_period_ns` in [t_begin_ns, t_end_ns]; a point emits an event at its
+// rounded pixel whenever that pixel changes, with polarity sign(-d . f) (brightness constancy,
+// d the projected gradient, f the pixel motion). Sorted by time.
+EventBuffer SimulateEdgeEvents(const Map& map, const Camera& camera,
+                               const TrajectoryFunction& trajectory, int64_t t_begin_ns,
+                               int64_t t_end_ns, int64_t render_period_ns = 100'000);
+
+// A grey frame (CV_8UC1) of the bright rectangles (200) on a dark background (40), seen from
+// `world_from_cam` by a pinhole `camera`, painted far to near.
+cv::Mat RenderRectangles(const std::vector<Rectangle>& rectangles, const Camera& camera,
+                         const Rigid3d& world_from_cam);
+
+}  // namespace evloc::tracking::testing

@@ -1,0 +1,188 @@
+#include "localizer/tracking/time_surface.h"
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+
+#include "core/common/error.h"
+
+namespace evloc::tracking {
+
+double SurfaceDecay::Value(int64_t last_t_ns, int64_t t_ns) const {
+  if (last_t_ns == kNeverFired) return 0.0;
+  const int64_t age_ns = std::max<int64_t>(0, t_ns - last_t_ns);
+  if (age_ns > MaxActiveAgeNs()) return 0.0;
+  const double value = std::exp(-static_cast<double>(age_ns) / decay_time_ns);
+  return value > empty_threshold ? value : 0.0;
+}
+
+int64_t SurfaceDecay::MaxActiveAgeNs() const {
+  // T > delta  <=>  age < tau * ln(1 / delta); one nanosecond of slack for rounding.
+  return static_cast<int64_t>(std::ceil(decay_time_ns * std::log(1.0 / empty_threshold))) + 1;
+}
+
+TimeSurface::TimeSurface(const UndistortionTable& table)
+    : width_(table.ideal_camera().width),
+      height_(table.ideal_camera().height),
+      sensor_width_(table.width()),
+      sensor_height_(table.height()) {
+  const size_t num_sensor_pixels = static_cast<size_t>(sensor_width_) * sensor_height_;
+  sensor_to_pixel_.assign(num_sensor_pixels, -1);
+  for (int y = 0; y < sensor_height_; ++y) {
+    for (int x = 0; x < sensor_width_; ++x) {
+      const UndistortionTable::Entry* entry = table.Find(x, y);
+      if (entry == nullptr) continue;
+      const int ideal_x = static_cast<int>(std::lround(entry->ideal_pixel.x()));
+      const int ideal_y = static_cast<int>(std::lround(entry->ideal_pixel.y()));
+      if (ideal_x < 0 || ideal_y < 0 || ideal_x >= width_ || ideal_y >= height_) continue;
+      sensor_to_pixel_[static_cast<size_t>(y) * sensor_width_ + x] = ideal_y * width_ + ideal_x;
+    }
+  }
+  Clear();
+}
+
+void TimeSurface::Clear() {
+  for (std::vector<int64_t>& channel : last_t_ns_) {
+    channel.assign(static_cast<size_t>(width_) * height_, kNeverFired);
+  }
+  num_dropped_ = 0;
+  num_stored_ = 0;
+}
+
+void TimeSurface::Insert(const EventBuffer& events, size_t begin, size_t end) {
+  const int64_t* t_ns = events.t_ns.data();
+  const uint16_t* xs = events.x.data();
+  const uint16_t* ys = events.y.data();
+  const int8_t* polarity = events.polarity.data();
+  const int32_t* lookup = sensor_to_pixel_.data();
+  int64_t* all = last_t_ns_[0].data();
+  int64_t* on = last_t_ns_[1].data();
+  int64_t* off = last_t_ns_[2].data();
+  const uint32_t sensor_width = sensor_width_;
+  const uint32_t sensor_height = sensor_height_;
+  int64_t dropped = 0;
+  for (size_t i = begin; i < end; ++i) {
+    const uint32_t x = xs[i];
+    const uint32_t y = ys[i];
+    if (x >= sensor_width || y >= sensor_height) [[unlikely]] {
+      num_dropped_ += dropped;
+      num_stored_ += static_cast<int64_t>(i - begin) - dropped;
+      throw InvalidArgumentError("Event " + std::to_string(i) + " at pixel (" + std::to_string(x) +
+                                 ", " + std::to_string(y) + ") lies outside the " +
+                                 std::to_string(sensor_width) + "x" +
+                                 std::to_string(sensor_height) + " sensor.");
+    }
+    const int32_t pixel = lookup[y * sensor_width + x];
+    if (pixel < 0) [[unlikely]] {
+      ++dropped;
+      continue;
+    }
+    all[pixel] = t_ns[i];
+    (polarity[i] > 0 ? on : off)[pixel] = t_ns[i];
+  }
+  num_dropped_ += dropped;
+  num_stored_ += static_cast<int64_t>(end - begin) - dropped;
+}
+
+cv::Mat TimeSurface::ActiveMask(SurfaceChannel channel, int64_t t_ns,
+                                const SurfaceDecay& decay) const {
+  cv::Mat mask(height_, width_, CV_8UC1);
+  const int64_t* last = last_t_ns_[static_cast<int>(channel)].data();
+  // A pixel is active when T > delta; the age test rejects most pixels without an exp.
+  const int64_t max_age_ns = decay.MaxActiveAgeNs();
+  for (int y = 0; y < height_; ++y) {
+    uint8_t* row = mask.ptr<uint8_t>(y);
+    const int64_t* last_row = last + static_cast<size_t>(y) * width_;
+    for (int x = 0; x < width_; ++x) {
+      const int64_t last_t = last_row[x];
+      const bool maybe_active = last_t != kNeverFired && t_ns - last_t <= max_age_ns;
+      row[x] = (maybe_active && decay.Value(last_t, t_ns) > 0) ? 255 : 0;
+    }
+  }
+  return mask;
+}
+
+TimeSurfaceField::TimeSurfaceField(const TimeSurface& surface, SurfaceChannel channel,
+                                   const SurfaceDecay& decay, bool smooth)
+    : surface_(surface), channel_(channel), decay_(decay), smooth_(smooth) {
+  const size_t num_pixels = static_cast<size_t>(surface.width()) * surface.height();
+  raw_.assign(num_pixels, 1.0f);
+  raw_stamp_.assign(num_pixels, 0);
+  if (smooth_) {
+    smoothed_.assign(num_pixels, 1.0f);
+    smoothed_stamp_.assign(num_pixels, 0);
+  }
+}
+
+void TimeSurfaceField::SetTime(int64_t t_ns) {
+  t_ns_ = t_ns;
+  num_evaluated_ = 0;
+  ++stamp_;
+  if (stamp_ == 0) {  // Wrapped after 2^32 steps: invalidate explicitly.
+    std::fill(raw_stamp_.begin(), raw_stamp_.end(), 0);
+    std::fill(smoothed_stamp_.begin(), smoothed_stamp_.end(), 0);
+    stamp_ = 1;
+  }
+}
+
+float TimeSurfaceField::ComputeRaw(size_t index) const {
+  const int x = static_cast<int>(index % surface_.width());
+  const int y = static_cast<int>(index / surface_.width());
+  return static_cast<float>(1.0 - decay_.Value(surface_.LastTimestamp(channel_, x, y), t_ns_));
+}
+
+float TimeSurfaceField::RawValue(int x, int y) {
+  const size_t index = static_cast<size_t>(y) * surface_.width() + x;
+  if (raw_stamp_[index] != stamp_) {
+    raw_[index] = ComputeRaw(index);
+    raw_stamp_[index] = stamp_;
+  }
+  return raw_[index];
+}
+
+float TimeSurfaceField::ValueAt(int x, int y) {
+  if (!smooth_) return RawValue(x, y);
+  const int width = surface_.width();
+  const size_t index = static_cast<size_t>(y) * width + x;
+  if (smoothed_stamp_[index] == stamp_) return smoothed_[index];
+  // Separable 5x5 binomial kernel with replicated borders, rows first (as cv::sepFilter2D).
+  const int max_x = width - 1;
+  const int max_y = surface_.height() - 1;
+  int columns[5];
+  for (int i = 0; i < 5; ++i) columns[i] = std::clamp(x + i - 2, 0, max_x);
+  float sum = 0.0f;
+  for (int j = 0; j < 5; ++j) {
+    const int row = std::clamp(y + j - 2, 0, max_y);
+    float row_sum = 0.0f;
+    for (int i = 0; i < 5; ++i) row_sum += kSmoothingKernel[i] * RawValue(columns[i], row);
+    sum += kSmoothingKernel[j] * row_sum;
+  }
+  smoothed_[index] = sum;
+  smoothed_stamp_[index] = stamp_;
+  ++num_evaluated_;
+  return sum;
+}
+
+bool TimeSurfaceField::Sample(double u, double v, double* value, Eigen::Vector2d* gradient) {
+  return SampleBilinear(
+      surface_.width(), surface_.height(), u, v, [this](int x, int y) { return ValueAt(x, y); },
+      value, gradient);
+}
+
+cv::Mat TimeSurfaceField::RenderDense() const {
+  cv::Mat raw(surface_.height(), surface_.width(), CV_32FC1);
+  const int64_t max_age_ns = decay_.MaxActiveAgeNs();
+  for (int y = 0; y < surface_.height(); ++y) {
+    float* row = raw.ptr<float>(y);
+    for (int x = 0; x < surface_.width(); ++x) {
+      const int64_t last_t = surface_.LastTimestamp(channel_, x, y);
+      // Most pixels are empty: skip the exp for them.
+      row[x] = (last_t == kNeverFired || t_ns_ - last_t > max_age_ns)
+                   ? 1.0f
+                   : static_cast<float>(1.0 - decay_.Value(last_t, t_ns_));
+    }
+  }
+  return smooth_ ? SmoothField(raw) : raw;
+}
+
+}  // namespace evloc::tracking

@@ -1,0 +1,147 @@
+// Time surfaces (method.md §4.1): per pixel of the ideal pinhole image, the time stamp of the last
+// event, for all events and separately for ON and OFF events. Events are undistorted one by one
+// through a pixel look-up table built once per session; no image is remapped per step.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <limits>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "core/camera/undistortion_table.h"
+#include "core/events/event.h"
+#include "localizer/tracking/potential_field.h"
+
+namespace evloc::tracking {
+
+// One of the three surfaces.
+enum class SurfaceChannel : int {
+  // Every event, whatever its polarity (the unsigned surface).
+  kAll = 0,
+  // ON events only.
+  kOn = 1,
+  // OFF events only.
+  kOff = 2,
+};
+
+// The time stamp of a pixel that has never fired.
+inline constexpr int64_t kNeverFired = std::numeric_limits<int64_t>::min();
+
+// The decay of a time surface: T(x, t) = exp(-(t - t_last) / tau), and T <= threshold counts as
+// empty (T = 0).
+struct SurfaceDecay {
+  // tau, nanoseconds.
+  double decay_time_ns = 3e7;
+  // The emptiness threshold delta.
+  double empty_threshold = 0.1;
+
+  // T for a pixel last fired at `last_t_ns`, evaluated at `t_ns` (events later than t_ns count
+  // as fired at t_ns); 0 when empty or never fired.
+  double Value(int64_t last_t_ns, int64_t t_ns) const;
+  // The age beyond which a pixel is certainly empty, nanoseconds.
+  int64_t MaxActiveAgeNs() const;
+};
+
+// Per-pixel last time stamps of the ideal pinhole image of a camera.
+class TimeSurface {
+ public:
+  // Builds the sensor-pixel to ideal-pixel look-up (nearest integer pixel) from `table`. Sensor
+  // pixels whose undistorted position falls outside the image are dropped on insertion.
+  explicit TimeSurface(const UndistortionTable& table);
+
+  // Image width, pixels.
+  int width() const { return width_; }
+  // Image height, pixels.
+  int height() const { return height_; }
+
+  // Stores events [begin, end) of `events`: one table look-up and two stores per event. Throws
+  // InvalidArgumentError for an event outside the sensor (nothing after it is stored).
+  void Insert(const EventBuffer& events, size_t begin, size_t end);
+
+  // Forgets every event.
+  void Clear();
+
+  // The last time stamp of ideal pixel (x, y) in `channel`, or kNeverFired. Unchecked.
+  int64_t LastTimestamp(SurfaceChannel channel, int x, int y) const {
+    return last_t_ns_[static_cast<int>(channel)][static_cast<size_t>(y) * width_ + x];
+  }
+
+  // The row-major ideal pixel index of sensor pixel (x, y), or -1 when it has none. Unchecked.
+  int32_t IdealPixelIndex(int x, int y) const {
+    return sensor_to_pixel_[static_cast<size_t>(y) * sensor_width_ + x];
+  }
+
+  // Number of inserted events that were dropped because their undistorted pixel lies outside
+  // the image.
+  int64_t num_dropped() const { return num_dropped_; }
+  // Number of inserted events that were stored.
+  int64_t num_stored() const { return num_stored_; }
+
+  // The binary mask (CV_8UC1, 255 = active) of pixels of `channel` with T(x, t_ns) > threshold.
+  cv::Mat ActiveMask(SurfaceChannel channel, int64_t t_ns, const SurfaceDecay& decay) const;
+
+ private:
+  int width_ = 0;
+  int height_ = 0;
+  int sensor_width_ = 0;
+  int sensor_height_ = 0;
+  // Per sensor pixel (row-major), the index of its ideal pixel, or -1.
+  std::vector<int32_t> sensor_to_pixel_;
+  // Per channel, per ideal pixel (row-major), the last time stamp.
+  std::vector<int64_t> last_t_ns_[3];
+  int64_t num_dropped_ = 0;
+  int64_t num_stored_ = 0;
+};
+
+// The potential field 1 - T of one channel of a time surface at one time, optionally smoothed,
+// evaluated lazily: only pixels that are sampled are computed, and memoised until the next
+// SetTime. Reads the surface live: events inserted after SetTime show through, so call SetTime
+// after inserting.
+class TimeSurfaceField : public PotentialField {
+ public:
+  // `surface` must outlive the field.
+  TimeSurfaceField(const TimeSurface& surface, SurfaceChannel channel, const SurfaceDecay& decay,
+                   bool smooth);
+
+  // Sets the evaluation time and forgets memoised values.
+  void SetTime(int64_t t_ns);
+  // The evaluation time.
+  int64_t time_ns() const { return t_ns_; }
+
+  int width() const override { return surface_.width(); }
+  int height() const override { return surface_.height(); }
+
+  // The unsmoothed value 1 - T at pixel (x, y), 1 where empty. Unchecked.
+  float RawValue(int x, int y);
+  // The field value at pixel (x, y) (smoothed when enabled), memoised. Unchecked.
+  float ValueAt(int x, int y);
+
+  bool Sample(double u, double v, double* value, Eigen::Vector2d* gradient) override;
+
+  // The whole field as an image (CV_32FC1), computed densely; equal to ValueAt everywhere up to
+  // float rounding. Used by FieldEvaluation::kDense and by tests.
+  cv::Mat RenderDense() const;
+
+  // Number of pixels computed (smoothed values) since the last SetTime.
+  int64_t num_evaluated() const { return num_evaluated_; }
+
+ private:
+  float ComputeRaw(size_t index) const;
+
+  const TimeSurface& surface_;
+  SurfaceChannel channel_;
+  SurfaceDecay decay_;
+  bool smooth_;
+  int64_t t_ns_ = 0;
+  // Memo stamp of the current time; a value is valid when its stamp equals this.
+  uint32_t stamp_ = 1;
+  std::vector<float> raw_;
+  std::vector<uint32_t> raw_stamp_;
+  std::vector<float> smoothed_;
+  std::vector<uint32_t> smoothed_stamp_;
+  int64_t num_evaluated_ = 0;
+};
+
+}  // namespace evloc::tracking

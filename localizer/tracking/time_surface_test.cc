@@ -1,0 +1,135 @@
+#include "localizer/tracking/time_surface.h"
+
+#include <cmath>
+#include <random>
+
+#include <gtest/gtest.h>
+
+#include "core/common/error.h"
+
+namespace evloc::tracking {
+namespace {
+
+EventBuffer MakeEvents(std::initializer_list<Event> events) {
+  EventBuffer buffer;
+  for (const Event& event : events) buffer.push_back(event);
+  return buffer;
+}
+
+TEST(TimeSurface, StoresLastTimestampPerChannel) {
+  const UndistortionTable table(Camera::Pinhole(40, 30, 30, 30, 19.5, 14.5));
+  TimeSurface surface(table);
+  const EventBuffer events = MakeEvents(
+      {{100, 5, 6, 1}, {200, 5, 6, -1}, {300, 7, 8, 1}, {400, 7, 8, 1}, {500, 39, 29, -1}});
+  surface.Insert(events, 0, events.size());
+  EXPECT_EQ(surface.LastTimestamp(SurfaceChannel::kAll, 5, 6), 200);
+  EXPECT_EQ(surface.LastTimestamp(SurfaceChannel::kOn, 5, 6), 100);
+  EXPECT_EQ(surface.LastTimestamp(SurfaceChannel::kOff, 5, 6), 200);
+  EXPECT_EQ(surface.LastTimestamp(SurfaceChannel::kOn, 7, 8), 400);
+  EXPECT_EQ(surface.LastTimestamp(SurfaceChannel::kOff, 7, 8), kNeverFired);
+  EXPECT_EQ(surface.LastTimestamp(SurfaceChannel::kAll, 39, 29), 500);
+  EXPECT_EQ(surface.LastTimestamp(SurfaceChannel::kAll, 0, 0), kNeverFired);
+  EXPECT_EQ(surface.num_stored(), 5);
+}
+
+TEST(TimeSurface, EventOutsideTheSensorThrows) {
+  const UndistortionTable table(Camera::Pinhole(40, 30, 30, 30, 19.5, 14.5));
+  TimeSurface surface(table);
+  const EventBuffer events = MakeEvents({{100, 5, 6, 1}, {200, 40, 6, -1}});
+  EXPECT_THROW(surface.Insert(events, 0, events.size()), InvalidArgumentError);
+}
+
+TEST(TimeSurface, UndistortsEventsThroughTheTable) {
+  Camera camera = Camera::Pinhole(64, 48, 50, 50, 31.5, 23.5);
+  camera.model = CameraModel::kRadialTangential;
+  camera.distortion = {-0.3, 0.1, 0.001, -0.002, 0.0};
+  const UndistortionTable table(camera);
+  TimeSurface surface(table);
+  int checked = 0;
+  for (const auto& [x, y] : {std::pair{8, 8}, std::pair{56, 40}, std::pair{31, 23}}) {
+    const UndistortionTable::Entry* entry = table.Find(x, y);
+    ASSERT_NE(entry, nullptr);
+    const int ideal_x = static_cast<int>(std::lround(entry->ideal_pixel.x()));
+    const int ideal_y = static_cast<int>(std::lround(entry->ideal_pixel.y()));
+    if (ideal_x < 0 || ideal_y < 0 || ideal_x >= 64 || ideal_y >= 48) continue;
+    const EventBuffer events =
+        MakeEvents({{1000 + checked, static_cast<uint16_t>(x), static_cast<uint16_t>(y), 1}});
+    surface.Insert(events, 0, 1);
+    EXPECT_EQ(surface.LastTimestamp(SurfaceChannel::kAll, ideal_x, ideal_y), 1000 + checked);
+    ++checked;
+  }
+  // The corner pixel moves by more than a pixel under this barrel distortion.
+  EXPECT_GT((table.At(8, 8).ideal_pixel - Eigen::Vector2f(8, 8)).norm(), 1.0f);
+  EXPECT_EQ(checked, 3);
+}
+
+TEST(TimeSurface, FieldIsOneMinusExponentialDecayWithEmptyThreshold) {
+  const UndistortionTable table(Camera::Pinhole(20, 20, 30, 30, 9.5, 9.5));
+  TimeSurface surface(table);
+  const int64_t t_ns = 1'000'000'000;
+  // Ages 0, 10 ms, 30 ms, 80 ms (the last below delta = 0.1 with tau = 30 ms).
+  const EventBuffer events = MakeEvents({{t_ns - 80'000'000, 2, 2, 1},
+                                         {t_ns - 30'000'000, 4, 2, 1},
+                                         {t_ns - 10'000'000, 6, 2, -1},
+                                         {t_ns, 8, 2, 1}});
+  surface.Insert(events, 0, events.size());
+  const SurfaceDecay decay{30e6, 0.1};
+  TimeSurfaceField field(surface, SurfaceChannel::kAll, decay, /*smooth=*/false);
+  field.SetTime(t_ns);
+  EXPECT_FLOAT_EQ(field.ValueAt(2, 2), 1.0f);
+  EXPECT_NEAR(field.ValueAt(4, 2), 1.0 - std::exp(-1.0), 1e-6);
+  EXPECT_NEAR(field.ValueAt(6, 2), 1.0 - std::exp(-1.0 / 3.0), 1e-6);
+  EXPECT_FLOAT_EQ(field.ValueAt(8, 2), 0.0f);
+  EXPECT_FLOAT_EQ(field.ValueAt(10, 10), 1.0f);
+  // The ON channel does not see the OFF event.
+  TimeSurfaceField on_field(surface, SurfaceChannel::kOn, decay, false);
+  on_field.SetTime(t_ns);
+  EXPECT_FLOAT_EQ(on_field.ValueAt(6, 2), 1.0f);
+  // The active mask follows the same threshold.
+  const cv::Mat mask = surface.ActiveMask(SurfaceChannel::kAll, t_ns, decay);
+  EXPECT_EQ(mask.at<uint8_t>(2, 2), 0);
+  EXPECT_EQ(mask.at<uint8_t>(2, 4), 255);
+  EXPECT_EQ(mask.at<uint8_t>(2, 8), 255);
+  EXPECT_EQ(cv::countNonZero(mask), 3);
+}
+
+TEST(TimeSurface, LazySmoothedFieldEqualsDenseRebuildAndItsGradientMatchesDifferences) {
+  const UndistortionTable table(Camera::Pinhole(64, 48, 50, 50, 31.5, 23.5));
+  TimeSurface surface(table);
+  std::mt19937 random(3);
+  std::uniform_int_distribution<int> column(0, 63), row(0, 47), polarity(0, 1);
+  EventBuffer events;
+  for (int i = 0; i < 600; ++i) {
+    events.push_back({int64_t{i} * 100'000, static_cast<uint16_t>(column(random)),
+                      static_cast<uint16_t>(row(random)),
+                      static_cast<int8_t>(polarity(random) ? 1 : -1)});
+  }
+  surface.Insert(events, 0, events.size());
+  for (const SurfaceChannel channel : {SurfaceChannel::kAll, SurfaceChannel::kOn}) {
+    TimeSurfaceField field(surface, channel, SurfaceDecay{30e6, 0.1}, /*smooth=*/true);
+    field.SetTime(60'000'000);
+    const cv::Mat dense = field.RenderDense();
+    for (int y = 0; y < 48; ++y) {
+      for (int x = 0; x < 64; ++x) {
+        ASSERT_NEAR(field.ValueAt(x, y), dense.at<float>(y, x), 1e-6) << x << " " << y;
+      }
+    }
+    // The bilinear derivative is the derivative of the sampled value inside a cell.
+    for (const auto& [u, v] :
+         {std::pair{10.3, 20.6}, std::pair{40.71, 5.25}, std::pair{0.5, 46.5}}) {
+      double value;
+      Eigen::Vector2d gradient;
+      ASSERT_TRUE(field.Sample(u, v, &value, &gradient));
+      double plus, minus;
+      ASSERT_TRUE(field.Sample(u + 1e-5, v, &plus, nullptr));
+      ASSERT_TRUE(field.Sample(u - 1e-5, v, &minus, nullptr));
+      EXPECT_NEAR(gradient.x(), (plus - minus) / 2e-5, 1e-6);
+      ASSERT_TRUE(field.Sample(u, v + 1e-5, &plus, nullptr));
+      ASSERT_TRUE(field.Sample(u, v - 1e-5, &minus, nullptr));
+      EXPECT_NEAR(gradient.y(), (plus - minus) / 2e-5, 1e-6);
+    }
+  }
+}
+
+}  // namespace
+}  // namespace evloc::tracking

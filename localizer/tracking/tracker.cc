@@ -1,0 +1,385 @@
+#include "localizer/tracking/tracker.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <numbers>
+#include <numeric>
+#include <string>
+
+#include <opencv2/imgproc.hpp>
+
+#include "core/common/error.h"
+#include "localizer/tracking/point_selection.h"
+
+namespace evloc::tracking {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double MillisecondsSince(Clock::time_point start) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
+}
+
+constexpr double kRadiansPerDegree = std::numbers::pi / 180.0;
+
+}  // namespace
+
+// The outcome of one solve from one starting pose.
+struct Tracker::Attempt {
+  RegistrationResult registration;
+  TrackingQuality quality;
+  bool good = false;
+};
+
+Tracker::Tracker(const Map& map, const VisibilityIndex* visibility, const Camera& camera,
+                 const TrackerOptions& options)
+    : map_(map),
+      visibility_(visibility),
+      options_((options.Check(), options)),
+      table_(camera),
+      intrinsics_(PinholeIntrinsics::FromCamera(table_.ideal_camera())),
+      decay_{options.decay_time_s * 1e9, options.empty_threshold},
+      polarity_options_{options.polarity_neutral_band_deg, options.gradient_probe_depth_fraction,
+                        options.min_flow_px},
+      surface_(table_) {
+  if (map.positions.size() != map.gradients.size()) {
+    throw InvalidArgumentError("Tracker: the map has not one gradient per point.");
+  }
+  if (table_.ideal_camera().width < 8 || table_.ideal_camera().height < 8) {
+    throw InvalidArgumentError("Tracker: the camera image must be at least 8x8 pixels.");
+  }
+  for (int channel = 0; channel < 3; ++channel) {
+    lazy_fields_[channel] = std::make_unique<TimeSurfaceField>(
+        surface_, static_cast<SurfaceChannel>(channel), decay_, options_.smooth_field);
+  }
+  if (visibility_ == nullptr) {
+    all_points_.resize(map.size());
+    std::iota(all_points_.begin(), all_points_.end(), 0u);
+  }
+  period_ns_ = std::max<int64_t>(1, std::llround(1e9 / options_.step_rate_hz));
+}
+
+void Tracker::Reset(const Rigid3d& world_from_cam, int64_t t_ns) {
+  if (!world_from_cam.IsFinite()) {
+    throw InvalidArgumentError("Tracker::Reset: the pose is not finite.");
+  }
+  motion_.Reset(world_from_cam, t_ns);
+  last_good_world_from_cam_ = world_from_cam;
+  status_ = TrackingStatus::kTracking;
+  next_step_t_ns_ = t_ns + period_ns_;
+  last_step_t_ns_ = t_ns;
+  events_since_step_ = 0;
+  has_selection_ = false;
+}
+
+std::vector<PoseEstimate> Tracker::AddEvents(const EventBuffer& events) {
+  if (options_.input != TrackerInput::kEvents) {
+    throw InvalidArgumentError("Tracker::AddEvents: this tracker takes frames (Canny-VT).");
+  }
+  if (!events.IsConsistent()) {
+    throw InvalidArgumentError("Tracker::AddEvents: the event arrays differ in length.");
+  }
+  const size_t count = events.size();
+  const int64_t* t_ns = events.t_ns.data();
+  // Reject the whole packet before storing anything when it goes back in time.
+  if (count > 0) {
+    bool ordered = !last_event_t_ns_ || t_ns[0] >= *last_event_t_ns_;
+    for (size_t i = 1; i < count; ++i) ordered &= t_ns[i] >= t_ns[i - 1];
+    if (!ordered) {
+      throw InvalidArgumentError("Tracker::AddEvents: event time stamps must not decrease.");
+    }
+  }
+  std::vector<PoseEstimate> estimates;
+  size_t begin = 0;
+  while (begin < count) {
+    if (!initialized()) {
+      surface_.Insert(events, begin, count);
+      begin = count;
+    } else if (options_.events_per_step) {
+      const size_t take =
+          std::min<size_t>(count - begin, *options_.events_per_step - events_since_step_);
+      surface_.Insert(events, begin, begin + take);
+      begin += take;
+      events_since_step_ += static_cast<int64_t>(take);
+      if (events_since_step_ == *options_.events_per_step) {
+        events_since_step_ = 0;
+        const int64_t step_t_ns = t_ns[begin - 1];
+        // Several steps at one time stamp would add nothing: the step waits for a later event.
+        if (step_t_ns > last_step_t_ns_) estimates.push_back(Step(step_t_ns));
+      }
+    } else {
+      // Events up to and including the next step time belong to that step.
+      const size_t end =
+          static_cast<size_t>(std::upper_bound(t_ns + begin, t_ns + count, next_step_t_ns_) - t_ns);
+      surface_.Insert(events, begin, end);
+      begin = end;
+      if (end < count) {
+        // An event after the step time proves that every event of the step has arrived.
+        estimates.push_back(Step(next_step_t_ns_));
+        next_step_t_ns_ += period_ns_;
+      }
+    }
+  }
+  if (count > 0) last_event_t_ns_ = t_ns[count - 1];
+  return estimates;
+}
+
+std::optional<PoseEstimate> Tracker::AddFrame(int64_t t_ns, const cv::Mat& gray) {
+  if (options_.input != TrackerInput::kFrames) {
+    throw InvalidArgumentError("Tracker::AddFrame: this tracker takes events (Canny-EVT).");
+  }
+  if (gray.type() != CV_8UC1 || gray.cols != table_.width() || gray.rows != table_.height()) {
+    throw InvalidArgumentError("Tracker::AddFrame: the frame must be CV_8UC1 of " +
+                               std::to_string(table_.width()) + "x" +
+                               std::to_string(table_.height()) + " pixels.");
+  }
+  if (!initialized()) return std::nullopt;
+  if (t_ns <= last_step_t_ns_) {
+    throw InvalidArgumentError("Tracker::AddFrame: frames must come after the last step.");
+  }
+  // Canny on the sensor image, then each edge pixel moved to its ideal pixel (no remapping).
+  cv::Mat sensor_edges;
+  cv::Canny(gray, sensor_edges, options_.canny_low_threshold, options_.canny_high_threshold);
+  cv::Mat ideal_edges = cv::Mat::zeros(surface_.height(), surface_.width(), CV_8UC1);
+  uint8_t* ideal = ideal_edges.ptr<uint8_t>(0);
+  for (int y = 0; y < sensor_edges.rows; ++y) {
+    const uint8_t* row = sensor_edges.ptr<uint8_t>(y);
+    for (int x = 0; x < sensor_edges.cols; ++x) {
+      if (row[x] == 0) continue;
+      const int32_t index = surface_.IdealPixelIndex(x, y);
+      if (index >= 0) ideal[index] = 255;
+    }
+  }
+  const cv::Mat distance_field =
+      TruncatedDistanceField(ideal_edges, options_.distance_truncation_px, false);
+  frame_distance_px_ = distance_field * options_.distance_truncation_px;
+  frame_field_ = DenseField(options_.smooth_field ? SmoothField(distance_field) : distance_field);
+  if (options_.use_occlusion_culling) annf_.Build(ideal_edges);
+  return Step(t_ns);
+}
+
+void Tracker::UpdateSurfaces(int64_t t_ns) {
+  if (options_.input == TrackerInput::kFrames) return;  // Built by AddFrame.
+  const int num_channels = options_.use_polarity ? 3 : 1;
+  for (int channel = 0; channel < num_channels; ++channel) {
+    lazy_fields_[channel]->SetTime(t_ns);
+    if (options_.field_evaluation == FieldEvaluation::kDense) {
+      dense_fields_[channel] = DenseField(lazy_fields_[channel]->RenderDense());
+    }
+  }
+  if (options_.use_occlusion_culling) {
+    annf_.Build(surface_.ActiveMask(SurfaceChannel::kAll, t_ns, decay_));
+  }
+}
+
+PotentialField* Tracker::Field(SurfaceChannel channel) {
+  if (options_.input == TrackerInput::kFrames) return &frame_field_;
+  const int index = static_cast<int>(channel);
+  if (options_.field_evaluation == FieldEvaluation::kDense) return &dense_fields_[index];
+  return lazy_fields_[index].get();
+}
+
+void Tracker::SelectPoints(const Rigid3d& predicted_world_from_cam) {
+  const Camera& ideal = table_.ideal_camera();
+  PointSelectionOptions selection;
+  selection.max_points = options_.max_points;
+  selection.bucket_size_px = options_.bucket_size_px;
+  selection.min_depth_m = options_.min_depth_m;
+  selection.max_depth_m = options_.max_depth_m;
+  selection.image_margin_px = options_.registration.image_margin_px;
+  const Rigid3d cam_from_world = predicted_world_from_cam.Inverse();
+  if (visibility_ != nullptr) {
+    VisibilityQueryOptions query;
+    query.min_depth_m = options_.min_depth_m;
+    query.max_depth_m = options_.max_depth_m;
+    query.image_margin_px = options_.registration.image_margin_px;
+    const std::vector<uint32_t> candidates =
+        visibility_->Query(ideal, predicted_world_from_cam, query);
+    selected_ = SelectEvenly(map_, candidates, intrinsics_, ideal.width, ideal.height,
+                             cam_from_world, selection);
+  } else {
+    selected_ = SelectEvenly(map_, all_points_, intrinsics_, ideal.width, ideal.height,
+                             cam_from_world, selection);
+  }
+  selection_world_from_cam_ = predicted_world_from_cam;
+  steps_since_selection_ = 0;
+  has_selection_ = true;
+}
+
+bool Tracker::NearEdge(const Eigen::Vector2d& pixel) const {
+  const int x = static_cast<int>(std::lround(pixel.x()));
+  const int y = static_cast<int>(std::lround(pixel.y()));
+  if (x < 0 || y < 0 || x >= surface_.width() || y >= surface_.height()) return false;
+  const double radius = options_.on_edge_radius_px;
+  if (options_.input == TrackerInput::kFrames) {
+    return frame_distance_px_.ptr<float>(y)[x] <= radius;
+  }
+  const int reach = static_cast<int>(std::floor(radius));
+  const int64_t max_age_ns = decay_.MaxActiveAgeNs();
+  for (int dy = -reach; dy <= reach; ++dy) {
+    const int yy = y + dy;
+    if (yy < 0 || yy >= surface_.height()) continue;
+    for (int dx = -reach; dx <= reach; ++dx) {
+      const int xx = x + dx;
+      if (xx < 0 || xx >= surface_.width() || dx * dx + dy * dy > radius * radius) continue;
+      const int64_t last_t = surface_.LastTimestamp(SurfaceChannel::kAll, xx, yy);
+      if (last_t != kNeverFired && step_t_ns_ - last_t <= max_age_ns &&
+          decay_.Value(last_t, step_t_ns_) > 0) {
+        return true;
+      }
+    }
+  }
+  return false;
+}
+
+bool Tracker::IsGood(const TrackingQuality& quality) const {
+  return quality.points_used >= options_.min_points &&
+         quality.on_edge_fraction >= options_.min_on_edge_fraction &&
+         quality.mean_residual <= options_.max_mean_residual;
+}
+
+Tracker::Attempt Tracker::Solve(const Rigid3d& start_world_from_cam,
+                                const Rigid3d* previous_world_from_cam) {
+  const Rigid3d start_cam_from_world = start_world_from_cam.Inverse();
+  const bool predict_polarity = options_.use_polarity && previous_world_from_cam != nullptr &&
+                                options_.input == TrackerInput::kEvents;
+  const Rigid3d previous_cam_from_world =
+      previous_world_from_cam ? previous_world_from_cam->Inverse() : Rigid3d();
+  const size_t num_selected = selected_.size();
+  scratch_pixels_.resize(num_selected);
+  scratch_depths_.resize(num_selected);
+  scratch_fields_.resize(num_selected);
+  for (size_t i = 0; i < num_selected; ++i) {
+    const uint32_t index = selected_[i];
+    const Eigen::Vector3d position = map_.positions[index].cast<double>();
+    const Eigen::Vector3d point_in_cam = start_cam_from_world * position;
+    scratch_depths_[i] = point_in_cam.z();
+    if (!intrinsics_.Project(point_in_cam, &scratch_pixels_[i])) {
+      scratch_pixels_[i].setConstant(-1e9);
+    }
+    SurfaceChannel channel = SurfaceChannel::kAll;
+    if (predict_polarity) {
+      const PredictedPolarity polarity =
+          PredictPolarity(position, map_.gradients[index].cast<double>(), intrinsics_,
+                          start_cam_from_world, previous_cam_from_world, polarity_options_);
+      if (polarity == PredictedPolarity::kOn) channel = SurfaceChannel::kOn;
+      if (polarity == PredictedPolarity::kOff) channel = SurfaceChannel::kOff;
+    }
+    scratch_fields_[i] = Field(channel);
+  }
+  if (options_.use_occlusion_culling) {
+    zbuffer_.Cull(scratch_pixels_, scratch_depths_, annf_, options_.annf_radius_px, &scratch_keep_);
+  } else {
+    scratch_keep_.assign(num_selected, 1);
+  }
+  std::vector<RegistrationPoint> points;
+  points.reserve(num_selected);
+  for (size_t i = 0; i < num_selected; ++i) {
+    if (scratch_keep_[i]) {
+      points.push_back({map_.positions[selected_[i]].cast<double>(), scratch_fields_[i]});
+    }
+  }
+  Attempt attempt;
+  attempt.registration =
+      RegisterPoints(points, intrinsics_, start_cam_from_world, options_.registration);
+  const Rigid3d& estimate = attempt.registration.cam_from_world;
+  // On-edge fraction over every selected point, culled or not: culling keeps only points near
+  // edges, so counting the survivors alone would flatter a wrong pose.
+  int in_image = 0;
+  int on_edge = 0;
+  for (const uint32_t index : selected_) {
+    Eigen::Vector2d pixel;
+    if (!intrinsics_.Project(estimate * map_.positions[index].cast<double>(), &pixel)) continue;
+    if (pixel.x() < 0 || pixel.y() < 0 || pixel.x() > surface_.width() - 1 ||
+        pixel.y() > surface_.height() - 1) {
+      continue;
+    }
+    ++in_image;
+    on_edge += NearEdge(pixel) ? 1 : 0;
+  }
+  attempt.quality.on_edge_fraction = in_image > 0 ? static_cast<double>(on_edge) / in_image : 0;
+  attempt.quality.mean_residual = attempt.registration.mean_residual;
+  attempt.quality.points_used = attempt.registration.points_used;
+  attempt.quality.points_selected = static_cast<int>(num_selected);
+  attempt.quality.iterations = attempt.registration.iterations;
+  attempt.good = IsGood(attempt.quality);
+  return attempt;
+}
+
+PoseEstimate Tracker::Step(int64_t t_ns) {
+  const Clock::time_point step_start = Clock::now();
+  PoseEstimate estimate;
+  estimate.t_ns = t_ns;
+  step_t_ns_ = t_ns;
+
+  UpdateSurfaces(t_ns);
+  estimate.timings.surface_ms = MillisecondsSince(step_start);
+
+  const Clock::time_point selection_start = Clock::now();
+  const bool was_tracking = status_ == TrackingStatus::kTracking;
+  const Rigid3d predicted = was_tracking ? motion_.Predict(t_ns) : last_good_world_from_cam_;
+  ++steps_since_selection_;
+  const bool moved =
+      has_selection_ && ((predicted.translation - selection_world_from_cam_.translation).norm() >
+                             options_.reselect_translation_m ||
+                         AngleBetween(predicted.rotation, selection_world_from_cam_.rotation) >
+                             options_.reselect_rotation_deg * kRadiansPerDegree);
+  if (!has_selection_ || moved || steps_since_selection_ >= options_.reselect_every_steps) {
+    SelectPoints(predicted);
+    estimate.timings.selection_ms = MillisecondsSince(selection_start);
+  }
+
+  const Clock::time_point solve_start = Clock::now();
+  const Rigid3d previous = motion_.last_world_from_cam();
+  Attempt best = Solve(predicted, was_tracking ? &previous : nullptr);
+  int recovery_attempts = 0;
+  if (!best.good && options_.enable_recovery) {
+    // Retry from the last good pose, then from perturbations around it, with the unsigned
+    // surface (the motion, hence the polarity prediction, is what failed).
+    std::vector<Rigid3d> starts = {last_good_world_from_cam_};
+    const double t = options_.recovery_translation_m;
+    const double r = options_.recovery_rotation_deg * kRadiansPerDegree;
+    for (int axis = 0; axis < 6; ++axis) {
+      for (const double sign : {1.0, -1.0}) {
+        Vector6d perturbation = Vector6d::Zero();
+        perturbation(axis) = sign * (axis < 3 ? t : r);
+        if (perturbation.isZero()) continue;
+        starts.push_back(last_good_world_from_cam_ * ExpSE3(perturbation));
+      }
+    }
+    for (const Rigid3d& start : starts) {
+      Attempt attempt = Solve(start, nullptr);
+      ++recovery_attempts;
+      const bool better = (attempt.good && !best.good) ||
+                          (attempt.good == best.good &&
+                           attempt.quality.on_edge_fraction > best.quality.on_edge_fraction);
+      if (better) best = std::move(attempt);
+      if (best.good) break;
+    }
+  }
+  estimate.timings.solve_ms = MillisecondsSince(solve_start);
+
+  estimate.world_from_cam = best.registration.cam_from_world.Inverse();
+  estimate.covariance = best.registration.covariance;
+  estimate.quality = best.quality;
+  estimate.quality.recovery_attempts = recovery_attempts;
+  if (best.good) {
+    if (was_tracking) {
+      motion_.Update(estimate.world_from_cam, t_ns);
+    } else {
+      motion_.Reset(estimate.world_from_cam, t_ns);
+    }
+    last_good_world_from_cam_ = estimate.world_from_cam;
+    status_ = TrackingStatus::kTracking;
+  } else {
+    status_ = TrackingStatus::kLost;
+    motion_.Reset(last_good_world_from_cam_, t_ns);
+  }
+  estimate.status = status_;
+  last_step_t_ns_ = t_ns;
+  estimate.timings.total_ms = MillisecondsSince(step_start);
+  return estimate;
+}
+
+}  // namespace evloc::tracking

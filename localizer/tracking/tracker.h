@@ -1,0 +1,176 @@
+// The map-based 6-DoF tracker of an event camera (Canny-EVT, method.md §4) and its frame-based
+// twin (Canny-VT, §4.5). Feed it event packets of any size; it runs tracking steps at a fixed
+// rate in event time (or every N events) and returns one PoseEstimate per step. The output is
+// deterministic: the same events give the same poses however they are split into packets (only
+// the measured timings differ). Not thread-safe: one Tracker per session.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "core/camera/camera.h"
+#include "core/camera/undistortion_table.h"
+#include "core/events/event.h"
+#include "core/geometry/rigid3.h"
+#include "localizer/tracking/motion_model.h"
+#include "localizer/tracking/occlusion.h"
+#include "localizer/tracking/polarity.h"
+#include "localizer/tracking/potential_field.h"
+#include "localizer/tracking/registration.h"
+#include "localizer/tracking/time_surface.h"
+#include "localizer/tracking/tracker_options.h"
+#include "maps/map.h"
+#include "maps/visibility.h"
+
+namespace evloc::tracking {
+
+// Whether the tracker trusts its estimate.
+enum class TrackingStatus {
+  // The last step met the quality thresholds.
+  kTracking,
+  // The last step (and its recovery attempts) failed them; the tracker searches around the last
+  // good pose at every step.
+  kLost,
+};
+
+// How well a step's estimate fits the measurements.
+struct TrackingQuality {
+  // Fraction of the selected points (before occlusion culling) inside the image that lie within
+  // on_edge_radius_px of an active edge pixel at the estimate.
+  double on_edge_fraction = 0;
+  // Mean field value at the registered points (0 on fresh edges, 1 far from any).
+  double mean_residual = 1;
+  // Number of points registered (after occlusion culling, inside the image).
+  int points_used = 0;
+  // Number of points selected from the map before occlusion culling.
+  int points_selected = 0;
+  // LM iterations of the accepted attempt.
+  int iterations = 0;
+  // Number of recovery attempts run in this step (0 when the first solve was good).
+  int recovery_attempts = 0;
+};
+
+// Wall-clock time spent in each stage of a step, milliseconds.
+struct StageTimings {
+  // Time-surface (or frame field) upkeep and the ANNF.
+  double surface_ms = 0;
+  // Visibility query and even subsampling (0 when the previous selection was kept).
+  double selection_ms = 0;
+  // Polarity prediction, occlusion culling, registration and quality of every attempt.
+  double solve_ms = 0;
+  // The whole step.
+  double total_ms = 0;
+};
+
+// The outcome of one tracking step.
+struct PoseEstimate {
+  // Time of the step, nanoseconds.
+  int64_t t_ns = 0;
+  // The estimated pose.
+  Rigid3d world_from_cam;
+  // Covariance of xi in world_from_cam * ExpSE3(xi), xi = (v, omega) in the camera frame.
+  Matrix6d covariance = Matrix6d::Identity();
+  // Tracking status after this step.
+  TrackingStatus status = TrackingStatus::kLost;
+  // Fit quality of the estimate.
+  TrackingQuality quality;
+  // Stage timings (the only field that differs between identical runs).
+  StageTimings timings;
+};
+
+// The tracker of one session.
+class Tracker {
+ public:
+  // `map` (and `visibility`, when given; built on `map`) must outlive the tracker. Without a
+  // visibility index every map point is a selection candidate. `camera` is the event (or frame)
+  // camera; its undistortion table is built here once. Throws InvalidArgumentError when the
+  // options, the camera or the map are invalid.
+  Tracker(const Map& map, const VisibilityIndex* visibility, const Camera& camera,
+          const TrackerOptions& options);
+
+  // Sets the pose at t_ns (initialisation or an external pose hint): status kTracking, zero
+  // velocity, the next fixed-rate step at t_ns + 1 / step_rate_hz.
+  void Reset(const Rigid3d& world_from_cam, int64_t t_ns);
+
+  // Ingests events (time-ordered, also across calls) and runs every step that became due; the
+  // step at time t uses every event with t_ns <= t. Before the first Reset events are stored but
+  // no step runs. Throws InvalidArgumentError (nothing ingested) when the events go back in time
+  // or the tracker takes frames; an event outside the sensor throws too.
+  std::vector<PoseEstimate> AddEvents(const EventBuffer& events);
+
+  // Runs one Canny-VT step on a grey frame (CV_8UC1, the camera's size) taken at t_ns. Returns
+  // nothing before the first Reset. Throws InvalidArgumentError when the tracker takes events,
+  // the image is of another type or size, or t_ns is not after the last step.
+  std::optional<PoseEstimate> AddFrame(int64_t t_ns, const cv::Mat& gray);
+
+  // True once Reset was called.
+  bool initialized() const { return motion_.initialized(); }
+  // Status after the last step (kTracking after Reset).
+  TrackingStatus status() const { return status_; }
+  // The last good pose.
+  const Rigid3d& last_good_world_from_cam() const { return last_good_world_from_cam_; }
+  // The options in use.
+  const TrackerOptions& options() const { return options_; }
+  // The ideal pinhole camera the fields live in.
+  const Camera& ideal_camera() const { return table_.ideal_camera(); }
+  // The time surface (for inspection and tests).
+  const TimeSurface& time_surface() const { return surface_; }
+  // The body-frame velocity of the motion prior, (v, omega) per second.
+  const Vector6d& velocity() const { return motion_.velocity(); }
+
+ private:
+  struct Attempt;
+
+  PoseEstimate Step(int64_t t_ns);
+  void UpdateSurfaces(int64_t t_ns);
+  void SelectPoints(const Rigid3d& predicted_world_from_cam);
+  Attempt Solve(const Rigid3d& start_world_from_cam, const Rigid3d* previous_world_from_cam);
+  bool IsGood(const TrackingQuality& quality) const;
+  bool NearEdge(const Eigen::Vector2d& pixel) const;
+  PotentialField* Field(SurfaceChannel channel);
+
+  const Map& map_;
+  const VisibilityIndex* visibility_;
+  TrackerOptions options_;
+  UndistortionTable table_;
+  PinholeIntrinsics intrinsics_;
+  SurfaceDecay decay_;
+  PolarityPredictionOptions polarity_options_;
+  TimeSurface surface_;
+  std::unique_ptr<TimeSurfaceField> lazy_fields_[3];
+  DenseField dense_fields_[3];
+  DenseField frame_field_;
+  cv::Mat frame_distance_px_;
+  NearestEdgeField annf_;
+  EdgeZBuffer zbuffer_;
+  ConstantVelocityModel motion_;
+  TrackingStatus status_ = TrackingStatus::kTracking;
+  Rigid3d last_good_world_from_cam_;
+  int64_t step_t_ns_ = 0;
+
+  // Selection state.
+  std::vector<uint32_t> all_points_;
+  std::vector<uint32_t> selected_;
+  Rigid3d selection_world_from_cam_;
+  int steps_since_selection_ = 0;
+  bool has_selection_ = false;
+
+  // Scheduling state.
+  int64_t period_ns_ = 0;
+  int64_t next_step_t_ns_ = 0;
+  int64_t events_since_step_ = 0;
+  std::optional<int64_t> last_event_t_ns_;
+  int64_t last_step_t_ns_ = 0;
+
+  // Per-step scratch.
+  std::vector<Eigen::Vector2d> scratch_pixels_;
+  std::vector<double> scratch_depths_;
+  std::vector<uint8_t> scratch_keep_;
+  std::vector<PotentialField*> scratch_fields_;
+};
+
+}  // namespace evloc::tracking

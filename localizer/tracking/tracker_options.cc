@@ -1,0 +1,96 @@
+#include "localizer/tracking/tracker_options.h"
+
+#include <cmath>
+#include <string>
+
+#include "core/common/error.h"
+
+namespace evloc::tracking {
+namespace {
+
+void Require(bool condition, const std::string& what) {
+  if (!condition) throw InvalidArgumentError("TrackerOptions: " + what);
+}
+
+bool Positive(double value) { return std::isfinite(value) && value > 0; }
+
+}  // namespace
+
+void RegistrationOptions::Check() const {
+  Require(Positive(robust_scale), "registration.robust_scale must be positive and finite.");
+  Require(max_iterations >= 1, "registration.max_iterations must be at least 1.");
+  Require(std::isfinite(min_increment) && min_increment >= 0,
+          "registration.min_increment must be finite and >= 0.");
+  Require(Positive(initial_damping), "registration.initial_damping must be positive.");
+  Require(std::isfinite(image_margin_px) && image_margin_px >= 0,
+          "registration.image_margin_px must be finite and >= 0.");
+}
+
+void TrackerOptions::Check() const {
+  Require(Positive(step_rate_hz) && step_rate_hz <= 1e6, "step_rate_hz must be in (0, 1e6].");
+  Require(!events_per_step || *events_per_step >= 1, "events_per_step must be at least 1.");
+  Require(Positive(decay_time_s), "decay_time_s must be positive.");
+  Require(std::isfinite(empty_threshold) && empty_threshold > 0 && empty_threshold < 1,
+          "empty_threshold must be in (0, 1).");
+  Require(max_points >= 6, "max_points must be at least 6.");
+  Require(bucket_size_px >= 1, "bucket_size_px must be at least 1.");
+  Require(Positive(min_depth_m) && Positive(max_depth_m) && min_depth_m < max_depth_m,
+          "min_depth_m and max_depth_m must be positive with min_depth_m < max_depth_m.");
+  Require(std::isfinite(reselect_translation_m) && reselect_translation_m >= 0,
+          "reselect_translation_m must be finite and >= 0.");
+  Require(std::isfinite(reselect_rotation_deg) && reselect_rotation_deg >= 0,
+          "reselect_rotation_deg must be finite and >= 0.");
+  Require(reselect_every_steps >= 1, "reselect_every_steps must be at least 1.");
+  Require(std::isfinite(polarity_neutral_band_deg) && polarity_neutral_band_deg >= 0 &&
+              polarity_neutral_band_deg < 180,
+          "polarity_neutral_band_deg must be in [0, 180).");
+  Require(Positive(gradient_probe_depth_fraction) && gradient_probe_depth_fraction < 1,
+          "gradient_probe_depth_fraction must be in (0, 1).");
+  Require(std::isfinite(min_flow_px) && min_flow_px >= 0, "min_flow_px must be >= 0.");
+  Require(Positive(annf_radius_px), "annf_radius_px must be positive.");
+  registration.Check();
+  Require(min_points >= 6, "min_points must be at least 6 (six pose parameters).");
+  Require(
+      std::isfinite(min_on_edge_fraction) && min_on_edge_fraction >= 0 && min_on_edge_fraction <= 1,
+      "min_on_edge_fraction must be in [0, 1].");
+  Require(std::isfinite(on_edge_radius_px) && on_edge_radius_px >= 0 && on_edge_radius_px <= 10,
+          "on_edge_radius_px must be in [0, 10].");
+  Require(std::isfinite(max_mean_residual) && max_mean_residual > 0,
+          "max_mean_residual must be positive.");
+  Require(std::isfinite(recovery_translation_m) && recovery_translation_m >= 0,
+          "recovery_translation_m must be finite and >= 0.");
+  Require(std::isfinite(recovery_rotation_deg) && recovery_rotation_deg >= 0,
+          "recovery_rotation_deg must be finite and >= 0.");
+  Require(std::isfinite(canny_low_threshold) && canny_low_threshold >= 0 &&
+              canny_low_threshold <= canny_high_threshold,
+          "canny thresholds must satisfy 0 <= canny_low_threshold <= canny_high_threshold.");
+  Require(Positive(distance_truncation_px), "distance_truncation_px must be positive.");
+}
+
+void TrackerOptions::SetVariant(const std::string& name) {
+  if (name == "EVT") {
+    use_polarity = true;
+    use_occlusion_culling = true;
+  } else if (name == "EVT-PR") {
+    use_polarity = true;
+    use_occlusion_culling = false;
+  } else if (name == "EVT-OH") {
+    use_polarity = false;
+    use_occlusion_culling = true;
+  } else if (name == "EVT--") {
+    use_polarity = false;
+    use_occlusion_culling = false;
+  } else {
+    throw InvalidArgumentError("Unknown tracker variant '" + name +
+                               "': expected EVT, EVT-PR, EVT-OH or EVT--.");
+  }
+}
+
+std::string TrackerOptions::VariantName() const {
+  if (use_polarity && use_occlusion_culling) return "EVT";
+  if (use_polarity) return "EVT-PR";
+  if (use_occlusion_culling) return "EVT-OH";
+  return "EVT--";
+}
+
+}  // namespace evloc::tracking

@@ -1,0 +1,150 @@
+// Every parameter of the event tracker in one place (docs/tracking.md lists the defaults and the
+// reasons for them). Fill the fields, then call Check().
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <string>
+
+namespace evloc::tracking {
+
+// Robust loss applied to the field residuals.
+enum class RobustLoss {
+  // Quadratic up to `robust_scale`, linear beyond.
+  kHuber,
+  // log(1 + (r/scale)^2): stronger down-weighting of outliers.
+  kCauchy,
+};
+
+// How the time-surface potential field is evaluated at each step.
+enum class FieldEvaluation {
+  // Only where projected points land, memoised per step (O(points)); the default.
+  kLazy,
+  // Full-image rebuild of every needed channel per step (O(pixels)); for comparison.
+  kDense,
+};
+
+// Which measurements drive the tracker.
+enum class TrackerInput {
+  // Events and time surfaces (Canny-EVT).
+  kEvents,
+  // Regular frames and distance transforms of their Canny edges (Canny-VT).
+  kFrames,
+};
+
+// Options of the solver (Levenberg-Marquardt on SE(3), forward compositional).
+struct RegistrationOptions {
+  // Robust loss on the field residuals.
+  RobustLoss loss = RobustLoss::kHuber;
+  // Scale of the robust loss, on the 0..1 field scale.
+  double robust_scale = 0.2;
+  // Maximum number of linearisations (accepted or rejected LM trials) per solve.
+  int max_iterations = 10;
+  // Stop when the increment is below this (metres for translation, radians for rotation).
+  double min_increment = 1e-6;
+  // Initial LM damping, relative to the diagonal of the normal equations.
+  double initial_damping = 1e-4;
+  // Points projecting closer than this to the image border (pixels) are not used.
+  double image_margin_px = 2.0;
+
+  // Throws InvalidArgumentError when a field is out of range.
+  void Check() const;
+};
+
+// Options of the event tracker (and of its frame-based twin).
+struct TrackerOptions {
+  // Measurements the tracker consumes.
+  TrackerInput input = TrackerInput::kEvents;
+
+  // --- Step scheduling ---
+  // Tracking steps per second of event time (used when events_per_step is unset).
+  double step_rate_hz = 300.0;
+  // When set, a step runs after every this many events instead of at a fixed rate.
+  std::optional<int64_t> events_per_step;
+
+  // --- Time surfaces ---
+  // Decay time tau of T = exp(-(t - t_last) / tau), seconds.
+  double decay_time_s = 0.03;
+  // Pixels with T <= this count as empty (field value 1) and as inactive for the ANNF.
+  double empty_threshold = 0.1;
+  // Smooth the field 1 - T with the 5x5 binomial (Gaussian) kernel.
+  bool smooth_field = false;
+  // Lazy (per projected point) or dense (full image) field evaluation.
+  FieldEvaluation field_evaluation = FieldEvaluation::kLazy;
+
+  // --- Point selection ---
+  // Maximum number of map points registered per step.
+  int max_points = 2500;
+  // Side of the square image buckets used for even coverage, pixels.
+  int bucket_size_px = 16;
+  // Points closer than this to the camera are not selected, metres.
+  double min_depth_m = 0.1;
+  // Points farther than this are not selected, metres.
+  double max_depth_m = 50.0;
+  // Re-run the selection when the predicted pose moved more than this since the last
+  // selection, metres.
+  double reselect_translation_m = 0.05;
+  // Same, for the rotation, degrees.
+  double reselect_rotation_deg = 3.0;
+  // Re-run the selection at least every this many steps.
+  int reselect_every_steps = 10;
+
+  // --- Polarity-aware registration (signed time surfaces) ---
+  // Register points against the ON or OFF surface of their predicted polarity.
+  bool use_polarity = true;
+  // Total width of the neutral band around 90 degrees between gradient and flow, degrees;
+  // points inside it use the unsigned surface.
+  double polarity_neutral_band_deg = 30.0;
+  // Length of the 3D gradient probe P + s g used to project the gradient, as a fraction of the
+  // point's depth.
+  double gradient_probe_depth_fraction = 0.01;
+  // Predicted flows shorter than this (pixels per step) give no polarity prediction.
+  double min_flow_px = 0.05;
+
+  // --- Occlusion culling (ANNF z-buffer) ---
+  // Keep only the nearest point among those claiming one edge pixel; drop points far from edges.
+  bool use_occlusion_culling = true;
+  // Radius within which a point looks for its nearest active edge pixel, pixels.
+  double annf_radius_px = 5.0;
+
+  // --- Registration ---
+  // Solver options.
+  RegistrationOptions registration;
+
+  // --- Tracking state ---
+  // A step with fewer registered points than this is bad.
+  int min_points = 50;
+  // A step with a smaller fraction of points within on_edge_radius_px of an active edge pixel is
+  // bad.
+  double min_on_edge_fraction = 0.35;
+  // Distance within which a projected point counts as on an edge, pixels.
+  double on_edge_radius_px = 1.5;
+  // A step whose mean field value at the points is above this is bad.
+  double max_mean_residual = 0.75;
+  // On a bad step, retry from the last good pose and around it before declaring LOST.
+  bool enable_recovery = true;
+  // Translation of the recovery perturbations (along each camera axis, both signs), metres.
+  double recovery_translation_m = 0.02;
+  // Rotation of the recovery perturbations (about each camera axis, both signs), degrees.
+  double recovery_rotation_deg = 2.0;
+
+  // --- Frame-based twin (Canny-VT) ---
+  // Lower hysteresis threshold of cv::Canny on 8-bit frames.
+  double canny_low_threshold = 50.0;
+  // Upper hysteresis threshold of cv::Canny.
+  double canny_high_threshold = 150.0;
+  // Distance at which the normalised distance field saturates at 1, pixels.
+  double distance_truncation_px = 10.0;
+
+  // Throws InvalidArgumentError naming the first field out of range.
+  void Check() const;
+
+  // Sets the ablation switches from a variant name of method.md §4.6: "EVT" (polarity and
+  // occlusion), "EVT-PR" (polarity only), "EVT-OH" (occlusion only), "EVT--" (neither). Throws
+  // InvalidArgumentError for any other name.
+  void SetVariant(const std::string& name);
+  // The variant name of the current switches.
+  std::string VariantName() const;
+};
+
+}  // namespace evloc::tracking
