@@ -134,7 +134,9 @@ std::string InputFingerprint(const MapBuilderOptions& options,
     text << "camera estimated\n";
   }
   text << "matcher " << MatcherTypeName(matcher) << " overlap " << options.colmap.sequential_overlap
-       << " features " << options.colmap.max_num_features << "\n";
+       << " features " << options.colmap.max_num_features << " mapper "
+       << options.colmap.abs_pose_min_num_inliers << " " << options.colmap.abs_pose_min_inlier_ratio
+       << " " << options.colmap.min_num_matches << "\n";
   if (options.known_poses) {
     text << "known poses\n" << ReadFileToString(*options.known_poses) << "\n";
   }
