@@ -1,0 +1,149 @@
+// Tracking benchmarks (docs/tracking.md, "Performance"): one tracking step at 640x480 with 2,000
+// points, broken down into surface upkeep, selection and solve, for lazy and dense fields and the
+// ablation variants; and the event ingestion rate of the time surface.
+#include <benchmark/benchmark.h>
+
+#include <algorithm>
+#include <random>
+#include <vector>
+
+#include "localizer/tracking/testing/synthetic_scene.h"
+#include "localizer/tracking/time_surface.h"
+#include "localizer/tracking/tracker.h"
+
+namespace evloc::tracking {
+namespace {
+
+constexpr int64_t kStepNs = 3'333'333;  // 300 Hz
+constexpr int64_t kStartNs = 50'000'000;
+constexpr int64_t kEndNs = 450'000'000;
+
+struct Scene {
+  Camera camera = Camera::Pinhole(640, 480, 500.0, 500.0, 319.5, 239.5);
+  Map map;
+  // Events before the first step, then one packet per step.
+  EventBuffer warm_up;
+  std::vector<EventBuffer> packets;
+};
+
+const Scene& GetScene() {
+  static const Scene scene = [] {
+    Scene result;
+    result.map = testing::MakeRectangleMap(testing::DefaultRectangles(), 0.003);
+    const EventBuffer events = testing::SimulateEdgeEvents(
+        result.map, result.camera, [](int64_t t_ns) { return testing::SmoothMotion(t_ns); }, 0,
+        kEndNs + kStepNs, 50'000);
+    int64_t boundary = kStartNs;
+    EventBuffer* current = &result.warm_up;
+    for (size_t i = 0; i < events.size(); ++i) {
+      while (events.t_ns[i] > boundary) {
+        result.packets.emplace_back();
+        current = &result.packets.back();
+        boundary += kStepNs;
+      }
+      current->push_back(events[i]);
+    }
+    return result;
+  }();
+  return scene;
+}
+
+// One tracking step per iteration: the packet of one step period (the step itself runs when the
+// next packet's first event arrives, so each AddEvents call runs exactly one step).
+void BM_TrackingStep(benchmark::State& state) {
+  const Scene& scene = GetScene();
+  TrackerOptions options;
+  options.max_points = 2000;
+  options.field_evaluation = state.range(0) == 0 ? FieldEvaluation::kLazy : FieldEvaluation::kDense;
+  options.use_polarity = state.range(1) != 0;
+  options.use_occlusion_culling = state.range(2) != 0;
+  options.smooth_field = state.range(3) != 0;
+  std::unique_ptr<Tracker> tracker;
+  size_t next_packet = 0;
+  auto restart = [&] {
+    tracker = std::make_unique<Tracker>(scene.map, nullptr, scene.camera, options);
+    tracker->AddEvents(scene.warm_up);
+    tracker->Reset(testing::SmoothMotion(kStartNs), kStartNs);
+    next_packet = 0;
+  };
+  restart();
+  std::vector<double> step_ms, surface_ms, selection_ms, solve_ms, points;
+  int64_t lost = 0;
+  for (auto _ : state) {
+    if (next_packet == scene.packets.size()) {
+      state.PauseTiming();
+      restart();
+      state.ResumeTiming();
+    }
+    const std::vector<PoseEstimate> estimates = tracker->AddEvents(scene.packets[next_packet++]);
+    for (const PoseEstimate& estimate : estimates) {
+      step_ms.push_back(estimate.timings.total_ms);
+      surface_ms.push_back(estimate.timings.surface_ms);
+      selection_ms.push_back(estimate.timings.selection_ms);
+      solve_ms.push_back(estimate.timings.solve_ms);
+      points.push_back(estimate.quality.points_used);
+      lost += estimate.status == TrackingStatus::kLost ? 1 : 0;
+    }
+  }
+  auto median = [](std::vector<double> values) {
+    if (values.empty()) return 0.0;
+    std::nth_element(values.begin(), values.begin() + values.size() / 2, values.end());
+    return values[values.size() / 2];
+  };
+  auto mean = [](const std::vector<double>& values) {
+    double sum = 0;
+    for (const double value : values) sum += value;
+    return values.empty() ? 0.0 : sum / values.size();
+  };
+  state.counters["step_median_ms"] = median(step_ms);
+  state.counters["surface_median_ms"] = median(surface_ms);
+  state.counters["selection_mean_ms"] = mean(selection_ms);
+  state.counters["solve_median_ms"] = median(solve_ms);
+  state.counters["points_used"] = mean(points);
+  state.counters["lost_steps"] = static_cast<double>(lost);
+  state.SetLabel(std::string(state.range(0) == 0 ? "lazy" : "dense") + " " + options.VariantName() +
+                 (options.smooth_field ? " smoothed" : ""));
+}
+// Args: dense field, polarity, occlusion, smoothing.
+BENCHMARK(BM_TrackingStep)
+    ->Args({0, 1, 1, 0})
+    ->Args({0, 0, 0, 0})
+    ->Args({0, 1, 0, 0})
+    ->Args({0, 0, 1, 0})
+    ->Args({1, 1, 1, 0})
+    ->Args({0, 1, 1, 1})
+    ->Args({1, 1, 1, 1})
+    ->Unit(benchmark::kMicrosecond);
+
+// Event ingestion: one look-up and two stores per event, 640x480, events on a moving edge
+// pattern (realistic locality) or uniformly random pixels (worst case).
+void BM_Ingestion(benchmark::State& state) {
+  const Camera camera = Camera::Pinhole(640, 480, 500.0, 500.0, 319.5, 239.5);
+  const UndistortionTable table(camera);
+  TimeSurface surface(table);
+  EventBuffer events;
+  const size_t count = 1 << 20;
+  std::mt19937 random(5);
+  if (state.range(0) == 0) {
+    const EventBuffer& scene_events = GetScene().warm_up;
+    for (size_t i = 0; i < count; ++i) events.push_back(scene_events[i % scene_events.size()]);
+  } else {
+    std::uniform_int_distribution<int> x(0, 639), y(0, 479);
+    for (size_t i = 0; i < count; ++i) {
+      events.push_back({static_cast<int64_t>(i) * 100, static_cast<uint16_t>(x(random)),
+                        static_cast<uint16_t>(y(random)), static_cast<int8_t>(i % 2 ? 1 : -1)});
+    }
+  }
+  for (auto _ : state) {
+    surface.Insert(events, 0, events.size());
+    benchmark::ClobberMemory();
+  }
+  state.SetItemsProcessed(static_cast<int64_t>(state.iterations()) * count);
+  state.SetLabel(state.range(0) == 0 ? "edge events" : "uniform random pixels");
+}
+BENCHMARK(BM_Ingestion)->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond);
+
+}  // namespace
+}  // namespace evloc::tracking
+
+BENCHMARK_MAIN();
