@@ -230,6 +230,31 @@ TEST(Evt3Decoder, ReservedWordThrowsParseErrorWithCumulativeOffsetAndContinues) 
   EXPECT_EQ(events.size(), 3u);
 }
 
+TEST(PropheseeDecoders, ResetForgetsStateAndStatistics) {
+  PropheseeDecoderOptions options;
+  options.sensor_size = SensorSize{1280, 720};
+  Evt3Decoder evt3(options);
+  const auto evt3_bytes = MixedEvt3Stream();
+  const EventBuffer first3 = DecodeAll(evt3, evt3_bytes);
+  evt3.Reset();
+  EXPECT_EQ(evt3.statistics().bytes, 0u);
+  EXPECT_EQ(DecodeAll(evt3, evt3_bytes), first3);
+  // The options survive the reset: x = 2047 is still outside the 1280-wide sensor.
+  evt3.Reset();
+  EXPECT_TRUE(DecodeAll(evt3, Evt3Bytes({0x8000, 0x0001, 0x2FFF})).empty());
+  EXPECT_EQ(evt3.statistics().dropped_outside_sensor, 1u);
+
+  Evt2Decoder evt2;
+  const auto evt2_bytes = MixedEvt2Stream();
+  const EventBuffer first2 = DecodeAll(evt2, evt2_bytes);
+  EventBuffer scratch;
+  evt2.Decode(evt2_bytes.data(), 3, &scratch);
+  EXPECT_TRUE(evt2.has_partial_word());
+  evt2.Reset();
+  EXPECT_FALSE(evt2.has_partial_word());
+  EXPECT_EQ(DecodeAll(evt2, evt2_bytes), first2);
+}
+
 TEST(Evt3Decoder, OddLengthLeavesAPartialWord) {
   const auto bytes = Evt3Bytes({0x8000, 0x0001, 0x2801});
   Evt3Decoder decoder;
