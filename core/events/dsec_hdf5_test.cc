@@ -84,5 +84,38 @@ TEST(DsecHdf5Reader, MissingDatasetOrBadPolarityIsAParseError) {
   std::filesystem::remove_all(directory);
 }
 
+TEST(DsecHdf5Reader, UnavailableCompressionFilterIsAClearIoError) {
+  const auto directory = testing::MakeTempDir("dsec");
+  const auto path = directory / "blosc.h5";
+  WriteDsecFile(path, 100);
+  // Rewrite /events/t chunked with the Blosc filter (id 32001) registered as optional: HDF5
+  // stores the pipeline although this library cannot run the filter, as in a DSEC download.
+  {
+    const hid_t file = H5Fopen(path.c_str(), H5F_ACC_RDWR, H5P_DEFAULT);
+    H5Ldelete(file, "/events/t", H5P_DEFAULT);
+    const hsize_t length = 100, chunk = 50;
+    const hid_t space = H5Screate_simple(1, &length, nullptr);
+    const hid_t properties = H5Pcreate(H5P_DATASET_CREATE);
+    H5Pset_chunk(properties, 1, &chunk);
+    ASSERT_GE(H5Pset_filter(properties, 32001, H5Z_FLAG_OPTIONAL, 0, nullptr), 0);
+    const hid_t dataset = H5Dcreate2(file, "/events/t", H5T_NATIVE_UINT32, space, H5P_DEFAULT,
+                                     properties, H5P_DEFAULT);
+    ASSERT_GE(dataset, 0);
+    H5Dclose(dataset);
+    H5Pclose(properties);
+    H5Sclose(space);
+    H5Fclose(file);
+  }
+  if (H5Zfilter_avail(32001) > 0) GTEST_SKIP() << "this HDF5 has the Blosc filter installed";
+  try {
+    DsecHdf5Reader reader(path);
+    FAIL() << "no error";
+  } catch (const IoError& error) {
+    EXPECT_NE(std::string(error.what()).find("Blosc (id 32001)"), std::string::npos)
+        << error.what();
+  }
+  std::filesystem::remove_all(directory);
+}
+
 }  // namespace
 }  // namespace evloc
