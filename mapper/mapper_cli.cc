@@ -9,6 +9,7 @@
 #include <sstream>
 
 #include "core/common/error.h"
+#include "mapper/build_command.h"
 #include "maps/map.h"
 #include "maps/map_directory.h"
 #include "maps/pcd_import.h"
@@ -218,8 +219,22 @@ int RunInfoCommand(const std::vector<std::string>& arguments, const std::string&
   return RunGuarded("info", kInfoHelp, err, [&] { return Info(arguments, out); });
 }
 
+// `build` keeps its own argv-style entry point (mapper/build_command.h), which prints to the
+// process's streams.
+int RunBuildSubcommand(const std::vector<std::string>& arguments,
+                       const std::string& /*command_line*/, std::ostream& /*out*/,
+                       std::ostream& /*err*/) {
+  std::vector<std::string> storage = {"build"};
+  storage.insert(storage.end(), arguments.begin(), arguments.end());
+  std::vector<char*> argv;
+  for (std::string& argument : storage) argv.push_back(argument.data());
+  return mapper::RunBuildCommand(static_cast<int>(argv.size()), argv.data());
+}
+
 const std::vector<MapperSubcommand>& MapperSubcommands() {
   static const std::vector<MapperSubcommand> subcommands = {
+      {"build", "build a map from images (COLMAP or known poses, semi-dense edges)",
+       RunBuildSubcommand},
       {"import-pcd", "import a Canny-EVT PCD map into a map directory", RunImportPcdCommand},
       {"info", "verify and summarise a map", RunInfoCommand},
   };

@@ -14,7 +14,7 @@ add_library(evloc_mapper_pipeline
   ${CMAKE_CURRENT_LIST_DIR}/build_command.cc)
 target_include_directories(evloc_mapper_pipeline PUBLIC ${PROJECT_SOURCE_DIR})
 target_link_libraries(evloc_mapper_pipeline
-  PUBLIC evloc_maps evloc_camera evloc_geometry evloc_common ${OpenCV_LIBS}
+  PUBLIC evloc_maps evloc_camera evloc_geometry evloc_common opencv_core opencv_imgproc opencv_imgcodecs
   PRIVATE evloc_trajectory nlohmann_json::nlohmann_json SQLite::SQLite3 Threads::Threads
           ${PCL_LIBRARIES})
 target_compile_definitions(evloc_mapper_pipeline PRIVATE EVLOC_VERSION="${PROJECT_VERSION}")

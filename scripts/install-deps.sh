@@ -8,7 +8,7 @@ PACKAGES=(
   # toolchain
   build-essential cmake ninja-build pkg-config ccache git clang clang-format libclang-rt-14-dev
   # core libraries
-  libeigen3-dev libopencv-dev libyaml-cpp-dev nlohmann-json3-dev libhdf5-dev
+  libeigen3-dev libopencv-dev libyaml-cpp-dev nlohmann-json3-dev libhdf5-dev libsqlite3-dev
   # mapping
   colmap libceres-dev libpcl-dev
   # service

@@ -1,0 +1,38 @@
+#include "core/common/cli.h"
+
+#include <charconv>
+#include <cmath>
+
+#include "core/common/error.h"
+
+namespace evloc {
+
+double ParseDoubleFlag(std::string_view flag, std::string_view text) {
+  double value = 0.0;
+  const auto [end, error] = std::from_chars(text.data(), text.data() + text.size(), value);
+  if (text.empty() || error != std::errc() || end != text.data() + text.size() ||
+      !std::isfinite(value)) {
+    throw InvalidArgumentError(std::string(flag) + " expects a number, got '" + std::string(text) +
+                               "'");
+  }
+  return value;
+}
+
+int64_t ParseIntegerFlag(std::string_view flag, std::string_view text) {
+  int64_t value = 0;
+  const auto [end, error] = std::from_chars(text.data(), text.data() + text.size(), value);
+  if (text.empty() || error != std::errc() || end != text.data() + text.size()) {
+    throw InvalidArgumentError(std::string(flag) + " expects an integer, got '" +
+                               std::string(text) + "'");
+  }
+  return value;
+}
+
+bool ParseSwitchFlag(std::string_view flag, std::string_view text) {
+  if (text == "on" || text == "true" || text == "1") return true;
+  if (text == "off" || text == "false" || text == "0") return false;
+  throw InvalidArgumentError(std::string(flag) + " expects on or off, got '" + std::string(text) +
+                             "'");
+}
+
+}  // namespace evloc

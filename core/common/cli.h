@@ -1,0 +1,21 @@
+// Helpers shared by the command-line tools: strict parsing of flag values, with errors that
+// name the flag and the offending text.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <string_view>
+
+namespace evloc {
+
+// Parses a finite floating-point number; the whole text must be consumed. Throws
+// InvalidArgumentError "FLAG expects a number, got 'TEXT'".
+double ParseDoubleFlag(std::string_view flag, std::string_view text);
+
+// Parses a base-10 integer; the whole text must be consumed. Throws InvalidArgumentError.
+int64_t ParseIntegerFlag(std::string_view flag, std::string_view text);
+
+// Parses "on"/"off" (also "true"/"false", "1"/"0"). Throws InvalidArgumentError.
+bool ParseSwitchFlag(std::string_view flag, std::string_view text);
+
+}  // namespace evloc

@@ -1,0 +1,37 @@
+#include "core/common/cli.h"
+
+#include <gtest/gtest.h>
+
+#include "core/common/error.h"
+
+namespace evloc {
+namespace {
+
+TEST(ParseDoubleFlag, AcceptsWholeNumbersOnly) {
+  EXPECT_DOUBLE_EQ(ParseDoubleFlag("--rate", "300"), 300.0);
+  EXPECT_DOUBLE_EQ(ParseDoubleFlag("--rate", "-1.5e-3"), -1.5e-3);
+  EXPECT_THROW(ParseDoubleFlag("--rate", "300Hz"), InvalidArgumentError);
+  EXPECT_THROW(ParseDoubleFlag("--rate", ""), InvalidArgumentError);
+  EXPECT_THROW(ParseDoubleFlag("--rate", "nan"), InvalidArgumentError);
+  try {
+    ParseDoubleFlag("--rate", "fast");
+    FAIL();
+  } catch (const InvalidArgumentError& error) {
+    EXPECT_EQ(std::string(error.what()), "--rate expects a number, got 'fast'");
+  }
+}
+
+TEST(ParseIntegerFlag, RejectsFractionsAndText) {
+  EXPECT_EQ(ParseIntegerFlag("--n", "42"), 42);
+  EXPECT_THROW(ParseIntegerFlag("--n", "4.2"), InvalidArgumentError);
+  EXPECT_THROW(ParseIntegerFlag("--n", "x"), InvalidArgumentError);
+}
+
+TEST(ParseSwitchFlag, OnOff) {
+  EXPECT_TRUE(ParseSwitchFlag("--polarity", "on"));
+  EXPECT_FALSE(ParseSwitchFlag("--polarity", "off"));
+  EXPECT_THROW(ParseSwitchFlag("--polarity", "maybe"), InvalidArgumentError);
+}
+
+}  // namespace
+}  // namespace evloc

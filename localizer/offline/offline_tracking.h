@@ -1,0 +1,76 @@
+// Offline tracking of a recorded sequence: the same Tracker the service runs, fed from an event
+// file (or a list of frames) in order. Used by evloc-track, the accuracy tests and, as the
+// reference, by the service's equivalence test.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+#include <vector>
+
+#include "core/camera/camera.h"
+#include "core/events/event_reader.h"
+#include "core/geometry/rigid3.h"
+#include "core/trajectory/trajectory.h"
+#include "localizer/tracking/tracker.h"
+#include "maps/map.h"
+#include "maps/visibility.h"
+
+namespace evloc::tracking {
+
+// Options of an offline run.
+struct OfflineTrackingOptions {
+  // The tracker's options (variant, rate, ...).
+  TrackerOptions tracker;
+  // Events read from the file per batch; any value gives the same poses (batching invariance).
+  size_t read_batch_events = 1 << 16;
+
+  // Throws InvalidArgumentError when a field is out of range.
+  void Check() const;
+};
+
+// What an offline run produced.
+struct OfflineTrackingResult {
+  // One pose per tracking step, world_from_cam.
+  Trajectory trajectory;
+  // Every step's estimate, in order (status, quality, covariance, timings).
+  std::vector<PoseEstimate> steps;
+  // Events read from the source (or frames, in frame mode).
+  int64_t measurements = 0;
+  // Steps whose status was LOST.
+  int64_t lost_steps = 0;
+  // Wall-clock time of the run (reading included), seconds.
+  double wall_s = 0;
+};
+
+// Called after every step, for progress display and debug output; `tracker` is the live tracker.
+using StepCallback = std::function<void(const PoseEstimate& step, const Tracker& tracker)>;
+
+// Tracks the events of `reader` from `initial_world_from_cam` at `initial_t_ns`; events before
+// initial_t_ns only prime the time surfaces. Throws what the reader and the tracker throw.
+OfflineTrackingResult TrackEventStream(EventReader& reader, const Map& map,
+                                       const VisibilityIndex* visibility, const Camera& camera,
+                                       const Rigid3d& initial_world_from_cam, int64_t initial_t_ns,
+                                       const OfflineTrackingOptions& options,
+                                       const StepCallback& on_step = {});
+
+// A frame of a sequence: its time and image file.
+struct FrameFile {
+  // Capture time, nanoseconds.
+  int64_t t_ns = 0;
+  // Image file (any format OpenCV reads; converted to 8-bit grey).
+  std::filesystem::path path;
+};
+
+// Tracks a sequence of frames with the frame-based twin (Canny-VT), starting from
+// `initial_world_from_cam` at `initial_t_ns`; frames at or before initial_t_ns are skipped.
+// Throws IoError for an unreadable frame.
+OfflineTrackingResult TrackFrameSequence(const std::vector<FrameFile>& frames, const Map& map,
+                                         const VisibilityIndex* visibility, const Camera& camera,
+                                         const Rigid3d& initial_world_from_cam,
+                                         int64_t initial_t_ns,
+                                         const OfflineTrackingOptions& options,
+                                         const StepCallback& on_step = {});
+
+}  // namespace evloc::tracking

@@ -1,0 +1,296 @@
+#include "localizer/offline/track_command.h"
+
+#include <cmath>
+#include <cstdio>
+#include <sstream>
+
+#include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+
+#include "core/common/cli.h"
+#include "core/common/error.h"
+#include "core/common/file_util.h"
+#include "core/events/event_reader.h"
+#include "core/trajectory/tum_io.h"
+#include "localizer/offline/debug_images.h"
+#include "maps/map_directory.h"
+#include "tools/sim/dataset.h"
+
+namespace evloc::tracking {
+namespace {
+
+const char* StatusName(TrackingStatus status) {
+  return status == TrackingStatus::kTracking ? "TRACKING" : "LOST";
+}
+
+nlohmann::json StepsToJson(const OfflineTrackingResult& result) {
+  nlohmann::json steps = nlohmann::json::array();
+  for (const PoseEstimate& step : result.steps) {
+    steps.push_back({{"t_s", static_cast<double>(step.t_ns) * 1e-9},
+                     {"status", StatusName(step.status)},
+                     {"points_selected", step.quality.points_selected},
+                     {"points_used", step.quality.points_used},
+                     {"on_edge_fraction", step.quality.on_edge_fraction},
+                     {"mean_residual", step.quality.mean_residual},
+                     {"iterations", step.quality.iterations},
+                     {"recovery_attempts", step.quality.recovery_attempts},
+                     {"surface_ms", step.timings.surface_ms},
+                     {"selection_ms", step.timings.selection_ms},
+                     {"solve_ms", step.timings.solve_ms},
+                     {"total_ms", step.timings.total_ms}});
+  }
+  return steps;
+}
+
+double Median(std::vector<double> values) {
+  if (values.empty()) return 0.0;
+  const size_t middle = values.size() / 2;
+  std::nth_element(values.begin(), values.begin() + middle, values.end());
+  return values[middle];
+}
+
+}  // namespace
+
+void TrackCommandOptions::Check() const {
+  if (help) return;
+  if (map_path.empty()) throw InvalidArgumentError("--map is required: a map directory or .evmap");
+  if (dataset_path.empty()) {
+    throw InvalidArgumentError("--dataset is required: a dataset folder (docs/dataset-format.md)");
+  }
+  if (output_path.empty()) {
+    throw InvalidArgumentError("--out is required: where to write the TUM trajectory");
+  }
+  if (debug_every_steps < 1) throw InvalidArgumentError("--debug-every must be at least 1");
+  if (ecd_width <= 0 || ecd_height <= 0) {
+    throw InvalidArgumentError("--ecd-size must be WIDTHxHEIGHT with positive sizes");
+  }
+  tracking.Check();
+}
+
+std::string TrackCommandUsage() {
+  return R"(Usage: evloc-track --map MAPDIR --dataset DIR --out TRAJ.txt [options]
+
+Tracks a recorded sequence against a map, offline, with the tracker the localizer service runs
+(docs/tracking.md), and writes world_from_cam at every step as a TUM trajectory.
+
+Options:
+  --map PATH             map directory (holding map.evmap) or .evmap file (required)
+  --dataset DIR          dataset folder, evloc or Event Camera Dataset layout (required)
+  --out PATH             output TUM trajectory (required)
+  --init-pose "tx ty tz qx qy qz qw"
+                         initial world_from_cam; default: the dataset's first ground-truth pose
+                         (required when the dataset has no ground truth)
+  --mode events|frames   events (Canny-EVT, default) or frames (Canny-VT on images.txt)
+  --rate HZ              tracking steps per second of event time (default 300)
+  --events-per-step N    a step every N events instead of a fixed rate
+  --variant NAME         EVT (default), EVT-PR, EVT-OH or EVT-- (method.md 4.6)
+  --polarity on|off      polarity-aware registration (default on)
+  --occlusion on|off     ANNF occlusion culling (default on)
+  --max-points N         map points registered per step (default 2500)
+  --tau SECONDS          time-surface decay time (default 0.03)
+  --stats PATH           per-step statistics (status, points, quality, timings) as JSON
+  --debug-dir DIR        write debug pictures (time surface with the map, ON/OFF surfaces,
+                         predicted gradient and flow)
+  --debug-every N        one debug picture every N steps (default 30)
+  --ecd-size WxH         sensor size for ECD folders with calib.txt only (default 240x180)
+  --quiet                no progress output
+  --help                 print this help
+
+Exit codes: 0 success, 1 bad input or failure, 2 bad command line.
+)";
+}
+
+Rigid3d ParsePoseText(const std::string& flag, const std::string& text) {
+  std::istringstream stream(text);
+  std::vector<double> values;
+  std::string token;
+  while (stream >> token) values.push_back(ParseDoubleFlag(flag, token));
+  if (values.size() != 7) {
+    throw InvalidArgumentError(flag + " expects 7 numbers \"tx ty tz qx qy qz qw\", got " +
+                               std::to_string(values.size()));
+  }
+  const Eigen::Quaterniond rotation(values[6], values[3], values[4], values[5]);
+  if (rotation.norm() < 1e-6) {
+    throw InvalidArgumentError(flag + ": the quaternion has zero norm");
+  }
+  return Rigid3d(rotation, Eigen::Vector3d(values[0], values[1], values[2]));
+}
+
+TrackCommandOptions ParseTrackCommandLine(const std::vector<std::string>& arguments) {
+  TrackCommandOptions options;
+  TrackerOptions& tracker = options.tracking.tracker;
+  for (size_t i = 0; i < arguments.size(); ++i) {
+    const std::string& flag = arguments[i];
+    if (flag == "--help" || flag == "-h") {
+      options.help = true;
+      continue;
+    }
+    if (flag == "--quiet") {
+      options.quiet = true;
+      continue;
+    }
+    if (i + 1 >= arguments.size()) {
+      throw InvalidArgumentError(flag.rfind("--", 0) == 0 ? flag + " needs a value"
+                                                          : "unexpected argument '" + flag + "'");
+    }
+    const std::string& value = arguments[++i];
+    if (flag == "--map") {
+      options.map_path = value;
+    } else if (flag == "--dataset") {
+      options.dataset_path = value;
+    } else if (flag == "--out") {
+      options.output_path = value;
+    } else if (flag == "--init-pose") {
+      options.initial_world_from_cam = ParsePoseText(flag, value);
+    } else if (flag == "--mode") {
+      if (value == "events") {
+        tracker.input = TrackerInput::kEvents;
+      } else if (value == "frames") {
+        tracker.input = TrackerInput::kFrames;
+      } else {
+        throw InvalidArgumentError("--mode expects events or frames, got '" + value + "'");
+      }
+    } else if (flag == "--rate") {
+      tracker.step_rate_hz = ParseDoubleFlag(flag, value);
+    } else if (flag == "--events-per-step") {
+      tracker.events_per_step = ParseIntegerFlag(flag, value);
+    } else if (flag == "--variant") {
+      tracker.SetVariant(value);
+    } else if (flag == "--polarity") {
+      tracker.use_polarity = ParseSwitchFlag(flag, value);
+    } else if (flag == "--occlusion") {
+      tracker.use_occlusion_culling = ParseSwitchFlag(flag, value);
+    } else if (flag == "--max-points") {
+      tracker.max_points = static_cast<int>(ParseIntegerFlag(flag, value));
+    } else if (flag == "--tau") {
+      tracker.decay_time_s = ParseDoubleFlag(flag, value);
+    } else if (flag == "--stats") {
+      options.stats_path = value;
+    } else if (flag == "--debug-dir") {
+      options.debug_dir = value;
+    } else if (flag == "--debug-every") {
+      options.debug_every_steps = static_cast<int>(ParseIntegerFlag(flag, value));
+    } else if (flag == "--ecd-size") {
+      const size_t x = value.find('x');
+      if (x == std::string::npos) {
+        throw InvalidArgumentError("--ecd-size expects WIDTHxHEIGHT, got '" + value + "'");
+      }
+      options.ecd_width = static_cast<int>(ParseIntegerFlag(flag, value.substr(0, x)));
+      options.ecd_height = static_cast<int>(ParseIntegerFlag(flag, value.substr(x + 1)));
+    } else {
+      throw InvalidArgumentError("unknown flag '" + flag + "' (see --help)");
+    }
+  }
+  options.Check();
+  return options;
+}
+
+OfflineTrackingResult RunTrackCommand(const TrackCommandOptions& options, std::ostream& log) {
+  options.Check();
+  sim::DatasetReaderOptions reader_options;
+  reader_options.ecd_width = options.ecd_width;
+  reader_options.ecd_height = options.ecd_height;
+  const sim::Dataset dataset = sim::ReadDataset(options.dataset_path, reader_options);
+  const bool events_mode = options.tracking.tracker.input == TrackerInput::kEvents;
+
+  // The initial pose and time.
+  Rigid3d initial_world_from_cam;
+  int64_t initial_t_ns = 0;
+  if (options.initial_world_from_cam) {
+    initial_world_from_cam = *options.initial_world_from_cam;
+    if (dataset.ground_truth && !dataset.ground_truth->empty()) {
+      initial_t_ns = dataset.ground_truth->start_ns();
+    } else if (!events_mode && !dataset.images.empty()) {
+      initial_t_ns = dataset.images.front().t_ns;
+    }
+  } else if (dataset.ground_truth && !dataset.ground_truth->empty()) {
+    initial_world_from_cam = dataset.ground_truth->poses().front().world_from_cam;
+    initial_t_ns = dataset.ground_truth->start_ns();
+  } else {
+    throw InvalidArgumentError("dataset '" + options.dataset_path.string() +
+                               "' has no groundtruth.txt: give the initial pose with --init-pose");
+  }
+
+  const Map map = LoadMap(ResolveMapFile(options.map_path));
+  const VisibilityIndex visibility(map);
+  if (!options.quiet) {
+    log << "evloc-track: map " << options.map_path.string() << " (" << map.size() << " points, "
+        << map.keyframes.size() << " keyframes), dataset " << options.dataset_path.string()
+        << ", variant " << options.tracking.tracker.VariantName() << ", "
+        << (events_mode ? "events" : "frames") << " at " << options.tracking.tracker.step_rate_hz
+        << " Hz\n";
+  }
+  if (options.debug_dir) std::filesystem::create_directories(*options.debug_dir);
+
+  int64_t step_index = 0;
+  Rigid3d previous_world_from_cam = initial_world_from_cam;
+  const int64_t end_ns = dataset.ground_truth ? dataset.ground_truth->end_ns() : 0;
+  const StepCallback on_step = [&](const PoseEstimate& step, const Tracker& tracker) {
+    if (options.debug_dir && step_index % options.debug_every_steps == 0) {
+      char name[64];
+      std::snprintf(name, sizeof(name), "step_%06lld.png", static_cast<long long>(step_index));
+      const cv::Mat picture =
+          RenderTrackingDebugImage(tracker, map, &visibility, step, previous_world_from_cam);
+      std::vector<uchar> png;
+      cv::imencode(".png", picture, png);
+      WriteFileAtomically(*options.debug_dir / name,
+                          std::string_view(reinterpret_cast<const char*>(png.data()), png.size()));
+    }
+    if (!options.quiet && step_index % 300 == 0) {
+      log << "  t=" << static_cast<double>(step.t_ns - initial_t_ns) * 1e-9 << " s";
+      if (end_ns > initial_t_ns) {
+        log << " of " << static_cast<double>(end_ns - initial_t_ns) * 1e-9 << " s";
+      }
+      log << "  " << StatusName(step.status) << "  points " << step.quality.points_used
+          << "  on-edge " << step.quality.on_edge_fraction << "\n";
+    }
+    previous_world_from_cam = step.world_from_cam;
+    ++step_index;
+  };
+
+  OfflineTrackingResult result;
+  if (events_mode) {
+    if (!dataset.events_path) {
+      throw InvalidArgumentError("dataset '" + options.dataset_path.string() +
+                                 "' has no events.evb or events.txt (use --mode frames for "
+                                 "images)");
+    }
+    const auto reader = OpenEventFile(*dataset.events_path);
+    result = TrackEventStream(*reader, map, &visibility, dataset.camera, initial_world_from_cam,
+                              initial_t_ns, options.tracking, on_step);
+  } else {
+    if (dataset.images.empty()) {
+      throw InvalidArgumentError("dataset '" + options.dataset_path.string() +
+                                 "' has no images.txt: frames mode needs images");
+    }
+    std::vector<FrameFile> frames;
+    for (const auto& image : dataset.images) frames.push_back({image.t_ns, image.path});
+    result = TrackFrameSequence(frames, map, &visibility, dataset.camera, initial_world_from_cam,
+                                initial_t_ns, options.tracking, on_step);
+  }
+  WriteTumTrajectory(options.output_path, result.trajectory);
+
+  std::vector<double> step_ms;
+  for (const PoseEstimate& step : result.steps) step_ms.push_back(step.timings.total_ms);
+  if (options.stats_path) {
+    nlohmann::json stats = {{"variant", options.tracking.tracker.VariantName()},
+                            {"mode", events_mode ? "events" : "frames"},
+                            {"step_rate_hz", options.tracking.tracker.step_rate_hz},
+                            {"measurements", result.measurements},
+                            {"steps", result.steps.size()},
+                            {"lost_steps", result.lost_steps},
+                            {"wall_s", result.wall_s},
+                            {"median_step_ms", Median(step_ms)},
+                            {"per_step", StepsToJson(result)}};
+    WriteFileAtomically(*options.stats_path, stats.dump(1) + "\n");
+  }
+  if (!options.quiet) {
+    log << "evloc-track: " << result.steps.size() << " steps (" << result.lost_steps
+        << " LOST) from " << result.measurements << (events_mode ? " events" : " frames") << " in "
+        << result.wall_s << " s wall; median step " << Median(step_ms)
+        << " ms; trajectory written to " << options.output_path.string() << "\n";
+  }
+  return result;
+}
+
+}  // namespace evloc::tracking
