@@ -1,0 +1,291 @@
+#include "tools/sim/dataset.h"
+
+#include <cmath>
+#include <cstdio>
+#include <sstream>
+#include <vector>
+
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "core/common/error.h"
+#include "core/common/file_util.h"
+#include "core/trajectory/tum_io.h"
+
+namespace evloc::sim {
+namespace fs = std::filesystem;
+namespace {
+
+// True when `dir` exists and holds at least one entry (or is not a folder).
+bool ExistsAndNotEmpty(const fs::path& dir) {
+  std::error_code error;
+  if (!fs::exists(dir, error)) return false;
+  if (!fs::is_directory(dir, error)) return true;
+  return fs::directory_iterator(dir, error) != fs::directory_iterator();
+}
+
+// "frame_00000012.png"-style names.
+std::string NumberedName(const char* prefix, size_t index) {
+  char name[64];
+  std::snprintf(name, sizeof(name), "%s_%08zu.png", prefix, index);
+  return name;
+}
+
+// Writes a PNG atomically (encode in memory, then WriteFileAtomically).
+void WritePngAtomically(const fs::path& path, const cv::Mat& image) {
+  std::vector<uchar> bytes;
+  if (!cv::imencode(".png", image, bytes)) {
+    throw IoError("cannot encode '" + path.string() + "' as PNG.");
+  }
+  WriteFileAtomically(path,
+                      std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size()));
+}
+
+// The text of a `t_s path` list.
+std::string FormatTimedFileList(const std::vector<TimedFile>& files) {
+  std::string text;
+  for (const TimedFile& file : files) {
+    text += FormatNanosecondsAsSeconds(file.t_ns) + " " + file.path.generic_string() + "\n";
+  }
+  return text;
+}
+
+void CheckIncreasing(const std::vector<TimedFile>& files, int64_t t_ns, const char* what) {
+  if (!files.empty() && t_ns <= files.back().t_ns) {
+    throw InvalidArgumentError(std::string("DatasetWriter: ") + what + " time " +
+                               FormatNanosecondsAsSeconds(t_ns) + " s is not after the previous " +
+                               FormatNanosecondsAsSeconds(files.back().t_ns) + " s.");
+  }
+}
+
+}  // namespace
+
+DatasetWriter::DatasetWriter(const fs::path& out_dir, const DatasetWriterOptions& options)
+    : out_dir_(out_dir), options_(options) {
+  options_.Check();
+  if (out_dir_.filename().empty()) out_dir_ = out_dir_.parent_path();  // "out/" -> "out"
+  if (ExistsAndNotEmpty(out_dir_) && !options_.force) {
+    throw InvalidArgumentError("Output folder '" + out_dir_.string() +
+                               "' already exists and is not empty; choose another --out or pass "
+                               "--force to replace it.");
+  }
+  staging_dir_ = out_dir_;
+  staging_dir_ += ".partial";
+  std::error_code error;
+  fs::remove_all(staging_dir_, error);
+  if (error) {
+    throw IoError("cannot remove the stale staging folder '" + staging_dir_.string() +
+                  "': " + error.message());
+  }
+  fs::create_directories(staging_dir_ / "images", error);
+  if (!error) fs::create_directories(staging_dir_ / "depth", error);
+  if (!error) fs::create_directories(staging_dir_ / "gt_map", error);
+  if (error) {
+    throw IoError("cannot create '" + staging_dir_.string() + "': " + error.message() +
+                  " (is the parent folder writable?)");
+  }
+}
+
+void DatasetWriter::WriteCamera(const Camera& camera) {
+  WriteCameraYaml(staging_dir_ / dataset_files::kCalibYaml, camera);
+}
+
+void DatasetWriter::AddImage(int64_t t_ns, const cv::Mat& image) {
+  if (image.depth() != CV_8U || (image.channels() != 1 && image.channels() != 3)) {
+    throw InvalidArgumentError("DatasetWriter::AddImage expects an 8-bit gray or BGR image.");
+  }
+  CheckIncreasing(images_, t_ns, "image");
+  const fs::path relative = fs::path("images") / NumberedName("frame", images_.size());
+  WritePngAtomically(staging_dir_ / relative, image);
+  images_.push_back({t_ns, relative});
+}
+
+void DatasetWriter::AddDepth(int64_t t_ns, const cv::Mat& depth_m) {
+  if (depth_m.type() != CV_32FC1) {
+    throw InvalidArgumentError("DatasetWriter::AddDepth expects CV_32FC1 depth in metres.");
+  }
+  CheckIncreasing(depth_, t_ns, "depth");
+  cv::Mat millimetres(depth_m.size(), CV_16UC1);
+  for (int row = 0; row < depth_m.rows; ++row) {
+    const float* in = depth_m.ptr<float>(row);
+    uint16_t* out = millimetres.ptr<uint16_t>(row);
+    for (int col = 0; col < depth_m.cols; ++col) {
+      const double mm = std::isfinite(in[col]) && in[col] > 0 ? std::round(in[col] * 1000.0) : 0;
+      out[col] = static_cast<uint16_t>(std::clamp(mm, 0.0, 65535.0));
+    }
+  }
+  const fs::path relative = fs::path("depth") / NumberedName("depth", depth_.size());
+  WritePngAtomically(staging_dir_ / relative, millimetres);
+  depth_.push_back({t_ns, relative});
+}
+
+void DatasetWriter::WriteGroundTruth(const Trajectory& ground_truth) {
+  WriteTumTrajectory(staging_dir_ / dataset_files::kGroundTruthTxt, ground_truth);
+}
+
+void DatasetWriter::WriteInfo(const nlohmann::json& info) {
+  WriteFileAtomically(staging_dir_ / dataset_files::kInfoJson, info.dump(2) + "\n");
+}
+
+void DatasetWriter::Commit() {
+  if (committed_) throw InvalidArgumentError("DatasetWriter::Commit called twice.");
+  WriteFileAtomically(staging_dir_ / dataset_files::kImagesTxt, FormatTimedFileList(images_));
+  WriteFileAtomically(staging_dir_ / dataset_files::kDepthTxt, FormatTimedFileList(depth_));
+  std::error_code error;
+  if (fs::exists(out_dir_, error)) {
+    if (ExistsAndNotEmpty(out_dir_) && !options_.force) {
+      throw InvalidArgumentError("Output folder '" + out_dir_.string() +
+                                 "' appeared while writing; the result is left in '" +
+                                 staging_dir_.string() + "'.");
+    }
+    fs::remove_all(out_dir_, error);
+    if (error) {
+      throw IoError("cannot replace '" + out_dir_.string() + "': " + error.message() +
+                    "; the new dataset is in '" + staging_dir_.string() + "'.");
+    }
+  }
+  fs::rename(staging_dir_, out_dir_, error);
+  if (error) {
+    throw IoError("cannot rename '" + staging_dir_.string() + "' to '" + out_dir_.string() +
+                  "': " + error.message());
+  }
+  committed_ = true;
+}
+
+void DatasetReaderOptions::Check() const {
+  if (ecd_width <= 0 || ecd_height <= 0) {
+    throw InvalidArgumentError("The ECD sensor size must be positive.");
+  }
+}
+
+std::vector<TimedFile> ReadTimedFileList(const fs::path& list_path, const fs::path& root) {
+  const std::string text = ReadFileToString(list_path);
+  std::istringstream lines(text);
+  std::string line;
+  std::vector<TimedFile> files;
+  int64_t line_number = 0;
+  while (std::getline(lines, line)) {
+    ++line_number;
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    const size_t first = line.find_first_not_of(" \t");
+    if (first == std::string::npos || line[first] == '#') continue;
+    std::istringstream fields(line);
+    std::string time_text;
+    std::string relative;
+    std::string extra;
+    if (!(fields >> time_text >> relative) || (fields >> extra)) {
+      throw ParseError::AtLine(list_path.string(), line_number,
+                               "expected two fields `t_seconds relative_path`");
+    }
+    int64_t t_ns = 0;
+    try {
+      t_ns = ParseSecondsAsNanoseconds(time_text);
+    } catch (const InvalidArgumentError& error) {
+      throw ParseError::AtLine(list_path.string(), line_number,
+                               "bad time '" + time_text + "': " + error.what());
+    }
+    if (!files.empty() && t_ns <= files.back().t_ns) {
+      throw ParseError::AtLine(list_path.string(), line_number,
+                               "time " + time_text + " is not after the previous line's");
+    }
+    files.push_back({t_ns, root / relative});
+  }
+  return files;
+}
+
+Dataset ReadDataset(const fs::path& root, const DatasetReaderOptions& options) {
+  options.Check();
+  std::error_code error;
+  if (!fs::is_directory(root, error)) {
+    throw IoError("dataset folder '" + root.string() + "' does not exist.");
+  }
+  if (root.filename().string().ends_with(".partial")) {
+    throw InvalidArgumentError("'" + root.string() +
+                               "' is an unfinished evloc-sim output (the run was interrupted); "
+                               "run the simulator again.");
+  }
+  Dataset dataset;
+  dataset.root = root;
+  if (fs::exists(root / dataset_files::kCalibYaml)) {
+    dataset.camera = ReadCameraYaml(root / dataset_files::kCalibYaml);
+  } else if (fs::exists(root / dataset_files::kCalibTxt)) {
+    dataset.camera =
+        ReadEcdCalibration(root / dataset_files::kCalibTxt, options.ecd_width, options.ecd_height);
+  } else {
+    throw InvalidArgumentError("dataset folder '" + root.string() + "' has neither " +
+                               dataset_files::kCalibYaml + " nor " + dataset_files::kCalibTxt +
+                               "; it is not a dataset.");
+  }
+  if (fs::exists(root / dataset_files::kImagesTxt)) {
+    dataset.images = ReadTimedFileList(root / dataset_files::kImagesTxt, root);
+  }
+  if (fs::exists(root / dataset_files::kDepthTxt)) {
+    dataset.depth = ReadTimedFileList(root / dataset_files::kDepthTxt, root);
+  }
+  for (const auto* list : {&dataset.images, &dataset.depth}) {
+    for (const TimedFile& file : *list) {
+      if (!fs::exists(file.path)) {
+        throw IoError("dataset '" + root.string() + "' lists '" + file.path.string() +
+                      "', which does not exist.");
+      }
+    }
+  }
+  if (fs::exists(root / dataset_files::kGroundTruthTxt)) {
+    dataset.ground_truth = ReadTumTrajectory(root / dataset_files::kGroundTruthTxt);
+  }
+  if (fs::exists(root / dataset_files::kEventsEvb)) {
+    dataset.events_path = root / dataset_files::kEventsEvb;
+  } else if (fs::exists(root / dataset_files::kEventsTxt)) {
+    dataset.events_path = root / dataset_files::kEventsTxt;
+  }
+  if (fs::exists(root / dataset_files::kGroundTruthMap)) {
+    dataset.ground_truth_map_path = root / dataset_files::kGroundTruthMap;
+  }
+  if (fs::exists(root / dataset_files::kInfoJson)) {
+    const fs::path info_path = root / dataset_files::kInfoJson;
+    try {
+      dataset.info = nlohmann::json::parse(ReadFileToString(info_path));
+    } catch (const nlohmann::json::parse_error& parse_error) {
+      throw ParseError(info_path.string(), "byte " + std::to_string(parse_error.byte),
+                       "malformed JSON");
+    }
+  }
+  return dataset;
+}
+
+cv::Mat ReadDepthPng(const fs::path& path) {
+  const cv::Mat raw = cv::imread(path.string(), cv::IMREAD_UNCHANGED);
+  if (raw.empty()) throw IoError("cannot read depth image '" + path.string() + "'.");
+  if (raw.type() != CV_16UC1) {
+    throw ParseError(path.string(), "header", "a depth PNG must be 16-bit single-channel");
+  }
+  cv::Mat metres;
+  raw.convertTo(metres, CV_32FC1, 1e-3);
+  return metres;
+}
+
+cv::Mat ReadGrayImage(const fs::path& path) {
+  const cv::Mat raw = cv::imread(path.string(), cv::IMREAD_UNCHANGED);
+  if (raw.empty()) throw IoError("cannot read image '" + path.string() + "'.");
+  const double scale = raw.depth() == CV_16U ? 1.0 / 65535.0 : 1.0 / 255.0;
+  cv::Mat gray;
+  if (raw.channels() == 1) {
+    gray = raw;
+  } else {
+    cv::Mat bgr;
+    if (raw.channels() == 4) {
+      cv::cvtColor(raw, bgr, cv::COLOR_BGRA2BGR);
+    } else {
+      bgr = raw;
+    }
+    cv::Mat bgr_float;
+    bgr.convertTo(bgr_float, CV_32FC3);
+    cv::transform(bgr_float, gray, cv::Matx13f(0.0722f, 0.7152f, 0.2126f));  // Rec. 709
+    gray.convertTo(gray, CV_32FC1, scale);
+    return gray;
+  }
+  gray.convertTo(gray, CV_32FC1, scale);
+  return gray;
+}
+
+}  // namespace evloc::sim

@@ -1,0 +1,159 @@
+// Sequence datasets in the Event Camera Dataset layout (docs/dataset-format.md): a writer that
+// stages everything in OUT.partial and renames it to OUT only when complete, and a reader that
+// loads both evloc-sim output (calib.yaml, events.evb) and real ECD folders (calib.txt,
+// events.txt).
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+#include <opencv2/core.hpp>
+
+#include "core/camera/camera.h"
+#include "core/trajectory/trajectory.h"
+
+namespace evloc::sim {
+
+// A file of a dataset with its time stamp (an image or a depth map).
+struct TimedFile {
+  // Time stamp, nanoseconds (seconds in the list files).
+  int64_t t_ns = 0;
+  // Absolute path (relative paths of the list files resolved against the dataset folder).
+  std::filesystem::path path;
+};
+
+// File names inside a dataset folder.
+namespace dataset_files {
+// evloc camera YAML.
+inline constexpr char kCalibYaml[] = "calib.yaml";
+// ECD calibration: `fx fy cx cy k1 k2 p1 p2 k3`.
+inline constexpr char kCalibTxt[] = "calib.txt";
+// evloc binary events.
+inline constexpr char kEventsEvb[] = "events.evb";
+// ECD text events: `t x y p`, p in {0, 1}.
+inline constexpr char kEventsTxt[] = "events.txt";
+// Image list: `t_s relative_path`.
+inline constexpr char kImagesTxt[] = "images.txt";
+// Depth list: `t_s relative_path` (16-bit PNG, millimetres, 0 = no depth).
+inline constexpr char kDepthTxt[] = "depth.txt";
+// Ground truth, TUM: `t tx ty tz qx qy qz qw`, world_from_cam.
+inline constexpr char kGroundTruthTxt[] = "groundtruth.txt";
+// Ground-truth map, evloc .evmap.
+inline constexpr char kGroundTruthMap[] = "gt_map/map.evmap";
+// Ground-truth map, PLY export.
+inline constexpr char kGroundTruthPly[] = "gt_map/map.ply";
+// Provenance and counts (JSON).
+inline constexpr char kInfoJson[] = "info.json";
+}  // namespace dataset_files
+
+// Options of the dataset writer.
+struct DatasetWriterOptions {
+  // Replace an existing non-empty output folder (only once the new one is complete).
+  bool force = false;
+
+  // Nothing to check; present for uniformity with other options structs.
+  void Check() const {}
+};
+
+// Writes a dataset folder. Everything goes to `OUT.partial` (removed first if a previous run left
+// it); Commit() writes the list files and renames it to OUT. A run that stops before Commit()
+// leaves only OUT.partial, which no reader accepts as a dataset (it has no images.txt).
+class DatasetWriter {
+ public:
+  // Prepares OUT.partial. Throws InvalidArgumentError when OUT exists, is not an empty folder and
+  // options.force is false; IoError when the staging folder cannot be created.
+  DatasetWriter(const std::filesystem::path& out_dir, const DatasetWriterOptions& options);
+
+  // The folder files are staged in; write extra files (events, maps) below it.
+  const std::filesystem::path& staging_dir() const { return staging_dir_; }
+  // The final folder.
+  const std::filesystem::path& out_dir() const { return out_dir_; }
+
+  // Writes calib.yaml.
+  void WriteCamera(const Camera& camera);
+  // Writes images/frame_NNNNNNNN.png (CV_8UC1 or CV_8UC3 BGR) and lists it for images.txt.
+  // Throws InvalidArgumentError when times do not increase or the image is not 8-bit.
+  void AddImage(int64_t t_ns, const cv::Mat& image);
+  // Writes depth/depth_NNNNNNNN.png (16-bit, millimetres rounded, 0 where depth is 0, clipped at
+  // 65.535 m) from a CV_32FC1 depth in metres, and lists it for depth.txt.
+  void AddDepth(int64_t t_ns, const cv::Mat& depth_m);
+  // Writes groundtruth.txt (TUM, world_from_cam).
+  void WriteGroundTruth(const Trajectory& ground_truth);
+  // Writes info.json.
+  void WriteInfo(const nlohmann::json& info);
+  // Writes images.txt and depth.txt, then moves OUT.partial to OUT (replacing OUT when forced).
+  // Throws IoError when the rename fails.
+  void Commit();
+
+  // Number of images added.
+  size_t num_images() const { return images_.size(); }
+  // Number of depth maps added.
+  size_t num_depth_maps() const { return depth_.size(); }
+
+ private:
+  std::filesystem::path out_dir_;
+  std::filesystem::path staging_dir_;
+  DatasetWriterOptions options_;
+  std::vector<TimedFile> images_;  // paths relative to the dataset folder
+  std::vector<TimedFile> depth_;
+  bool committed_ = false;
+};
+
+// Options of the dataset reader.
+struct DatasetReaderOptions {
+  // Sensor width used with an ECD calib.txt (which has no size); DAVIS240C: 240.
+  int ecd_width = 240;
+  // Sensor height used with an ECD calib.txt; DAVIS240C: 180.
+  int ecd_height = 180;
+
+  // Throws InvalidArgumentError unless both sizes are positive.
+  void Check() const;
+};
+
+// A loaded dataset: its calibration, the lists of images and depth maps, ground truth and where
+// its events are. Image and depth pixels are read on demand.
+struct Dataset {
+  // The dataset folder.
+  std::filesystem::path root;
+  // The camera (from calib.yaml, else from calib.txt with the reader's size).
+  Camera camera;
+  // Images in time order (empty when the folder has no images.txt).
+  std::vector<TimedFile> images;
+  // Depth maps in time order (empty when there is no depth.txt).
+  std::vector<TimedFile> depth;
+  // Ground truth world_from_cam, when groundtruth.txt exists.
+  std::optional<Trajectory> ground_truth;
+  // The event file (events.evb preferred, else events.txt), when one exists; open it with
+  // OpenEventFile() from core/events.
+  std::optional<std::filesystem::path> events_path;
+  // The ground-truth map (gt_map/map.evmap), when present.
+  std::optional<std::filesystem::path> ground_truth_map_path;
+  // info.json, when present (evloc-sim output).
+  std::optional<nlohmann::json> info;
+};
+
+// Loads a dataset folder. Throws IoError when the folder or a listed file is missing, ParseError
+// naming the file and line for malformed lists, InvalidArgumentError when the folder has neither
+// calib.yaml nor calib.txt, or is an unfinished OUT.partial.
+Dataset ReadDataset(const std::filesystem::path& root, const DatasetReaderOptions& options = {});
+
+// Reads a list file `t_s path` (images.txt, depth.txt); `#` comments and blank lines skipped.
+// Paths are resolved against `root`. Throws ParseError naming the line for a malformed line or a
+// time that does not increase.
+std::vector<TimedFile> ReadTimedFileList(const std::filesystem::path& list_path,
+                                         const std::filesystem::path& root);
+
+// Reads a depth PNG written by DatasetWriter::AddDepth as CV_32FC1 metres (0 = no depth).
+// Throws IoError when it cannot be read, ParseError when it is not 16-bit single-channel.
+cv::Mat ReadDepthPng(const std::filesystem::path& path);
+
+// Reads an image as linear gray intensity in [0, 1] (CV_32FC1): 8- or 16-bit, gray or colour
+// (Rec. 709 luminance). Throws IoError when it cannot be read.
+cv::Mat ReadGrayImage(const std::filesystem::path& path);
+
+}  // namespace evloc::sim

@@ -1,0 +1,125 @@
+#include "tools/sim/dataset.h"
+
+#include <filesystem>
+#include <fstream>
+
+#include <gtest/gtest.h>
+#include <opencv2/imgcodecs.hpp>
+
+#include "core/common/error.h"
+#include "core/common/test_data.h"
+
+namespace evloc::sim {
+namespace {
+
+namespace fs = std::filesystem;
+
+TEST(Dataset, WriterReaderRoundTrip) {
+  const fs::path root = evloc::testing::MakeTempDir("dataset_round_trip");
+  const fs::path out = root / "seq";
+  const Camera camera = Camera::Pinhole(16, 12, 20, 21, 7.5, 5.5);
+  std::vector<TimedPose> poses;
+  for (int i = 0; i < 5; ++i) {
+    poses.push_back(
+        {i * 5'000'000, Rigid3d(Eigen::Quaterniond::Identity(), Eigen::Vector3d(i * 0.01, 0, 1))});
+  }
+  {
+    DatasetWriter writer(out, {});
+    writer.WriteCamera(camera);
+    for (int i = 0; i < 3; ++i) {
+      writer.AddImage(1'000'000'000LL + i * 33'333'333,
+                      cv::Mat(12, 16, CV_8UC3, cv::Scalar(i, 2 * i, 3 * i)));
+      cv::Mat depth(12, 16, CV_32FC1, cv::Scalar(1.2341 + i));
+      depth.at<float>(0, 0) = 0;
+      writer.AddDepth(1'000'000'000LL + i * 33'333'333, depth);
+    }
+    writer.WriteGroundTruth(Trajectory(poses));
+    writer.WriteInfo({{"seed", 4}});
+    EXPECT_TRUE(fs::exists(writer.staging_dir()));
+    EXPECT_FALSE(fs::exists(out));
+    writer.Commit();
+  }
+  EXPECT_FALSE(fs::exists(root / "seq.partial"));
+  const Dataset dataset = ReadDataset(out);
+  EXPECT_EQ(dataset.camera, camera);
+  ASSERT_EQ(dataset.images.size(), 3u);
+  EXPECT_EQ(dataset.images[2].t_ns, 1'000'000'000LL + 2 * 33'333'333);
+  EXPECT_EQ(cv::imread(dataset.images[1].path.string(), cv::IMREAD_UNCHANGED).at<cv::Vec3b>(3, 3),
+            cv::Vec3b(1, 2, 3));
+  ASSERT_EQ(dataset.depth.size(), 3u);
+  const cv::Mat depth = ReadDepthPng(dataset.depth[1].path);
+  EXPECT_NEAR(depth.at<float>(5, 5), 2.234, 1e-6);  // rounded to millimetres
+  EXPECT_EQ(depth.at<float>(0, 0), 0.0f);
+  ASSERT_TRUE(dataset.ground_truth.has_value());
+  EXPECT_EQ(dataset.ground_truth->size(), 5u);
+  EXPECT_EQ(dataset.ground_truth->poses()[3].world_from_cam.translation,
+            poses[3].world_from_cam.translation);
+  ASSERT_TRUE(dataset.info.has_value());
+  EXPECT_EQ((*dataset.info)["seed"], 4);
+  EXPECT_FALSE(dataset.events_path.has_value());
+  fs::remove_all(root);
+}
+
+TEST(Dataset, RefusesNonEmptyOutputWithoutForceAndReplacesWithForce) {
+  const fs::path root = evloc::testing::MakeTempDir("dataset_force");
+  const fs::path out = root / "seq";
+  fs::create_directories(out);
+  std::ofstream(out / "old.txt") << "old";
+  EXPECT_THROW(DatasetWriter(out, {}), InvalidArgumentError);
+  DatasetWriter writer(out, DatasetWriterOptions{true});
+  writer.WriteCamera(Camera::Pinhole(4, 4, 5, 5, 1.5, 1.5));
+  // Until the commit the old content is untouched.
+  EXPECT_TRUE(fs::exists(out / "old.txt"));
+  writer.Commit();
+  EXPECT_FALSE(fs::exists(out / "old.txt"));
+  EXPECT_TRUE(fs::exists(out / "calib.yaml"));
+  fs::remove_all(root);
+}
+
+TEST(Dataset, InterruptedRunLeavesNothingThatLooksComplete) {
+  const fs::path root = evloc::testing::MakeTempDir("dataset_interrupted");
+  const fs::path out = root / "seq";
+  {
+    DatasetWriter writer(out, {});
+    writer.WriteCamera(Camera::Pinhole(4, 4, 5, 5, 1.5, 1.5));
+    writer.AddImage(0, cv::Mat(4, 4, CV_8UC1, cv::Scalar(9)));
+  }  // destroyed without Commit: an interrupted run
+  EXPECT_FALSE(fs::exists(out));
+  EXPECT_THROW(ReadDataset(root / "seq.partial"), InvalidArgumentError);
+  // The next run starts over and succeeds.
+  DatasetWriter writer(out, {});
+  writer.WriteCamera(Camera::Pinhole(4, 4, 5, 5, 1.5, 1.5));
+  writer.Commit();
+  EXPECT_TRUE(fs::exists(out / "images.txt"));
+  fs::remove_all(root);
+}
+
+TEST(Dataset, ReadsARealEcdFolder) {
+  EVLOC_REQUIRE_SHARED_DATA(calib, "ecd/slider_depth/calib.txt");
+  const Dataset dataset = ReadDataset(calib.parent_path());
+  EXPECT_EQ(dataset.camera.width, 240);
+  EXPECT_EQ(dataset.camera.model, CameraModel::kRadialTangential);
+  EXPECT_NEAR(dataset.camera.fx, 335.419462958, 1e-9);
+  EXPECT_EQ(dataset.images.size(), 87u);
+  EXPECT_EQ(dataset.images[1].t_ns, 38'766'001);
+  ASSERT_TRUE(dataset.ground_truth.has_value());
+  EXPECT_EQ(dataset.ground_truth->size(), 339u);
+  const cv::Mat gray = ReadGrayImage(dataset.images[0].path);
+  EXPECT_EQ(gray.cols, 240);
+  EXPECT_EQ(gray.rows, 180);
+}
+
+TEST(Dataset, ListErrorsNameTheLine) {
+  const fs::path root = evloc::testing::MakeTempDir("dataset_list");
+  std::ofstream(root / "images.txt") << "0.1 a.png\n0.05 b.png\n";
+  try {
+    ReadTimedFileList(root / "images.txt", root);
+    FAIL() << "expected a ParseError";
+  } catch (const ParseError& error) {
+    EXPECT_NE(std::string(error.what()).find("line 2"), std::string::npos) << error.what();
+  }
+  fs::remove_all(root);
+}
+
+}  // namespace
+}  // namespace evloc::sim

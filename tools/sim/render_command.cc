@@ -1,0 +1,305 @@
+#include "tools/sim/render_command.h"
+
+#include <chrono>
+#include <cmath>
+#include <memory>
+
+#include <opencv2/imgcodecs.hpp>
+
+#include "core/common/error.h"
+#include "core/events/ecd_text.h"
+#include "core/events/evb.h"
+#include "core/trajectory/tum_io.h"
+#include "maps/map.h"
+#include "maps/ply.h"
+#include "tools/sim/dataset.h"
+#include "tools/sim/ground_truth_map.h"
+#include "tools/sim/renderer.h"
+#include "tools/sim/scene.h"
+#include "tools/sim/simulate.h"
+
+namespace evloc::sim {
+namespace fs = std::filesystem;
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double SecondsSince(Clock::time_point start) {
+  return std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+// events.evb, and events.txt when asked, written as batches arrive.
+class EventFiles {
+ public:
+  EventFiles(const fs::path& dir, const Camera& camera, bool with_text)
+      : evb_(dir / dataset_files::kEventsEvb, SensorSize{camera.width, camera.height}) {
+    if (with_text) text_ = std::make_unique<EcdTextWriter>(dir / dataset_files::kEventsTxt);
+  }
+  void Write(const EventBuffer& events) {
+    evb_.Write(events);
+    if (text_) text_->Write(events);
+  }
+  void Close() {
+    evb_.Close();
+    if (text_) text_->Close();
+  }
+
+ private:
+  EvbWriter evb_;
+  std::unique_ptr<EcdTextWriter> text_;
+};
+
+nlohmann::json CameraJson(const Camera& camera) {
+  return {{"model", CameraModelName(camera.model)},
+          {"width", camera.width},
+          {"height", camera.height},
+          {"fx", camera.fx},
+          {"fy", camera.fy},
+          {"cx", camera.cx},
+          {"cy", camera.cy},
+          {"distortion", camera.distortion}};
+}
+
+nlohmann::json EsimJson(const EsimOptions& esim) {
+  return {{"contrast_threshold_on", esim.contrast_threshold_on},
+          {"contrast_threshold_off", esim.contrast_threshold_off},
+          {"threshold_mismatch_sigma", esim.threshold_mismatch_sigma},
+          {"refractory_period_ns", esim.refractory_period_ns},
+          {"noise_rate_hz_per_pixel", esim.noise_rate_hz_per_pixel},
+          {"log_epsilon", esim.log_epsilon},
+          {"seed", esim.seed}};
+}
+
+// The viewpoint a motion is centred on: the camera region's centre, looking at the scene's centre
+// (or horizontally along +x when they nearly coincide), world z up.
+Viewpoint DefaultViewpoint(const Scene& scene) {
+  Viewpoint viewpoint;
+  viewpoint.position = scene.camera_region.center();
+  viewpoint.up = Eigen::Vector3d::UnitZ();
+  Eigen::Vector3d direction = scene.bounds.center() - viewpoint.position;
+  if (direction.head<2>().norm() < 0.3) direction = Eigen::Vector3d(1, 0, -0.2);
+  viewpoint.look_at = viewpoint.position + direction;
+  return viewpoint;
+}
+
+}  // namespace
+
+Camera CameraPreset(const std::string& name) {
+  if (name == "default") return Camera::Pinhole(640, 480, 500, 500, 319.5, 239.5);
+  if (name == "davis240") {
+    Camera camera;
+    camera.model = CameraModel::kRadialTangential;
+    camera.width = 240;
+    camera.height = 180;
+    camera.fx = 199.092366542;
+    camera.fy = 198.82882047;
+    camera.cx = 132.192071378;
+    camera.cy = 110.712660011;
+    camera.distortion = {-0.368436311798, 0.150947243557, -0.000296130534385, -0.000759431726241,
+                         0.0};
+    camera.Check();
+    return camera;
+  }
+  throw InvalidArgumentError("Unknown camera preset '" + name + "'; expected default or davis240.");
+}
+
+void RenderCommandOptions::Check() const {
+  if (out_dir.empty()) throw InvalidArgumentError("render: --out is required.");
+  if (duration_s && (!std::isfinite(*duration_s) || *duration_s <= 0)) {
+    throw InvalidArgumentError("render: --duration must be a positive number of seconds.");
+  }
+  if (!std::isfinite(fps) || fps <= 0) {
+    throw InvalidArgumentError("render: --fps must be positive.");
+  }
+  if (!(ground_truth_rate_hz >= 200)) {
+    throw InvalidArgumentError("render: the ground-truth rate must be at least 200 Hz.");
+  }
+  if (!(keyframe_interval_s > 0) || !(max_pixel_motion_px > 0)) {
+    throw InvalidArgumentError(
+        "render: keyframe interval and pixel motion bound must be positive.");
+  }
+}
+
+nlohmann::json RunRenderCommand(const RenderCommandOptions& options) {
+  options.Check();
+  const auto total_start = Clock::now();
+  const Camera camera = options.camera_yaml ? ReadCameraYaml(*options.camera_yaml)
+                                            : CameraPreset(options.camera_preset);
+  Scene scene = options.scene_json ? LoadSceneJson(*options.scene_json) : MakeDefaultRoom();
+  scene.Check();
+  const Viewpoint viewpoint = DefaultViewpoint(scene);
+
+  std::unique_ptr<CameraMotion> motion;
+  if (options.trajectory_file) {
+    const Trajectory recorded = ReadTumTrajectory(*options.trajectory_file);
+    std::optional<int64_t> duration_ns;
+    if (options.duration_s)
+      duration_ns = static_cast<int64_t>(std::llround(*options.duration_s * 1e9));
+    const Rigid3d anchor(LookAtRotation(viewpoint.position, viewpoint.look_at, viewpoint.up),
+                         viewpoint.position);
+    motion = std::make_unique<RecordedMotion>(recorded, anchor, duration_ns);
+  } else {
+    SmoothMotionOptions motion_options;
+    motion_options.profile = options.motion;
+    motion_options.duration_s = options.duration_s.value_or(10.0);
+    motion_options.seed = options.seed;
+    motion_options.camera_region = scene.camera_region;
+    motion_options.viewpoint = viewpoint;
+    motion = std::make_unique<SmoothMotion>(motion_options);
+  }
+
+  const LightingPreset lighting = MakeLightingPreset(options.lighting, scene.bounds);
+  SequenceOptions sequence;
+  sequence.esim.seed = options.seed;
+  if (options.clean) sequence.esim = sequence.esim.Clean();
+  sequence.frames = lighting.frames;
+  sequence.frames.fps = options.fps;
+  sequence.frames.seed = options.seed;
+  if (sequence.frames.exposure_s >= 0.9 / options.fps)
+    sequence.frames.exposure_s = 0.9 / options.fps;
+  sequence.illumination = lighting.illumination;
+  sequence.max_pixel_motion_px = options.max_pixel_motion_px;
+  sequence.Check();
+
+  DatasetWriter writer(options.out_dir, DatasetWriterOptions{options.force});
+  writer.WriteCamera(camera);
+  const Renderer renderer(scene, camera);
+  EventFiles event_files(writer.staging_dir(), camera, options.events_txt);
+  const SequenceStats stats = SimulateSequence(
+      [&](const Rigid3d& pose, cv::Mat* gray, cv::Mat* rgb, cv::Mat* depth) {
+        renderer.Render(pose, gray, rgb, depth);
+      },
+      camera, *motion, sequence, [&](const EventBuffer& events) { event_files.Write(events); },
+      [&](int64_t t_ns, const cv::Mat& image, const cv::Mat& depth_m) {
+        writer.AddImage(t_ns, image);
+        writer.AddDepth(t_ns, depth_m);
+      });
+  event_files.Close();
+
+  const Trajectory ground_truth = SampleMotion(*motion, options.ground_truth_rate_hz);
+  writer.WriteGroundTruth(ground_truth);
+
+  const auto map_start = Clock::now();
+  std::vector<Rigid3d> keyframes;
+  const auto keyframe_step = static_cast<int64_t>(std::llround(options.keyframe_interval_s * 1e9));
+  for (int64_t t = 0; t <= motion->duration_ns(); t += keyframe_step) {
+    keyframes.push_back(motion->WorldFromCam(t));
+  }
+  const Map map = BuildGroundTruthMap(scene, camera, keyframes, GroundTruthMapOptions());
+  SaveMap(writer.staging_dir() / dataset_files::kGroundTruthMap, map);
+  WritePly(writer.staging_dir() / dataset_files::kGroundTruthPly, map);
+  const double map_seconds = SecondsSince(map_start);
+
+  const PeakSpeeds peak = MeasurePeakSpeeds(*motion);
+  const double duration_s = motion->duration_ns() * 1e-9;
+  nlohmann::json info = {
+      {"tool", "evloc-sim render"},
+      {"options",
+       {{"camera", options.camera_yaml ? options.camera_yaml->string() : options.camera_preset},
+        {"scene", options.scene_json ? options.scene_json->string() : "default room"},
+        {"motion", options.trajectory_file ? "trajectory" : MotionProfileName(options.motion)},
+        {"trajectory_file", options.trajectory_file ? options.trajectory_file->string() : ""},
+        {"duration_s", duration_s},
+        {"fps", options.fps},
+        {"lighting", LightingConditionName(options.lighting)},
+        {"seed", options.seed},
+        {"clean", options.clean},
+        {"max_pixel_motion_px", options.max_pixel_motion_px},
+        {"ground_truth_rate_hz", options.ground_truth_rate_hz},
+        {"keyframe_interval_s", options.keyframe_interval_s}}},
+      {"camera", CameraJson(camera)},
+      {"esim", EsimJson(sequence.esim)},
+      {"frames",
+       {{"exposure_s", sequence.frames.exposure_s},
+        {"gain_dn_per_electron", sequence.frames.gain_dn_per_electron},
+        {"read_noise_electrons", sequence.frames.read_noise_electrons},
+        {"illumination_lit", sequence.illumination.lit_factor},
+        {"illumination_shadow", sequence.illumination.shadow_factor}}},
+      {"counts",
+       {{"events", stats.num_events},
+        {"event_rate_per_s", stats.num_events / duration_s},
+        {"renders", stats.num_renders},
+        {"frames", stats.num_frames},
+        {"ground_truth_poses", ground_truth.size()},
+        {"map_points", map.size()},
+        {"map_keyframes", keyframes.size()}}},
+      {"motion_measured",
+       {{"peak_linear_m_per_s", peak.linear_m_per_s},
+        {"peak_angular_deg_per_s", peak.angular_rad_per_s * 180 / M_PI},
+        {"max_image_motion_between_renders_px", stats.max_measured_motion_px}}},
+      {"timings_s",
+       {{"render", stats.render_seconds},
+        {"esim", stats.esim_seconds},
+        {"frames", stats.frame_seconds},
+        {"ground_truth_map", map_seconds}}}};
+  info["timings_s"]["total"] = SecondsSince(total_start);
+  writer.WriteInfo(info);
+  writer.Commit();
+  return info;
+}
+
+void EventsFromFramesCommandOptions::Check() const {
+  if (in_dir.empty() || out_dir.empty()) {
+    throw InvalidArgumentError("events-from-frames: --in and --out are required.");
+  }
+  std::error_code error;
+  if (fs::weakly_canonical(in_dir, error) == fs::weakly_canonical(out_dir, error)) {
+    throw InvalidArgumentError("events-from-frames: --in and --out must differ.");
+  }
+  if (ecd_width <= 0 || ecd_height <= 0) {
+    throw InvalidArgumentError("events-from-frames: --ecd-size must be positive.");
+  }
+  conversion.Check();
+}
+
+nlohmann::json RunEventsFromFramesCommand(const EventsFromFramesCommandOptions& options) {
+  options.Check();
+  const auto total_start = Clock::now();
+  const Dataset input = ReadDataset(options.in_dir, {options.ecd_width, options.ecd_height});
+  if (input.images.size() < 2) {
+    throw InvalidArgumentError("events-from-frames: '" + options.in_dir.string() +
+                               "' lists fewer than 2 images in images.txt.");
+  }
+  DatasetWriter writer(options.out_dir, DatasetWriterOptions{options.force});
+  writer.WriteCamera(input.camera);
+  EventFiles event_files(writer.staging_dir(), input.camera, options.events_txt);
+  const EventsFromFramesStats stats =
+      EventsFromFrames(input.images, options.conversion,
+                       [&](const EventBuffer& events) { event_files.Write(events); });
+  event_files.Close();
+  // Frames, depth and ground truth carried over.
+  for (const TimedFile& image : input.images) {
+    writer.AddImage(image.t_ns, cv::imread(image.path.string(), cv::IMREAD_UNCHANGED));
+  }
+  for (const TimedFile& depth : input.depth) writer.AddDepth(depth.t_ns, ReadDepthPng(depth.path));
+  if (input.ground_truth) writer.WriteGroundTruth(*input.ground_truth);
+  if (input.ground_truth_map_path) {
+    fs::copy_file(*input.ground_truth_map_path,
+                  writer.staging_dir() / dataset_files::kGroundTruthMap);
+    const fs::path ply = input.root / dataset_files::kGroundTruthPly;
+    if (fs::exists(ply)) fs::copy_file(ply, writer.staging_dir() / dataset_files::kGroundTruthPly);
+  }
+  const double duration_s = (input.images.back().t_ns - input.images.front().t_ns) * 1e-9;
+  nlohmann::json info = {
+      {"tool", "evloc-sim events-from-frames"},
+      {"input", options.in_dir.string()},
+      {"camera", CameraJson(input.camera)},
+      {"esim", EsimJson(options.conversion.esim)},
+      {"interpolation",
+       {{"method", "DIS optical flow, bidirectional backward warping"},
+        {"max_pixel_motion_px", options.conversion.max_pixel_motion_px},
+        {"input_gamma", options.conversion.input_gamma}}},
+      {"counts",
+       {{"events", stats.num_events},
+        {"event_rate_per_s", duration_s > 0 ? stats.num_events / duration_s : 0.0},
+        {"input_frames", stats.num_input_frames},
+        {"interpolated_frames", stats.num_interpolated_frames},
+        {"max_flow_px", stats.max_flow_px}}},
+      {"timings_s", {{"flow", stats.flow_seconds}, {"esim", stats.esim_seconds}}}};
+  info["timings_s"]["total"] = SecondsSince(total_start);
+  writer.WriteInfo(info);
+  writer.Commit();
+  return info;
+}
+
+}  // namespace evloc::sim

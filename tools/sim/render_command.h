@@ -1,0 +1,92 @@
+// The two commands of evloc-sim as library functions (the CLI only parses flags):
+// `render` (scene + motion -> dataset) and `events-from-frames` (dataset -> dataset with events).
+// See docs/simulator.md and docs/dataset-format.md.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <optional>
+#include <string>
+
+#include <nlohmann/json.hpp>
+
+#include "core/camera/camera.h"
+#include "tools/sim/events_from_frames.h"
+#include "tools/sim/frame_sensor.h"
+#include "tools/sim/motion.h"
+
+namespace evloc::sim {
+
+// The `--camera` presets: "default" (640 x 480 pinhole, Prophesee Gen3-like) and "davis240"
+// (240 x 180, the Event Camera Dataset DAVIS240C calibration). Throws InvalidArgumentError for
+// other names.
+Camera CameraPreset(const std::string& name);
+
+// Options of `evloc-sim render`.
+struct RenderCommandOptions {
+  // Output dataset folder.
+  std::filesystem::path out_dir;
+  // Camera preset name (ignored when camera_yaml is set).
+  std::string camera_preset = "default";
+  // Camera YAML file overriding the preset.
+  std::optional<std::filesystem::path> camera_yaml;
+  // Scene JSON; the default room when unset.
+  std::optional<std::filesystem::path> scene_json;
+  // Motion preset (used when no trajectory file is given).
+  MotionProfile motion = MotionProfile::kMid;
+  // TUM trajectory replayed instead of the preset motion.
+  std::optional<std::filesystem::path> trajectory_file;
+  // Duration in seconds; unset: 10 s for presets, the whole file for a trajectory.
+  std::optional<double> duration_s;
+  // Frame rate of the frame camera, Hz.
+  double fps = 30;
+  // Lighting preset.
+  LightingCondition lighting = LightingCondition::kBright;
+  // Seed of motion, sensor noise and event noise.
+  uint64_t seed = 1;
+  // Event pixel without mismatch, refractory period and noise.
+  bool clean = false;
+  // Also write events.txt (ECD text).
+  bool events_txt = false;
+  // Replace an existing non-empty output folder.
+  bool force = false;
+  // Ground-truth rate, Hz (>= 200).
+  double ground_truth_rate_hz = 1000;
+  // Interval between ground-truth map keyframes along the path, seconds.
+  double keyframe_interval_s = 0.5;
+  // Largest image motion between renders, pixels.
+  double max_pixel_motion_px = 0.5;
+
+  // Throws InvalidArgumentError for an empty output path, non-positive duration, fps, rates or
+  // intervals, or a ground-truth rate below 200 Hz.
+  void Check() const;
+};
+
+// Runs `render`; returns the info.json written. Throws the library's typed errors.
+nlohmann::json RunRenderCommand(const RenderCommandOptions& options);
+
+// Options of `evloc-sim events-from-frames`.
+struct EventsFromFramesCommandOptions {
+  // Input dataset folder (evloc-sim output or an ECD folder with images.txt).
+  std::filesystem::path in_dir;
+  // Output dataset folder.
+  std::filesystem::path out_dir;
+  // Sensor size for an ECD calib.txt input.
+  int ecd_width = 240;
+  // Sensor height for an ECD calib.txt input.
+  int ecd_height = 180;
+  // Conversion options (ESIM, interpolation).
+  EventsFromFramesOptions conversion;
+  // Also write events.txt (ECD text).
+  bool events_txt = false;
+  // Replace an existing non-empty output folder.
+  bool force = false;
+
+  // Throws InvalidArgumentError for empty paths, equal in and out, bad sizes or conversion options.
+  void Check() const;
+};
+
+// Runs `events-from-frames`; returns the info.json written.
+nlohmann::json RunEventsFromFramesCommand(const EventsFromFramesCommandOptions& options);
+
+}  // namespace evloc::sim

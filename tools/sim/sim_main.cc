@@ -1,0 +1,219 @@
+// evloc-sim: the event camera simulator's command line (docs/simulator.md). Parses flags into
+// the options of tools/sim/render_command.h and reports errors; all work is in the library.
+#include <algorithm>
+#include <charconv>
+#include <cstdlib>
+#include <iostream>
+#include <map>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "core/common/error.h"
+#include "tools/sim/render_command.h"
+
+namespace {
+
+using evloc::InvalidArgumentError;
+
+constexpr char kUsage[] = R"(evloc-sim: simulate an event camera dataset (docs/simulator.md).
+
+Usage:
+  evloc-sim render --out DIR [options]
+  evloc-sim events-from-frames --in DATASET --out DIR [options]
+  evloc-sim --help
+
+render options:
+  --out DIR             output dataset folder (written as DIR.partial, renamed when complete)
+  --camera NAME         default (640x480 pinhole, f=500 px) | davis240 (ECD DAVIS240C); default: default
+  --camera-yaml FILE    evloc camera YAML, overrides --camera
+  --scene FILE          scene JSON (docs/sim-scene.md); default: the built-in room
+  --motion NAME         slow | mid | fast | aggressive; default: mid
+  --trajectory FILE     TUM trajectory replayed relative to its first pose instead of --motion
+  --duration S          seconds; default 10 for --motion, the whole file for --trajectory
+  --fps F               frame camera rate, Hz; default 30
+  --lighting NAME       bright | dim | dark | hdr; default: bright
+  --seed N              seed of motion and noise (same seed, same bytes); default 1
+  --clean               ideal event pixel: no threshold mismatch, refractory period or noise
+  --events-txt          also write events.txt (ECD text format)
+  --force               replace an existing non-empty output folder
+
+events-from-frames options:
+  --in DATASET          input folder with images.txt (evloc-sim output or ECD)
+  --out DIR             output dataset folder
+  --ecd-size WxH        sensor size for an ECD calib.txt input; default 240x180
+  --contrast C          ESIM contrast threshold (ON and OFF); default 0.2
+  --gamma G             input frames are raised to G to get linear intensity; default 1
+  --seed N              seed of mismatch and noise; default 1
+  --clean, --events-txt, --force   as for render
+
+Exit codes: 0 success, 2 bad command line, 1 failure while running.
+)";
+
+// A command-line mistake: reported with the usage hint and exit code 2.
+class UsageError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+// Flags as name -> value ("" for switches), checked against the allowed names.
+std::map<std::string, std::string> ParseFlags(const std::vector<std::string>& args,
+                                              const std::vector<std::string>& valued,
+                                              const std::vector<std::string>& switches) {
+  std::map<std::string, std::string> flags;
+  for (size_t i = 0; i < args.size(); ++i) {
+    const std::string& arg = args[i];
+    const auto contains = [&](const std::vector<std::string>& names) {
+      return std::find(names.begin(), names.end(), arg) != names.end();
+    };
+    if (contains(switches)) {
+      flags[arg] = "";
+    } else if (contains(valued)) {
+      if (i + 1 >= args.size()) throw UsageError(arg + " needs a value.");
+      flags[arg] = args[++i];
+    } else {
+      throw UsageError("unknown argument '" + arg + "'.");
+    }
+  }
+  return flags;
+}
+
+double ParseDouble(const std::string& flag, const std::string& text) {
+  double value = 0;
+  const auto result = std::from_chars(text.data(), text.data() + text.size(), value);
+  if (result.ec != std::errc() || result.ptr != text.data() + text.size()) {
+    throw UsageError(flag + " expects a number, got '" + text + "'.");
+  }
+  return value;
+}
+
+uint64_t ParseUnsigned(const std::string& flag, const std::string& text) {
+  uint64_t value = 0;
+  const auto result = std::from_chars(text.data(), text.data() + text.size(), value);
+  if (result.ec != std::errc() || result.ptr != text.data() + text.size()) {
+    throw UsageError(flag + " expects a non-negative integer, got '" + text + "'.");
+  }
+  return value;
+}
+
+int RunRender(const std::vector<std::string>& args) {
+  const auto flags = ParseFlags(args,
+                                {"--out", "--camera", "--camera-yaml", "--scene", "--motion",
+                                 "--trajectory", "--duration", "--fps", "--lighting", "--seed"},
+                                {"--clean", "--events-txt", "--force"});
+  evloc::sim::RenderCommandOptions options;
+  if (!flags.contains("--out")) throw UsageError("render needs --out DIR.");
+  if (flags.contains("--motion") && flags.contains("--trajectory")) {
+    throw UsageError("--motion and --trajectory exclude each other.");
+  }
+  for (const auto& [flag, value] : flags) {
+    try {
+      if (flag == "--out") options.out_dir = value;
+      if (flag == "--camera") options.camera_preset = value;
+      if (flag == "--camera-yaml") options.camera_yaml = value;
+      if (flag == "--scene") options.scene_json = value;
+      if (flag == "--motion") options.motion = evloc::sim::ParseMotionProfile(value);
+      if (flag == "--trajectory") options.trajectory_file = value;
+      if (flag == "--duration") options.duration_s = ParseDouble(flag, value);
+      if (flag == "--fps") options.fps = ParseDouble(flag, value);
+      if (flag == "--lighting") options.lighting = evloc::sim::ParseLightingCondition(value);
+      if (flag == "--seed") options.seed = ParseUnsigned(flag, value);
+      if (flag == "--clean") options.clean = true;
+      if (flag == "--events-txt") options.events_txt = true;
+      if (flag == "--force") options.force = true;
+    } catch (const InvalidArgumentError& error) {
+      throw UsageError(flag + ": " + error.what());
+    }
+  }
+  if (!options.camera_yaml) {
+    try {
+      evloc::sim::CameraPreset(options.camera_preset);
+    } catch (const InvalidArgumentError& error) {
+      throw UsageError(std::string("--camera: ") + error.what());
+    }
+  }
+  try {
+    options.Check();
+  } catch (const InvalidArgumentError& error) {
+    throw UsageError(error.what());
+  }
+  const auto info = evloc::sim::RunRenderCommand(options);
+  std::cout << "evloc-sim render: wrote " << options.out_dir.string() << ": "
+            << info["counts"]["events"] << " events (" << info["counts"]["event_rate_per_s"]
+            << " /s), " << info["counts"]["frames"] << " frames, " << info["counts"]["renders"]
+            << " renders in " << info["timings_s"]["total"] << " s\n";
+  return 0;
+}
+
+int RunEventsFromFrames(const std::vector<std::string>& args) {
+  const auto flags =
+      ParseFlags(args, {"--in", "--out", "--ecd-size", "--contrast", "--gamma", "--seed"},
+                 {"--clean", "--events-txt", "--force"});
+  evloc::sim::EventsFromFramesCommandOptions options;
+  if (!flags.contains("--in") || !flags.contains("--out")) {
+    throw UsageError("events-from-frames needs --in DATASET and --out DIR.");
+  }
+  bool clean = false;
+  for (const auto& [flag, value] : flags) {
+    if (flag == "--in") options.in_dir = value;
+    if (flag == "--out") options.out_dir = value;
+    if (flag == "--ecd-size") {
+      const size_t x = value.find('x');
+      if (x == std::string::npos) throw UsageError("--ecd-size expects WxH, got '" + value + "'.");
+      options.ecd_width = static_cast<int>(ParseUnsigned(flag, value.substr(0, x)));
+      options.ecd_height = static_cast<int>(ParseUnsigned(flag, value.substr(x + 1)));
+    }
+    if (flag == "--contrast") {
+      options.conversion.esim.contrast_threshold_on = ParseDouble(flag, value);
+      options.conversion.esim.contrast_threshold_off =
+          options.conversion.esim.contrast_threshold_on;
+    }
+    if (flag == "--gamma") options.conversion.input_gamma = ParseDouble(flag, value);
+    if (flag == "--seed") options.conversion.esim.seed = ParseUnsigned(flag, value);
+    if (flag == "--clean") clean = true;
+    if (flag == "--events-txt") options.events_txt = true;
+    if (flag == "--force") options.force = true;
+  }
+  if (clean) options.conversion.esim = options.conversion.esim.Clean();
+  try {
+    options.Check();
+  } catch (const InvalidArgumentError& error) {
+    throw UsageError(error.what());
+  }
+  const auto info = evloc::sim::RunEventsFromFramesCommand(options);
+  std::cout << "evloc-sim events-from-frames: wrote " << options.out_dir.string() << ": "
+            << info["counts"]["events"] << " events (" << info["counts"]["event_rate_per_s"]
+            << " /s) from " << info["counts"]["input_frames"] << " frames and "
+            << info["counts"]["interpolated_frames"] << " interpolated frames in "
+            << info["timings_s"]["total"] << " s\n";
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const std::vector<std::string> args(argv + 1, argv + argc);
+  if (args.empty() || args[0] == "--help" || args[0] == "-h" ||
+      std::find(args.begin(), args.end(), "--help") != args.end()) {
+    std::cout << kUsage;
+    return args.empty() ? 2 : 0;
+  }
+  const std::vector<std::string> rest(args.begin() + 1, args.end());
+  try {
+    if (args[0] == "render") return RunRender(rest);
+    if (args[0] == "events-from-frames") return RunEventsFromFrames(rest);
+    throw UsageError("unknown command '" + args[0] + "'; expected render or events-from-frames.");
+  } catch (const UsageError& error) {
+    std::cerr << "evloc-sim: " << error.what() << " Run `evloc-sim --help` for usage.\n";
+    return 2;
+  } catch (const evloc::InvalidArgumentError& error) {
+    std::cerr << "evloc-sim: " << error.what() << "\n";
+    return 2;
+  } catch (const evloc::Error& error) {
+    std::cerr << "evloc-sim: " << error.what() << "\n";
+    return 1;
+  } catch (const std::exception& error) {
+    std::cerr << "evloc-sim: unexpected error: " << error.what() << "\n";
+    return 1;
+  }
+}
