@@ -1,36 +1,16 @@
 #include "mapper/build_command.h"
 
-#include <charconv>
-#include <cmath>
 #include <iomanip>
 #include <iostream>
 #include <sstream>
 
 #include <opencv2/imgcodecs.hpp>
 
+#include "core/common/cli.h"
 #include "core/common/error.h"
 
 namespace evloc::mapper {
 namespace {
-
-double ParseNumber(const std::string& flag, const std::string& text) {
-  double value = 0.0;
-  const auto result = std::from_chars(text.data(), text.data() + text.size(), value);
-  if (result.ec != std::errc() || result.ptr != text.data() + text.size() ||
-      !std::isfinite(value)) {
-    throw InvalidArgumentError(flag + ": '" + text + "' is not a number");
-  }
-  return value;
-}
-
-int ParseInt(const std::string& flag, const std::string& text) {
-  int value = 0;
-  const auto result = std::from_chars(text.data(), text.data() + text.size(), value);
-  if (result.ec != std::errc() || result.ptr != text.data() + text.size()) {
-    throw InvalidArgumentError(flag + ": '" + text + "' is not an integer");
-  }
-  return value;
-}
 
 // Renders progress lines on stderr.
 class StderrProgress : public ProgressListener {
@@ -56,7 +36,7 @@ Camera ParseCameraFlag(const std::string& value, int width, int height) {
   std::vector<double> params;
   std::istringstream stream(value.substr(colon + 1));
   std::string token;
-  while (std::getline(stream, token, ',')) params.push_back(ParseNumber("--camera", token));
+  while (std::getline(stream, token, ',')) params.push_back(ParseDoubleFlag("--camera", token));
   const size_t expected = 4 + NumDistortionCoefficients(camera.model);
   if (params.size() != expected) {
     throw InvalidArgumentError("--camera: model " + CameraModelName(camera.model) + " takes " +
@@ -151,18 +131,18 @@ BuildCommandLine ParseBuildCommandLine(const std::vector<std::string>& arguments
     } else if (flag == "--colmap-workspace") {
       options.colmap_workspace = value;
     } else if (flag == "--threads") {
-      options.colmap.num_threads = ParseInt(flag, value);
+      options.colmap.num_threads = ParseIntFlag(flag, value);
       options.semidense.num_threads = options.colmap.num_threads;
     } else if (flag == "--max-features") {
-      options.colmap.max_num_features = ParseInt(flag, value);
+      options.colmap.max_num_features = ParseIntFlag(flag, value);
     } else if (flag == "--max-keyframes") {
-      options.keyframes.max_keyframes = ParseInt(flag, value);
+      options.keyframes.max_keyframes = ParseIntFlag(flag, value);
     } else if (flag == "--neighbours") {
-      options.keyframes.num_neighbours = ParseInt(flag, value);
+      options.keyframes.num_neighbours = ParseIntFlag(flag, value);
     } else if (flag == "--min-confirmations") {
-      options.semidense.min_keyframe_confirmations = ParseInt(flag, value);
+      options.semidense.min_keyframe_confirmations = ParseIntFlag(flag, value);
     } else if (flag == "--voxel-size") {
-      options.merge.voxel_size = ParseNumber(flag, value);
+      options.merge.voxel_size = ParseDoubleFlag(flag, value);
     } else {
       throw InvalidArgumentError("unknown flag '" + flag + "' (see --help)");
     }

@@ -2,6 +2,7 @@
 
 #include <charconv>
 #include <cmath>
+#include <limits>
 
 #include "core/common/error.h"
 
@@ -26,6 +27,14 @@ int64_t ParseIntegerFlag(std::string_view flag, std::string_view text) {
                                std::string(text) + "'");
   }
   return value;
+}
+
+int ParseIntFlag(std::string_view flag, std::string_view text) {
+  const int64_t value = ParseIntegerFlag(flag, text);
+  if (value < std::numeric_limits<int>::min() || value > std::numeric_limits<int>::max()) {
+    throw InvalidArgumentError(std::string(flag) + " is out of range: '" + std::string(text) + "'");
+  }
+  return static_cast<int>(value);
 }
 
 bool ParseSwitchFlag(std::string_view flag, std::string_view text) {

@@ -15,6 +15,9 @@ double ParseDoubleFlag(std::string_view flag, std::string_view text);
 // Parses a base-10 integer; the whole text must be consumed. Throws InvalidArgumentError.
 int64_t ParseIntegerFlag(std::string_view flag, std::string_view text);
 
+// Parses a base-10 integer that fits an int. Throws InvalidArgumentError.
+int ParseIntFlag(std::string_view flag, std::string_view text);
+
 // Parses "on"/"off" (also "true"/"false", "1"/"0"). Throws InvalidArgumentError.
 bool ParseSwitchFlag(std::string_view flag, std::string_view text);
 

@@ -27,6 +27,11 @@ TEST(ParseIntegerFlag, RejectsFractionsAndText) {
   EXPECT_THROW(ParseIntegerFlag("--n", "x"), InvalidArgumentError);
 }
 
+TEST(ParseIntFlag, RejectsValuesBeyondInt) {
+  EXPECT_EQ(ParseIntFlag("--n", "-7"), -7);
+  EXPECT_THROW(ParseIntFlag("--n", "4294967296"), InvalidArgumentError);
+}
+
 TEST(ParseSwitchFlag, OnOff) {
   EXPECT_TRUE(ParseSwitchFlag("--polarity", "on"));
   EXPECT_FALSE(ParseSwitchFlag("--polarity", "off"));

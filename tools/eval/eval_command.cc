@@ -1,26 +1,12 @@
 #include "tools/eval/eval_command.h"
 
-#include <charconv>
-#include <cmath>
-
+#include "core/common/cli.h"
 #include "core/common/error.h"
 #include "core/common/file_util.h"
 #include "core/trajectory/tum_io.h"
 #include "tools/eval/plot.h"
 
 namespace evloc {
-namespace {
-
-double ParseNumberFlag(const std::string& flag, const std::string& text) {
-  double value = 0.0;
-  const auto [end, error] = std::from_chars(text.data(), text.data() + text.size(), value);
-  if (error != std::errc() || end != text.data() + text.size() || !std::isfinite(value)) {
-    throw InvalidArgumentError(flag + " expects a number, got '" + text + "'");
-  }
-  return value;
-}
-
-}  // namespace
 
 void EvalCommandOptions::Check() const {
   if (help) return;
@@ -79,13 +65,13 @@ EvalCommandOptions ParseEvalCommandLine(const std::vector<std::string>& argument
     } else if (flag == "--align") {
       options.evaluation.alignment = ParseAlignment(value);
     } else if (flag == "--delta") {
-      options.evaluation.delta_s = ParseNumberFlag(flag, value);
+      options.evaluation.delta_s = ParseDoubleFlag(flag, value);
     } else if (flag == "--max-dt") {
-      options.evaluation.max_dt_s = ParseNumberFlag(flag, value);
+      options.evaluation.max_dt_s = ParseDoubleFlag(flag, value);
     } else if (flag == "--fail-cm") {
-      options.evaluation.fail_cm = ParseNumberFlag(flag, value);
+      options.evaluation.fail_cm = ParseDoubleFlag(flag, value);
     } else if (flag == "--coverage-gap") {
-      options.evaluation.coverage_max_gap_s = ParseNumberFlag(flag, value);
+      options.evaluation.coverage_max_gap_s = ParseDoubleFlag(flag, value);
     } else if (flag == "--json") {
       options.json_path = value;
     } else if (flag == "--plot") {
