@@ -1,0 +1,678 @@
+#include "localizer/service/localizer_server.h"
+
+#include <algorithm>
+#include <chrono>
+#include <fstream>
+#include <mutex>
+#include <sstream>
+#include <thread>
+#include <variant>
+#include <vector>
+
+#include <grpcpp/ext/proto_server_reflection_plugin.h>
+#include <grpcpp/grpcpp.h>
+#include <grpcpp/health_check_service_interface.h>
+
+#include "core/common/error.h"
+#include "evloc/localizer.grpc.pb.h"
+#include "localizer/service/bounded_queue.h"
+#include "localizer/service/session.h"
+
+namespace evloc::service {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+using TrackServerStream = grpc::ServerReaderWriter<api::TrackResponse, api::TrackRequest>;
+
+double Percentile(std::vector<double> values, double fraction) {
+  if (values.empty()) return 0.0;
+  const size_t index = std::min(values.size() - 1,
+                                static_cast<size_t>(fraction * static_cast<double>(values.size())));
+  std::nth_element(values.begin(), values.begin() + static_cast<std::ptrdiff_t>(index),
+                   values.end());
+  return values[index];
+}
+
+double MicrosecondsSince(Clock::time_point start) {
+  return std::chrono::duration<double, std::micro>(Clock::now() - start).count();
+}
+
+std::string Trim(const std::string& text) {
+  const size_t begin = text.find_first_not_of(" \t\r");
+  if (begin == std::string::npos) return "";
+  const size_t end = text.find_last_not_of(" \t\r");
+  return text.substr(begin, end - begin + 1);
+}
+
+// An item from the stream reader to the tracking worker.
+struct InboundItem {
+  // Events of one packet (empty for other kinds).
+  EventBuffer events;
+  // A frame, when the item is one.
+  std::optional<cv::Mat> gray;
+  // A pose reset, when the item is one.
+  std::optional<Rigid3d> reset_world_from_cam;
+  // Time of the frame or reset; end of the packet window; ns.
+  int64_t t_ns = 0;
+  // When the reader received the message.
+  Clock::time_point received;
+};
+
+// An item from the tracking worker (or the reader, for notices) to the stream writer.
+struct OutboundItem {
+  // The message.
+  api::TrackResponse response;
+  // For PoseUpdates: when the packet that completed the step was received.
+  std::optional<Clock::time_point> received;
+};
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------------
+// Options and tokens.
+
+void LocalizerServerOptions::Check() const {
+  MapRegistryOptions{maps_dir}.Check();
+  if (listen_address.empty()) throw InvalidArgumentError("--listen: the address is empty");
+  if (max_sessions < 1) throw InvalidArgumentError("--max-sessions must be at least 1");
+  if (threads != 0 && threads < max_sessions + 2) {
+    throw InvalidArgumentError("--threads must be 0 (automatic) or at least --max-sessions + 2 (" +
+                               std::to_string(max_sessions + 2) +
+                               "): every running session holds one gRPC thread");
+  }
+  if (max_message_bytes < 1024) {
+    throw InvalidArgumentError("--max-message-bytes must be at least 1024");
+  }
+  if (!(idle_timeout_s > 0)) throw InvalidArgumentError("--idle-timeout must be positive");
+  if (queue_packets < 2) throw InvalidArgumentError("--queue-packets must be at least 2");
+  if (!(backpressure_fraction > 0 && backpressure_fraction <= 1)) {
+    throw InvalidArgumentError("--backpressure-fraction must be in (0, 1]");
+  }
+  tracker.Check();
+}
+
+std::string LocalizerServerOptions::Describe() const {
+  std::ostringstream text;
+  text << "maps: " << maps_dir.string() << "\n"
+       << "listen: " << listen_address << "\n"
+       << "max-sessions: " << max_sessions << "\n"
+       << "threads: " << (threads == 0 ? max_sessions + 8 : threads)
+       << (threads == 0 ? " (automatic)" : "") << "\n"
+       << "max-message-bytes: " << max_message_bytes << "\n"
+       << "idle-timeout: " << idle_timeout_s << " s\n"
+       << "queue-packets: " << queue_packets << "\n"
+       << "backpressure-fraction: " << backpressure_fraction << "\n"
+       << "auth-tokens: " << (auth_tokens_file ? auth_tokens_file->string() : "none (open)") << "\n"
+       << "tracker: variant " << tracker.VariantName() << ", " << tracker.step_rate_hz
+       << " Hz, max-points " << tracker.max_points << ", tau " << tracker.decay_time_s << " s\n";
+  return text.str();
+}
+
+TokenTable TokenTable::Read(const std::filesystem::path& path) {
+  std::ifstream file(path);
+  if (!file) {
+    throw IoError("cannot read the token file '" + path.string() +
+                  "' (check the path given to --auth-tokens)");
+  }
+  TokenTable table;
+  std::string line;
+  int64_t line_number = 0;
+  while (std::getline(file, line)) {
+    ++line_number;
+    const size_t comment = line.find('#');
+    if (comment != std::string::npos) line.resize(comment);
+    line = Trim(line);
+    if (line.empty()) continue;
+    std::istringstream fields(line);
+    std::string token;
+    std::string maps;
+    std::string extra;
+    fields >> token >> maps >> extra;
+    if (!extra.empty()) {
+      throw ParseError::AtLine(path.string(), line_number,
+                               "expected `TOKEN [map1,map2,...]`, got more fields");
+    }
+    std::set<std::string> allowed;
+    std::istringstream names(maps);
+    std::string name;
+    while (std::getline(names, name, ',')) {
+      if (!name.empty()) allowed.insert(name);
+    }
+    if (!table.maps_.emplace(token, std::move(allowed)).second) {
+      throw ParseError::AtLine(path.string(), line_number, "token listed twice");
+    }
+  }
+  return table;
+}
+
+bool TokenTable::Allows(const std::string& token, const std::string& map_name) const {
+  const auto found = maps_.find(token);
+  if (found == maps_.end()) return false;
+  return found->second.empty() || found->second.count(map_name) > 0;
+}
+
+// ---------------------------------------------------------------------------------------------
+// The service.
+
+class LocalizerServer::Service final : public api::Localizer::Service {
+ public:
+  Service(const LocalizerServerOptions& options, LogFunction log)
+      : options_(options), log_(std::move(log)), registry_(MapRegistryOptions{options.maps_dir}) {
+    if (options.auth_tokens_file) tokens_ = TokenTable::Read(*options.auth_tokens_file);
+  }
+
+  grpc::Status ListMaps(grpc::ServerContext* context, const api::ListMapsRequest*,
+                        api::ListMapsResponse* response) override {
+    std::optional<std::string> token;
+    if (grpc::Status status = Authenticate(*context, &token); !status.ok()) return Reject(status);
+    for (const std::string& name : registry_.ListNames()) {
+      if (tokens_ && !tokens_->Allows(*token, name)) continue;
+      try {
+        *response->add_maps() = DescribeMap(*registry_.Get(name));
+      } catch (const Error& error) {
+        Log("ListMaps: skipping map '" + name + "': " + error.what());
+      }
+    }
+    return grpc::Status::OK;
+  }
+
+  grpc::Status GetMap(grpc::ServerContext* context, const api::GetMapRequest* request,
+                      api::MapDescription* response) override {
+    std::optional<std::string> token;
+    if (grpc::Status status = Authenticate(*context, &token); !status.ok()) return Reject(status);
+    if (grpc::Status status = Authorize(token, request->name()); !status.ok()) {
+      return Reject(status);
+    }
+    try {
+      *response = DescribeMap(*registry_.Get(request->name(), request->version()));
+    } catch (const MapNotFoundError& error) {
+      return Reject({grpc::StatusCode::NOT_FOUND, error.what()});
+    } catch (const Error& error) {
+      return Reject({grpc::StatusCode::FAILED_PRECONDITION,
+                     std::string("the map cannot be loaded: ") + error.what()});
+    }
+    return grpc::Status::OK;
+  }
+
+  grpc::Status Track(grpc::ServerContext* context, TrackServerStream* stream) override;
+
+  // Counts a rejected request and passes its status through.
+  grpc::Status Reject(grpc::Status status) {
+    ++counters_.rejected;
+    return status;
+  }
+
+  // Checks the bearer token when tokens are configured; `token` receives it.
+  grpc::Status Authenticate(const grpc::ServerContext& context,
+                            std::optional<std::string>* token) const {
+    if (!tokens_) return grpc::Status::OK;
+    const auto& metadata = context.client_metadata();
+    const auto found = metadata.find("authorization");
+    const std::string prefix = "Bearer ";
+    if (found == metadata.end()) {
+      return {grpc::StatusCode::UNAUTHENTICATED,
+              "this server needs a token: send metadata 'authorization: Bearer TOKEN'"};
+    }
+    const std::string value(found->second.data(), found->second.size());
+    if (value.rfind(prefix, 0) != 0 || !tokens_->Knows(value.substr(prefix.size()))) {
+      return {grpc::StatusCode::UNAUTHENTICATED, "unknown or malformed bearer token"};
+    }
+    *token = value.substr(prefix.size());
+    return grpc::Status::OK;
+  }
+
+  // Checks that the token (if tokens are configured) may use `map_name`.
+  grpc::Status Authorize(const std::optional<std::string>& token,
+                         const std::string& map_name) const {
+    if (!tokens_ || tokens_->Allows(*token, map_name)) return grpc::Status::OK;
+    return {grpc::StatusCode::PERMISSION_DENIED, "this token may not use map '" + map_name + "'"};
+  }
+
+  // Writes a log line.
+  void Log(const std::string& line) const {
+    if (log_) log_(line);
+  }
+
+  const LocalizerServerOptions& options() const { return options_; }
+  MapRegistry& registry() { return registry_; }
+  ServerCounters& counters() { return counters_; }
+  uint64_t NextSessionId() { return ++last_session_id_; }
+
+ private:
+  LocalizerServerOptions options_;
+  LogFunction log_;
+  MapRegistry registry_;
+  std::optional<TokenTable> tokens_;
+  ServerCounters counters_;
+  std::atomic<uint64_t> last_session_id_{0};
+};
+
+namespace {
+
+// The state of one Track call: its reader (the gRPC handler thread), its tracking worker and its
+// writer, joined by bounded queues. Only the writer thread writes to the stream once the session
+// runs; no lock is held across a stream write.
+class TrackStream {
+ public:
+  TrackStream(LocalizerServer::Service& service, grpc::ServerContext* context,
+              TrackServerStream* stream)
+      : service_(service),
+        options_(service.options()),
+        context_(context),
+        stream_(stream),
+        inbound_(static_cast<size_t>(options_.queue_packets)),
+        outbound_(4096),
+        backpressure_threshold_(std::max<size_t>(
+            1, static_cast<size_t>(options_.backpressure_fraction *
+                                   static_cast<double>(options_.queue_packets)))) {}
+
+  // Runs the session to its end and returns its status.
+  grpc::Status Run() {
+    std::optional<std::string> token;
+    if (grpc::Status status = service_.Authenticate(*context_, &token); !status.ok()) {
+      return status;
+    }
+    api::TrackRequest request;
+    if (!stream_->Read(&request)) {
+      return {grpc::StatusCode::CANCELLED, "the stream ended before a SessionStart"};
+    }
+    if (!request.has_start()) {
+      return {grpc::StatusCode::FAILED_PRECONDITION,
+              "the first message of a Track stream must be a SessionStart"};
+    }
+    const api::SessionStart& start = request.start();
+    if (grpc::Status status = service_.Authorize(token, start.map_name()); !status.ok()) {
+      return status;
+    }
+    // Admission.
+    ServerCounters& counters = service_.counters();
+    if (++counters.sessions_active > options_.max_sessions) {
+      --counters.sessions_active;
+      return {grpc::StatusCode::RESOURCE_EXHAUSTED,
+              "the server runs its maximum of " + std::to_string(options_.max_sessions) +
+                  " sessions; retry later or use another server"};
+    }
+    struct ActiveSlot {
+      ServerCounters& counters;
+      ~ActiveSlot() { --counters.sessions_active; }
+    } slot{counters};
+
+    std::shared_ptr<const LoadedMap> map;
+    SessionSettings settings;
+    try {
+      map = service_.registry().Get(start.map_name(), start.map_version());
+      settings = SessionSettingsFromProto(start, options_.tracker);
+      tracker_ = std::make_unique<SessionTracker>(map, settings);
+      decoder_ =
+          std::make_unique<PacketDecoder>(SensorSize{settings.camera.width, settings.camera.height},
+                                          settings.sensor_time_offset_ns);
+    } catch (const MapNotFoundError& error) {
+      return {grpc::StatusCode::NOT_FOUND, error.what()};
+    } catch (const InvalidArgumentError& error) {
+      return {grpc::StatusCode::INVALID_ARGUMENT, error.what()};
+    } catch (const Error& error) {
+      return {grpc::StatusCode::FAILED_PRECONDITION,
+              std::string("map '") + start.map_name() + "' cannot be loaded: " + error.what()};
+    }
+    camera_ = settings.camera;
+    id_ = service_.NextSessionId();
+    ++counters.sessions_started;
+    const auto session_start = Clock::now();
+    service_.Log("session " + std::to_string(id_) + " start: map " + map->name + " version " +
+                 map->version + " (" + std::to_string(map->map.size()) + " points), client '" +
+                 start.client_name() + "' " + context_->peer() + ", camera " +
+                 std::to_string(camera_.width) + "x" + std::to_string(camera_.height) + ", " +
+                 (tracker_->takes_frames() ? "frames" : "events") + ", " +
+                 settings.tracker.VariantName() + " at " +
+                 std::to_string(settings.tracker.step_rate_hz) + " Hz");
+
+    api::TrackResponse started;
+    started.mutable_started()->set_session_id(id_);
+    *started.mutable_started()->mutable_map() = DescribeMap(*map);
+    started.mutable_started()->set_step_rate_hz(settings.tracker.step_rate_hz);
+    started.mutable_started()->set_variant(settings.tracker.VariantName());
+    started.mutable_started()->set_queue_capacity(static_cast<uint32_t>(inbound_.capacity()));
+    if (!stream_->Write(started)) {
+      return {grpc::StatusCode::CANCELLED, "the client went away"};
+    }
+
+    std::thread writer([this] {
+      WriterLoop();
+      writer_done_ = true;
+    });
+    std::thread worker([this] {
+      WorkerLoop();
+      worker_done_ = true;
+    });
+    grpc::Status status = ReadLoop();
+    // Let the worker track what is queued (after an error: nothing more), then let the writer
+    // send what is left; a client that stops reading cannot hold the session forever.
+    if (status.ok()) {
+      inbound_.Close();
+    } else {
+      inbound_.Abort();
+    }
+    WaitOrCancel(worker_done_);
+    worker.join();
+    if (status.ok()) {
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (!worker_status_.ok()) status = worker_status_;
+    }
+    if (status.ok()) {
+      api::TrackResponse end;
+      api::SessionEnd* totals = end.mutable_end();
+      totals->set_packets(decoder_->packets());
+      totals->set_events(events_);
+      totals->set_frames(frames_);
+      totals->set_poses(poses_);
+      totals->set_lost_poses(lost_poses_);
+      totals->set_backpressure_notices(backpressure_notices_);
+      totals->set_duration_s(std::chrono::duration<double>(Clock::now() - session_start).count());
+      // The writer fills in the latency figures.
+      outbound_.Push(OutboundItem{std::move(end), std::nullopt});
+    }
+    outbound_.Close();
+    WaitOrCancel(writer_done_);
+    writer.join();
+    if (status.ok() && write_failed_) {
+      status = grpc::Status(grpc::StatusCode::CANCELLED, "the client went away");
+    }
+    service_.Log(
+        "session " + std::to_string(id_) +
+        " end: " + (status.ok() ? std::string("OK") : status.error_message()) + "; " +
+        std::to_string(decoder_->packets()) + " packets, " + std::to_string(events_) + " events, " +
+        std::to_string(frames_) + " frames, " + std::to_string(poses_) + " poses (" +
+        std::to_string(lost_poses_) + " LOST), latency p50 " +
+        std::to_string(static_cast<int64_t>(Percentile(latencies_us_, 0.5))) + " us p99 " +
+        std::to_string(static_cast<int64_t>(Percentile(latencies_us_, 0.99))) + " us, " +
+        std::to_string(backpressure_notices_) + " backpressure notices, " +
+        std::to_string(std::chrono::duration<double>(Clock::now() - session_start).count()) + " s");
+    return status;
+  }
+
+ private:
+  // Waits until `done` is set; cancels the call when neither the worker nor the writer made
+  // progress for the idle timeout (a client that stopped reading its responses).
+  void WaitOrCancel(const std::atomic<bool>& done) {
+    const auto limit = std::chrono::duration<double>(options_.idle_timeout_s);
+    uint64_t last_progress = progress_.load();
+    auto last_change = Clock::now();
+    while (!done) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(2));
+      const uint64_t progress = progress_.load();
+      if (progress != last_progress) {
+        last_progress = progress;
+        last_change = Clock::now();
+      } else if (Clock::now() - last_change > limit) {
+        context_->TryCancel();
+        last_change = Clock::now();
+      }
+    }
+  }
+
+  // Reads messages until the client half-closes (OK) or something is wrong (its status).
+  grpc::Status ReadLoop() {
+    api::TrackRequest request;
+    EventBuffer events;
+    std::optional<int64_t> last_frame_t_ns;
+    while (stream_->Read(&request)) {
+      const auto received = Clock::now();
+      InboundItem item;
+      item.received = received;
+      try {
+        switch (request.message_case()) {
+          case api::TrackRequest::kStart:
+            return {grpc::StatusCode::FAILED_PRECONDITION,
+                    "a second SessionStart: open a new stream for a new session"};
+          case api::TrackRequest::kEvents:
+            if (tracker_->takes_frames()) {
+              return {grpc::StatusCode::INVALID_ARGUMENT,
+                      "this session tracks frames (options.frames): send Frames, not events"};
+            }
+            decoder_->Decode(request.events(), &item.events);
+            item.t_ns = request.events().end_t_ns();
+            latest_end_t_ns_ = item.t_ns;
+            break;
+          case api::TrackRequest::kFrame:
+            if (!tracker_->takes_frames()) {
+              return {grpc::StatusCode::INVALID_ARGUMENT,
+                      "this session tracks events: set options.frames in SessionStart to send "
+                      "Frames"};
+            }
+            item.gray = FrameFromProto(request.frame(), camera_, last_frame_t_ns);
+            item.t_ns = request.frame().t_ns();
+            last_frame_t_ns = item.t_ns;
+            latest_end_t_ns_ = item.t_ns;
+            break;
+          case api::TrackRequest::kPoseHint: {
+            const int64_t t_ns = request.pose_hint().t_ns();
+            const std::optional<int64_t> last = decoder_->end_t_ns();
+            if (last && t_ns < *last) {
+              return {grpc::StatusCode::INVALID_ARGUMENT,
+                      "PoseHint at " + std::to_string(t_ns) +
+                          " ns lies before the end of the last packet (" + std::to_string(*last) +
+                          " ns)"};
+            }
+            item.reset_world_from_cam =
+                RigidFromProto(request.pose_hint().world_from_cam(), "PoseHint.world_from_cam");
+            item.t_ns = t_ns;
+            break;
+          }
+          default:
+            return {grpc::StatusCode::INVALID_ARGUMENT, "an empty TrackRequest"};
+        }
+      } catch (const InvalidArgumentError& error) {
+        return {grpc::StatusCode::INVALID_ARGUMENT, error.what()};
+      }
+      const PushResult pushed = inbound_.TryPush(std::move(item));
+      if (pushed == PushResult::kFull) {
+        return {grpc::StatusCode::RESOURCE_EXHAUSTED,
+                "the session's queue of " + std::to_string(inbound_.capacity()) +
+                    " packets overflowed: the tracker is slower than the stream; send at real "
+                    "time, lower the step rate or max_points, or wait for Backpressure to clear"};
+      }
+      if (pushed == PushResult::kClosed) break;  // The worker stopped; its status follows.
+      NoteQueueLevel();
+    }
+    if (context_->IsCancelled()) {
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (!worker_status_.ok()) return worker_status_;
+      if (idle_) {
+        return {grpc::StatusCode::CANCELLED,
+                "no message for " + std::to_string(options_.idle_timeout_s) + " s (idle timeout)"};
+      }
+      return {grpc::StatusCode::CANCELLED, "the client cancelled or went away"};
+    }
+    std::lock_guard<std::mutex> lock(mutex_);
+    return worker_status_;
+  }
+
+  // Sends a Backpressure notice when the queue crosses the threshold (again once it fell below
+  // half of it).
+  void NoteQueueLevel() {
+    const size_t queued = inbound_.size();
+    if (queued >= backpressure_threshold_ && !backpressure_armed_) return;
+    if (queued < backpressure_threshold_) {
+      if (queued < backpressure_threshold_ / 2) backpressure_armed_ = true;
+      return;
+    }
+    backpressure_armed_ = false;
+    api::TrackResponse notice;
+    notice.mutable_backpressure()->set_queued_packets(static_cast<uint32_t>(queued));
+    notice.mutable_backpressure()->set_queue_capacity(static_cast<uint32_t>(inbound_.capacity()));
+    notice.mutable_backpressure()->set_behind_ns(latest_end_t_ns_ - tracked_end_t_ns_.load());
+    ++backpressure_notices_;
+    outbound_.PushFront(OutboundItem{std::move(notice), std::nullopt});
+  }
+
+  // Tracks the queued items in order and hands the poses to the writer.
+  void WorkerLoop() {
+    const auto idle_timeout = std::chrono::duration_cast<Clock::duration>(
+        std::chrono::duration<double>(options_.idle_timeout_s));
+    ServerCounters& counters = service_.counters();
+    while (true) {
+      bool timed_out = false;
+      std::optional<InboundItem> item = inbound_.Pop(idle_timeout, &timed_out);
+      if (!item) {
+        if (timed_out) {
+          {
+            std::lock_guard<std::mutex> lock(mutex_);
+            idle_ = true;
+          }
+          context_->TryCancel();
+        }
+        return;
+      }
+      std::vector<tracking::PoseEstimate> estimates;
+      try {
+        if (item->gray) {
+          if (auto estimate = tracker_->AddFrame(item->t_ns, *item->gray)) {
+            estimates.push_back(*estimate);
+          }
+          ++frames_;
+        } else if (item->reset_world_from_cam) {
+          tracker_->Reset(*item->reset_world_from_cam, item->t_ns);
+        } else {
+          estimates = tracker_->AddEvents(item->events);
+          events_ += item->events.size();
+          counters.events += static_cast<int64_t>(item->events.size());
+        }
+      } catch (const std::exception& error) {
+        {
+          std::lock_guard<std::mutex> lock(mutex_);
+          worker_status_ = grpc::Status(grpc::StatusCode::INTERNAL,
+                                        std::string("tracking failed: ") + error.what());
+        }
+        inbound_.Abort();
+        context_->TryCancel();
+        return;
+      }
+      tracked_end_t_ns_ = item->t_ns;
+      ++progress_;
+      for (const tracking::PoseEstimate& estimate : estimates) {
+        OutboundItem out{api::TrackResponse(), item->received};
+        *out.response.mutable_pose() = PoseUpdateFromEstimate(estimate);
+        ++poses_;
+        ++counters.poses;
+        if (estimate.status == tracking::TrackingStatus::kLost) {
+          ++lost_poses_;
+          ++counters.lost_poses;
+        }
+        if (outbound_.Push(std::move(out)) == PushResult::kClosed) return;
+      }
+    }
+  }
+
+  // Writes the outbound messages until the queue is closed and drained, or the client is gone.
+  void WriterLoop() {
+    while (true) {
+      bool timed_out = false;
+      std::optional<OutboundItem> item = outbound_.Pop(std::chrono::seconds(1), &timed_out);
+      if (!item) {
+        if (timed_out) continue;
+        return;
+      }
+      if (item->received) {
+        const double latency_us = MicrosecondsSince(*item->received);
+        item->response.mutable_pose()->set_latency_us(latency_us);
+        latencies_us_.push_back(latency_us);
+      }
+      if (item->response.has_end()) {
+        item->response.mutable_end()->set_latency_p50_us(Percentile(latencies_us_, 0.5));
+        item->response.mutable_end()->set_latency_p99_us(Percentile(latencies_us_, 0.99));
+      }
+      if (!stream_->Write(item->response)) {
+        write_failed_ = true;
+        outbound_.Abort();
+        return;
+      }
+      ++progress_;
+    }
+  }
+
+  LocalizerServer::Service& service_;
+  const LocalizerServerOptions& options_;
+  grpc::ServerContext* context_;
+  TrackServerStream* stream_;
+  uint64_t id_ = 0;
+  Camera camera_;
+  std::unique_ptr<SessionTracker> tracker_;
+  std::unique_ptr<PacketDecoder> decoder_;
+  BoundedQueue<InboundItem> inbound_;
+  BoundedQueue<OutboundItem> outbound_;
+
+  // Reader state.
+  size_t backpressure_threshold_;
+  bool backpressure_armed_ = true;
+  int64_t latest_end_t_ns_ = 0;
+  uint64_t backpressure_notices_ = 0;
+
+  // Worker state (read by the reader after the worker joined, except tracked_end_t_ns_).
+  std::atomic<int64_t> tracked_end_t_ns_{0};
+  uint64_t events_ = 0;
+  uint64_t frames_ = 0;
+  uint64_t poses_ = 0;
+  uint64_t lost_poses_ = 0;
+
+  // Writer state (read after the writer joined).
+  std::vector<double> latencies_us_;
+  std::atomic<bool> write_failed_{false};
+
+  // Shared between threads.
+  std::atomic<bool> worker_done_{false};
+  std::atomic<bool> writer_done_{false};
+  std::atomic<uint64_t> progress_{0};
+  std::mutex mutex_;
+  grpc::Status worker_status_;
+  bool idle_ = false;
+};
+
+}  // namespace
+
+grpc::Status LocalizerServer::Service::Track(grpc::ServerContext* context,
+                                             TrackServerStream* stream) {
+  TrackStream session(*this, context, stream);
+  grpc::Status status = session.Run();
+  if (!status.ok()) ++counters_.rejected;
+  return status;
+}
+
+// ---------------------------------------------------------------------------------------------
+// The server.
+
+LocalizerServer::LocalizerServer(const LocalizerServerOptions& options, LogFunction log) {
+  options.Check();
+  service_ = std::make_unique<Service>(options, std::move(log));
+  grpc::EnableDefaultHealthCheckService(true);
+  grpc::reflection::InitProtoReflectionServerBuilderPlugin();
+  grpc::ServerBuilder builder;
+  builder.AddListeningPort(options.listen_address, grpc::InsecureServerCredentials(), &port_);
+  builder.RegisterService(service_.get());
+  builder.SetMaxReceiveMessageSize(options.max_message_bytes);
+  grpc::ResourceQuota quota("evloc-localizer");
+  quota.SetMaxThreads(options.threads == 0 ? options.max_sessions + 8 : options.threads);
+  builder.SetResourceQuota(quota);
+  server_ = builder.BuildAndStart();
+  if (!server_ || port_ == 0) {
+    throw IoError("cannot listen on '" + options.listen_address +
+                  "' (address in use, or not a host:port this machine has)");
+  }
+  if (auto* health = server_->GetHealthCheckService()) health->SetServingStatus(true);
+}
+
+LocalizerServer::~LocalizerServer() { Shutdown(); }
+
+void LocalizerServer::Shutdown() {
+  if (shut_down_.exchange(true)) return;
+  if (auto* health = server_->GetHealthCheckService()) health->SetServingStatus(false);
+  server_->Shutdown(std::chrono::system_clock::now() + std::chrono::seconds(1));
+  server_->Wait();
+}
+
+void LocalizerServer::Wait() { server_->Wait(); }
+
+const ServerCounters& LocalizerServer::counters() const { return service_->counters(); }
+
+MapRegistry& LocalizerServer::registry() { return service_->registry(); }
+
+}  // namespace evloc::service

@@ -1,0 +1,373 @@
+#include "localizer/service/localizer_server.h"
+
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <fstream>
+#include <future>
+#include <thread>
+
+#include <grpcpp/generic/generic_stub.h>
+#include <grpcpp/grpcpp.h>
+
+#include "core/common/error.h"
+#include "core/events/event_reader.h"
+#include "localizer/offline/offline_tracking.h"
+#include "localizer/service/session.h"
+#include "localizer/service/testing/service_fixture.h"
+#include "localizer/tracking/testing/synthetic_scene.h"
+
+namespace evloc::service {
+namespace {
+
+using testing::TestSessionStart;
+
+// Serves an in-memory event buffer through the EventReader interface.
+class BufferEventReader : public EventReader {
+ public:
+  explicit BufferEventReader(const EventBuffer& events) : events_(events) {}
+  size_t Read(size_t max_events, EventBuffer* out) override {
+    const size_t count = std::min(max_events, events_.size() - next_);
+    for (size_t i = 0; i < count; ++i) out->push_back(events_[next_ + i]);
+    next_ += count;
+    return count;
+  }
+  std::optional<SensorSize> sensor_size() const override { return std::nullopt; }
+
+ private:
+  const EventBuffer& events_;
+  size_t next_ = 0;
+};
+
+// What a Track call returned.
+struct TrackOutcome {
+  grpc::Status status;
+  std::vector<api::TrackResponse> responses;
+  // Requests the stream accepted before it closed.
+  size_t written = 0;
+
+  std::vector<api::PoseUpdate> Poses() const {
+    std::vector<api::PoseUpdate> poses;
+    for (const auto& response : responses) {
+      if (response.has_pose()) poses.push_back(response.pose());
+    }
+    return poses;
+  }
+  int Count(api::TrackResponse::MessageCase which) const {
+    int count = 0;
+    for (const auto& response : responses) count += response.message_case() == which;
+    return count;
+  }
+};
+
+// Sends `requests`, half-closes, and reads every response (on a second thread, as a real
+// client must, so that the server never waits for its writes).
+TrackOutcome RunTrack(api::Localizer::Stub& stub, const std::vector<api::TrackRequest>& requests,
+                      const std::string& token = "") {
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(60));
+  if (!token.empty()) context.AddMetadata("authorization", "Bearer " + token);
+  auto stream = stub.Track(&context);
+  TrackOutcome outcome;
+  std::thread reader([&] {
+    api::TrackResponse response;
+    while (stream->Read(&response)) outcome.responses.push_back(response);
+  });
+  for (const auto& request : requests) {
+    if (!stream->Write(request)) break;
+    ++outcome.written;
+  }
+  stream->WritesDone();
+  reader.join();
+  outcome.status = stream->Finish();
+  return outcome;
+}
+
+// Waits (at most 10 s) until `condition` holds.
+bool Eventually(const std::function<bool()>& condition) {
+  for (int i = 0; i < 1000; ++i) {
+    if (condition()) return true;
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  return condition();
+}
+
+class LocalizerServerTest : public ::testing::Test {
+ protected:
+  void StartServer(const std::function<void(LocalizerServerOptions&)>& adjust = {}) {
+    testing::WriteTestMap(folder_.path(), testing::kTestMapName, testing::TestMap());
+    LocalizerServerOptions options = testing::TestServerOptions(folder_.path());
+    if (adjust) adjust(options);
+    server_ = std::make_unique<LocalizerServer>(options, [this](const std::string& line) {
+      std::lock_guard<std::mutex> lock(log_mutex_);
+      log_.push_back(line);
+    });
+    stub_ = testing::ConnectStub(server_->port());
+  }
+
+  std::vector<std::string> LogLines() {
+    std::lock_guard<std::mutex> lock(log_mutex_);
+    return log_;
+  }
+
+  // A short valid session: start and 50 ms of events in 1 ms packets.
+  std::vector<api::TrackRequest> ShortSession() {
+    std::vector<api::TrackRequest> requests{TestSessionStart()};
+    static const EventBuffer events = testing::TestEvents(70'000'000);
+    for (auto& packet : testing::PackedPackets(events, 1'000'000)) requests.push_back(packet);
+    return requests;
+  }
+
+  // Declared before the server, which logs until it is destroyed.
+  testing::TemporaryFolder folder_;
+  std::mutex log_mutex_;
+  std::vector<std::string> log_;
+  std::unique_ptr<LocalizerServer> server_;
+  std::unique_ptr<api::Localizer::Stub> stub_;
+};
+
+TEST_F(LocalizerServerTest, ListsAndDescribesMaps) {
+  StartServer();
+  grpc::ClientContext list_context;
+  api::ListMapsResponse list;
+  ASSERT_TRUE(stub_->ListMaps(&list_context, {}, &list).ok());
+  ASSERT_EQ(list.maps_size(), 1);
+  const Map map = testing::TestMap();
+  EXPECT_EQ(list.maps(0).name(), testing::kTestMapName);
+  EXPECT_EQ(list.maps(0).num_points(), map.size());
+  EXPECT_EQ(list.maps(0).version(), MapVersionString(ComputeMapContentChecksum(map)));
+  EXPECT_GT(list.maps(0).bounding_box_max().z(), list.maps(0).bounding_box_min().z());
+
+  grpc::ClientContext get_context;
+  api::GetMapRequest request;
+  request.set_name("nowhere");
+  api::MapDescription description;
+  EXPECT_EQ(stub_->GetMap(&get_context, request, &description).error_code(),
+            grpc::StatusCode::NOT_FOUND);
+}
+
+TEST_F(LocalizerServerTest, PosesEqualOfflineTrackingOfTheSameEvents) {
+  // The client sends as fast as it can: a queue deep enough for the whole stream.
+  StartServer([](LocalizerServerOptions& options) { options.queue_packets = 1024; });
+  const EventBuffer events = testing::TestEvents(300'000'000);
+  std::vector<api::TrackRequest> requests{TestSessionStart()};
+  for (auto& packet : testing::PackedPackets(events, 1'000'000)) requests.push_back(packet);
+  const TrackOutcome outcome = RunTrack(*stub_, requests);
+  ASSERT_TRUE(outcome.status.ok()) << outcome.status.error_message();
+  ASSERT_GE(outcome.responses.size(), 2u);
+  EXPECT_TRUE(outcome.responses.front().has_started());
+  ASSERT_TRUE(outcome.responses.back().has_end());
+  const api::SessionEnd& end = outcome.responses.back().end();
+  EXPECT_EQ(end.events(), events.size());
+  EXPECT_EQ(end.packets(), requests.size() - 1);
+
+  tracking::OfflineTrackingOptions options;
+  options.tracker.step_rate_hz = 200;
+  BufferEventReader reader(events);
+  const Map map = testing::TestMap();
+  const VisibilityIndex visibility(map);
+  const auto offline = tracking::TrackEventStream(
+      reader, map, &visibility, testing::TestCamera(),
+      tracking::testing::SmoothMotion(testing::kInitialTimeNs), testing::kInitialTimeNs, options);
+
+  const auto poses = outcome.Poses();
+  EXPECT_EQ(end.poses(), poses.size());
+  ASSERT_EQ(poses.size(), offline.steps.size());
+  ASSERT_GE(poses.size(), 50u);
+  for (size_t i = 0; i < poses.size(); ++i) {
+    const tracking::PoseEstimate& expected = offline.steps[i];
+    EXPECT_EQ(poses[i].t_ns(), expected.t_ns);
+    const Rigid3d pose = RigidFromProto(poses[i].world_from_cam(), "pose");
+    EXPECT_EQ(pose.translation, expected.world_from_cam.translation) << "step " << i;
+    EXPECT_EQ(poses[i].world_from_cam().rotation().w(), expected.world_from_cam.rotation.w());
+    EXPECT_EQ(poses[i].status(), api::TRACKING);
+    ASSERT_EQ(poses[i].covariance_size(), 36);
+    EXPECT_EQ(poses[i].covariance(7), expected.covariance(1, 1));
+    EXPECT_GT(poses[i].latency_us(), 0);
+    EXPECT_GT(poses[i].quality().points_used(), 50u);
+  }
+  // Tracking itself is right, too.
+  const Rigid3d truth = tracking::testing::SmoothMotion(poses.back().t_ns());
+  EXPECT_LT((RigidFromProto(poses.back().world_from_cam(), "pose").translation - truth.translation)
+                .norm(),
+            0.02);
+  EXPECT_TRUE(Eventually([&] { return server_->counters().sessions_active == 0; }));
+  const auto lines = LogLines();
+  ASSERT_EQ(lines.size(), 2u);
+  EXPECT_NE(lines[0].find("session 1 start"), std::string::npos);
+  EXPECT_NE(lines[1].find("session 1 end: OK"), std::string::npos);
+}
+
+TEST_F(LocalizerServerTest, FirstMessageMustBeSessionStart) {
+  StartServer();
+  auto requests = ShortSession();
+  requests.erase(requests.begin());
+  EXPECT_EQ(RunTrack(*stub_, requests).status.error_code(), grpc::StatusCode::FAILED_PRECONDITION);
+}
+
+TEST_F(LocalizerServerTest, UnknownMapIsNotFound) {
+  StartServer();
+  auto requests = ShortSession();
+  requests[0].mutable_start()->set_map_name("atlantis");
+  EXPECT_EQ(RunTrack(*stub_, requests).status.error_code(), grpc::StatusCode::NOT_FOUND);
+  requests[0].mutable_start()->set_map_name(testing::kTestMapName);
+  requests[0].mutable_start()->set_map_version("deadbeef");
+  EXPECT_EQ(RunTrack(*stub_, requests).status.error_code(), grpc::StatusCode::NOT_FOUND);
+}
+
+TEST_F(LocalizerServerTest, InvalidCameraIsInvalidArgument) {
+  StartServer();
+  auto requests = ShortSession();
+  requests[0].mutable_start()->mutable_camera()->set_fy(0);
+  const TrackOutcome outcome = RunTrack(*stub_, requests);
+  EXPECT_EQ(outcome.status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_NE(outcome.status.error_message().find("camera"), std::string::npos);
+}
+
+TEST_F(LocalizerServerTest, EventOutsideTheSensorIsInvalidArgument) {
+  StartServer();
+  auto requests = ShortSession();
+  // The test camera is 320x240; shrink the declared sensor so that events fall outside.
+  requests[0].mutable_start()->mutable_camera()->set_width(100);
+  requests[0].mutable_start()->mutable_camera()->set_cx(49.5);
+  const TrackOutcome outcome = RunTrack(*stub_, requests);
+  EXPECT_EQ(outcome.status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_NE(outcome.status.error_message().find("outside"), std::string::npos);
+}
+
+TEST_F(LocalizerServerTest, TimeGoingBackIsInvalidArgument) {
+  StartServer();
+  auto requests = ShortSession();
+  std::swap(requests[10], requests[20]);
+  EXPECT_EQ(RunTrack(*stub_, requests).status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+}
+
+TEST_F(LocalizerServerTest, MalformedPacketIsInvalidArgument) {
+  StartServer();
+  auto requests = ShortSession();
+  requests[5].mutable_events()->mutable_data()->append("xyz");
+  const TrackOutcome outcome = RunTrack(*stub_, requests);
+  EXPECT_EQ(outcome.status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_NE(outcome.status.error_message().find("event packet 4"), std::string::npos);
+}
+
+TEST_F(LocalizerServerTest, OversizedPacketIsResourceExhausted) {
+  StartServer([](LocalizerServerOptions& options) { options.max_message_bytes = 64 << 10; });
+  auto requests = ShortSession();
+  requests[3].mutable_events()->mutable_data()->append(std::string(128 << 10, '\0'));
+  EXPECT_EQ(RunTrack(*stub_, requests).status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
+}
+
+TEST_F(LocalizerServerTest, TooManySessionsAreRefusedWhileOthersKeepTracking) {
+  StartServer([](LocalizerServerOptions& options) { options.max_sessions = 1; });
+  const auto requests = ShortSession();
+  grpc::ClientContext context;
+  auto first = stub_->Track(&context);
+  ASSERT_TRUE(first->Write(requests[0]));
+  api::TrackResponse response;
+  ASSERT_TRUE(first->Read(&response));
+  ASSERT_TRUE(response.has_started());
+
+  EXPECT_EQ(RunTrack(*stub_, requests).status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
+
+  for (size_t i = 1; i < requests.size(); ++i) ASSERT_TRUE(first->Write(requests[i]));
+  first->WritesDone();
+  int poses = 0;
+  while (first->Read(&response)) poses += response.has_pose();
+  EXPECT_TRUE(first->Finish().ok());
+  EXPECT_GT(poses, 5);
+}
+
+TEST_F(LocalizerServerTest, VanishedClientIsCleanedUp) {
+  StartServer();
+  const auto requests = ShortSession();
+  {
+    grpc::ClientContext context;
+    auto stream = stub_->Track(&context);
+    for (size_t i = 0; i < 10; ++i) ASSERT_TRUE(stream->Write(requests[i]));
+    api::TrackResponse response;
+    ASSERT_TRUE(stream->Read(&response));
+    ASSERT_TRUE(Eventually([&] { return server_->counters().sessions_active == 1; }));
+    context.TryCancel();
+  }
+  EXPECT_TRUE(Eventually([&] { return server_->counters().sessions_active == 0; }));
+  EXPECT_TRUE(RunTrack(*stub_, requests).status.ok());
+}
+
+TEST_F(LocalizerServerTest, IdleSessionIsCancelled) {
+  StartServer([](LocalizerServerOptions& options) { options.idle_timeout_s = 0.2; });
+  grpc::ClientContext context;
+  auto stream = stub_->Track(&context);
+  ASSERT_TRUE(stream->Write(TestSessionStart()));
+  api::TrackResponse response;
+  ASSERT_TRUE(stream->Read(&response));
+  EXPECT_FALSE(stream->Read(&response));  // The server ends the idle stream by itself.
+  EXPECT_FALSE(stream->Finish().ok());
+  EXPECT_TRUE(Eventually([&] { return server_->counters().sessions_active == 0; }));
+  EXPECT_TRUE(Eventually([&] {
+    const auto lines = LogLines();
+    return !lines.empty() && lines.back().find("idle timeout") != std::string::npos;
+  }));
+}
+
+TEST_F(LocalizerServerTest, OverflowingSessionIsToldThenStopped) {
+  StartServer([](LocalizerServerOptions& options) {
+    options.queue_packets = 4;
+    options.backpressure_fraction = 0.5;
+  });
+  std::vector<api::TrackRequest> requests{TestSessionStart()};
+  requests[0].mutable_start()->mutable_options()->set_step_rate_hz(2000);
+  const EventBuffer events = testing::TestEvents(300'000'000);
+  for (auto& packet : testing::PackedPackets(events, 50'000)) requests.push_back(packet);
+  const TrackOutcome outcome = RunTrack(*stub_, requests);
+  EXPECT_EQ(outcome.status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
+  EXPECT_GE(outcome.Count(api::TrackResponse::kBackpressure), 1);
+  EXPECT_LT(outcome.written, requests.size());
+}
+
+TEST_F(LocalizerServerTest, ServesHealthChecks) {
+  StartServer();
+  auto channel = grpc::CreateChannel("127.0.0.1:" + std::to_string(server_->port()),
+                                     grpc::InsecureChannelCredentials());
+  grpc::GenericStub generic(channel);
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
+  const grpc::Slice empty_request("", 0);
+  const grpc::ByteBuffer request(&empty_request, 1);  // HealthCheckRequest{service = ""}
+  grpc::ByteBuffer response;
+  std::promise<grpc::Status> done;
+  generic.UnaryCall(&context, "/grpc.health.v1.Health/Check", grpc::StubOptions(), &request,
+                    &response, [&done](grpc::Status status) { done.set_value(status); });
+  ASSERT_TRUE(done.get_future().get().ok());
+  std::vector<grpc::Slice> slices;
+  ASSERT_TRUE(response.Dump(&slices).ok());
+  std::string bytes;
+  for (const auto& slice : slices)
+    bytes.append(reinterpret_cast<const char*>(slice.begin()), slice.size());
+  EXPECT_EQ(bytes, std::string("\x08\x01", 2));  // status: SERVING
+}
+
+TEST_F(LocalizerServerTest, BearerTokensGuardMaps) {
+  const auto tokens = folder_.path() / "tokens.txt";
+  {
+    std::ofstream file(tokens);
+    file << "# tokens\nalpha\nbeta other_map,third_map  # limited\n";
+  }
+  StartServer([&](LocalizerServerOptions& options) { options.auth_tokens_file = tokens; });
+  const auto requests = ShortSession();
+  EXPECT_EQ(RunTrack(*stub_, requests).status.error_code(), grpc::StatusCode::UNAUTHENTICATED);
+  EXPECT_EQ(RunTrack(*stub_, requests, "gamma").status.error_code(),
+            grpc::StatusCode::UNAUTHENTICATED);
+  EXPECT_EQ(RunTrack(*stub_, requests, "beta").status.error_code(),
+            grpc::StatusCode::PERMISSION_DENIED);
+  EXPECT_TRUE(RunTrack(*stub_, requests, "alpha").status.ok());
+  grpc::ClientContext context;
+  context.AddMetadata("authorization", "Bearer beta");
+  api::ListMapsResponse list;
+  ASSERT_TRUE(stub_->ListMaps(&context, {}, &list).ok());
+  EXPECT_EQ(list.maps_size(), 0);
+  EXPECT_GE(server_->counters().rejected, 3);
+}
+
+}  // namespace
+}  // namespace evloc::service

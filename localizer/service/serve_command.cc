@@ -1,0 +1,93 @@
+#include "localizer/service/serve_command.h"
+
+#include "core/common/cli.h"
+#include "core/common/error.h"
+
+namespace evloc::service {
+
+std::string ServeUsage() {
+  return R"(Usage: evloc-localizer serve --maps DIR [options]
+
+Serves map-based tracking of event cameras over gRPC (proto/evloc/localizer.proto, docs/api.md),
+with grpc.health.v1 health checking and server reflection.
+
+Options:
+  --maps DIR                 folder with one subdirectory per map, NAME/map.evmap (required)
+  --listen HOST:PORT         address to listen on (default 127.0.0.1:50051; port 0: any free)
+  --max-sessions N           most Track sessions at once (default 8)
+  --threads N                most gRPC handler threads, >= max-sessions + 2 (default 0:
+                             max-sessions + 8)
+  --max-message-bytes N      largest request message, bytes (default 4194304)
+  --idle-timeout SECONDS     cancel a session that sends nothing this long (default 30)
+  --queue-packets N          packets a session may have waiting (default 256)
+  --backpressure-fraction F  queue fill that triggers a Backpressure notice (default 0.5)
+  --auth-tokens FILE         bearer tokens, one per line: TOKEN [map1,map2]
+  --rate HZ                  default tracking steps per second (default 300)
+  --variant NAME             default variant: EVT, EVT-PR, EVT-OH or EVT-- (default EVT)
+  --max-points N             default map points per step (default 2500)
+  --tau SECONDS              default time-surface decay time (default 0.03)
+  --help                     print this help
+
+Stop with Ctrl-C (SIGINT) or SIGTERM. Exit codes: 0 stopped, 1 failure, 2 bad command line.
+)";
+}
+
+ServeCommand ParseServeCommandLine(const std::vector<std::string>& arguments) {
+  ServeCommand command;
+  size_t first = 0;
+  if (!arguments.empty() && arguments[0] == "serve") first = 1;
+  for (size_t i = first; i < arguments.size(); ++i) {
+    const std::string& flag = arguments[i];
+    if (flag == "--help" || flag == "-h") {
+      command.help = true;
+      continue;
+    }
+    if (first == 0) {
+      throw InvalidArgumentError("the first argument must be the command 'serve' (see --help)");
+    }
+    if (i + 1 >= arguments.size()) {
+      throw InvalidArgumentError(flag.rfind("--", 0) == 0 ? flag + " needs a value"
+                                                          : "unexpected argument '" + flag + "'");
+    }
+    const std::string& value = arguments[++i];
+    LocalizerServerOptions& server = command.server;
+    if (flag == "--maps") {
+      server.maps_dir = value;
+    } else if (flag == "--listen") {
+      server.listen_address = value;
+    } else if (flag == "--max-sessions") {
+      server.max_sessions = static_cast<int>(ParseIntegerFlag(flag, value));
+    } else if (flag == "--threads") {
+      server.threads = static_cast<int>(ParseIntegerFlag(flag, value));
+    } else if (flag == "--max-message-bytes") {
+      server.max_message_bytes = static_cast<int>(ParseIntegerFlag(flag, value));
+    } else if (flag == "--idle-timeout") {
+      server.idle_timeout_s = ParseDoubleFlag(flag, value);
+    } else if (flag == "--queue-packets") {
+      server.queue_packets = static_cast<int>(ParseIntegerFlag(flag, value));
+    } else if (flag == "--backpressure-fraction") {
+      server.backpressure_fraction = ParseDoubleFlag(flag, value);
+    } else if (flag == "--auth-tokens") {
+      server.auth_tokens_file = value;
+    } else if (flag == "--rate") {
+      server.tracker.step_rate_hz = ParseDoubleFlag(flag, value);
+    } else if (flag == "--variant") {
+      server.tracker.SetVariant(value);
+    } else if (flag == "--max-points") {
+      server.tracker.max_points = static_cast<int>(ParseIntegerFlag(flag, value));
+    } else if (flag == "--tau") {
+      server.tracker.decay_time_s = ParseDoubleFlag(flag, value);
+    } else {
+      throw InvalidArgumentError("unknown flag '" + flag + "' (see --help)");
+    }
+  }
+  if (command.help) return command;
+  if (first == 0) throw InvalidArgumentError("missing the command 'serve' (see --help)");
+  if (command.server.maps_dir.empty()) {
+    throw InvalidArgumentError("--maps is required: a folder with one subdirectory per map");
+  }
+  command.server.Check();
+  return command;
+}
+
+}  // namespace evloc::service

@@ -1,0 +1,76 @@
+#include "localizer/service/serve_command.h"
+
+#include <gtest/gtest.h>
+
+#include "core/common/error.h"
+#include "localizer/service/testing/service_fixture.h"
+
+namespace evloc::service {
+namespace {
+
+TEST(ServeCommand, EveryFlagReachesItsOption) {
+  testing::TemporaryFolder folder;
+  const ServeCommand command = ParseServeCommandLine({"serve",
+                                                      "--maps",
+                                                      folder.path().string(),
+                                                      "--listen",
+                                                      "127.0.0.1:0",
+                                                      "--max-sessions",
+                                                      "3",
+                                                      "--threads",
+                                                      "9",
+                                                      "--max-message-bytes",
+                                                      "65536",
+                                                      "--idle-timeout",
+                                                      "2.5",
+                                                      "--queue-packets",
+                                                      "16",
+                                                      "--backpressure-fraction",
+                                                      "0.25",
+                                                      "--rate",
+                                                      "250",
+                                                      "--variant",
+                                                      "EVT-PR",
+                                                      "--max-points",
+                                                      "1000",
+                                                      "--tau",
+                                                      "0.02"});
+  const LocalizerServerOptions& server = command.server;
+  EXPECT_EQ(server.maps_dir, folder.path());
+  EXPECT_EQ(server.listen_address, "127.0.0.1:0");
+  EXPECT_EQ(server.max_sessions, 3);
+  EXPECT_EQ(server.threads, 9);
+  EXPECT_EQ(server.max_message_bytes, 65536);
+  EXPECT_EQ(server.idle_timeout_s, 2.5);
+  EXPECT_EQ(server.queue_packets, 16);
+  EXPECT_EQ(server.backpressure_fraction, 0.25);
+  EXPECT_EQ(server.tracker.step_rate_hz, 250);
+  EXPECT_EQ(server.tracker.VariantName(), "EVT-PR");
+  EXPECT_EQ(server.tracker.max_points, 1000);
+  EXPECT_EQ(server.tracker.decay_time_s, 0.02);
+  EXPECT_NE(server.Describe().find("max-sessions: 3"), std::string::npos);
+}
+
+TEST(ServeCommand, BadCommandLinesAreRejectedWithTheFlag) {
+  testing::TemporaryFolder folder;
+  const std::string maps = folder.path().string();
+  EXPECT_TRUE(ParseServeCommandLine({"--help"}).help);
+  EXPECT_THROW(ParseServeCommandLine({}), InvalidArgumentError);
+  EXPECT_THROW(ParseServeCommandLine({"serve"}), InvalidArgumentError);
+  EXPECT_THROW(ParseServeCommandLine({"serve", "--maps", maps, "--bogus", "1"}),
+               InvalidArgumentError);
+  EXPECT_THROW(ParseServeCommandLine({"serve", "--maps", maps, "--max-sessions", "0"}),
+               InvalidArgumentError);
+  EXPECT_THROW(ParseServeCommandLine({"serve", "--maps", maps, "--threads", "3"}),
+               InvalidArgumentError);
+  EXPECT_THROW(ParseServeCommandLine({"serve", "--maps", maps + "/missing"}), InvalidArgumentError);
+  try {
+    ParseServeCommandLine({"serve", "--maps", maps, "--idle-timeout", "soon"});
+    FAIL() << "expected an error";
+  } catch (const InvalidArgumentError& error) {
+    EXPECT_NE(std::string(error.what()).find("--idle-timeout"), std::string::npos);
+  }
+}
+
+}  // namespace
+}  // namespace evloc::service

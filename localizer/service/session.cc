@@ -1,0 +1,365 @@
+#include "localizer/service/session.h"
+
+#include <cmath>
+#include <cstring>
+#include <string>
+
+#include "core/common/error.h"
+
+namespace evloc::service {
+namespace {
+
+bool AllFinite(std::initializer_list<double> values) {
+  for (double value : values) {
+    if (!std::isfinite(value)) return false;
+  }
+  return true;
+}
+
+std::string PacketName(uint64_t index) { return "event packet " + std::to_string(index); }
+
+}  // namespace
+
+std::string EncodePackedEvents(const EventBuffer& events, size_t begin, size_t end,
+                               int64_t time_base_ns) {
+  std::string data(kPackedEventBytes * (end - begin), '\0');
+  auto* out = reinterpret_cast<uint8_t*>(data.data());
+  for (size_t i = begin; i < end; ++i, out += kPackedEventBytes) {
+    const int64_t offset_ns = events.t_ns[i] - time_base_ns;
+    if (offset_ns < 0 || offset_ns > 0x7fffffff) {
+      throw InvalidArgumentError("EncodePackedEvents: event " + std::to_string(i) +
+                                 " lies outside [time base, time base + 2^31 ns)");
+    }
+    const uint32_t word =
+        static_cast<uint32_t>(offset_ns) | (events.polarity[i] > 0 ? 0x80000000u : 0u);
+    out[0] = static_cast<uint8_t>(word);
+    out[1] = static_cast<uint8_t>(word >> 8);
+    out[2] = static_cast<uint8_t>(word >> 16);
+    out[3] = static_cast<uint8_t>(word >> 24);
+    out[4] = static_cast<uint8_t>(events.x[i]);
+    out[5] = static_cast<uint8_t>(events.x[i] >> 8);
+    out[6] = static_cast<uint8_t>(events.y[i]);
+    out[7] = static_cast<uint8_t>(events.y[i] >> 8);
+  }
+  return data;
+}
+
+Camera CameraFromProto(const map_format::Camera& camera) {
+  Camera result;
+  switch (camera.model()) {
+    case map_format::CAMERA_MODEL_PINHOLE:
+      result.model = CameraModel::kPinhole;
+      break;
+    case map_format::CAMERA_MODEL_RADIAL_TANGENTIAL:
+      result.model = CameraModel::kRadialTangential;
+      break;
+    case map_format::CAMERA_MODEL_EQUIDISTANT:
+      result.model = CameraModel::kEquidistant;
+      break;
+    default:
+      throw InvalidArgumentError(
+          "SessionStart.camera.model is not set (PINHOLE, "
+          "RADIAL_TANGENTIAL or EQUIDISTANT)");
+  }
+  if (camera.width() == 0 || camera.height() == 0 || camera.width() > 65535 ||
+      camera.height() > 65535) {
+    throw InvalidArgumentError("SessionStart.camera: width and height must be 1..65535, got " +
+                               std::to_string(camera.width()) + "x" +
+                               std::to_string(camera.height()));
+  }
+  result.width = static_cast<int>(camera.width());
+  result.height = static_cast<int>(camera.height());
+  result.fx = camera.fx();
+  result.fy = camera.fy();
+  result.cx = camera.cx();
+  result.cy = camera.cy();
+  result.distortion.assign(camera.distortion().begin(), camera.distortion().end());
+  // Radial-tangential with 4 coefficients (k1 k2 p1 p2, as many calibration tools write) gets
+  // k3 = 0.
+  if (result.model == CameraModel::kRadialTangential && result.distortion.size() == 4) {
+    result.distortion.push_back(0.0);
+  }
+  try {
+    result.Check();
+  } catch (const InvalidArgumentError& error) {
+    throw InvalidArgumentError(std::string("SessionStart.camera: ") + error.what());
+  }
+  return result;
+}
+
+map_format::Camera CameraToProto(const Camera& camera) {
+  map_format::Camera result;
+  switch (camera.model) {
+    case CameraModel::kPinhole:
+      result.set_model(map_format::CAMERA_MODEL_PINHOLE);
+      break;
+    case CameraModel::kRadialTangential:
+      result.set_model(map_format::CAMERA_MODEL_RADIAL_TANGENTIAL);
+      break;
+    case CameraModel::kEquidistant:
+      result.set_model(map_format::CAMERA_MODEL_EQUIDISTANT);
+      break;
+  }
+  result.set_width(static_cast<uint32_t>(camera.width));
+  result.set_height(static_cast<uint32_t>(camera.height));
+  result.set_fx(camera.fx);
+  result.set_fy(camera.fy);
+  result.set_cx(camera.cx);
+  result.set_cy(camera.cy);
+  for (double value : camera.distortion) result.add_distortion(value);
+  return result;
+}
+
+Rigid3d RigidFromProto(const map_format::Rigid3& pose, const char* what) {
+  const auto& q = pose.rotation();
+  const auto& t = pose.translation();
+  if (!AllFinite({q.w(), q.x(), q.y(), q.z(), t.x(), t.y(), t.z()})) {
+    throw InvalidArgumentError(std::string(what) + ": the pose has a non-finite value");
+  }
+  const Eigen::Quaterniond rotation(q.w(), q.x(), q.y(), q.z());
+  if (std::abs(rotation.norm() - 1.0) > 1e-3) {
+    throw InvalidArgumentError(std::string(what) +
+                               ": the rotation must be a unit quaternion (norm " +
+                               std::to_string(rotation.norm()) + ")");
+  }
+  return Rigid3d(rotation.normalized(), Eigen::Vector3d(t.x(), t.y(), t.z()));
+}
+
+map_format::Rigid3 RigidToProto(const Rigid3d& pose) {
+  map_format::Rigid3 result;
+  result.mutable_rotation()->set_w(pose.rotation.w());
+  result.mutable_rotation()->set_x(pose.rotation.x());
+  result.mutable_rotation()->set_y(pose.rotation.y());
+  result.mutable_rotation()->set_z(pose.rotation.z());
+  result.mutable_translation()->set_x(pose.translation.x());
+  result.mutable_translation()->set_y(pose.translation.y());
+  result.mutable_translation()->set_z(pose.translation.z());
+  return result;
+}
+
+api::MapDescription DescribeMap(const LoadedMap& map) {
+  api::MapDescription description;
+  description.set_name(map.name);
+  description.set_version(map.version);
+  description.set_num_points(map.info.num_points);
+  description.set_num_keyframes(map.info.num_keyframes);
+  auto* low = description.mutable_bounding_box_min();
+  low->set_x(map.info.bounding_box_min.x());
+  low->set_y(map.info.bounding_box_min.y());
+  low->set_z(map.info.bounding_box_min.z());
+  auto* high = description.mutable_bounding_box_max();
+  high->set_x(map.info.bounding_box_max.x());
+  high->set_y(map.info.bounding_box_max.y());
+  high->set_z(map.info.bounding_box_max.z());
+  description.set_content_crc32c(map.content_crc32c);
+  description.set_file_bytes(map.file_bytes);
+  return description;
+}
+
+api::PoseUpdate PoseUpdateFromEstimate(const tracking::PoseEstimate& estimate) {
+  api::PoseUpdate update;
+  update.set_t_ns(estimate.t_ns);
+  *update.mutable_world_from_cam() = RigidToProto(estimate.world_from_cam);
+  for (int row = 0; row < 6; ++row) {
+    for (int col = 0; col < 6; ++col) update.add_covariance(estimate.covariance(row, col));
+  }
+  update.set_status(estimate.status == tracking::TrackingStatus::kTracking ? api::TRACKING
+                                                                           : api::LOST);
+  auto* quality = update.mutable_quality();
+  quality->set_on_edge_fraction(estimate.quality.on_edge_fraction);
+  quality->set_mean_residual(estimate.quality.mean_residual);
+  quality->set_points_used(static_cast<uint32_t>(estimate.quality.points_used));
+  quality->set_points_selected(static_cast<uint32_t>(estimate.quality.points_selected));
+  quality->set_iterations(static_cast<uint32_t>(estimate.quality.iterations));
+  quality->set_recovery_attempts(static_cast<uint32_t>(estimate.quality.recovery_attempts));
+  update.set_step_ms(estimate.timings.total_ms);
+  return update;
+}
+
+cv::Mat FrameFromProto(const api::Frame& frame, const Camera& camera,
+                       std::optional<int64_t> previous_t_ns) {
+  if (frame.width() != static_cast<uint32_t>(camera.width) ||
+      frame.height() != static_cast<uint32_t>(camera.height)) {
+    throw InvalidArgumentError("Frame: size " + std::to_string(frame.width()) + "x" +
+                               std::to_string(frame.height()) + " differs from the camera's " +
+                               std::to_string(camera.width) + "x" + std::to_string(camera.height));
+  }
+  const size_t expected = static_cast<size_t>(camera.width) * static_cast<size_t>(camera.height);
+  if (frame.gray().size() != expected) {
+    throw InvalidArgumentError("Frame: gray holds " + std::to_string(frame.gray().size()) +
+                               " bytes, expected width * height = " + std::to_string(expected));
+  }
+  if (previous_t_ns && frame.t_ns() <= *previous_t_ns) {
+    throw InvalidArgumentError("Frame: time " + std::to_string(frame.t_ns()) +
+                               " ns is not after the previous frame's " +
+                               std::to_string(*previous_t_ns) + " ns");
+  }
+  cv::Mat gray(camera.height, camera.width, CV_8UC1);
+  std::memcpy(gray.data, frame.gray().data(), expected);
+  return gray;
+}
+
+SessionSettings SessionSettingsFromProto(const api::SessionStart& start,
+                                         const tracking::TrackerOptions& defaults) {
+  if (!start.has_camera()) throw InvalidArgumentError("SessionStart.camera is missing");
+  if (!start.has_initial_world_from_cam()) {
+    throw InvalidArgumentError("SessionStart.initial_world_from_cam is missing");
+  }
+  SessionSettings settings;
+  settings.camera = CameraFromProto(start.camera());
+  settings.initial_world_from_cam =
+      RigidFromProto(start.initial_world_from_cam(), "SessionStart.initial_world_from_cam");
+  settings.initial_t_ns = start.initial_t_ns();
+  settings.sensor_time_offset_ns = start.sensor_time_offset_ns();
+  settings.tracker = defaults;
+  const api::TrackingOptions& options = start.options();
+  try {
+    if (!options.variant().empty()) settings.tracker.SetVariant(options.variant());
+    if (options.has_use_polarity()) settings.tracker.use_polarity = options.use_polarity();
+    if (options.has_use_occlusion_culling()) {
+      settings.tracker.use_occlusion_culling = options.use_occlusion_culling();
+    }
+    if (options.step_rate_hz() != 0) settings.tracker.step_rate_hz = options.step_rate_hz();
+    if (options.max_points() != 0) {
+      if (options.max_points() > 1'000'000) {
+        throw InvalidArgumentError("max_points must be at most 1000000");
+      }
+      settings.tracker.max_points = static_cast<int>(options.max_points());
+    }
+    if (options.decay_time_s() != 0) settings.tracker.decay_time_s = options.decay_time_s();
+    settings.tracker.input =
+        options.frames() ? tracking::TrackerInput::kFrames : tracking::TrackerInput::kEvents;
+    settings.tracker.Check();
+  } catch (const InvalidArgumentError& error) {
+    throw InvalidArgumentError(std::string("SessionStart.options: ") + error.what());
+  }
+  return settings;
+}
+
+PacketDecoder::PacketDecoder(SensorSize sensor_size, int64_t sensor_time_offset_ns)
+    : sensor_size_(sensor_size), sensor_time_offset_ns_(sensor_time_offset_ns) {
+  sensor_size_.Check();
+}
+
+void PacketDecoder::Decode(const api::EventPacket& packet, EventBuffer* out) {
+  out->clear();
+  const uint64_t index = packets_;
+  const std::string& data = packet.data();
+  if (end_t_ns_ && packet.end_t_ns() < *end_t_ns_) {
+    throw InvalidArgumentError(
+        PacketName(index) + ": end_t_ns " + std::to_string(packet.end_t_ns()) +
+        " ns goes back from the previous packet's " + std::to_string(*end_t_ns_) + " ns");
+  }
+  if (!data.empty()) {
+    if (packet.encoding() == api::EVENT_ENCODING_UNSPECIFIED ||
+        !api::EventEncoding_IsValid(packet.encoding())) {
+      throw InvalidArgumentError(PacketName(index) + ": the encoding is not set or unknown");
+    }
+    if (encoding_ != api::EVENT_ENCODING_UNSPECIFIED && packet.encoding() != encoding_) {
+      throw InvalidArgumentError(PacketName(index) + ": the encoding changed within the session");
+    }
+    encoding_ = packet.encoding();
+  }
+  const auto* bytes = reinterpret_cast<const uint8_t*>(data.data());
+  if (encoding_ == api::EVENT_ENCODING_PACKED && !data.empty()) {
+    if (data.size() % kPackedEventBytes != 0) {
+      throw InvalidArgumentError(PacketName(index) + ": PACKED data of " +
+                                 std::to_string(data.size()) +
+                                 " bytes is not a whole number of 8-byte events");
+    }
+    const size_t count = data.size() / kPackedEventBytes;
+    out->t_ns.resize(count);
+    out->x.resize(count);
+    out->y.resize(count);
+    out->polarity.resize(count);
+    for (size_t i = 0; i < count; ++i) {
+      const uint8_t* record = bytes + i * kPackedEventBytes;
+      const uint32_t time_word =
+          static_cast<uint32_t>(record[0]) | (static_cast<uint32_t>(record[1]) << 8) |
+          (static_cast<uint32_t>(record[2]) << 16) | (static_cast<uint32_t>(record[3]) << 24);
+      out->t_ns[i] = packet.time_base_ns() + static_cast<int64_t>(time_word & 0x7fffffffu);
+      out->polarity[i] = (time_word >> 31) != 0 ? 1 : -1;
+      out->x[i] = static_cast<uint16_t>(record[4] | (record[5] << 8));
+      out->y[i] = static_cast<uint16_t>(record[6] | (record[7] << 8));
+    }
+  } else if (encoding_ == api::EVENT_ENCODING_EVT3 || encoding_ == api::EVENT_ENCODING_EVT2) {
+    if (!raw_decoder_) {
+      PropheseeDecoderOptions options;
+      options.source = "the session's event stream";
+      if (encoding_ == api::EVENT_ENCODING_EVT3) {
+        raw_decoder_ = std::make_unique<Evt3Decoder>(options);
+      } else {
+        raw_decoder_ = std::make_unique<Evt2Decoder>(options);
+      }
+    }
+    try {
+      raw_decoder_->Decode(bytes, data.size(), out);
+    } catch (const ParseError& error) {
+      throw InvalidArgumentError(PacketName(index) + ": malformed raw data: " + error.what());
+    }
+    for (int64_t& t_ns : out->t_ns) t_ns += sensor_time_offset_ns_;
+  }
+  // Order and position checks.
+  const size_t count = out->size();
+  for (size_t i = 0; i < count; ++i) {
+    if (!sensor_size_.Contains(out->x[i], out->y[i])) {
+      throw InvalidArgumentError(PacketName(index) + ": event " + std::to_string(i) + " at (" +
+                                 std::to_string(out->x[i]) + ", " + std::to_string(out->y[i]) +
+                                 ") lies outside the " + std::to_string(sensor_size_.width) + "x" +
+                                 std::to_string(sensor_size_.height) + " sensor");
+    }
+    const int64_t t_ns = out->t_ns[i];
+    if (t_ns > packet.end_t_ns()) {
+      throw InvalidArgumentError(PacketName(index) + ": event " + std::to_string(i) + " at " +
+                                 std::to_string(t_ns) + " ns lies after the packet's end_t_ns " +
+                                 std::to_string(packet.end_t_ns()) + " ns");
+    }
+    if (i > 0 ? t_ns < out->t_ns[i - 1] : (end_t_ns_ && t_ns <= *end_t_ns_)) {
+      throw InvalidArgumentError(PacketName(index) + ": event " + std::to_string(i) + " at " +
+                                 std::to_string(t_ns) + " ns goes back in time");
+    }
+  }
+  end_t_ns_ = packet.end_t_ns();
+  ++packets_;
+}
+
+SessionTracker::SessionTracker(std::shared_ptr<const LoadedMap> map,
+                               const SessionSettings& settings)
+    : map_(std::move(map)),
+      settings_(settings),
+      tracker_(map_->map, map_->visibility.get(), settings.camera, settings.tracker),
+      takes_frames_(settings.tracker.input == tracking::TrackerInput::kFrames) {
+  if (takes_frames_) {
+    tracker_.Reset(settings_.initial_world_from_cam, settings_.initial_t_ns);
+    started_ = true;
+  }
+}
+
+std::vector<tracking::PoseEstimate> SessionTracker::AddEvents(const EventBuffer& events) {
+  if (started_) return tracker_.AddEvents(events);
+  // As TrackEventStream: events up to the initial time prime the surfaces before the Reset.
+  size_t split = 0;
+  while (split < events.size() && events.t_ns[split] <= settings_.initial_t_ns) ++split;
+  if (split == events.size()) return tracker_.AddEvents(events);
+  head_.clear();
+  tail_.clear();
+  head_.Append(events.t_ns.data(), events.x.data(), events.y.data(), events.polarity.data(), split);
+  tail_.Append(events.t_ns.data() + split, events.x.data() + split, events.y.data() + split,
+               events.polarity.data() + split, events.size() - split);
+  if (!head_.empty()) tracker_.AddEvents(head_);
+  tracker_.Reset(settings_.initial_world_from_cam, settings_.initial_t_ns);
+  started_ = true;
+  return tracker_.AddEvents(tail_);
+}
+
+std::optional<tracking::PoseEstimate> SessionTracker::AddFrame(int64_t t_ns, const cv::Mat& gray) {
+  if (t_ns <= settings_.initial_t_ns) return std::nullopt;
+  return tracker_.AddFrame(t_ns, gray);
+}
+
+void SessionTracker::Reset(const Rigid3d& world_from_cam, int64_t t_ns) {
+  tracker_.Reset(world_from_cam, t_ns);
+  started_ = true;
+}
+
+}  // namespace evloc::service

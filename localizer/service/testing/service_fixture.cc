@@ -1,0 +1,98 @@
+#include "localizer/service/testing/service_fixture.h"
+
+#include <atomic>
+#include <random>
+
+#include <grpcpp/grpcpp.h>
+
+#include "localizer/service/session.h"
+#include "localizer/tracking/testing/synthetic_scene.h"
+#include "maps/map_directory.h"
+
+namespace evloc::service::testing {
+
+Map TestMap() {
+  return tracking::testing::MakeRectangleMap(tracking::testing::DefaultRectangles(), 0.01);
+}
+
+Camera TestCamera() { return Camera::Pinhole(320, 240, 250, 250, 159.5, 119.5); }
+
+EventBuffer TestEvents(int64_t duration_ns) {
+  return tracking::testing::SimulateEdgeEvents(
+      TestMap(), TestCamera(), [](int64_t t) { return tracking::testing::SmoothMotion(t); }, 0,
+      duration_ns);
+}
+
+TemporaryFolder::TemporaryFolder() {
+  static std::atomic<int> counter{0};
+  std::random_device random;
+  path_ = std::filesystem::temp_directory_path() /
+          ("evloc-service-test-" + std::to_string(random()) + "-" + std::to_string(++counter));
+  std::filesystem::create_directories(path_);
+}
+
+TemporaryFolder::~TemporaryFolder() {
+  std::error_code error;
+  std::filesystem::remove_all(path_, error);
+}
+
+void WriteTestMap(const std::filesystem::path& maps_dir, const std::string& name, const Map& map) {
+  MapDirectoryWriteOptions options;
+  options.overwrite = true;
+  options.write_ply = false;
+  WriteMapDirectory(maps_dir / name, map, options);
+}
+
+LocalizerServerOptions TestServerOptions(const std::filesystem::path& maps_dir) {
+  LocalizerServerOptions options;
+  options.maps_dir = maps_dir;
+  options.listen_address = "127.0.0.1:0";
+  options.max_sessions = 4;
+  options.idle_timeout_s = 5.0;
+  return options;
+}
+
+std::unique_ptr<api::Localizer::Stub> ConnectStub(int port) {
+  grpc::ChannelArguments arguments;
+  arguments.SetMaxReceiveMessageSize(64 << 20);
+  arguments.SetMaxSendMessageSize(64 << 20);
+  return api::Localizer::NewStub(grpc::CreateCustomChannel(
+      "127.0.0.1:" + std::to_string(port), grpc::InsecureChannelCredentials(), arguments));
+}
+
+api::TrackRequest TestSessionStart() {
+  api::TrackRequest request;
+  api::SessionStart* start = request.mutable_start();
+  start->set_map_name(kTestMapName);
+  *start->mutable_camera() = CameraToProto(TestCamera());
+  *start->mutable_initial_world_from_cam() =
+      RigidToProto(tracking::testing::SmoothMotion(kInitialTimeNs));
+  start->set_initial_t_ns(kInitialTimeNs);
+  start->mutable_options()->set_step_rate_hz(200);
+  start->set_client_name("test");
+  return request;
+}
+
+std::vector<api::TrackRequest> PackedPackets(const EventBuffer& events, int64_t packet_ns) {
+  std::vector<api::TrackRequest> packets;
+  if (events.empty()) return packets;
+  size_t begin = 0;
+  int64_t window_start = events.t_ns.front() - 1;
+  while (begin < events.size()) {
+    const int64_t window_end = window_start + packet_ns;
+    size_t end = begin;
+    while (end < events.size() && events.t_ns[end] <= window_end) ++end;
+    api::TrackRequest request;
+    api::EventPacket* packet = request.mutable_events();
+    packet->set_encoding(api::EVENT_ENCODING_PACKED);
+    packet->set_time_base_ns(window_start);
+    packet->set_end_t_ns(window_end);
+    packet->set_data(EncodePackedEvents(events, begin, end, window_start));
+    packets.push_back(std::move(request));
+    begin = end;
+    window_start = window_end;
+  }
+  return packets;
+}
+
+}  // namespace evloc::service::testing

@@ -1,0 +1,62 @@
+// Helpers for tests of the localizer service and its clients: a map folder with the synthetic
+// rectangle map, a server on loopback, the synthetic event stream and the Track requests for it.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "core/camera/camera.h"
+#include "core/events/event.h"
+#include "evloc/localizer.grpc.pb.h"
+#include "localizer/service/localizer_server.h"
+#include "maps/map.h"
+
+namespace evloc::service::testing {
+
+// Name of the map the fixture writes.
+inline constexpr char kTestMapName[] = "rectangles";
+// Start of the tracked part of the synthetic stream, ns (earlier events prime the surfaces).
+inline constexpr int64_t kInitialTimeNs = 20'000'000;
+
+// The synthetic rectangle map (outline points every centimetre).
+Map TestMap();
+// The 320x240 pinhole camera of the synthetic scene.
+Camera TestCamera();
+// Ideal edge events of TestMap() seen along testing::SmoothMotion over [0, duration_ns].
+EventBuffer TestEvents(int64_t duration_ns);
+
+// A fresh temporary folder removed on destruction.
+class TemporaryFolder {
+ public:
+  // Creates a unique folder under the system temporary directory.
+  TemporaryFolder();
+  ~TemporaryFolder();
+  TemporaryFolder(const TemporaryFolder&) = delete;
+  TemporaryFolder& operator=(const TemporaryFolder&) = delete;
+  // The folder.
+  const std::filesystem::path& path() const { return path_; }
+
+ private:
+  std::filesystem::path path_;
+};
+
+// Writes `map` as maps_dir/name/map.evmap (and map.ply).
+void WriteTestMap(const std::filesystem::path& maps_dir, const std::string& name, const Map& map);
+
+// Server options for tests: the given map folder, 127.0.0.1 port 0, short idle timeout.
+LocalizerServerOptions TestServerOptions(const std::filesystem::path& maps_dir);
+
+// A stub connected to 127.0.0.1:port.
+std::unique_ptr<api::Localizer::Stub> ConnectStub(int port);
+
+// A SessionStart for the test map and camera at the synthetic motion's pose at kInitialTimeNs,
+// 200 Hz steps.
+api::TrackRequest TestSessionStart();
+
+// PACKED EventPackets of `events`, one per `packet_ns` window starting at the first event.
+std::vector<api::TrackRequest> PackedPackets(const EventBuffer& events, int64_t packet_ns);
+
+}  // namespace evloc::service::testing
