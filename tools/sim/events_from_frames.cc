@@ -51,15 +51,15 @@ double FlowQuantile(const cv::Mat& flow, double quantile) {
 
 // `frame` sampled at x - scale * flow(x).
 cv::Mat WarpBack(const cv::Mat& frame, const cv::Mat& flow, double scale) {
-  cv::Mat map(flow.size(), CV_32FC2);
+  cv::Mat grid(flow.size(), CV_32FC2);
   for (int row = 0; row < flow.rows; ++row) {
-    const auto* vectors = flow.ptr<cv::Vec2f>(row);
-    auto* out = map.ptr<cv::Vec2f>(row);
+    auto* out = grid.ptr<cv::Vec2f>(row);
     for (int col = 0; col < flow.cols; ++col) {
-      out[col] = cv::Vec2f(static_cast<float>(col - scale * vectors[col][0]),
-                           static_cast<float>(row - scale * vectors[col][1]));
+      out[col] = cv::Vec2f(static_cast<float>(col), static_cast<float>(row));
     }
   }
+  cv::Mat map;
+  cv::scaleAdd(flow, -scale, grid, map);
   cv::Mat warped;
   cv::remap(frame, warped, map, cv::noArray(), cv::INTER_LINEAR, cv::BORDER_REPLICATE);
   return warped;

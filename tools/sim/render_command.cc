@@ -159,6 +159,7 @@ nlohmann::json RunRenderCommand(const RenderCommandOptions& options) {
     sequence.frames.exposure_s = 0.9 / options.fps;
   sequence.illumination = lighting.illumination;
   sequence.max_pixel_motion_px = options.max_pixel_motion_px;
+  sequence.max_render_motion_px = options.max_render_motion_px;
   sequence.Check();
 
   DatasetWriter writer(options.out_dir, DatasetWriterOptions{options.force});
@@ -205,6 +206,7 @@ nlohmann::json RunRenderCommand(const RenderCommandOptions& options) {
         {"seed", options.seed},
         {"clean", options.clean},
         {"max_pixel_motion_px", options.max_pixel_motion_px},
+        {"max_render_motion_px", options.max_render_motion_px},
         {"ground_truth_rate_hz", options.ground_truth_rate_hz},
         {"keyframe_interval_s", options.keyframe_interval_s}}},
       {"camera", CameraJson(camera)},
@@ -219,6 +221,7 @@ nlohmann::json RunRenderCommand(const RenderCommandOptions& options) {
        {{"events", stats.num_events},
         {"event_rate_per_s", stats.num_events / duration_s},
         {"renders", stats.num_renders},
+        {"interpolated_images", stats.num_interpolated},
         {"frames", stats.num_frames},
         {"ground_truth_poses", ground_truth.size()},
         {"map_points", map.size()},
@@ -226,9 +229,10 @@ nlohmann::json RunRenderCommand(const RenderCommandOptions& options) {
       {"motion_measured",
        {{"peak_linear_m_per_s", peak.linear_m_per_s},
         {"peak_angular_deg_per_s", peak.angular_rad_per_s * 180 / M_PI},
-        {"max_image_motion_between_renders_px", stats.max_measured_motion_px}}},
+        {"max_image_motion_between_esim_images_px", stats.max_measured_motion_px}}},
       {"timings_s",
        {{"render", stats.render_seconds},
+        {"interpolation", stats.interpolation_seconds},
         {"esim", stats.esim_seconds},
         {"frames", stats.frame_seconds},
         {"ground_truth_map", map_seconds}}}};

@@ -54,8 +54,11 @@ struct RenderCommandOptions {
   double ground_truth_rate_hz = 1000;
   // Interval between ground-truth map keyframes along the path, seconds.
   double keyframe_interval_s = 0.5;
-  // Largest image motion between renders, pixels.
+  // Largest image motion between consecutive ESIM images, pixels.
   double max_pixel_motion_px = 0.5;
+  // Largest image motion between two renders, pixels (images in between are interpolated along
+  // the flow from the rendered depth; equal to max_pixel_motion_px to render every image).
+  double max_render_motion_px = 3.0;
 
   // Throws InvalidArgumentError for an empty output path, non-positive duration, fps, rates or
   // intervals, or a ground-truth rate below 200 Hz.

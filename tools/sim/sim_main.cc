@@ -34,6 +34,8 @@ render options:
   --fps F               frame camera rate, Hz; default 30
   --lighting NAME       bright | dim | dark | hdr; default: bright
   --seed N              seed of motion and noise (same seed, same bytes); default 1
+  --render-motion PX    largest image motion between two renders; images in between are
+                        interpolated along the depth-based flow (0.5 = render every image); default 3
   --clean               ideal event pixel: no threshold mismatch, refractory period or noise
   --events-txt          also write events.txt (ECD text format)
   --force               replace an existing non-empty output folder
@@ -97,10 +99,11 @@ uint64_t ParseUnsigned(const std::string& flag, const std::string& text) {
 }
 
 int RunRender(const std::vector<std::string>& args) {
-  const auto flags = ParseFlags(args,
-                                {"--out", "--camera", "--camera-yaml", "--scene", "--motion",
-                                 "--trajectory", "--duration", "--fps", "--lighting", "--seed"},
-                                {"--clean", "--events-txt", "--force"});
+  const auto flags =
+      ParseFlags(args,
+                 {"--out", "--camera", "--camera-yaml", "--scene", "--motion", "--trajectory",
+                  "--duration", "--fps", "--lighting", "--seed", "--render-motion"},
+                 {"--clean", "--events-txt", "--force"});
   evloc::sim::RenderCommandOptions options;
   if (!flags.contains("--out")) throw UsageError("render needs --out DIR.");
   if (flags.contains("--motion") && flags.contains("--trajectory")) {
@@ -118,6 +121,7 @@ int RunRender(const std::vector<std::string>& args) {
       if (flag == "--fps") options.fps = ParseDouble(flag, value);
       if (flag == "--lighting") options.lighting = evloc::sim::ParseLightingCondition(value);
       if (flag == "--seed") options.seed = ParseUnsigned(flag, value);
+      if (flag == "--render-motion") options.max_render_motion_px = ParseDouble(flag, value);
       if (flag == "--clean") options.clean = true;
       if (flag == "--events-txt") options.events_txt = true;
       if (flag == "--force") options.force = true;

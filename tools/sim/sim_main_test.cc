@@ -75,20 +75,20 @@ TEST(EvlocSimCli, ExistingOutputNeedsForce) {
 TEST(EvlocSimCli, SameSeedSameBytesAndTheDatasetLoads) {
   const fs::path dir = evloc::testing::MakeTempDir("sim_cli_seed");
   const std::string common =
-      " --camera davis240 --duration 0.25 --motion fast --seed 5 --events-txt";
+      " --camera davis240 --duration 0.15 --motion fast --seed 5 --events-txt";
   ASSERT_EQ(RunSim("render --out " + (dir / "a").string() + common).exit_code, 0);
   ASSERT_EQ(RunSim("render --out " + (dir / "b").string() + common).exit_code, 0);
   for (const char* name :
-       {"events.evb", "events.txt", "groundtruth.txt", "images/frame_00000003.png"}) {
+       {"events.evb", "events.txt", "groundtruth.txt", "images/frame_00000004.png"}) {
     EXPECT_EQ(evloc::ReadFileToString(dir / "a" / name), evloc::ReadFileToString(dir / "b" / name))
         << name;
   }
   const evloc::sim::Dataset dataset = evloc::sim::ReadDataset(dir / "a");
   EXPECT_EQ(dataset.camera.width, 240);
-  EXPECT_EQ(dataset.images.size(), 8u);  // exposures [k/30, k/30 + 10 ms] inside 0.25 s: k = 0..7
-  EXPECT_EQ(dataset.depth.size(), 8u);
+  EXPECT_EQ(dataset.images.size(), 5u);  // exposures [k/30, k/30 + 10 ms] inside 0.15 s: k = 0..4
+  EXPECT_EQ(dataset.depth.size(), 5u);
   ASSERT_TRUE(dataset.ground_truth.has_value());
-  EXPECT_GE(dataset.ground_truth->size(), 0.25 * 200);
+  EXPECT_GE(dataset.ground_truth->size(), 0.15 * 200);
   ASSERT_TRUE(dataset.events_path.has_value());
   auto reader = evloc::OpenEventFile(*dataset.events_path);
   evloc::EventBuffer events;

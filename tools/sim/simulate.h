@@ -34,8 +34,11 @@ struct SequenceOptions {
   FrameSensorOptions frames;
   // The scene illumination seen by both cameras.
   IlluminationOptions illumination;
-  // Largest image motion between two consecutive renders, pixels.
+  // Largest image motion between two consecutive ESIM images, pixels.
   double max_pixel_motion_px = 0.5;
+  // Largest image motion between two renders, pixels; images between renders are interpolated
+  // along the exact flow from the rendered depth (equal to max_pixel_motion_px: no interpolation).
+  double max_render_motion_px = 3.0;
   // Longest interval between two renders, nanoseconds.
   int64_t max_render_interval_ns = 5'000'000;
   // Shortest interval between two renders, nanoseconds (bounds the work for extreme motion).
@@ -53,14 +56,18 @@ struct SequenceOptions {
 struct SequenceStats {
   // Number of renders (each feeds ESIM).
   int64_t num_renders = 0;
+  // Number of images interpolated between renders (each feeds ESIM).
+  int64_t num_interpolated = 0;
   // Number of events emitted.
   int64_t num_events = 0;
   // Number of frames emitted.
   int64_t num_frames = 0;
-  // Largest image motion between consecutive renders, measured on the depth samples, pixels.
+  // Largest image motion between consecutive ESIM images, measured on the depth samples, pixels.
   double max_measured_motion_px = 0;
   // Time spent rendering, seconds.
   double render_seconds = 0;
+  // Time spent computing flow and interpolating images, seconds.
+  double interpolation_seconds = 0;
   // Time spent in ESIM, seconds.
   double esim_seconds = 0;
   // Time spent exposing frames, seconds.
@@ -73,10 +80,18 @@ struct SequenceStats {
 double MaxImageMotion(const Camera& camera, const std::vector<Eigen::Vector3d>& points_world,
                       const std::vector<Eigen::Vector2d>& pixels, const Rigid3d& world_from_cam);
 
+// The flow from view a to view b of the pixels of a (CV_32FC2, pixels): each pixel's point at its
+// depth (z, metres; `rays` from ComputeRayTable) projected into b; 0 where there is no depth or
+// the point does not project.
+cv::Mat FlowFromDepth(const Camera& camera, const cv::Mat& rays, const cv::Mat& depth,
+                      const Rigid3d& world_from_a, const Rigid3d& world_from_b);
+
 // Runs the loop over [0, motion.duration_ns()]: renders at adaptive times (each step halved until
-// the measured image motion is at most max_pixel_motion_px, and every exposure start, middle and
-// end rendered exactly), feeds ESIM, and integrates frames. Events go to `event_sink` in time
-// order; frames to `frame_sink` in time order. Throws InvalidArgumentError for bad options.
+// the measured image motion is at most max_render_motion_px, and every exposure start, middle and
+// end rendered exactly), interpolates images between renders so that consecutive ESIM images
+// move at most max_pixel_motion_px, feeds ESIM, and integrates frames over every image. Events go
+// to `event_sink` in time order; frames to `frame_sink` in time order. Throws InvalidArgumentError
+// for bad options.
 SequenceStats SimulateSequence(const RenderFunction& render, const Camera& camera,
                                const CameraMotion& motion, const SequenceOptions& options,
                                const EventSink& event_sink, const FrameSink& frame_sink);
