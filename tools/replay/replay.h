@@ -1,0 +1,101 @@
+// evloc-replay: streams a recorded dataset to a localizer server as a live camera would
+// (docs/api.md), collects the poses and measures the latency.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <optional>
+#include <ostream>
+#include <string>
+#include <vector>
+
+#include "core/geometry/rigid3.h"
+#include "core/trajectory/trajectory.h"
+
+namespace evloc::replay {
+
+// How events are put on the wire.
+enum class WireEncoding {
+  // evloc's PACKED layout (8 bytes per event, nanosecond times).
+  kPacked,
+  // Prophesee EVT 3.0 (microsecond times: event times are rounded up to whole microseconds).
+  kEvt3,
+};
+
+// Options of a replay; every field is a flag of evloc-replay.
+struct ReplayOptions {
+  // Server address, host:port (--server).
+  std::string server;
+  // Map name on the server (--map).
+  std::string map_name;
+  // Dataset folder (tools/sim/dataset.h layout) (--dataset).
+  std::filesystem::path dataset;
+  // Output TUM trajectory of the received poses (--out).
+  std::filesystem::path output;
+  // Playback speed relative to real time; nullopt: as fast as the server keeps up (--speed 1 |
+  // 2.5 | max).
+  std::optional<double> speed = 1.0;
+  // Wire encoding (--encoding packed|evt3).
+  WireEncoding encoding = WireEncoding::kPacked;
+  // Length of the time window of one packet, microseconds (--packet-us).
+  int64_t packet_us = 1000;
+  // Bearer token sent as `authorization: Bearer T` (--token).
+  std::optional<std::string> token;
+  // Initial world_from_cam; default: the dataset's first ground-truth pose (--init-pose).
+  std::optional<Rigid3d> initial_world_from_cam;
+  // Tracking steps per second asked of the server; nullopt: the server's default (--rate).
+  std::optional<double> step_rate_hz;
+  // With --speed max: the most session time sent ahead of the last pose received, ms
+  // (--max-lead-ms); keeps the server's queue from overflowing.
+  double max_lead_ms = 50.0;
+  // Stop after this much session time after the initial pose, seconds (--duration).
+  std::optional<double> duration_s;
+  // Sensor size for ECD folders with calib.txt only (--ecd-size).
+  int ecd_width = 240;
+  // Sensor height for ECD folders.
+  int ecd_height = 180;
+
+  // Throws InvalidArgumentError naming the first invalid field.
+  void Check() const;
+};
+
+// What a replay measured.
+struct ReplayResult {
+  // The received poses, world_from_cam.
+  Trajectory trajectory;
+  // Status of each pose: true when TRACKING.
+  std::vector<bool> tracking;
+  // Events sent.
+  int64_t events_sent = 0;
+  // Packets sent.
+  int64_t packets_sent = 0;
+  // Poses received with status LOST.
+  int64_t lost_poses = 0;
+  // Backpressure notices received.
+  int64_t backpressure_notices = 0;
+  // Client-side latency, microseconds: pose received minus sending of the packet holding the
+  // first event after the pose's time (the event that let the step run); median and 99th pct.
+  double client_latency_p50_us = 0;
+  // 99th percentile of the client-side latency, microseconds.
+  double client_latency_p99_us = 0;
+  // Server-side latency (PoseUpdate.latency_us), median and 99th percentile, microseconds.
+  double server_latency_p50_us = 0;
+  // 99th percentile of the server-side latency, microseconds.
+  double server_latency_p99_us = 0;
+  // Wall time of the replay, seconds.
+  double wall_s = 0;
+};
+
+// Streams the dataset, writes the trajectory and returns the figures; progress and the summary
+// go to `log`. Throws InvalidArgumentError / IoError / ParseError for bad options or dataset,
+// and Error with the gRPC status for a failed session.
+ReplayResult RunReplay(const ReplayOptions& options, std::ostream& log);
+
+// The usage text of evloc-replay.
+std::string ReplayUsage();
+
+// Parses the command line (arguments after the program name); `help` is set for --help.
+// Throws InvalidArgumentError naming the flag.
+ReplayOptions ParseReplayCommandLine(const std::vector<std::string>& arguments, bool* help);
+
+}  // namespace evloc::replay
