@@ -132,6 +132,7 @@ void DatasetWriter::Commit() {
   WriteFileAtomically(staging_dir_ / dataset_files::kImagesTxt, FormatTimedFileList(images_));
   WriteFileAtomically(staging_dir_ / dataset_files::kDepthTxt, FormatTimedFileList(depth_));
   std::error_code error;
+  if (fs::is_empty(staging_dir_ / "gt_map", error)) fs::remove(staging_dir_ / "gt_map", error);
   if (fs::exists(out_dir_, error)) {
     if (ExistsAndNotEmpty(out_dir_) && !options_.force) {
       throw InvalidArgumentError("Output folder '" + out_dir_.string() +

@@ -86,7 +86,8 @@ class DatasetWriter {
   void WriteGroundTruth(const Trajectory& ground_truth);
   // Writes info.json.
   void WriteInfo(const nlohmann::json& info);
-  // Writes images.txt and depth.txt, then moves OUT.partial to OUT (replacing OUT when forced).
+  // Writes images.txt and depth.txt, removes gt_map/ when nothing was written there, then moves
+  // OUT.partial to OUT (replacing OUT when forced).
   // Throws IoError when the rename fails.
   void Commit();
 

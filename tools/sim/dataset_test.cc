@@ -40,6 +40,7 @@ TEST(Dataset, WriterReaderRoundTrip) {
     writer.Commit();
   }
   EXPECT_FALSE(fs::exists(root / "seq.partial"));
+  EXPECT_FALSE(fs::exists(out / "gt_map"));  // nothing was written there
   const Dataset dataset = ReadDataset(out);
   EXPECT_EQ(dataset.camera, camera);
   ASSERT_EQ(dataset.images.size(), 3u);

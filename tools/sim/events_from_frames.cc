@@ -49,17 +49,25 @@ double FlowQuantile(const cv::Mat& flow, double quantile) {
   return magnitudes[index];
 }
 
-// `frame` sampled at x - scale * flow(x).
-cv::Mat WarpBack(const cv::Mat& frame, const cv::Mat& flow, double scale) {
-  cv::Mat grid(flow.size(), CV_32FC2);
-  for (int row = 0; row < flow.rows; ++row) {
-    auto* out = grid.ptr<cv::Vec2f>(row);
-    for (int col = 0; col < flow.cols; ++col) {
-      out[col] = cv::Vec2f(static_cast<float>(col), static_cast<float>(row));
+// The pixel coordinate grid (x, y) of a size, cached per thread.
+const cv::Mat& PixelGrid(cv::Size size) {
+  thread_local cv::Mat grid;
+  if (grid.size() != size) {
+    grid.create(size, CV_32FC2);
+    for (int row = 0; row < size.height; ++row) {
+      auto* out = grid.ptr<cv::Vec2f>(row);
+      for (int col = 0; col < size.width; ++col) {
+        out[col] = cv::Vec2f(static_cast<float>(col), static_cast<float>(row));
+      }
     }
   }
+  return grid;
+}
+
+// `frame` sampled at x - scale * flow(x).
+cv::Mat WarpBack(const cv::Mat& frame, const cv::Mat& flow, double scale) {
   cv::Mat map;
-  cv::scaleAdd(flow, -scale, grid, map);
+  cv::scaleAdd(flow, -scale, PixelGrid(flow.size()), map);
   cv::Mat warped;
   cv::remap(frame, warped, map, cv::noArray(), cv::INTER_LINEAR, cv::BORDER_REPLICATE);
   return warped;

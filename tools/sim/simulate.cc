@@ -68,23 +68,28 @@ cv::Mat FlowFromDepth(const Camera& camera, const cv::Mat& rays, const cv::Mat& 
   const Rigid3d b_from_a = world_from_b.Inverse() * world_from_a;
   const Eigen::Matrix3d rotation = b_from_a.RotationMatrix();
   cv::Mat flow(depth.size(), CV_32FC2, cv::Scalar(0, 0));
-  Eigen::Vector2d pixel;
-  for (int row = 0; row < depth.rows; ++row) {
-    const float* depth_row = depth.ptr<float>(row);
-    const auto* ray_row = rays.ptr<cv::Vec3f>(row);
-    auto* flow_row = flow.ptr<cv::Vec2f>(row);
-    for (int col = 0; col < depth.cols; ++col) {
-      const float z = depth_row[col];
-      const cv::Vec3f& ray = ray_row[col];
-      if (!(z > 0) || !std::isfinite(ray[0])) continue;
-      const Eigen::Vector3d point_a =
-          Eigen::Vector3d(ray[0], ray[1], ray[2]) * static_cast<double>(z);
-      if (camera.Project(rotation * point_a + b_from_a.translation, &pixel)) {
-        flow_row[col] =
-            cv::Vec2f(static_cast<float>(pixel.x() - col), static_cast<float>(pixel.y() - row));
-      }
-    }
-  }
+  cv::parallel_for_(
+      cv::Range(0, depth.rows),
+      [&](const cv::Range& rows) {
+        Eigen::Vector2d pixel;
+        for (int row = rows.start; row < rows.end; ++row) {
+          const float* depth_row = depth.ptr<float>(row);
+          const auto* ray_row = rays.ptr<cv::Vec3f>(row);
+          auto* flow_row = flow.ptr<cv::Vec2f>(row);
+          for (int col = 0; col < depth.cols; ++col) {
+            const float z = depth_row[col];
+            const cv::Vec3f& ray = ray_row[col];
+            if (!(z > 0) || !std::isfinite(ray[0])) continue;
+            const Eigen::Vector3d point_a =
+                Eigen::Vector3d(ray[0], ray[1], ray[2]) * static_cast<double>(z);
+            if (camera.Project(rotation * point_a + b_from_a.translation, &pixel)) {
+              flow_row[col] = cv::Vec2f(static_cast<float>(pixel.x() - col),
+                                        static_cast<float>(pixel.y() - row));
+            }
+          }
+        }
+      },
+      2);
   return flow;
 }
 
