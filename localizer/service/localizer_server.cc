@@ -14,8 +14,10 @@
 #include <grpcpp/health_check_service_interface.h>
 
 #include "core/common/error.h"
+#include "core/common/file_util.h"
 #include "evloc/localizer.grpc.pb.h"
 #include "localizer/service/bounded_queue.h"
+#include "localizer/service/metrics_http.h"
 #include "localizer/service/session.h"
 
 namespace evloc::service {
@@ -88,7 +90,48 @@ void LocalizerServerOptions::Check() const {
   if (!(backpressure_fraction > 0 && backpressure_fraction <= 1)) {
     throw InvalidArgumentError("--backpressure-fraction must be in (0, 1]");
   }
+  if (tls_cert_file.has_value() != tls_key_file.has_value()) {
+    throw InvalidArgumentError("--tls-cert and --tls-key go together");
+  }
   tracker.Check();
+}
+
+void ServerCounters::RecordLatency(double latency_us) {
+  size_t bucket = 0;
+  while (bucket < kLatencyBucketsUs.size() && latency_us > kLatencyBucketsUs[bucket]) ++bucket;
+  ++latency_bucket_counts[bucket];
+  double sum = latency_sum_us.load();
+  while (!latency_sum_us.compare_exchange_weak(sum, sum + latency_us)) {
+  }
+}
+
+std::string ServerCounters::PrometheusText() const {
+  std::ostringstream text;
+  const auto metric = [&text](const char* name, const char* type, const char* help, int64_t value) {
+    text << "# HELP " << name << " " << help << "\n# TYPE " << name << " " << type << "\n"
+         << name << " " << value << "\n";
+  };
+  metric("evloc_sessions_active", "gauge", "Track sessions running now.", sessions_active);
+  metric("evloc_sessions_started_total", "counter", "Track sessions accepted.", sessions_started);
+  metric("evloc_requests_rejected_total", "counter", "Requests ended with an error status.",
+         rejected);
+  metric("evloc_events_total", "counter", "Events tracked (rate() gives events/s).", events);
+  metric("evloc_poses_total", "counter", "PoseUpdates sent (rate() gives poses/s).", poses);
+  metric("evloc_lost_poses_total", "counter", "PoseUpdates with status LOST.", lost_poses);
+  text << "# HELP evloc_pose_latency_microseconds Packet received to PoseUpdate sent.\n"
+       << "# TYPE evloc_pose_latency_microseconds histogram\n";
+  int64_t cumulative = 0;
+  for (size_t i = 0; i <= kLatencyBucketsUs.size(); ++i) {
+    cumulative += latency_bucket_counts[i];
+    text << "evloc_pose_latency_microseconds_bucket{le=\""
+         << (i < kLatencyBucketsUs.size()
+                 ? std::to_string(static_cast<int64_t>(kLatencyBucketsUs[i]))
+                 : std::string("+Inf"))
+         << "\"} " << cumulative << "\n";
+  }
+  text << "evloc_pose_latency_microseconds_sum " << latency_sum_us.load() << "\n"
+       << "evloc_pose_latency_microseconds_count " << cumulative << "\n";
+  return text.str();
 }
 
 std::string LocalizerServerOptions::Describe() const {
@@ -102,6 +145,11 @@ std::string LocalizerServerOptions::Describe() const {
        << "idle-timeout: " << idle_timeout_s << " s\n"
        << "queue-packets: " << queue_packets << "\n"
        << "backpressure-fraction: " << backpressure_fraction << "\n"
+       << "metrics: " << metrics_address.value_or("none") << "\n"
+       << "tls: "
+       << (tls_cert_file ? tls_cert_file->string() + " + " + tls_key_file->string()
+                         : std::string("off (plaintext)"))
+       << "\n"
        << "auth-tokens: " << (auth_tokens_file ? auth_tokens_file->string() : "none (open)") << "\n"
        << "tracker: variant " << tracker.VariantName() << ", " << tracker.step_rate_hz
        << " Hz, max-points " << tracker.max_points << ", tau " << tracker.decay_time_s << " s\n";
@@ -576,6 +624,7 @@ class TrackStream {
         const double latency_us = MicrosecondsSince(*item->received);
         item->response.mutable_pose()->set_latency_us(latency_us);
         latencies_us_.push_back(latency_us);
+        service_.counters().RecordLatency(latency_us);
       }
       if (item->response.has_end()) {
         item->response.mutable_end()->set_latency_p50_us(Percentile(latencies_us_, 0.5));
@@ -646,7 +695,14 @@ LocalizerServer::LocalizerServer(const LocalizerServerOptions& options, LogFunct
   grpc::EnableDefaultHealthCheckService(true);
   grpc::reflection::InitProtoReflectionServerBuilderPlugin();
   grpc::ServerBuilder builder;
-  builder.AddListeningPort(options.listen_address, grpc::InsecureServerCredentials(), &port_);
+  std::shared_ptr<grpc::ServerCredentials> credentials = grpc::InsecureServerCredentials();
+  if (options.tls_cert_file) {
+    grpc::SslServerCredentialsOptions ssl;
+    ssl.pem_key_cert_pairs.push_back(
+        {ReadFileToString(*options.tls_key_file), ReadFileToString(*options.tls_cert_file)});
+    credentials = grpc::SslServerCredentials(ssl);
+  }
+  builder.AddListeningPort(options.listen_address, credentials, &port_);
   builder.RegisterService(service_.get());
   builder.SetMaxReceiveMessageSize(options.max_message_bytes);
   grpc::ResourceQuota quota("evloc-localizer");
@@ -658,12 +714,20 @@ LocalizerServer::LocalizerServer(const LocalizerServerOptions& options, LogFunct
                   "' (address in use, or not a host:port this machine has)");
   }
   if (auto* health = server_->GetHealthCheckService()) health->SetServingStatus(true);
+  if (options.metrics_address) {
+    const ServerCounters* counters = &service_->counters();
+    metrics_ = std::make_unique<MetricsHttpServer>(
+        *options.metrics_address, [counters] { return counters->PrometheusText(); });
+  }
 }
 
 LocalizerServer::~LocalizerServer() { Shutdown(); }
 
+int LocalizerServer::metrics_port() const { return metrics_ ? metrics_->port() : 0; }
+
 void LocalizerServer::Shutdown() {
   if (shut_down_.exchange(true)) return;
+  metrics_.reset();
   if (auto* health = server_->GetHealthCheckService()) health->SetServingStatus(false);
   server_->Shutdown(std::chrono::system_clock::now() + std::chrono::seconds(1));
   server_->Wait();

@@ -3,6 +3,7 @@
 // and server reflection. Library code: it logs through a callback and throws typed errors.
 #pragma once
 
+#include <array>
 #include <atomic>
 #include <cstdint>
 #include <filesystem>
@@ -21,6 +22,8 @@ class Server;
 }  // namespace grpc
 
 namespace evloc::service {
+
+class MetricsHttpServer;
 
 // Options of the server; every field is a flag of `evloc-localizer serve`.
 struct LocalizerServerOptions {
@@ -47,6 +50,13 @@ struct LocalizerServerOptions {
   // File of bearer tokens, one per line: `TOKEN` (every map) or `TOKEN map1,map2` (those maps
   // only); '#' starts a comment. Unset: no authentication (--auth-tokens).
   std::optional<std::filesystem::path> auth_tokens_file;
+  // Serve Prometheus metrics over HTTP at this IPV4:PORT (GET /metrics); unset: none
+  // (--metrics).
+  std::optional<std::string> metrics_address;
+  // PEM certificate chain for TLS; with tls_key_file. Unset: plaintext (--tls-cert).
+  std::optional<std::filesystem::path> tls_cert_file;
+  // PEM private key for TLS (--tls-key).
+  std::optional<std::filesystem::path> tls_key_file;
   // Default tracker options of every session (SessionStart.options override them).
   tracking::TrackerOptions tracker;
 
@@ -70,6 +80,18 @@ struct ServerCounters {
   std::atomic<int64_t> poses{0};
   // PoseUpdates with status LOST.
   std::atomic<int64_t> lost_poses{0};
+  // Upper bounds of the latency histogram buckets, microseconds (the last bucket is +Inf).
+  static constexpr std::array<double, 8> kLatencyBucketsUs = {100,  250,  500,   1000,
+                                                              2000, 5000, 10000, 50000};
+  // PoseUpdates per latency bucket (not cumulative; index 8: above the last bound).
+  std::array<std::atomic<int64_t>, 9> latency_bucket_counts{};
+  // Sum of the latencies, microseconds.
+  std::atomic<double> latency_sum_us{0};
+
+  // Adds one pose latency to the histogram.
+  void RecordLatency(double latency_us);
+  // The counters in the Prometheus text exposition format.
+  std::string PrometheusText() const;
 };
 
 // Bearer tokens and the maps each may use.
@@ -112,6 +134,8 @@ class LocalizerServer {
   void Wait();
   // Counters since start.
   const ServerCounters& counters() const;
+  // Port of the metrics endpoint (0 without one).
+  int metrics_port() const;
   // The map registry.
   MapRegistry& registry();
 
@@ -121,6 +145,7 @@ class LocalizerServer {
  private:
   std::unique_ptr<Service> service_;
   std::unique_ptr<grpc::Server> server_;
+  std::unique_ptr<MetricsHttpServer> metrics_;
   int port_ = 0;
   std::atomic<bool> shut_down_{false};
 };

@@ -7,10 +7,16 @@
 #include <future>
 #include <thread>
 
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
 #include <grpcpp/generic/generic_stub.h>
 #include <grpcpp/grpcpp.h>
 
 #include "core/common/error.h"
+#include "core/common/file_util.h"
 #include "core/events/event_reader.h"
 #include "localizer/offline/offline_tracking.h"
 #include "localizer/service/session.h"
@@ -367,6 +373,91 @@ TEST_F(LocalizerServerTest, BearerTokensGuardMaps) {
   ASSERT_TRUE(stub_->ListMaps(&context, {}, &list).ok());
   EXPECT_EQ(list.maps_size(), 0);
   EXPECT_GE(server_->counters().rejected, 3);
+}
+
+// GET `path` from 127.0.0.1:port over HTTP/1.0; the whole response.
+std::string HttpGet(int port, const std::string& path) {
+  const int connection = ::socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in address{};
+  address.sin_family = AF_INET;
+  address.sin_port = htons(static_cast<uint16_t>(port));
+  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  std::string response;
+  if (::connect(connection, reinterpret_cast<sockaddr*>(&address), sizeof(address)) == 0) {
+    const std::string request = "GET " + path + " HTTP/1.0\r\n\r\n";
+    ::send(connection, request.data(), request.size(), 0);
+    char buffer[4096];
+    ssize_t count = 0;
+    while ((count = ::recv(connection, buffer, sizeof(buffer), 0)) > 0) {
+      response.append(buffer, static_cast<size_t>(count));
+    }
+  }
+  ::close(connection);
+  return response;
+}
+
+// The value of an unlabelled metric line "NAME VALUE".
+double MetricValue(const std::string& text, const std::string& name) {
+  const size_t at = text.find("\n" + name + " ");
+  if (at == std::string::npos) return -1;
+  return std::stod(text.substr(at + name.size() + 2));
+}
+
+TEST_F(LocalizerServerTest, ServesPrometheusMetrics) {
+  StartServer([](LocalizerServerOptions& options) { options.metrics_address = "127.0.0.1:0"; });
+  ASSERT_GT(server_->metrics_port(), 0);
+  ASSERT_TRUE(RunTrack(*stub_, ShortSession()).status.ok());
+  auto requests = ShortSession();
+  requests[0].mutable_start()->set_map_name("atlantis");
+  ASSERT_FALSE(RunTrack(*stub_, requests).status.ok());
+
+  const std::string response = HttpGet(server_->metrics_port(), "/metrics");
+  ASSERT_EQ(response.rfind("HTTP/1.0 200 OK", 0), 0u) << response;
+  const double poses = MetricValue(response, "evloc_poses_total");
+  EXPECT_GT(poses, 5);
+  EXPECT_EQ(MetricValue(response, "evloc_sessions_started_total"), 1);
+  EXPECT_EQ(MetricValue(response, "evloc_sessions_active"), 0);
+  EXPECT_EQ(MetricValue(response, "evloc_requests_rejected_total"), 1);
+  EXPECT_GT(MetricValue(response, "evloc_events_total"), 1000);
+  EXPECT_EQ(MetricValue(response, "evloc_lost_poses_total"), 0);
+  EXPECT_EQ(MetricValue(response, "evloc_pose_latency_microseconds_count"), poses);
+  EXPECT_NE(response.find("evloc_pose_latency_microseconds_bucket{le=\"+Inf\"} "),
+            std::string::npos);
+  EXPECT_EQ(HttpGet(server_->metrics_port(), "/other").rfind("HTTP/1.0 404", 0), 0u);
+}
+
+TEST_F(LocalizerServerTest, ServesTlsWhenGivenACertificate) {
+  if (std::system("openssl version > /dev/null 2>&1") != 0) {
+    GTEST_SKIP() << "the openssl command is not installed: cannot make a test certificate";
+  }
+  const auto cert = folder_.path() / "cert.pem";
+  const auto key = folder_.path() / "key.pem";
+  const std::string command =
+      "openssl req -x509 -newkey rsa:2048 -nodes -days 1 -subj /CN=localhost -addext "
+      "subjectAltName=DNS:localhost,IP:127.0.0.1 -keyout '" +
+      key.string() + "' -out '" + cert.string() + "' > /dev/null 2>&1";
+  ASSERT_EQ(std::system(command.c_str()), 0);
+  StartServer([&](LocalizerServerOptions& options) {
+    options.tls_cert_file = cert;
+    options.tls_key_file = key;
+  });
+  grpc::SslCredentialsOptions ssl;
+  ssl.pem_root_certs = ReadFileToString(cert);
+  grpc::ChannelArguments arguments;
+  arguments.SetSslTargetNameOverride("localhost");
+  auto secure = api::Localizer::NewStub(grpc::CreateCustomChannel(
+      "127.0.0.1:" + std::to_string(server_->port()), grpc::SslCredentials(ssl), arguments));
+  grpc::ClientContext secure_context;
+  secure_context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
+  api::ListMapsResponse list;
+  const grpc::Status status = secure->ListMaps(&secure_context, {}, &list);
+  ASSERT_TRUE(status.ok()) << status.error_message();
+  EXPECT_EQ(list.maps_size(), 1);
+  EXPECT_TRUE(RunTrack(*secure, ShortSession()).status.ok());
+
+  grpc::ClientContext plain_context;
+  plain_context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(2));
+  EXPECT_FALSE(stub_->ListMaps(&plain_context, {}, &list).ok());
 }
 
 }  // namespace

@@ -22,6 +22,11 @@ Options:
   --queue-packets N          packets a session may have waiting (default 256)
   --backpressure-fraction F  queue fill that triggers a Backpressure notice (default 0.5)
   --auth-tokens FILE         bearer tokens, one per line: TOKEN [map1,map2]
+  --metrics IPV4:PORT        serve Prometheus metrics at http://IPV4:PORT/metrics (e.g.
+                             127.0.0.1:9464): sessions, events, poses, LOST, rejections,
+                             latency histogram
+  --tls-cert PEM             TLS certificate chain (with --tls-key); default plaintext
+  --tls-key PEM              TLS private key
   --rate HZ                  default tracking steps per second (default 300)
   --variant NAME             default variant: EVT, EVT-PR, EVT-OH or EVT-- (default EVT)
   --max-points N             default map points per step (default 2500)
@@ -69,6 +74,12 @@ ServeCommand ParseServeCommandLine(const std::vector<std::string>& arguments) {
       server.backpressure_fraction = ParseDoubleFlag(flag, value);
     } else if (flag == "--auth-tokens") {
       server.auth_tokens_file = value;
+    } else if (flag == "--metrics") {
+      server.metrics_address = value;
+    } else if (flag == "--tls-cert") {
+      server.tls_cert_file = value;
+    } else if (flag == "--tls-key") {
+      server.tls_key_file = value;
     } else if (flag == "--rate") {
       server.tracker.step_rate_hz = ParseDoubleFlag(flag, value);
     } else if (flag == "--variant") {

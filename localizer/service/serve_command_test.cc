@@ -10,31 +10,40 @@ namespace {
 
 TEST(ServeCommand, EveryFlagReachesItsOption) {
   testing::TemporaryFolder folder;
-  const ServeCommand command = ParseServeCommandLine({"serve",
-                                                      "--maps",
-                                                      folder.path().string(),
-                                                      "--listen",
-                                                      "127.0.0.1:0",
-                                                      "--max-sessions",
-                                                      "3",
-                                                      "--threads",
-                                                      "9",
-                                                      "--max-message-bytes",
-                                                      "65536",
-                                                      "--idle-timeout",
-                                                      "2.5",
-                                                      "--queue-packets",
-                                                      "16",
-                                                      "--backpressure-fraction",
-                                                      "0.25",
-                                                      "--rate",
-                                                      "250",
-                                                      "--variant",
-                                                      "EVT-PR",
-                                                      "--max-points",
-                                                      "1000",
-                                                      "--tau",
-                                                      "0.02"});
+  const std::vector<std::string> arguments = {"serve",
+                                              "--maps",
+                                              folder.path().string(),
+                                              "--listen",
+                                              "127.0.0.1:0",
+                                              "--max-sessions",
+                                              "3",
+                                              "--threads",
+                                              "9",
+                                              "--max-message-bytes",
+                                              "65536",
+                                              "--idle-timeout",
+                                              "2.5",
+                                              "--queue-packets",
+                                              "16",
+                                              "--backpressure-fraction",
+                                              "0.25",
+                                              "--rate",
+                                              "250",
+                                              "--variant",
+                                              "EVT-PR",
+                                              "--max-points",
+                                              "1000",
+                                              "--tau",
+                                              "0.02",
+                                              "--metrics",
+                                              "127.0.0.1:9464",
+                                              "--tls-cert",
+                                              "c.pem",
+                                              "--tls-key",
+                                              "k.pem",
+                                              "--auth-tokens",
+                                              "tokens.txt"};
+  const ServeCommand command = ParseServeCommandLine(arguments);
   const LocalizerServerOptions& server = command.server;
   EXPECT_EQ(server.maps_dir, folder.path());
   EXPECT_EQ(server.listen_address, "127.0.0.1:0");
@@ -48,6 +57,10 @@ TEST(ServeCommand, EveryFlagReachesItsOption) {
   EXPECT_EQ(server.tracker.VariantName(), "EVT-PR");
   EXPECT_EQ(server.tracker.max_points, 1000);
   EXPECT_EQ(server.tracker.decay_time_s, 0.02);
+  EXPECT_EQ(server.metrics_address, "127.0.0.1:9464");
+  EXPECT_EQ(server.tls_cert_file, "c.pem");
+  EXPECT_EQ(server.tls_key_file, "k.pem");
+  EXPECT_EQ(server.auth_tokens_file, "tokens.txt");
   EXPECT_NE(server.Describe().find("max-sessions: 3"), std::string::npos);
 }
 
@@ -62,6 +75,8 @@ TEST(ServeCommand, BadCommandLinesAreRejectedWithTheFlag) {
   EXPECT_THROW(ParseServeCommandLine({"serve", "--maps", maps, "--max-sessions", "0"}),
                InvalidArgumentError);
   EXPECT_THROW(ParseServeCommandLine({"serve", "--maps", maps, "--threads", "3"}),
+               InvalidArgumentError);
+  EXPECT_THROW(ParseServeCommandLine({"serve", "--maps", maps, "--tls-cert", "c.pem"}),
                InvalidArgumentError);
   EXPECT_THROW(ParseServeCommandLine({"serve", "--maps", maps + "/missing"}), InvalidArgumentError);
   try {
