@@ -375,6 +375,70 @@ TEST_F(LocalizerServerTest, BearerTokensGuardMaps) {
   EXPECT_GE(server_->counters().rejected, 3);
 }
 
+TEST_F(LocalizerServerTest, FrameSessionTracksFramesAndRefusesEvents) {
+  StartServer();
+  api::TrackRequest start = TestSessionStart();
+  start.mutable_start()->mutable_options()->set_frames(true);
+  std::vector<api::TrackRequest> requests{start};
+  const auto rectangles = tracking::testing::DefaultRectangles();
+  const Camera camera = testing::TestCamera();
+  for (int64_t t = testing::kInitialTimeNs + 20'000'000; t <= 220'000'000; t += 20'000'000) {
+    const cv::Mat gray =
+        tracking::testing::RenderRectangles(rectangles, camera, tracking::testing::SmoothMotion(t));
+    api::TrackRequest request;
+    request.mutable_frame()->set_t_ns(t);
+    request.mutable_frame()->set_width(static_cast<uint32_t>(camera.width));
+    request.mutable_frame()->set_height(static_cast<uint32_t>(camera.height));
+    request.mutable_frame()->set_gray(
+        std::string(reinterpret_cast<const char*>(gray.data), gray.total()));
+    requests.push_back(request);
+  }
+  const TrackOutcome outcome = RunTrack(*stub_, requests);
+  ASSERT_TRUE(outcome.status.ok()) << outcome.status.error_message();
+  const auto poses = outcome.Poses();
+  ASSERT_EQ(poses.size(), 10u);
+  const Rigid3d truth = tracking::testing::SmoothMotion(poses.back().t_ns());
+  EXPECT_LT((RigidFromProto(poses.back().world_from_cam(), "pose").translation - truth.translation)
+                .norm(),
+            0.03);
+  EXPECT_EQ(outcome.responses.back().end().frames(), 10u);
+
+  requests.push_back(ShortSession()[1]);
+  EXPECT_EQ(RunTrack(*stub_, requests).status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+}
+
+TEST_F(LocalizerServerTest, PoseHintResetsTheTracker) {
+  StartServer();
+  auto requests = ShortSession();
+  // After 30 packets (30 ms of events), reset to a pose 5 cm off the truth at that time.
+  const int64_t hint_t_ns = requests[30].events().end_t_ns();
+  Rigid3d hint = tracking::testing::SmoothMotion(hint_t_ns);
+  hint.translation.x() += 0.05;
+  api::TrackRequest request;
+  request.mutable_pose_hint()->set_t_ns(hint_t_ns);
+  *request.mutable_pose_hint()->mutable_world_from_cam() = RigidToProto(hint);
+  requests.insert(requests.begin() + 31, request);
+  const TrackOutcome outcome = RunTrack(*stub_, requests);
+  ASSERT_TRUE(outcome.status.ok()) << outcome.status.error_message();
+  // The first step after the hint starts from the hinted pose and pulls it back towards the truth.
+  const auto poses = outcome.Poses();
+  const auto after = std::find_if(poses.begin(), poses.end(), [&](const api::PoseUpdate& pose) {
+    return pose.t_ns() > hint_t_ns;
+  });
+  ASSERT_NE(after, poses.end());
+  const double error = (RigidFromProto(after->world_from_cam(), "pose").translation -
+                        tracking::testing::SmoothMotion(after->t_ns()).translation)
+                           .norm();
+  EXPECT_GT(error, 0.005) << "the hint was ignored";
+  EXPECT_LT(error, 0.05);
+
+  // A hint before the end of the last packet goes back in time.
+  request.mutable_pose_hint()->set_t_ns(hint_t_ns - 2'000'000);
+  auto backwards = ShortSession();
+  backwards.insert(backwards.begin() + 31, request);
+  EXPECT_EQ(RunTrack(*stub_, backwards).status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+}
+
 // GET `path` from 127.0.0.1:port over HTTP/1.0; the whole response.
 std::string HttpGet(int port, const std::string& path) {
   const int connection = ::socket(AF_INET, SOCK_STREAM, 0);

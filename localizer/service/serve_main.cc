@@ -35,6 +35,10 @@ int main(int argc, char** argv) {
       std::cout << "evloc-localizer: " << line << std::endl;
     });
     std::cout << "evloc-localizer: serving on port " << server.port() << std::endl;
+    if (server.metrics_port() != 0) {
+      std::cout << "evloc-localizer: metrics on port " << server.metrics_port() << " (GET /metrics)"
+                << std::endl;
+    }
     std::thread stopper([&server, &signals] {
       int received = 0;
       sigwait(&signals, &received);
