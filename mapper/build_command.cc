@@ -72,13 +72,15 @@ Inputs:
                            triangulates (needs --camera or --calib)
   --align-to FILE          reference poses (same layouts): Sim(3) alignment of the model
 COLMAP:
-  --matcher M              sequential | exhaustive | auto (default auto: exhaustive up to 50 images)
+  --matcher M              sequential | exhaustive | auto (default auto: sequential for a timed
+                           --images-list (video), else exhaustive up to 50 images)
   --colmap PATH            COLMAP executable (default: colmap in PATH)
   --colmap-workspace DIR   workspace kept for re-runs (default: MAPDIR.colmap-workspace)
   --threads N              threads for COLMAP and the semi-dense stage (default 2)
   --max-features N         SIFT features per image (default 8192)
 Map:
   --max-keyframes N        at most N keyframes (default: no limit)
+  --min-keyframes N        at least N keyframes when there are N images (default 12)
   --neighbours N           stereo neighbours per keyframe (default 6)
   --min-confirmations K    keyframes that must confirm a point (default 2)
   --voxel-size METRES      duplicate-merge voxel (default: 1 pixel at the median depth)
@@ -137,6 +139,8 @@ BuildCommandLine ParseBuildCommandLine(const std::vector<std::string>& arguments
       options.colmap.max_num_features = ParseIntFlag(flag, value);
     } else if (flag == "--max-keyframes") {
       options.keyframes.max_keyframes = ParseIntFlag(flag, value);
+    } else if (flag == "--min-keyframes") {
+      options.keyframes.min_keyframes = ParseIntFlag(flag, value);
     } else if (flag == "--neighbours") {
       options.keyframes.num_neighbours = ParseIntFlag(flag, value);
     } else if (flag == "--min-confirmations") {

@@ -44,8 +44,8 @@ TEST(BuildCommand, ParsesFlagsIntoOptions) {
   WriteImage(directory / "a.png", 64, 48);
   const BuildCommandLine command_line = ParseBuildCommandLine(
       {"build", "--images", directory.string(), "--out", (directory / "map").string(), "--camera",
-       "pinhole:50,51,31.5,23.5", "--matcher", "sequential", "--max-keyframes", "7", "--threads",
-       "1", "--voxel-size", "0.002", "--quiet"});
+       "pinhole:50,51,31.5,23.5", "--matcher", "sequential", "--max-keyframes", "7",
+       "--min-keyframes", "5", "--threads", "1", "--voxel-size", "0.002", "--quiet"});
   const MapBuilderOptions& options = command_line.options;
   EXPECT_TRUE(command_line.quiet);
   ASSERT_TRUE(options.camera.has_value());
@@ -54,6 +54,7 @@ TEST(BuildCommand, ParsesFlagsIntoOptions) {
   EXPECT_DOUBLE_EQ(options.camera->fy, 51.0);
   EXPECT_EQ(options.colmap.matcher, MatcherType::kSequential);
   EXPECT_EQ(options.keyframes.max_keyframes, 7);
+  EXPECT_EQ(options.keyframes.min_keyframes, 5);
   EXPECT_EQ(options.semidense.num_threads, 1);
   EXPECT_EQ(options.merge.voxel_size, 0.002);
   EXPECT_NE(options.command_line.find("--max-keyframes 7"), std::string::npos);

@@ -17,7 +17,8 @@ namespace evloc::mapper {
 
 // How image pairs are chosen for feature matching.
 enum class MatcherType {
-  // Exhaustive for small sets (ColmapOptions::exhaustive_max_images), sequential otherwise.
+  // Exhaustive for small sets (ColmapOptions::exhaustive_max_images), sequential otherwise
+  // (BuildMap also picks sequential for a timed image list, i.e. a video).
   kAuto,
   // Every image against the next ones in name order (video-like sequences).
   kSequential,

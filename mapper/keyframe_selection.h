@@ -33,6 +33,11 @@ struct RegisteredView {
 struct KeyframeSelectionOptions {
   // At most this many keyframes (evenly thinned out in view order); std::nullopt: no limit.
   std::optional<int> max_keyframes;
+  // At least this many keyframes when there are that many views (and max_keyframes allows):
+  // when the thresholds below give
+  // fewer (short video-like sequences), the baseline and rotation thresholds are halved until
+  // they give enough, and as a last resort the keyframes are spread evenly over the views.
+  int min_keyframes = 12;
   // A view becomes a keyframe when it shares less than this fraction of the last keyframe's
   // sparse points.
   double max_shared_fraction = 0.7;
@@ -48,6 +53,10 @@ struct KeyframeSelectionOptions {
   int min_shared_points = 15;
   // A neighbour's baseline must be at least this fraction of the keyframe's median depth.
   double min_neighbour_baseline_ratio = 0.02;
+  // Neighbours are ranked by shared sparse points times min(1, baseline / (this fraction of the
+  // keyframe's median depth)): among views that share the structure, wider baselines (more
+  // precise depth) come first up to this ratio.
+  double preferred_neighbour_baseline_ratio = 0.08;
   // A neighbour's optical axis must be within this angle of the keyframe's, degrees.
   double max_neighbour_angle_deg = 50.0;
 

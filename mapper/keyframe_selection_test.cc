@@ -37,6 +37,7 @@ TEST(KeyframeSelection, NewKeyframeAfterEnoughBaseline) {
   KeyframeSelectionOptions options;
   options.max_baseline_ratio = 0.045;  // 0.09 m at 2 m depth: every 5th view (0.1 m).
   options.max_shared_fraction = 0.01;
+  options.min_keyframes = 1;
   const KeyframeSelection selection = SelectKeyframes(scene.views, scene.points, options);
   EXPECT_EQ(selection.keyframes, (std::vector<size_t>{0, 5, 10, 15}));
   ASSERT_EQ(selection.median_depths.size(), 4u);
@@ -59,10 +60,43 @@ TEST(KeyframeSelection, NeighboursShareMostPointsAndHaveBaseline) {
   scene.views.push_back(scene.views[0]);
   KeyframeSelectionOptions options;
   options.num_neighbours = 3;
+  options.preferred_neighbour_baseline_ratio = 0.01;  // Every baseline here is wide enough.
   const KeyframeSelection selection = SelectKeyframes(scene.views, scene.points, options);
   ASSERT_EQ(selection.keyframes.front(), 0u);
   const std::vector<size_t>& neighbours = selection.neighbours.front();
   EXPECT_EQ(neighbours, (std::vector<size_t>{1, 2, 3}));
+}
+
+TEST(KeyframeSelection, NeighboursPreferBaselineUpToThePreferredRatio) {
+  const Scene scene = MakeScene(10, 0.1);
+  KeyframeSelectionOptions options;
+  options.num_neighbours = 3;
+  options.preferred_neighbour_baseline_ratio = 0.08;  // 0.16 m at 2 m depth.
+  const KeyframeSelection selection = SelectKeyframes(scene.views, scene.points, options);
+  ASSERT_EQ(selection.keyframes.front(), 0u);
+  // View 1 (0.1 m) shares the most points but is weighted by 0.1 / 0.16; views 2-4 are not.
+  EXPECT_EQ(selection.neighbours.front(), (std::vector<size_t>{2, 3, 4}));
+}
+
+TEST(KeyframeSelection, ShortSequenceGetsMinKeyframes) {
+  // 60 views over 0.6 m at 2 m depth: the default 0.1 * depth baseline gives 3 keyframes.
+  const Scene scene = MakeScene(60, 0.01);
+  KeyframeSelectionOptions options;
+  options.max_shared_fraction = 0.01;
+  options.min_keyframes = 12;
+  const KeyframeSelection selection = SelectKeyframes(scene.views, scene.points, options);
+  EXPECT_GE(selection.keyframes.size(), 12u);
+  EXPECT_LE(selection.keyframes.size(), 30u);
+  EXPECT_EQ(selection.keyframes.front(), 0u);
+  EXPECT_GE(selection.keyframes.back(), 50u);
+  for (const std::vector<size_t>& neighbours : selection.neighbours) {
+    EXPECT_EQ(neighbours.size(), static_cast<size_t>(options.num_neighbours));
+  }
+  // More keyframes than views cannot be had: every view is one.
+  options.min_keyframes = 100;
+  const Scene tiny = MakeScene(4, 0.001);
+  EXPECT_EQ(SelectKeyframes(tiny.views, tiny.points, options).keyframes,
+            (std::vector<size_t>{0, 1, 2, 3}));
 }
 
 TEST(KeyframeSelection, RejectsBadInput) {
@@ -70,6 +104,12 @@ TEST(KeyframeSelection, RejectsBadInput) {
   KeyframeSelectionOptions options;
   EXPECT_THROW(SelectKeyframes({}, scene.points, options), InvalidArgumentError);
   options.num_neighbours = 0;
+  EXPECT_THROW(SelectKeyframes(scene.views, scene.points, options), InvalidArgumentError);
+  options = KeyframeSelectionOptions();
+  options.min_keyframes = 0;
+  EXPECT_THROW(SelectKeyframes(scene.views, scene.points, options), InvalidArgumentError);
+  options = KeyframeSelectionOptions();
+  options.preferred_neighbour_baseline_ratio = 0.0;
   EXPECT_THROW(SelectKeyframes(scene.views, scene.points, options), InvalidArgumentError);
   options = KeyframeSelectionOptions();
   std::vector<RegisteredView> views = scene.views;

@@ -584,6 +584,13 @@ MapBuildReport BuildMap(const MapBuilderOptions& options_in, ProgressListener* p
   const fs::path workspace = options.colmap_workspace
                                  ? fs::absolute(*options.colmap_workspace)
                                  : fs::path(output_dir.string() + ".colmap-workspace");
+  // A timed image list is a time-ordered video: sequential matching (each image with the next
+  // sequential_overlap ones) instead of all pairs, whatever the number of images.
+  const bool timed_sequence = std::all_of(images.begin(), images.end(),
+                                          [](const InputImage& image) { return image.has_time; });
+  if (options.colmap.matcher == MatcherType::kAuto && timed_sequence) {
+    options.colmap.matcher = MatcherType::kSequential;
+  }
   ColmapRunner runner(options.colmap, workspace, options.image_dir);
   report.colmap_version = ColmapVersion(options.colmap);
   const MatcherType matcher = runner.EffectiveMatcher(images.size());

@@ -22,13 +22,26 @@ target_compile_definitions(evloc_mapper_pipeline PRIVATE EVLOC_VERSION="${PROJEC
 target_include_directories(evloc_mapper_pipeline SYSTEM PRIVATE ${PCL_INCLUDE_DIRS})
 target_compile_definitions(evloc_mapper_pipeline PRIVATE ${PCL_DEFINITIONS})
 
+# Accuracy of a map against an exact synthetic scene (scripts/accuracy/mapper_synthetic.sh).
+add_library(evloc_mapper_accuracy ${CMAKE_CURRENT_LIST_DIR}/map_accuracy.cc)
+target_include_directories(evloc_mapper_accuracy PUBLIC ${PROJECT_SOURCE_DIR})
+target_link_libraries(evloc_mapper_accuracy
+  PUBLIC evloc_maps evloc_camera evloc_geometry evloc_common opencv_core
+  PRIVATE ${PCL_LIBRARIES})
+target_include_directories(evloc_mapper_accuracy SYSTEM PRIVATE ${PCL_INCLUDE_DIRS})
+target_compile_definitions(evloc_mapper_accuracy PRIVATE ${PCL_DEFINITIONS})
+add_executable(evloc-mapper-accuracy ${CMAKE_CURRENT_LIST_DIR}/map_accuracy_main.cc)
+target_link_libraries(evloc-mapper-accuracy PRIVATE evloc_mapper_accuracy evloc_trajectory
+  opencv_imgcodecs nlohmann_json::nlohmann_json)
+
 evloc_add_test(NAME evloc_mapper_pipeline_test
   SOURCES ${CMAKE_CURRENT_LIST_DIR}/colmap_model_test.cc
           ${CMAKE_CURRENT_LIST_DIR}/keyframe_selection_test.cc
           ${CMAKE_CURRENT_LIST_DIR}/semidense_depth_test.cc
           ${CMAKE_CURRENT_LIST_DIR}/map_merge_test.cc
           ${CMAKE_CURRENT_LIST_DIR}/build_command_test.cc
-  LIBS evloc_mapper_pipeline evloc_trajectory)
+          ${CMAKE_CURRENT_LIST_DIR}/map_accuracy_test.cc
+  LIBS evloc_mapper_pipeline evloc_mapper_accuracy evloc_trajectory)
 
 evloc_add_test(NAME evloc_mapper_accuracy_test
   SOURCES ${CMAKE_CURRENT_LIST_DIR}/map_builder_accuracy_test.cc

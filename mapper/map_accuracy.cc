@@ -1,0 +1,161 @@
+#include "mapper/map_accuracy.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numbers>
+
+#include <pcl/kdtree/kdtree_flann.h>
+#include <pcl/point_cloud.h>
+#include <pcl/point_types.h>
+
+#include "core/common/error.h"
+
+namespace evloc::mapper {
+namespace {
+
+double Median(std::vector<double> values) {
+  if (values.empty()) return std::numeric_limits<double>::quiet_NaN();
+  const auto middle = values.begin() + static_cast<std::ptrdiff_t>(values.size() / 2);
+  std::nth_element(values.begin(), middle, values.end());
+  return *middle;
+}
+
+double AngleDeg(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
+  const double cosine = a.normalized().dot(b.normalized());
+  return std::acos(std::clamp(cosine, -1.0, 1.0)) * 180.0 / std::numbers::pi;
+}
+
+double DistanceToSegment(const Eigen::Vector3d& point, const Eigen::Vector3d& a,
+                         const Eigen::Vector3d& b) {
+  const Eigen::Vector3d ab = b - a;
+  const double length_squared = ab.squaredNorm();
+  if (length_squared <= 0.0) return (point - a).norm();
+  const double t = std::clamp((point - a).dot(ab) / length_squared, 0.0, 1.0);
+  return (point - (a + t * ab)).norm();
+}
+
+// The image direction of gradient `gradient` at `point` in `view`; false when not visible.
+bool ImageDirection(const DepthView& view, const Eigen::Vector3d& point,
+                    const Eigen::Vector3d& gradient, Eigen::Vector2d* direction) {
+  const Eigen::Vector3d in_cam = view.cam_from_world * point;
+  const Eigen::Vector3d tip_in_cam = view.cam_from_world * (point + 1e-3 * gradient);
+  Eigen::Vector2d pixel;
+  Eigen::Vector2d tip;
+  if (in_cam.z() <= 0.0 || tip_in_cam.z() <= 0.0) return false;
+  if (!view.camera.Project(in_cam, &pixel) || !view.camera.Project(tip_in_cam, &tip)) return false;
+  *direction = tip - pixel;
+  return direction->norm() > 1e-12;
+}
+
+}  // namespace
+
+void MapAccuracyOptions::Check() const {
+  if (!(within_m > 0.0)) throw InvalidArgumentError("within_m must be > 0");
+  if (depth_window_half_size_px < 0) {
+    throw InvalidArgumentError("depth_window_half_size_px must be >= 0");
+  }
+  if (!(max_segment_length_m >= 0.0)) {
+    throw InvalidArgumentError("max_segment_length_m must be >= 0");
+  }
+}
+
+MapAccuracy MeasureMapAccuracy(const Map& map, const Map& reference,
+                               const std::vector<DepthView>& views,
+                               const MapAccuracyOptions& options) {
+  options.Check();
+  if (map.size() == 0) throw InvalidArgumentError("the measured map is empty");
+  if (reference.size() < 2) throw InvalidArgumentError("the reference map has fewer than 2 points");
+  pcl::PointCloud<pcl::PointXYZ>::Ptr cloud(new pcl::PointCloud<pcl::PointXYZ>);
+  cloud->reserve(reference.size());
+  for (const Eigen::Vector3f& position : reference.positions) {
+    cloud->push_back(pcl::PointXYZ(position.x(), position.y(), position.z()));
+  }
+  pcl::KdTreeFLANN<pcl::PointXYZ> tree;
+  tree.setInputCloud(cloud);
+  std::vector<Eigen::Vector3d> centers;
+  for (const DepthView& view : views) centers.push_back(view.cam_from_world.Inverse().translation);
+
+  MapAccuracy accuracy;
+  accuracy.num_points = map.size();
+  std::vector<double> depth_errors;
+  std::vector<double> edge_distances;
+  std::vector<double> gradient_angles;
+  std::vector<double> image_gradient_angles;
+  std::vector<int> indices(2);
+  std::vector<float> squared_distances(2);
+  const int window = options.depth_window_half_size_px;
+  for (size_t i = 0; i < map.size(); ++i) {
+    const Eigen::Vector3d point = map.positions[i].cast<double>();
+    const Eigen::Vector3d gradient = map.gradients[i].cast<double>();
+    // Ground-truth edges.
+    const pcl::PointXYZ query(map.positions[i].x(), map.positions[i].y(), map.positions[i].z());
+    if (tree.nearestKSearch(query, 2, indices, squared_distances) < 1) continue;
+    const Eigen::Vector3d first = reference.positions[indices[0]].cast<double>();
+    double distance = (point - first).norm();
+    if (indices.size() > 1) {
+      const Eigen::Vector3d second = reference.positions[indices[1]].cast<double>();
+      if ((second - first).norm() <= options.max_segment_length_m) {
+        distance = DistanceToSegment(point, first, second);
+      }
+    }
+    edge_distances.push_back(distance);
+    const Eigen::Vector3d reference_gradient = reference.gradients[indices[0]].cast<double>();
+    gradient_angles.push_back(AngleDeg(gradient, reference_gradient));
+
+    // The nearest depth view (by camera centre) in which the point projects with valid depth.
+    std::vector<std::pair<double, size_t>> by_distance;
+    for (size_t v = 0; v < views.size(); ++v) {
+      by_distance.emplace_back((centers[v] - point).squaredNorm(), v);
+    }
+    std::sort(by_distance.begin(), by_distance.end());
+    for (const auto& [unused, v] : by_distance) {
+      const DepthView& view = views[v];
+      const Eigen::Vector3d in_cam = view.cam_from_world * point;
+      Eigen::Vector2d pixel;
+      if (in_cam.z() <= 0.0 || !view.camera.Project(in_cam, &pixel) ||
+          !view.camera.IsInside(pixel)) {
+        continue;
+      }
+      const int u = static_cast<int>(std::lround(pixel.x()));
+      const int w = static_cast<int>(std::lround(pixel.y()));
+      double best = std::numeric_limits<double>::infinity();
+      for (int dy = -window; dy <= window; ++dy) {
+        for (int dx = -window; dx <= window; ++dx) {
+          const int x = u + dx;
+          const int y = w + dy;
+          if (x < 0 || y < 0 || x >= view.depth_m.cols || y >= view.depth_m.rows) continue;
+          const float depth = view.depth_m.at<float>(y, x);
+          if (depth > 0.0f) best = std::min(best, std::abs(in_cam.z() - depth));
+        }
+      }
+      if (!std::isfinite(best)) continue;
+      depth_errors.push_back(best);
+      Eigen::Vector2d direction;
+      Eigen::Vector2d reference_direction;
+      if (ImageDirection(view, point, gradient, &direction) &&
+          ImageDirection(view, point, reference_gradient, &reference_direction)) {
+        image_gradient_angles.push_back(
+            AngleDeg(Eigen::Vector3d(direction.x(), direction.y(), 0),
+                     Eigen::Vector3d(reference_direction.x(), reference_direction.y(), 0)));
+      }
+      break;
+    }
+  }
+  const auto fraction_within = [&](const std::vector<double>& values) {
+    if (values.empty()) return 0.0;
+    const auto count = std::count_if(values.begin(), values.end(),
+                                     [&](double value) { return value <= options.within_m; });
+    return static_cast<double>(count) / static_cast<double>(values.size());
+  };
+  accuracy.num_depth_compared = depth_errors.size();
+  accuracy.median_depth_error_m = Median(depth_errors);
+  accuracy.depth_within_fraction = fraction_within(depth_errors);
+  accuracy.median_edge_distance_m = Median(edge_distances);
+  accuracy.edge_within_fraction = fraction_within(edge_distances);
+  accuracy.median_gradient_angle_deg = Median(gradient_angles);
+  accuracy.median_image_gradient_angle_deg = Median(image_gradient_angles);
+  return accuracy;
+}
+
+}  // namespace evloc::mapper

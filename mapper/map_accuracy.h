@@ -1,0 +1,70 @@
+// Accuracy of a built map against an exact scene (docs/mapper.md, "Accuracy on synthetic
+// sequences"): depth error against rendered depth maps, distance to the ground-truth edge map and
+// the angle between 3D gradients.
+#pragma once
+
+#include <cstddef>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "core/camera/camera.h"
+#include "core/geometry/rigid3.h"
+#include "maps/map.h"
+
+namespace evloc::mapper {
+
+// A rendered depth map with its camera and pose.
+struct DepthView {
+  // Intrinsics of the depth map.
+  Camera camera;
+  // Pose: p_cam = cam_from_world * p_world.
+  Rigid3d cam_from_world;
+  // z along the optical axis, metres, CV_32F; 0 where nothing was hit.
+  cv::Mat depth_m;
+};
+
+// Options of MeasureMapAccuracy.
+struct MapAccuracyOptions {
+  // Points within this distance count as accurate, metres (the "within" fractions).
+  double within_m = 0.02;
+  // The depth error of a point is the smallest |z - depth| over a window of this half-size around
+  // its projection (an edge point may fall on either side of a depth discontinuity), pixels.
+  int depth_window_half_size_px = 1;
+  // Two nearest ground-truth points closer than this to each other form an edge segment whose
+  // distance is used (the ground truth samples edges discretely), metres.
+  double max_segment_length_m = 0.025;
+
+  // Throws InvalidArgumentError on a bad value.
+  void Check() const;
+};
+
+// The measured accuracy.
+struct MapAccuracy {
+  // Points of the measured map.
+  size_t num_points = 0;
+  // Points that project into a depth view with valid depth nearby.
+  size_t num_depth_compared = 0;
+  // Median depth error against the nearest depth view (by camera centre), metres.
+  double median_depth_error_m = 0.0;
+  // Fraction of the compared points with a depth error within within_m.
+  double depth_within_fraction = 0.0;
+  // Median distance to the ground-truth edges (segment of the two nearest points), metres.
+  double median_edge_distance_m = 0.0;
+  // Fraction of the points within within_m of the ground-truth edges.
+  double edge_within_fraction = 0.0;
+  // Median angle between a point's 3D gradient and its nearest ground-truth point's, degrees.
+  double median_gradient_angle_deg = 0.0;
+  // Median angle between the two gradients projected into the nearest depth view, degrees
+  // (what tracking uses: the 3D gradient of method.md §3.4 is only defined up to the viewing
+  // direction).
+  double median_image_gradient_angle_deg = 0.0;
+};
+
+// Measures `map` against the exact `reference` map and rendered `views`. Throws
+// InvalidArgumentError when the options are bad or either map is empty.
+MapAccuracy MeasureMapAccuracy(const Map& map, const Map& reference,
+                               const std::vector<DepthView>& views,
+                               const MapAccuracyOptions& options);
+
+}  // namespace evloc::mapper

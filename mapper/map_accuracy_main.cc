@@ -1,0 +1,129 @@
+// evloc-mapper-accuracy: measures a built map against a synthetic dataset's exact scene
+// (gt_map/ and the rendered depth maps; docs/mapper.md, "Accuracy on synthetic sequences").
+// Prints one JSON object on stdout; exit code 2 for a bad command line, 1 for an error.
+
+#include <filesystem>
+#include <iostream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+
+#include "core/camera/camera.h"
+#include "core/common/cli.h"
+#include "core/common/error.h"
+#include "core/common/file_util.h"
+#include "core/trajectory/trajectory.h"
+#include "core/trajectory/tum_io.h"
+#include "mapper/map_accuracy.h"
+#include "maps/map.h"
+#include "maps/map_directory.h"
+
+namespace {
+
+namespace fs = std::filesystem;
+using evloc::mapper::DepthView;
+
+constexpr const char* kUsage = R"(Usage: evloc-mapper-accuracy --map MAPDIR --dataset DIR [options]
+
+Measures a map against an evloc-sim dataset: depth error against the rendered depth maps (nearest
+frame by camera centre), distance to the exact edges of DIR/gt_map and gradient angles.
+  --map MAPDIR         map directory or .evmap file
+  --dataset DIR        evloc-sim dataset (calib.yaml, depth.txt, groundtruth.txt, gt_map/)
+  --within METRES      threshold of the "within" fractions (default 0.02)
+  --depth-stride N     use every N-th depth map (default 1)
+)";
+
+std::vector<DepthView> ReadDepthViews(const fs::path& dataset, int stride) {
+  const evloc::Camera camera = evloc::ReadCameraYaml(dataset / "calib.yaml");
+  const evloc::Trajectory trajectory = evloc::ReadTumTrajectory(dataset / "groundtruth.txt");
+  std::istringstream lines(evloc::ReadFileToString(dataset / "depth.txt"));
+  std::vector<DepthView> views;
+  std::string line;
+  int index = 0;
+  while (std::getline(lines, line)) {
+    std::istringstream fields(line);
+    std::string time;
+    std::string path;
+    if (!(fields >> time >> path) || time[0] == '#') continue;
+    if (index++ % stride != 0) continue;
+    const std::optional<evloc::Rigid3d> world_from_cam =
+        trajectory.Lookup(evloc::ParseSecondsAsNanoseconds(time));
+    if (!world_from_cam) continue;
+    const cv::Mat millimetres = cv::imread((dataset / path).string(), cv::IMREAD_UNCHANGED);
+    if (millimetres.empty() || millimetres.type() != CV_16UC1) {
+      throw evloc::IoError("cannot read the 16-bit depth map " + (dataset / path).string());
+    }
+    DepthView view;
+    view.camera = camera;
+    view.cam_from_world = world_from_cam->Inverse();
+    millimetres.convertTo(view.depth_m, CV_32F, 1e-3);
+    views.push_back(std::move(view));
+  }
+  return views;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  fs::path map_path;
+  fs::path dataset;
+  int stride = 1;
+  evloc::mapper::MapAccuracyOptions options;
+  try {
+    for (int i = 1; i < argc; ++i) {
+      const std::string flag = argv[i];
+      if (flag == "--help" || flag == "-h") {
+        std::cout << kUsage;
+        return 0;
+      }
+      if (i + 1 >= argc) throw evloc::InvalidArgumentError(flag + " needs a value");
+      const std::string value = argv[++i];
+      if (flag == "--map") {
+        map_path = value;
+      } else if (flag == "--dataset") {
+        dataset = value;
+      } else if (flag == "--within") {
+        options.within_m = evloc::ParseDoubleFlag(flag, value);
+      } else if (flag == "--depth-stride") {
+        stride = evloc::ParseIntFlag(flag, value);
+      } else {
+        throw evloc::InvalidArgumentError("unknown flag '" + flag + "'");
+      }
+    }
+    if (map_path.empty() || dataset.empty()) {
+      throw evloc::InvalidArgumentError("--map and --dataset are required");
+    }
+    if (stride < 1) throw evloc::InvalidArgumentError("--depth-stride must be at least 1");
+    options.Check();
+  } catch (const evloc::Error& error) {
+    std::cerr << "evloc-mapper-accuracy: " << error.what() << "\n\n" << kUsage;
+    return 2;
+  }
+  try {
+    const evloc::Map map = evloc::LoadMap(evloc::ResolveMapFile(map_path));
+    const evloc::Map reference = evloc::LoadMap(dataset / "gt_map" / evloc::kMapFileName);
+    const std::vector<DepthView> views = ReadDepthViews(dataset, stride);
+    const evloc::mapper::MapAccuracy accuracy =
+        evloc::mapper::MeasureMapAccuracy(map, reference, views, options);
+    nlohmann::json json;
+    json["points"] = accuracy.num_points;
+    json["reference_points"] = reference.size();
+    json["depth_views"] = views.size();
+    json["depth_compared_points"] = accuracy.num_depth_compared;
+    json["median_depth_error_m"] = accuracy.median_depth_error_m;
+    json["depth_within_fraction"] = accuracy.depth_within_fraction;
+    json["median_edge_distance_m"] = accuracy.median_edge_distance_m;
+    json["edge_within_fraction"] = accuracy.edge_within_fraction;
+    json["median_gradient_angle_deg"] = accuracy.median_gradient_angle_deg;
+    json["median_image_gradient_angle_deg"] = accuracy.median_image_gradient_angle_deg;
+    json["within_m"] = options.within_m;
+    std::cout << json.dump(2) << "\n";
+    return 0;
+  } catch (const std::exception& error) {
+    std::cerr << "evloc-mapper-accuracy: error: " << error.what() << "\n";
+    return 1;
+  }
+}
