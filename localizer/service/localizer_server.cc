@@ -46,6 +46,29 @@ std::string Trim(const std::string& text) {
   return text.substr(begin, end - begin + 1);
 }
 
+const char* StatusCodeName(grpc::StatusCode code) {
+  switch (code) {
+    case grpc::StatusCode::CANCELLED:
+      return "CANCELLED";
+    case grpc::StatusCode::INVALID_ARGUMENT:
+      return "INVALID_ARGUMENT";
+    case grpc::StatusCode::NOT_FOUND:
+      return "NOT_FOUND";
+    case grpc::StatusCode::PERMISSION_DENIED:
+      return "PERMISSION_DENIED";
+    case grpc::StatusCode::RESOURCE_EXHAUSTED:
+      return "RESOURCE_EXHAUSTED";
+    case grpc::StatusCode::FAILED_PRECONDITION:
+      return "FAILED_PRECONDITION";
+    case grpc::StatusCode::UNAUTHENTICATED:
+      return "UNAUTHENTICATED";
+    case grpc::StatusCode::INTERNAL:
+      return "INTERNAL";
+    default:
+      return "error";
+  }
+}
+
 // An item from the stream reader to the tracking worker.
 struct InboundItem {
   // Events of one packet (empty for other kinds).
@@ -313,6 +336,9 @@ class TrackStream {
         backpressure_threshold_(std::max<size_t>(
             1, static_cast<size_t>(options_.backpressure_fraction *
                                    static_cast<double>(options_.queue_packets)))) {}
+
+  // True once the session was accepted (it then logs its own start and end).
+  bool started() const { return id_ != 0; }
 
   // Runs the session to its end and returns its status.
   grpc::Status Run() {
@@ -682,7 +708,13 @@ grpc::Status LocalizerServer::Service::Track(grpc::ServerContext* context,
                                              TrackServerStream* stream) {
   TrackStream session(*this, context, stream);
   grpc::Status status = session.Run();
-  if (!status.ok()) ++counters_.rejected;
+  if (!status.ok()) {
+    ++counters_.rejected;
+    if (!session.started()) {
+      Log("Track from " + context->peer() + " refused: " + StatusCodeName(status.error_code()) +
+          ": " + status.error_message());
+    }
+  }
   return status;
 }
 

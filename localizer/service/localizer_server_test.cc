@@ -216,6 +216,8 @@ TEST_F(LocalizerServerTest, UnknownMapIsNotFound) {
   auto requests = ShortSession();
   requests[0].mutable_start()->set_map_name("atlantis");
   EXPECT_EQ(RunTrack(*stub_, requests).status.error_code(), grpc::StatusCode::NOT_FOUND);
+  ASSERT_EQ(LogLines().size(), 1u);
+  EXPECT_NE(LogLines()[0].find("refused: NOT_FOUND"), std::string::npos) << LogLines()[0];
   requests[0].mutable_start()->set_map_name(testing::kTestMapName);
   requests[0].mutable_start()->set_map_version("deadbeef");
   EXPECT_EQ(RunTrack(*stub_, requests).status.error_code(), grpc::StatusCode::NOT_FOUND);

@@ -78,6 +78,8 @@ struct SharedState {
   std::vector<bool> tracking;
   std::vector<double> client_latency_us;
   std::vector<double> server_latency_us;
+  std::vector<double> server_overhead_us;
+  std::vector<double> step_ms;
   int64_t lost = 0;
   int64_t backpressure = 0;
   int64_t last_pose_t_ns = 0;
@@ -191,6 +193,8 @@ ReplayResult RunReplay(const ReplayOptions& options, std::ostream& log) {
               std::chrono::duration<double, std::micro>(now - shared.sent.front().sent).count());
         }
         shared.server_latency_us.push_back(pose.latency_us());
+        shared.server_overhead_us.push_back(pose.latency_us() - pose.step_ms() * 1e3);
+        shared.step_ms.push_back(pose.step_ms());
         shared.poses.push_back(
             {pose.t_ns(), service::RigidFromProto(pose.world_from_cam(), "PoseUpdate")});
         shared.tracking.push_back(pose.status() == api::TRACKING);
@@ -297,6 +301,9 @@ ReplayResult RunReplay(const ReplayOptions& options, std::ostream& log) {
   result.client_latency_p99_us = Percentile(shared.client_latency_us, 0.99);
   result.server_latency_p50_us = Percentile(shared.server_latency_us, 0.5);
   result.server_latency_p99_us = Percentile(shared.server_latency_us, 0.99);
+  result.server_overhead_p50_us = Percentile(shared.server_overhead_us, 0.5);
+  result.server_overhead_p99_us = Percentile(shared.server_overhead_us, 0.99);
+  result.step_p50_ms = Percentile(shared.step_ms, 0.5);
   WriteTumTrajectory(options.output, result.trajectory);
   log << "evloc-replay: sent " << result.events_sent << " events in " << result.packets_sent
       << " packets, received " << result.trajectory.size() << " poses (" << result.lost_poses
@@ -304,7 +311,9 @@ ReplayResult RunReplay(const ReplayOptions& options, std::ostream& log) {
       << " s\n"
       << "evloc-replay: latency client p50 " << result.client_latency_p50_us << " us p99 "
       << result.client_latency_p99_us << " us; server p50 " << result.server_latency_p50_us
-      << " us p99 " << result.server_latency_p99_us << " us\n"
+      << " us p99 " << result.server_latency_p99_us << " us (of which outside the step: p50 "
+      << result.server_overhead_p50_us << " us p99 " << result.server_overhead_p99_us
+      << " us); median step " << result.step_p50_ms << " ms\n"
       << "evloc-replay: server totals: " << end.events() << " events, " << end.poses()
       << " poses; trajectory written to " << options.output.string() << "\n";
   return result;

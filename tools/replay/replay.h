@@ -82,6 +82,13 @@ struct ReplayResult {
   double server_latency_p50_us = 0;
   // 99th percentile of the server-side latency, microseconds.
   double server_latency_p99_us = 0;
+  // Server-side overhead (latency_us minus the step's own time): queueing, serialisation and
+  // hand-over; median and 99th percentile, microseconds.
+  double server_overhead_p50_us = 0;
+  // 99th percentile of the overhead, microseconds.
+  double server_overhead_p99_us = 0;
+  // Median wall time of a tracking step on the server, milliseconds.
+  double step_p50_ms = 0;
   // Wall time of the replay, seconds.
   double wall_s = 0;
 };

@@ -72,9 +72,11 @@ TEST_F(ReplayBenchmark, OneRealTimeSessionLatency) {
     const ReplayResult result = RunReplay(Options(0), log);
     std::printf(
         "one session, 300 Hz, 1 ms packets, %zu poses: server latency p50 %.0f us p99 %.0f us; "
-        "client latency p50 %.0f us p99 %.0f us\n",
+        "client latency p50 %.0f us p99 %.0f us; outside the step p50 %.0f us p99 %.0f us; "
+        "median step %.2f ms\n",
         result.trajectory.size(), result.server_latency_p50_us, result.server_latency_p99_us,
-        result.client_latency_p50_us, result.client_latency_p99_us);
+        result.client_latency_p50_us, result.client_latency_p99_us, result.server_overhead_p50_us,
+        result.server_overhead_p99_us, result.step_p50_ms);
     EXPECT_GE(result.trajectory.size(), 400u);
     EXPECT_EQ(result.lost_poses, 0);
     EXPECT_GT(result.server_latency_p99_us, 0);
