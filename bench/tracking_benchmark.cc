@@ -67,7 +67,7 @@ void BM_TrackingStep(benchmark::State& state) {
     next_packet = 0;
   };
   restart();
-  std::vector<double> step_ms, surface_ms, selection_ms, solve_ms, points;
+  std::vector<double> step_ms, surface_ms, selection_ms, solve_ms, points, iterations;
   int64_t lost = 0;
   for (auto _ : state) {
     if (next_packet == scene.packets.size()) {
@@ -82,6 +82,7 @@ void BM_TrackingStep(benchmark::State& state) {
       selection_ms.push_back(estimate.timings.selection_ms);
       solve_ms.push_back(estimate.timings.solve_ms);
       points.push_back(estimate.quality.points_used);
+      iterations.push_back(estimate.quality.iterations);
       lost += estimate.status == TrackingStatus::kLost ? 1 : 0;
     }
   }
@@ -100,6 +101,7 @@ void BM_TrackingStep(benchmark::State& state) {
   state.counters["selection_mean_ms"] = mean(selection_ms);
   state.counters["solve_median_ms"] = median(solve_ms);
   state.counters["points_used"] = mean(points);
+  state.counters["lm_iterations"] = mean(iterations);
   state.counters["lost_steps"] = static_cast<double>(lost);
   state.SetLabel(std::string(state.range(0) == 0 ? "lazy" : "dense") + " " + options.VariantName() +
                  (options.smooth_field ? " smoothed" : ""));

@@ -1,8 +1,8 @@
 #include "localizer/tracking/occlusion.h"
 
+#include <algorithm>
 #include <cmath>
-
-#include <opencv2/imgproc.hpp>
+#include <tuple>
 
 #include "core/common/error.h"
 
@@ -12,42 +12,70 @@ void NearestEdgeField::Build(const cv::Mat& edge_mask) {
   if (edge_mask.type() != CV_8UC1 || edge_mask.empty()) {
     throw InvalidArgumentError("NearestEdgeField needs a non-empty CV_8UC1 edge mask.");
   }
-  // distanceTransform measures distances to zero pixels: zero on the edges.
-  const cv::Mat not_edges = (edge_mask == 0);
-  num_edge_pixels_ = edge_mask.rows * edge_mask.cols - cv::countNonZero(not_edges);
-  if (num_edge_pixels_ == 0) {
-    distance_.create(edge_mask.size(), CV_32F);
-    labels_.release();
-    return;
+  mask_image_ = edge_mask.isContinuous() ? edge_mask : edge_mask.clone();
+  mask_ = mask_image_.ptr<uint8_t>(0);
+  last_t_ns_ = nullptr;
+  width_ = edge_mask.cols;
+  height_ = edge_mask.rows;
+}
+
+void NearestEdgeField::Build(const TimeSurface& surface, SurfaceChannel channel, int64_t t_ns,
+                             const SurfaceDecay& decay) {
+  mask_image_.release();
+  mask_ = nullptr;
+  last_t_ns_ = surface.LastTimestamps(channel);
+  // Active <=> age <= the largest active age (events after t_ns count as fired at t_ns). Never
+  // fired pixels hold kNeverFired, below any threshold.
+  min_active_t_ns_ = t_ns - decay.MaxActiveAgeExactNs();
+  width_ = surface.width();
+  height_ = surface.height();
+}
+
+const std::vector<NearestEdgeField::Offset>& NearestEdgeField::Offsets(double radius_px) const {
+  for (const auto& [radius, offsets] : offsets_) {
+    if (radius == radius_px) return offsets;
   }
-  cv::distanceTransform(not_edges, distance_, labels_, cv::DIST_L2, cv::DIST_MASK_5,
-                        cv::DIST_LABEL_PIXEL);
-  // Every zero pixel of the input carries its own label; map labels back to pixels.
-  label_to_pixel_.assign(static_cast<size_t>(num_edge_pixels_) + 1, -1);
-  for (int y = 0; y < edge_mask.rows; ++y) {
-    const uint8_t* mask_row = edge_mask.ptr<uint8_t>(y);
-    const int32_t* label_row = labels_.ptr<int32_t>(y);
-    for (int x = 0; x < edge_mask.cols; ++x) {
-      if (mask_row[x] == 0) continue;
-      const int32_t label = label_row[x];
-      if (label >= 0 && label < static_cast<int32_t>(label_to_pixel_.size())) {
-        label_to_pixel_[label] = y * edge_mask.cols + x;
+  std::vector<Offset> offsets;
+  const int reach = static_cast<int>(std::floor(radius_px));
+  for (int dy = -reach; dy <= reach; ++dy) {
+    for (int dx = -reach; dx <= reach; ++dx) {
+      const int squared = dx * dx + dy * dy;
+      if (squared <= radius_px * radius_px) {
+        offsets.push_back({dx, dy, std::sqrt(static_cast<float>(squared))});
       }
     }
   }
+  // Nearest first; at equal distance, the lower row-major index first.
+  std::sort(offsets.begin(), offsets.end(), [](const Offset& a, const Offset& b) {
+    const int squared_a = a.dx * a.dx + a.dy * a.dy;
+    const int squared_b = b.dx * b.dx + b.dy * b.dy;
+    return std::tie(squared_a, a.dy, a.dx) < std::tie(squared_b, b.dy, b.dx);
+  });
+  // A handful of radii at most; keep the cache from growing without bound.
+  if (offsets_.size() >= 4) offsets_.erase(offsets_.begin());
+  offsets_.emplace_back(radius_px, std::move(offsets));
+  return offsets_.back().second;
 }
 
-bool NearestEdgeField::Nearest(int x, int y, int* edge_pixel_index, float* distance_px) const {
-  if (num_edge_pixels_ == 0 || x < 0 || y < 0 || x >= distance_.cols || y >= distance_.rows) {
+bool NearestEdgeField::Nearest(int x, int y, double radius_px, int* edge_pixel_index,
+                               float* distance_px) const {
+  if ((mask_ == nullptr && last_t_ns_ == nullptr) || x < 0 || y < 0 || x >= width_ ||
+      y >= height_ || !(radius_px >= 0)) {
     return false;
   }
-  const int32_t label = labels_.ptr<int32_t>(y)[x];
-  if (label < 0 || label >= static_cast<int32_t>(label_to_pixel_.size())) return false;
-  const int32_t index = label_to_pixel_[label];
-  if (index < 0) return false;
-  *edge_pixel_index = index;
-  *distance_px = distance_.ptr<float>(y)[x];
-  return true;
+  const bool inside = x >= radius_px && y >= radius_px && x + radius_px <= width_ - 1 &&
+                      y + radius_px <= height_ - 1;
+  for (const Offset& offset : Offsets(radius_px)) {
+    const int xx = x + offset.dx;
+    const int yy = y + offset.dy;
+    if (!inside && (xx < 0 || yy < 0 || xx >= width_ || yy >= height_)) continue;
+    if (IsEdge(xx, yy)) {
+      *edge_pixel_index = yy * width_ + xx;
+      *distance_px = offset.distance;
+      return true;
+    }
+  }
+  return false;
 }
 
 void EdgeZBuffer::Cull(const std::vector<Eigen::Vector2d>& pixels,
@@ -61,14 +89,15 @@ void EdgeZBuffer::Cull(const std::vector<Eigen::Vector2d>& pixels,
   keep->assign(pixels.size(), 0);
   claimed_.assign(pixels.size(), -1);
   for (size_t i = 0; i < pixels.size(); ++i) {
+    if (!std::isfinite(pixels[i].x()) || !std::isfinite(pixels[i].y()) ||
+        std::abs(pixels[i].x()) > 1e8 || std::abs(pixels[i].y()) > 1e8) {
+      continue;
+    }
     const int x = static_cast<int>(std::lround(pixels[i].x()));
     const int y = static_cast<int>(std::lround(pixels[i].y()));
     int edge_pixel;
     float distance;
-    if (!std::isfinite(pixels[i].x()) || !std::isfinite(pixels[i].y()) ||
-        !annf.Nearest(x, y, &edge_pixel, &distance) || distance > radius_px) {
-      continue;
-    }
+    if (!annf.Nearest(x, y, radius_px, &edge_pixel, &distance)) continue;
     claimed_[i] = edge_pixel;
     int32_t& owner = owner_[edge_pixel];
     // The comparison the reference implementation never made: the nearer point wins.

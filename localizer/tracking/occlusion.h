@@ -1,44 +1,70 @@
-// Occlusion culling with an approximate nearest-neighbour field (ANNF, method.md §4.4): every
-// pixel knows its nearest active edge pixel; map points claiming the same edge pixel are resolved
-// by a z-buffer keyed by that edge pixel (the nearest point wins), and points with no edge pixel
-// within a radius drop out.
+// Occlusion culling with an approximate nearest-neighbour field (ANNF, method.md §4.4): each
+// projected map point looks for its nearest active edge pixel within a radius in its own window;
+// map points claiming the same edge pixel are resolved by a z-buffer keyed by that edge pixel (the
+// nearest point wins), and points with no edge pixel within the radius drop out.
 #pragma once
 
 #include <cstdint>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Core>
 #include <opencv2/core.hpp>
 
+#include "localizer/tracking/time_surface.h"
+
 namespace evloc::tracking {
 
-// For every pixel, the nearest edge pixel of a binary edge image (cv::distanceTransform with
-// DIST_LABEL_PIXEL, 5x5 mask: approximate Euclidean distances).
+// The nearest edge pixel of any pixel, searched on demand in a window around it (O(r^2) per query
+// at worst, O(1) for a pixel on an edge) instead of a whole-image distance transform per step.
+// Distances are exact Euclidean distances between integer pixels; among edge pixels at the same
+// distance the one with the lowest row-major index wins. Not thread-safe (the search order is
+// cached per radius).
 class NearestEdgeField {
  public:
-  // Builds the field of `edge_mask` (CV_8UC1, non-zero = edge). Throws InvalidArgumentError for
-  // another type or an empty image.
+  // Uses the non-zero pixels of `edge_mask` (CV_8UC1, shared, not copied) as edges. Throws
+  // InvalidArgumentError for another type or an empty image.
   void Build(const cv::Mat& edge_mask);
+  // Uses the pixels of `channel` of `surface` active at `t_ns` (T > delta, as the field's empty
+  // test) as edges; reads the surface live, so `surface` must outlive the queries.
+  void Build(const TimeSurface& surface, SurfaceChannel channel, int64_t t_ns,
+             const SurfaceDecay& decay);
 
   // Image width, pixels.
-  int width() const { return distance_.cols; }
+  int width() const { return width_; }
   // Image height, pixels.
-  int height() const { return distance_.rows; }
-  // True when the last built image had no edge pixel (or nothing was built).
-  bool empty() const { return num_edge_pixels_ == 0; }
-  // Number of edge pixels.
-  int num_edge_pixels() const { return num_edge_pixels_; }
+  int height() const { return height_; }
 
-  // The nearest edge pixel of pixel (x, y), as the row-major index y * width + x, and its
-  // (approximate) distance in pixels. False when (x, y) is outside the image or there is no edge.
-  bool Nearest(int x, int y, int* edge_pixel_index, float* distance_px) const;
+  // True when pixel (x, y) is an edge pixel. Unchecked.
+  bool IsEdge(int x, int y) const {
+    const size_t index = static_cast<size_t>(y) * width_ + x;
+    return mask_ != nullptr ? mask_[index] != 0 : last_t_ns_[index] >= min_active_t_ns_;
+  }
+
+  // The nearest edge pixel of pixel (x, y) within `radius_px`, as the row-major index
+  // y * width + x, and its distance in pixels. False when (x, y) is outside the image or no edge
+  // pixel lies within the radius.
+  bool Nearest(int x, int y, double radius_px, int* edge_pixel_index, float* distance_px) const;
 
  private:
-  cv::Mat distance_;
-  cv::Mat labels_;
-  // Label (1-based, from distanceTransform) to the row-major index of its edge pixel.
-  std::vector<int32_t> label_to_pixel_;
-  int num_edge_pixels_ = 0;
+  struct Offset {
+    int dx;
+    int dy;
+    float distance;
+  };
+  const std::vector<Offset>& Offsets(double radius_px) const;
+
+  int width_ = 0;
+  int height_ = 0;
+  // Either a mask (non-zero = edge) ...
+  cv::Mat mask_image_;
+  const uint8_t* mask_ = nullptr;
+  // ... or per-pixel last time stamps with the earliest time stamp that is still active.
+  const int64_t* last_t_ns_ = nullptr;
+  int64_t min_active_t_ns_ = 0;
+  // Per radius asked for, the window offsets within it by increasing distance then row-major
+  // order (a tracker asks for two radii: occlusion and on-edge).
+  mutable std::vector<std::pair<double, std::vector<Offset>>> offsets_;
 };
 
 // The z-buffer keyed by edge pixel. Reuses its storage across steps.

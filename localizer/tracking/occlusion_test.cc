@@ -1,5 +1,9 @@
 #include "localizer/tracking/occlusion.h"
 
+#include <algorithm>
+#include <cmath>
+#include <random>
+
 #include <gtest/gtest.h>
 
 #include "core/common/error.h"
@@ -13,23 +17,68 @@ TEST(NearestEdgeField, FindsTheNearestEdgePixel) {
   edges.at<uint8_t>(20, 30) = 255;  // (x 30, y 20)
   NearestEdgeField annf;
   annf.Build(edges);
-  EXPECT_EQ(annf.num_edge_pixels(), 2);
   int index;
   float distance;
-  ASSERT_TRUE(annf.Nearest(8, 10, &index, &distance));
+  ASSERT_TRUE(annf.Nearest(8, 10, 5.0, &index, &distance));
   EXPECT_EQ(index, 10 * 40 + 5);
   EXPECT_NEAR(distance, 3.0, 0.05);
-  ASSERT_TRUE(annf.Nearest(30, 20, &index, &distance));
+  ASSERT_TRUE(annf.Nearest(30, 20, 5.0, &index, &distance));
   EXPECT_EQ(index, 20 * 40 + 30);
   EXPECT_EQ(distance, 0.0f);
-  ASSERT_TRUE(annf.Nearest(27, 16, &index, &distance));
+  ASSERT_TRUE(annf.Nearest(27, 16, 5.0, &index, &distance));
   EXPECT_EQ(index, 20 * 40 + 30);
   EXPECT_NEAR(distance, 5.0, 0.1);
-  EXPECT_FALSE(annf.Nearest(40, 0, &index, &distance));
+  // Beyond the search radius there is no nearest edge.
+  EXPECT_FALSE(annf.Nearest(27, 16, 4.9, &index, &distance));
+  EXPECT_FALSE(annf.Nearest(40, 0, 5.0, &index, &distance));
   // An image without edges has no nearest edge.
   annf.Build(cv::Mat::zeros(30, 40, CV_8UC1));
-  EXPECT_TRUE(annf.empty());
-  EXPECT_FALSE(annf.Nearest(8, 10, &index, &distance));
+  EXPECT_FALSE(annf.Nearest(8, 10, 5.0, &index, &distance));
+}
+
+// The window search agrees with a brute-force search over every edge pixel, for a mask and for
+// the active pixels of a time surface (the same pixels as the surface's active mask).
+TEST(NearestEdgeField, WindowSearchEqualsBruteForceOnMaskAndTimeSurface) {
+  const UndistortionTable table(Camera::Pinhole(50, 40, 40, 40, 24.5, 19.5));
+  TimeSurface surface(table);
+  std::mt19937 random(11);
+  std::uniform_int_distribution<int> column(0, 49), row(0, 39);
+  EventBuffer events;
+  for (int i = 0; i < 60; ++i) {
+    events.push_back({int64_t{i} * 2'000'000, static_cast<uint16_t>(column(random)),
+                      static_cast<uint16_t>(row(random)), static_cast<int8_t>(i % 2 ? 1 : -1)});
+  }
+  surface.Insert(events, 0, events.size());
+  const SurfaceDecay decay{30e6, 0.1};
+  const int64_t t_ns = 120'000'000;
+  const cv::Mat mask = surface.ActiveMask(SurfaceChannel::kAll, t_ns, decay);
+  ASSERT_GT(cv::countNonZero(mask), 10);
+  ASSERT_LT(cv::countNonZero(mask), 60);  // Some events have decayed.
+  NearestEdgeField from_mask;
+  from_mask.Build(mask);
+  NearestEdgeField from_surface;
+  from_surface.Build(surface, SurfaceChannel::kAll, t_ns, decay);
+  for (int y = 0; y < 40; ++y) {
+    for (int x = 0; x < 50; ++x) {
+      ASSERT_EQ(from_surface.IsEdge(x, y), mask.at<uint8_t>(y, x) != 0) << x << " " << y;
+      double best = 1e9;
+      for (int yy = 0; yy < 40; ++yy) {
+        for (int xx = 0; xx < 50; ++xx) {
+          if (mask.at<uint8_t>(yy, xx) != 0) best = std::min(best, std::hypot(xx - x, yy - y));
+        }
+      }
+      for (const NearestEdgeField* field : {&from_mask, &from_surface}) {
+        int index;
+        float distance;
+        const bool found = field->Nearest(x, y, 5.0, &index, &distance);
+        ASSERT_EQ(found, best <= 5.0) << x << " " << y;
+        if (!found) continue;
+        EXPECT_NEAR(distance, best, 1e-5);
+        EXPECT_NE(mask.at<uint8_t>(index / 50, index % 50), 0);
+        EXPECT_NEAR(std::hypot(index % 50 - x, index / 50 - y), best, 1e-5);
+      }
+    }
+  }
 }
 
 // Two points claim the edge pixel (x 20, y 15); the nearer must win whatever the order. A

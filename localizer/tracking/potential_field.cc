@@ -13,13 +13,6 @@ DenseField::DenseField(cv::Mat values) : values_(std::move(values)) {
   }
 }
 
-bool DenseField::Sample(double u, double v, double* value, Eigen::Vector2d* gradient) {
-  if (values_.empty()) return false;
-  return SampleBilinear(
-      values_.cols, values_.rows, u, v, [this](int x, int y) { return values_.ptr<float>(y)[x]; },
-      value, gradient);
-}
-
 cv::Mat SmoothField(const cv::Mat& values) {
   const cv::Mat kernel(1, 5, CV_32F, const_cast<float*>(kSmoothingKernel));
   cv::Mat smoothed;

@@ -52,7 +52,7 @@ inline bool SampleBilinear(int width, int height, double u, double v, ValueAt&& 
 }
 
 // A field stored as a full float image (CV_32FC1).
-class DenseField : public PotentialField {
+class DenseField final : public PotentialField {
  public:
   DenseField() = default;
   // Wraps `values` (CV_32FC1, shared, not copied). Throws InvalidArgumentError for another type
@@ -63,7 +63,12 @@ class DenseField : public PotentialField {
   const cv::Mat& values() const { return values_; }
   int width() const override { return values_.cols; }
   int height() const override { return values_.rows; }
-  bool Sample(double u, double v, double* value, Eigen::Vector2d* gradient) override;
+  bool Sample(double u, double v, double* value, Eigen::Vector2d* gradient) override {
+    if (values_.empty()) return false;
+    return SampleBilinear(
+        values_.cols, values_.rows, u, v, [this](int x, int y) { return values_.ptr<float>(y)[x]; },
+        value, gradient);
+  }
 
  private:
   cv::Mat values_;

@@ -1,11 +1,13 @@
 #include "localizer/tracking/registration.h"
 
 #include <cmath>
+#include <typeinfo>
 
 #include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
 
 #include "core/common/error.h"
+#include "localizer/tracking/time_surface.h"
 
 namespace evloc::tracking {
 namespace {
@@ -23,6 +25,46 @@ struct Linearization {
   int points_used = 0;
 };
 
+// The residual of one point and, when `jacobian` (6 values) is not null, its derivative with
+// respect to the left increment, at the pose (rotation, translation) = cam_from_world as a matrix.
+// `Field` is the concrete field type so that the per-sample call is not virtual in the hot loop.
+template <typename Field>
+inline bool ResidualAndJacobian(Field& field, const PinholeIntrinsics& intrinsics,
+                                const Eigen::Matrix3d& rotation, const Eigen::Vector3d& translation,
+                                const Eigen::Vector3d& position_world, double margin_px,
+                                double* residual, double* jacobian) {
+  const Eigen::Vector3d point_in_cam = rotation * position_world + translation;
+  const double z = point_in_cam.z();
+  if (!(z > Camera::kMinDepth)) return false;
+  const double inverse_z = 1.0 / z;
+  const double x = point_in_cam.x() * inverse_z;
+  const double y = point_in_cam.y() * inverse_z;
+  const double u = intrinsics.fx * x + intrinsics.cx;
+  const double v = intrinsics.fy * y + intrinsics.cy;
+  if (!(u >= margin_px && v >= margin_px && u <= field.width() - 1 - margin_px &&
+        v <= field.height() - 1 - margin_px)) {
+    return false;
+  }
+  Eigen::Vector2d field_gradient;
+  if (!field.Sample(u, v, residual, jacobian ? &field_gradient : nullptr)) return false;
+  if (jacobian != nullptr) {
+    // dr/dp = grad F * d pi/d p; dr/d omega = dr/dp * (-Hat(p)) = p x dr/dp.
+    const double a0 = field_gradient.x() * intrinsics.fx * inverse_z;
+    const double a1 = field_gradient.y() * intrinsics.fy * inverse_z;
+    const double a2 = -(a0 * x + a1 * y);
+    jacobian[0] = a0;
+    jacobian[1] = a1;
+    jacobian[2] = a2;
+    jacobian[3] = point_in_cam.y() * a2 - point_in_cam.z() * a1;
+    jacobian[4] = point_in_cam.z() * a0 - point_in_cam.x() * a2;
+    jacobian[5] = point_in_cam.x() * a1 - point_in_cam.y() * a0;
+  }
+  return true;
+}
+
+// Normal equations and cost of all points at one pose. `Field` is the concrete type of every
+// point's field (PotentialField when they differ).
+template <typename Field>
 Linearization Linearize(const std::vector<RegistrationPoint>& points,
                         const PinholeIntrinsics& intrinsics, const Rigid3d& cam_from_world,
                         const RegistrationOptions& options) {
@@ -30,26 +72,72 @@ Linearization Linearize(const std::vector<RegistrationPoint>& points,
   // Points outside the image cost as much as a point far from every edge (residual 1), so that
   // costs at different poses compare the same point set.
   const double outside_cost = RobustCost(options.loss, options.robust_scale, 1.0);
-  // Accumulate J^T J in the upper triangle only; 21 products per point instead of 36.
-  Matrix6d information = Matrix6d::Zero();
+  const Eigen::Matrix3d rotation = cam_from_world.RotationMatrix();
+  const Eigen::Vector3d& translation = cam_from_world.translation;
+  // J^T W J in the upper triangle only (21 products per point), row-major packed.
+  double information[21] = {};
+  double gradient[6] = {};
   for (const RegistrationPoint& point : points) {
     double residual;
-    RowVector6d jacobian;
-    if (!EvaluatePointResidual(*point.field, intrinsics, cam_from_world, point.position_world,
-                               options.image_margin_px, &residual, &jacobian)) {
+    double jacobian[6];
+    if (!ResidualAndJacobian(static_cast<Field&>(*point.field), intrinsics, rotation, translation,
+                             point.position_world, options.image_margin_px, &residual, jacobian)) {
       result.cost += outside_cost;
       continue;
     }
     const double weight = RobustWeight(options.loss, options.robust_scale, residual);
-    information.selfadjointView<Eigen::Upper>().rankUpdate(jacobian.transpose(), weight);
-    result.gradient += (weight * residual) * jacobian.transpose();
+    int k = 0;
+    for (int i = 0; i < 6; ++i) {
+      const double weighted = weight * jacobian[i];
+      gradient[i] += weighted * residual;
+      for (int j = i; j < 6; ++j) information[k++] += weighted * jacobian[j];
+    }
     result.cost += RobustCost(options.loss, options.robust_scale, residual);
     result.weighted_squared_residuals += weight * residual * residual;
     result.sum_residuals += residual;
     ++result.points_used;
   }
-  result.information = information.selfadjointView<Eigen::Upper>();
+  int k = 0;
+  for (int i = 0; i < 6; ++i) {
+    result.gradient(i) = gradient[i];
+    for (int j = i; j < 6; ++j) {
+      result.information(i, j) = information[k];
+      result.information(j, i) = information[k];
+      ++k;
+    }
+  }
   return result;
+}
+
+// The concrete field type shared by every point, so that Linearize samples without a virtual
+// call; PotentialField (virtual calls) when the points use different kinds of field.
+enum class FieldKind { kTimeSurface, kDense, kMixed };
+
+FieldKind CommonFieldKind(const std::vector<RegistrationPoint>& points) {
+  bool all_time_surface = true;
+  bool all_dense = true;
+  for (const RegistrationPoint& point : points) {
+    const std::type_info& type = typeid(*point.field);
+    all_time_surface &= type == typeid(TimeSurfaceField);
+    all_dense &= type == typeid(DenseField);
+  }
+  if (all_time_surface) return FieldKind::kTimeSurface;
+  if (all_dense) return FieldKind::kDense;
+  return FieldKind::kMixed;
+}
+
+Linearization LinearizeAny(FieldKind kind, const std::vector<RegistrationPoint>& points,
+                           const PinholeIntrinsics& intrinsics, const Rigid3d& cam_from_world,
+                           const RegistrationOptions& options) {
+  switch (kind) {
+    case FieldKind::kTimeSurface:
+      return Linearize<TimeSurfaceField>(points, intrinsics, cam_from_world, options);
+    case FieldKind::kDense:
+      return Linearize<DenseField>(points, intrinsics, cam_from_world, options);
+    case FieldKind::kMixed:
+      break;
+  }
+  return Linearize<PotentialField>(points, intrinsics, cam_from_world, options);
 }
 
 // sigma^2 H^-1, with unconstrained directions given a large variance.
@@ -79,27 +167,9 @@ Matrix6d Covariance(const Linearization& linearization, bool* well_conditioned) 
 bool EvaluatePointResidual(PotentialField& field, const PinholeIntrinsics& intrinsics,
                            const Rigid3d& cam_from_world, const Eigen::Vector3d& position_world,
                            double margin_px, double* residual, RowVector6d* jacobian) {
-  const Eigen::Vector3d point_in_cam = cam_from_world * position_world;
-  Eigen::Vector2d pixel;
-  Eigen::Matrix<double, 2, 3> d_pixel_d_point;
-  if (!intrinsics.Project(point_in_cam, &pixel, jacobian ? &d_pixel_d_point : nullptr)) {
-    return false;
-  }
-  if (pixel.x() < margin_px || pixel.y() < margin_px || pixel.x() > field.width() - 1 - margin_px ||
-      pixel.y() > field.height() - 1 - margin_px) {
-    return false;
-  }
-  Eigen::Vector2d field_gradient;
-  if (!field.Sample(pixel.x(), pixel.y(), residual, jacobian ? &field_gradient : nullptr)) {
-    return false;
-  }
-  if (jacobian != nullptr) {
-    // d p_cam / d delta for p_cam(delta) = ExpSE3(delta) * p_cam ~ p_cam + v + omega x p_cam.
-    const Eigen::RowVector3d d_residual_d_point = field_gradient.transpose() * d_pixel_d_point;
-    jacobian->head<3>() = d_residual_d_point;
-    jacobian->tail<3>() = d_residual_d_point * (-Hat(point_in_cam));
-  }
-  return true;
+  return ResidualAndJacobian(field, intrinsics, cam_from_world.RotationMatrix(),
+                             cam_from_world.translation, position_world, margin_px, residual,
+                             jacobian ? jacobian->data() : nullptr);
 }
 
 double RobustWeight(RobustLoss loss, double scale, double residual) {
@@ -139,7 +209,8 @@ RegistrationResult RegisterPoints(const std::vector<RegistrationPoint>& points,
   }
   RegistrationResult result;
   result.cam_from_world = initial_cam_from_world;
-  Linearization current = Linearize(points, intrinsics, initial_cam_from_world, options);
+  const FieldKind kind = CommonFieldKind(points);
+  Linearization current = LinearizeAny(kind, points, intrinsics, initial_cam_from_world, options);
   double damping = options.initial_damping;
   double growth = 2.0;
   for (int iteration = 0; iteration < options.max_iterations; ++iteration) {
@@ -151,7 +222,7 @@ RegistrationResult RegisterPoints(const std::vector<RegistrationPoint>& points,
     if (!increment.allFinite()) break;
     ++result.iterations;
     const Rigid3d candidate = ExpSE3(increment) * result.cam_from_world;
-    Linearization trial = Linearize(points, intrinsics, candidate, options);
+    Linearization trial = LinearizeAny(kind, points, intrinsics, candidate, options);
     const bool small = increment.head<3>().norm() < options.min_increment &&
                        increment.tail<3>().norm() < options.min_increment;
     // Gain ratio: actual over predicted decrease of the (robust) cost (Nielsen's LM update).
@@ -159,7 +230,12 @@ RegistrationResult RegisterPoints(const std::vector<RegistrationPoint>& points,
         -(increment.dot(current.gradient) + 0.5 * increment.dot(current.information * increment));
     const double gain =
         predicted_decrease > 0 ? (current.cost - trial.cost) / predicted_decrease : -1;
+    // Below this change of cost the field's pixel-level roughness dominates: further trials
+    // only trade sub-millimetre moves (measured: without it every solve ran to max_iterations).
+    const double negligible = options.min_relative_decrease * current.cost;
+    bool converged = small;
     if (trial.cost < current.cost) {
+      converged |= current.cost - trial.cost < negligible;
       result.cam_from_world = candidate;
       current = trial;
       const double factor = 2 * gain - 1;
@@ -167,10 +243,11 @@ RegistrationResult RegisterPoints(const std::vector<RegistrationPoint>& points,
       damping = std::max(damping, 1e-8);
       growth = 2.0;
     } else {
+      converged |= predicted_decrease < negligible;
       damping *= growth;
       growth *= 2.0;
     }
-    if (small) {
+    if (converged) {
       result.converged = true;
       break;
     }

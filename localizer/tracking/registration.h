@@ -93,7 +93,8 @@ struct RegistrationResult {
   int points_used = 0;
   // Number of LM trials (linearisations) run.
   int iterations = 0;
-  // True when the last increment was below RegistrationOptions::min_increment.
+  // True when the solve stopped on a small increment or a negligible (predicted) decrease of the
+  // cost rather than on max_iterations.
   bool converged = false;
   // True when H had full rank at the estimate (otherwise the covariance is large, 1e6).
   bool well_conditioned = false;

@@ -21,6 +21,21 @@ int64_t SurfaceDecay::MaxActiveAgeNs() const {
   return static_cast<int64_t>(std::ceil(decay_time_ns * std::log(1.0 / empty_threshold))) + 1;
 }
 
+int64_t SurfaceDecay::MaxActiveAgeExactNs() const {
+  // Start from the analytic bound and settle the rounding with Value itself, so that the two
+  // agree exactly. Age 0 is always active (empty_threshold < 1).
+  auto active = [this](int64_t age_ns) {
+    return std::exp(-static_cast<double>(age_ns) / decay_time_ns) > empty_threshold;
+  };
+  int64_t age_ns = std::min<int64_t>(
+      MaxActiveAgeNs(),
+      static_cast<int64_t>(std::floor(decay_time_ns * std::log(1.0 / empty_threshold))));
+  age_ns = std::max<int64_t>(age_ns, 0);
+  while (age_ns > 0 && !active(age_ns)) --age_ns;
+  while (age_ns + 1 <= MaxActiveAgeNs() && active(age_ns + 1)) ++age_ns;
+  return age_ns;
+}
+
 TimeSurface::TimeSurface(const UndistortionTable& table)
     : width_(table.ideal_camera().width),
       height_(table.ideal_camera().height),
@@ -106,12 +121,8 @@ TimeSurfaceField::TimeSurfaceField(const TimeSurface& surface, SurfaceChannel ch
                                    const SurfaceDecay& decay, bool smooth)
     : surface_(surface), channel_(channel), decay_(decay), smooth_(smooth) {
   const size_t num_pixels = static_cast<size_t>(surface.width()) * surface.height();
-  raw_.assign(num_pixels, 1.0f);
-  raw_stamp_.assign(num_pixels, 0);
-  if (smooth_) {
-    smoothed_.assign(num_pixels, 1.0f);
-    smoothed_stamp_.assign(num_pixels, 0);
-  }
+  raw_.assign(num_pixels, Memo{});
+  if (smooth_) smoothed_.assign(num_pixels, Memo{});
 }
 
 void TimeSurfaceField::SetTime(int64_t t_ns) {
@@ -119,8 +130,8 @@ void TimeSurfaceField::SetTime(int64_t t_ns) {
   num_evaluated_ = 0;
   ++stamp_;
   if (stamp_ == 0) {  // Wrapped after 2^32 steps: invalidate explicitly.
-    std::fill(raw_stamp_.begin(), raw_stamp_.end(), 0);
-    std::fill(smoothed_stamp_.begin(), smoothed_stamp_.end(), 0);
+    std::fill(raw_.begin(), raw_.end(), Memo{});
+    std::fill(smoothed_.begin(), smoothed_.end(), Memo{});
     stamp_ = 1;
   }
 }
@@ -131,20 +142,10 @@ float TimeSurfaceField::ComputeRaw(size_t index) const {
   return static_cast<float>(1.0 - decay_.Value(surface_.LastTimestamp(channel_, x, y), t_ns_));
 }
 
-float TimeSurfaceField::RawValue(int x, int y) {
-  const size_t index = static_cast<size_t>(y) * surface_.width() + x;
-  if (raw_stamp_[index] != stamp_) {
-    raw_[index] = ComputeRaw(index);
-    raw_stamp_[index] = stamp_;
-  }
-  return raw_[index];
-}
-
-float TimeSurfaceField::ValueAt(int x, int y) {
-  if (!smooth_) return RawValue(x, y);
+float TimeSurfaceField::SmoothedValue(int x, int y) {
   const int width = surface_.width();
-  const size_t index = static_cast<size_t>(y) * width + x;
-  if (smoothed_stamp_[index] == stamp_) return smoothed_[index];
+  Memo& memo = smoothed_[static_cast<size_t>(y) * width + x];
+  if (memo.stamp == stamp_) return memo.value;
   // Separable 5x5 binomial kernel with replicated borders, rows first (as cv::sepFilter2D).
   const int max_x = width - 1;
   const int max_y = surface_.height() - 1;
@@ -157,16 +158,10 @@ float TimeSurfaceField::ValueAt(int x, int y) {
     for (int i = 0; i < 5; ++i) row_sum += kSmoothingKernel[i] * RawValue(columns[i], row);
     sum += kSmoothingKernel[j] * row_sum;
   }
-  smoothed_[index] = sum;
-  smoothed_stamp_[index] = stamp_;
+  memo.value = sum;
+  memo.stamp = stamp_;
   ++num_evaluated_;
   return sum;
-}
-
-bool TimeSurfaceField::Sample(double u, double v, double* value, Eigen::Vector2d* gradient) {
-  return SampleBilinear(
-      surface_.width(), surface_.height(), u, v, [this](int x, int y) { return ValueAt(x, y); },
-      value, gradient);
 }
 
 cv::Mat TimeSurfaceField::RenderDense() const {

@@ -42,6 +42,9 @@ struct SurfaceDecay {
   double Value(int64_t last_t_ns, int64_t t_ns) const;
   // The age beyond which a pixel is certainly empty, nanoseconds.
   int64_t MaxActiveAgeNs() const;
+  // The largest age at which a pixel is still active (Value > 0), nanoseconds: a pixel is active
+  // exactly when t_ns - last_t_ns <= this.
+  int64_t MaxActiveAgeExactNs() const;
 };
 
 // Per-pixel last time stamps of the ideal pinhole image of a camera.
@@ -66,6 +69,12 @@ class TimeSurface {
   // The last time stamp of ideal pixel (x, y) in `channel`, or kNeverFired. Unchecked.
   int64_t LastTimestamp(SurfaceChannel channel, int x, int y) const {
     return last_t_ns_[static_cast<int>(channel)][static_cast<size_t>(y) * width_ + x];
+  }
+
+  // The last time stamps of `channel`, one per ideal pixel, row-major (kNeverFired when never
+  // fired). Valid until the surface is destroyed.
+  const int64_t* LastTimestamps(SurfaceChannel channel) const {
+    return last_t_ns_[static_cast<int>(channel)].data();
   }
 
   // The row-major ideal pixel index of sensor pixel (x, y), or -1 when it has none. Unchecked.
@@ -99,7 +108,7 @@ class TimeSurface {
 // evaluated lazily: only pixels that are sampled are computed, and memoised until the next
 // SetTime. Reads the surface live: events inserted after SetTime show through, so call SetTime
 // after inserting.
-class TimeSurfaceField : public PotentialField {
+class TimeSurfaceField final : public PotentialField {
  public:
   // `surface` must outlive the field.
   TimeSurfaceField(const TimeSurface& surface, SurfaceChannel channel, const SurfaceDecay& decay,
@@ -113,12 +122,23 @@ class TimeSurfaceField : public PotentialField {
   int width() const override { return surface_.width(); }
   int height() const override { return surface_.height(); }
 
-  // The unsmoothed value 1 - T at pixel (x, y), 1 where empty. Unchecked.
-  float RawValue(int x, int y);
+  // The unsmoothed value 1 - T at pixel (x, y), 1 where empty, memoised. Unchecked.
+  float RawValue(int x, int y) {
+    Memo& memo = raw_[static_cast<size_t>(y) * surface_.width() + x];
+    if (memo.stamp != stamp_) [[unlikely]] {
+      memo.value = ComputeRaw(static_cast<size_t>(y) * surface_.width() + x);
+      memo.stamp = stamp_;
+    }
+    return memo.value;
+  }
   // The field value at pixel (x, y) (smoothed when enabled), memoised. Unchecked.
-  float ValueAt(int x, int y);
+  float ValueAt(int x, int y) { return smooth_ ? SmoothedValue(x, y) : RawValue(x, y); }
 
-  bool Sample(double u, double v, double* value, Eigen::Vector2d* gradient) override;
+  bool Sample(double u, double v, double* value, Eigen::Vector2d* gradient) override {
+    return SampleBilinear(
+        surface_.width(), surface_.height(), u, v, [this](int x, int y) { return ValueAt(x, y); },
+        value, gradient);
+  }
 
   // The whole field as an image (CV_32FC1), computed densely; equal to ValueAt everywhere up to
   // float rounding. Used by FieldEvaluation::kDense and by tests.
@@ -128,7 +148,14 @@ class TimeSurfaceField : public PotentialField {
   int64_t num_evaluated() const { return num_evaluated_; }
 
  private:
+  // A memoised value and the stamp of the time it was computed for (one 8-byte load per pixel).
+  struct Memo {
+    uint32_t stamp = 0;
+    float value = 1.0f;
+  };
+
   float ComputeRaw(size_t index) const;
+  float SmoothedValue(int x, int y);
 
   const TimeSurface& surface_;
   SurfaceChannel channel_;
@@ -137,10 +164,8 @@ class TimeSurfaceField : public PotentialField {
   int64_t t_ns_ = 0;
   // Memo stamp of the current time; a value is valid when its stamp equals this.
   uint32_t stamp_ = 1;
-  std::vector<float> raw_;
-  std::vector<uint32_t> raw_stamp_;
-  std::vector<float> smoothed_;
-  std::vector<uint32_t> smoothed_stamp_;
+  std::vector<Memo> raw_;
+  std::vector<Memo> smoothed_;
   int64_t num_evaluated_ = 0;
 };
 

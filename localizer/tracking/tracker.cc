@@ -155,7 +155,7 @@ std::optional<PoseEstimate> Tracker::AddFrame(int64_t t_ns, const cv::Mat& gray)
       TruncatedDistanceField(ideal_edges, options_.distance_truncation_px, false);
   frame_distance_px_ = distance_field * options_.distance_truncation_px;
   frame_field_ = DenseField(options_.smooth_field ? SmoothField(distance_field) : distance_field);
-  if (options_.use_occlusion_culling) annf_.Build(ideal_edges);
+  edges_.Build(ideal_edges);
   return Step(t_ns);
 }
 
@@ -168,9 +168,8 @@ void Tracker::UpdateSurfaces(int64_t t_ns) {
       dense_fields_[channel] = DenseField(lazy_fields_[channel]->RenderDense());
     }
   }
-  if (options_.use_occlusion_culling) {
-    annf_.Build(surface_.ActiveMask(SurfaceChannel::kAll, t_ns, decay_));
-  }
+  // O(1): the edge search reads the surface in a window around each query.
+  edges_.Build(surface_, SurfaceChannel::kAll, t_ns, decay_);
 }
 
 PotentialField* Tracker::Field(SurfaceChannel channel) {
@@ -215,22 +214,9 @@ bool Tracker::NearEdge(const Eigen::Vector2d& pixel) const {
   if (options_.input == TrackerInput::kFrames) {
     return frame_distance_px_.ptr<float>(y)[x] <= radius;
   }
-  const int reach = static_cast<int>(std::floor(radius));
-  const int64_t max_age_ns = decay_.MaxActiveAgeNs();
-  for (int dy = -reach; dy <= reach; ++dy) {
-    const int yy = y + dy;
-    if (yy < 0 || yy >= surface_.height()) continue;
-    for (int dx = -reach; dx <= reach; ++dx) {
-      const int xx = x + dx;
-      if (xx < 0 || xx >= surface_.width() || dx * dx + dy * dy > radius * radius) continue;
-      const int64_t last_t = surface_.LastTimestamp(SurfaceChannel::kAll, xx, yy);
-      if (last_t != kNeverFired && step_t_ns_ - last_t <= max_age_ns &&
-          decay_.Value(last_t, step_t_ns_) > 0) {
-        return true;
-      }
-    }
-  }
-  return false;
+  int edge_pixel;
+  float distance;
+  return edges_.Nearest(x, y, radius, &edge_pixel, &distance);
 }
 
 bool Tracker::IsGood(const TrackingQuality& quality) const {
@@ -250,10 +236,12 @@ Tracker::Attempt Tracker::Solve(const Rigid3d& start_world_from_cam,
   scratch_pixels_.resize(num_selected);
   scratch_depths_.resize(num_selected);
   scratch_fields_.resize(num_selected);
+  const Eigen::Matrix3d start_rotation = start_cam_from_world.RotationMatrix();
   for (size_t i = 0; i < num_selected; ++i) {
     const uint32_t index = selected_[i];
     const Eigen::Vector3d position = map_.positions[index].cast<double>();
-    const Eigen::Vector3d point_in_cam = start_cam_from_world * position;
+    const Eigen::Vector3d point_in_cam =
+        start_rotation * position + start_cam_from_world.translation;
     scratch_depths_[i] = point_in_cam.z();
     if (!intrinsics_.Project(point_in_cam, &scratch_pixels_[i])) {
       scratch_pixels_[i].setConstant(-1e9);
@@ -269,12 +257,13 @@ Tracker::Attempt Tracker::Solve(const Rigid3d& start_world_from_cam,
     scratch_fields_[i] = Field(channel);
   }
   if (options_.use_occlusion_culling) {
-    zbuffer_.Cull(scratch_pixels_, scratch_depths_, annf_, options_.annf_radius_px, &scratch_keep_);
+    zbuffer_.Cull(scratch_pixels_, scratch_depths_, edges_, options_.annf_radius_px,
+                  &scratch_keep_);
   } else {
     scratch_keep_.assign(num_selected, 1);
   }
-  std::vector<RegistrationPoint> points;
-  points.reserve(num_selected);
+  std::vector<RegistrationPoint>& points = scratch_points_;
+  points.clear();
   for (size_t i = 0; i < num_selected; ++i) {
     if (scratch_keep_[i]) {
       points.push_back({map_.positions[selected_[i]].cast<double>(), scratch_fields_[i]});
@@ -283,14 +272,17 @@ Tracker::Attempt Tracker::Solve(const Rigid3d& start_world_from_cam,
   Attempt attempt;
   attempt.registration =
       RegisterPoints(points, intrinsics_, start_cam_from_world, options_.registration);
-  const Rigid3d& estimate = attempt.registration.cam_from_world;
+  const Eigen::Matrix3d estimate_rotation = attempt.registration.cam_from_world.RotationMatrix();
+  const Eigen::Vector3d& estimate_translation = attempt.registration.cam_from_world.translation;
   // On-edge fraction over every selected point, culled or not: culling keeps only points near
   // edges, so counting the survivors alone would flatter a wrong pose.
   int in_image = 0;
   int on_edge = 0;
   for (const uint32_t index : selected_) {
     Eigen::Vector2d pixel;
-    if (!intrinsics_.Project(estimate * map_.positions[index].cast<double>(), &pixel)) continue;
+    const Eigen::Vector3d point_in_cam =
+        estimate_rotation * map_.positions[index].cast<double>() + estimate_translation;
+    if (!intrinsics_.Project(point_in_cam, &pixel)) continue;
     if (pixel.x() < 0 || pixel.y() < 0 || pixel.x() > surface_.width() - 1 ||
         pixel.y() > surface_.height() - 1) {
       continue;

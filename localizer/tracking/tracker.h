@@ -145,7 +145,8 @@ class Tracker {
   DenseField dense_fields_[3];
   DenseField frame_field_;
   cv::Mat frame_distance_px_;
-  NearestEdgeField annf_;
+  // Active edge pixels (events) or Canny edges (frames) of the current step.
+  NearestEdgeField edges_;
   EdgeZBuffer zbuffer_;
   ConstantVelocityModel motion_;
   TrackingStatus status_ = TrackingStatus::kTracking;
@@ -171,6 +172,7 @@ class Tracker {
   std::vector<double> scratch_depths_;
   std::vector<uint8_t> scratch_keep_;
   std::vector<PotentialField*> scratch_fields_;
+  std::vector<RegistrationPoint> scratch_points_;
 };
 
 }  // namespace evloc::tracking

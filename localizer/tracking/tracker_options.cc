@@ -21,6 +21,9 @@ void RegistrationOptions::Check() const {
   Require(max_iterations >= 1, "registration.max_iterations must be at least 1.");
   Require(std::isfinite(min_increment) && min_increment >= 0,
           "registration.min_increment must be finite and >= 0.");
+  Require(std::isfinite(min_relative_decrease) && min_relative_decrease >= 0 &&
+              min_relative_decrease < 1,
+          "registration.min_relative_decrease must be in [0, 1).");
   Require(Positive(initial_damping), "registration.initial_damping must be positive.");
   Require(std::isfinite(image_margin_px) && image_margin_px >= 0,
           "registration.image_margin_px must be finite and >= 0.");
@@ -47,7 +50,8 @@ void TrackerOptions::Check() const {
   Require(Positive(gradient_probe_depth_fraction) && gradient_probe_depth_fraction < 1,
           "gradient_probe_depth_fraction must be in (0, 1).");
   Require(std::isfinite(min_flow_px) && min_flow_px >= 0, "min_flow_px must be >= 0.");
-  Require(Positive(annf_radius_px), "annf_radius_px must be positive.");
+  Require(Positive(annf_radius_px) && annf_radius_px <= 32,
+          "annf_radius_px must be in (0, 32] (the search window is (2r+1)^2 pixels).");
   registration.Check();
   Require(min_points >= 6, "min_points must be at least 6 (six pose parameters).");
   Require(

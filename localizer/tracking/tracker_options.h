@@ -42,6 +42,9 @@ struct RegistrationOptions {
   int max_iterations = 10;
   // Stop when the increment is below this (metres for translation, radians for rotation).
   double min_increment = 1e-6;
+  // Also stop when an accepted trial lowered the cost, or a rejected trial's quadratic model
+  // predicted to lower it, by less than this fraction of the cost (0 disables).
+  double min_relative_decrease = 1e-4;
   // Initial LM damping, relative to the diagonal of the normal equations.
   double initial_damping = 1e-4;
   // Points projecting closer than this to the image border (pixels) are not used.
