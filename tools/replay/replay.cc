@@ -13,6 +13,7 @@
 
 #include "core/common/cli.h"
 #include "core/common/error.h"
+#include "core/common/file_util.h"
 #include "core/events/event_reader.h"
 #include "core/trajectory/tum_io.h"
 #include "evloc/localizer.grpc.pb.h"
@@ -105,6 +106,9 @@ void ReplayOptions::Check() const {
   if (ecd_width <= 0 || ecd_height <= 0) {
     throw InvalidArgumentError("--ecd-size must be WIDTHxHEIGHT with positive sizes");
   }
+  if (tls_server_name && !tls_ca_file) {
+    throw InvalidArgumentError("--tls-server-name needs --tls-ca");
+  }
 }
 
 ReplayResult RunReplay(const ReplayOptions& options, std::ostream& log) {
@@ -142,8 +146,15 @@ ReplayResult RunReplay(const ReplayOptions& options, std::ostream& log) {
 
   grpc::ChannelArguments channel_arguments;
   channel_arguments.SetMaxReceiveMessageSize(64 << 20);
-  auto channel = grpc::CreateCustomChannel(options.server, grpc::InsecureChannelCredentials(),
-                                           channel_arguments);
+  std::shared_ptr<grpc::ChannelCredentials> credentials = grpc::InsecureChannelCredentials();
+  if (options.tls_ca_file) {
+    grpc::SslCredentialsOptions ssl;
+    ssl.pem_root_certs = ReadFileToString(*options.tls_ca_file);
+    credentials = grpc::SslCredentials(ssl);
+    if (options.tls_server_name)
+      channel_arguments.SetSslTargetNameOverride(*options.tls_server_name);
+  }
+  auto channel = grpc::CreateCustomChannel(options.server, credentials, channel_arguments);
   auto stub = api::Localizer::NewStub(channel);
   grpc::ClientContext context;
   if (options.token) context.AddMetadata("authorization", "Bearer " + *options.token);
@@ -336,6 +347,8 @@ Options:
   --encoding packed|evt3 wire encoding (default packed; evt3 rounds times up to microseconds)
   --packet-us N          time window per packet, microseconds (default 1000)
   --token T              bearer token (sent as 'authorization: Bearer T')
+  --tls-ca PEM           use TLS, trusting these root certificates (default plaintext)
+  --tls-server-name NAME host name in the server's certificate, when not --server's host
   --init-pose "tx ty tz qx qy qz qw"
                          initial world_from_cam (default: first ground-truth pose)
   --rate HZ              tracking steps per second (default: the server's)
@@ -386,6 +399,10 @@ ReplayOptions ParseReplayCommandLine(const std::vector<std::string>& arguments, 
       options.packet_us = ParseIntegerFlag(flag, value);
     } else if (flag == "--token") {
       options.token = value;
+    } else if (flag == "--tls-ca") {
+      options.tls_ca_file = value;
+    } else if (flag == "--tls-server-name") {
+      options.tls_server_name = value;
     } else if (flag == "--init-pose") {
       options.initial_world_from_cam = tracking::ParsePoseText(flag, value);
     } else if (flag == "--rate") {

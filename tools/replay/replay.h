@@ -41,6 +41,11 @@ struct ReplayOptions {
   int64_t packet_us = 1000;
   // Bearer token sent as `authorization: Bearer T` (--token).
   std::optional<std::string> token;
+  // PEM root certificate(s) to verify a TLS server with; unset: plaintext (--tls-ca).
+  std::optional<std::filesystem::path> tls_ca_file;
+  // Host name expected in the server's certificate when it differs from --server's host
+  // (--tls-server-name).
+  std::optional<std::string> tls_server_name;
   // Initial world_from_cam; default: the dataset's first ground-truth pose (--init-pose).
   std::optional<Rigid3d> initial_world_from_cam;
   // Tracking steps per second asked of the server; nullopt: the server's default (--rate).

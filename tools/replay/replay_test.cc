@@ -138,6 +138,42 @@ TEST_F(ReplayTest, ServerErrorsBecomeClearFailures) {
   }
 }
 
+TEST(ReplayTls, ReplaysOverTls) {
+  if (std::system("openssl version > /dev/null 2>&1") != 0) {
+    GTEST_SKIP() << "the openssl command is not installed: cannot make a test certificate";
+  }
+  fixture::TemporaryFolder folder;
+  const auto cert = folder.path() / "cert.pem";
+  const auto key = folder.path() / "key.pem";
+  const std::string command =
+      "openssl req -x509 -newkey rsa:2048 -nodes -days 1 -subj /CN=localhost -addext "
+      "subjectAltName=DNS:localhost -keyout '" +
+      key.string() + "' -out '" + cert.string() + "' > /dev/null 2>&1";
+  ASSERT_EQ(std::system(command.c_str()), 0);
+  fixture::WriteTestMap(folder.path() / "maps", fixture::kTestMapName, fixture::TestMap());
+  service::LocalizerServerOptions server_options =
+      fixture::TestServerOptions(folder.path() / "maps");
+  server_options.tls_cert_file = cert;
+  server_options.tls_key_file = key;
+  service::LocalizerServer server(server_options);
+
+  ReplayOptions options;
+  options.server = "127.0.0.1:" + std::to_string(server.port());
+  options.map_name = fixture::kTestMapName;
+  options.dataset = WriteTestDataset(folder.path());
+  options.output = folder.path() / "trajectory.txt";
+  options.speed = std::nullopt;
+  options.duration_s = 0.1;
+  options.tls_ca_file = cert;
+  options.tls_server_name = "localhost";
+  std::ostringstream log;
+  EXPECT_GE(RunReplay(options, log).trajectory.size(), 25u);
+
+  options.tls_ca_file.reset();
+  options.tls_server_name.reset();
+  EXPECT_THROW(RunReplay(options, log), Error) << "plaintext to a TLS server";
+}
+
 TEST(ReplayCommandLine, FlagsMapToOptions) {
   bool help = false;
   const ReplayOptions options = ParseReplayCommandLine(
