@@ -17,6 +17,8 @@ PACKAGES=(
   libgtest-dev libgmock-dev libbenchmark-dev
   # python client example and its test
   python3 python3-grpcio python3-protobuf python3-numpy
+  # TLS test certificates
+  openssl
 )
 
 missing=()
