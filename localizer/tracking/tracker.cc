@@ -290,6 +290,32 @@ Tracker::Attempt Tracker::Solve(const Rigid3d& start_world_from_cam,
     ++in_image;
     on_edge += NearEdge(pixel) ? 1 : 0;
   }
+  // Check the confident polarity predictions against the events: the nearest active pixel of a
+  // point predicted ON should have fired ON last (and OFF for OFF).
+  if (predict_polarity) {
+    for (size_t i = 0; i < num_selected; ++i) {
+      const PotentialField* field = scratch_fields_[i];
+      const bool on = field == Field(SurfaceChannel::kOn);
+      if (!on && field != Field(SurfaceChannel::kOff)) continue;
+      Eigen::Vector2d pixel;
+      const Eigen::Vector3d point_in_cam =
+          estimate_rotation * map_.positions[selected_[i]].cast<double>() + estimate_translation;
+      if (!intrinsics_.Project(point_in_cam, &pixel)) continue;
+      int edge_pixel;
+      float distance;
+      if (!edges_.Nearest(static_cast<int>(std::lround(pixel.x())),
+                          static_cast<int>(std::lround(pixel.y())), options_.on_edge_radius_px,
+                          &edge_pixel, &distance)) {
+        continue;
+      }
+      const int x = edge_pixel % surface_.width();
+      const int y = edge_pixel / surface_.width();
+      const bool fired_on = surface_.LastTimestamp(SurfaceChannel::kOn, x, y) >=
+                            surface_.LastTimestamp(SurfaceChannel::kOff, x, y);
+      ++attempt.quality.polarity_predictions;
+      attempt.quality.polarity_matches += fired_on == on ? 1 : 0;
+    }
+  }
   attempt.quality.on_edge_fraction = in_image > 0 ? static_cast<double>(on_edge) / in_image : 0;
   attempt.quality.mean_residual = attempt.registration.mean_residual;
   attempt.quality.points_used = attempt.registration.points_used;

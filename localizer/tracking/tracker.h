@@ -52,6 +52,11 @@ struct TrackingQuality {
   int iterations = 0;
   // Number of recovery attempts run in this step (0 when the first solve was good).
   int recovery_attempts = 0;
+  // Points with a confident (ON or OFF) polarity prediction that lie on an active edge pixel at
+  // the estimate (within on_edge_radius_px).
+  int polarity_predictions = 0;
+  // Of those, the points whose nearest active edge pixel fired last with the predicted polarity.
+  int polarity_matches = 0;
 };
 
 // Wall-clock time spent in each stage of a step, milliseconds.
