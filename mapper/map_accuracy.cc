@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <numbers>
 
@@ -154,6 +155,14 @@ MapAccuracy MeasureMapAccuracy(const Map& map, const Map& reference,
   accuracy.median_edge_distance_m = Median(edge_distances);
   accuracy.edge_within_fraction = fraction_within(edge_distances);
   accuracy.median_gradient_angle_deg = Median(gradient_angles);
+  const auto fraction = [&](const std::function<bool(double)>& predicate) {
+    if (gradient_angles.empty()) return 0.0;
+    return static_cast<double>(
+               std::count_if(gradient_angles.begin(), gradient_angles.end(), predicate)) /
+           static_cast<double>(gradient_angles.size());
+  };
+  accuracy.gradient_within_10deg_fraction = fraction([](double angle) { return angle <= 10.0; });
+  accuracy.gradient_opposite_fraction = fraction([](double angle) { return angle > 90.0; });
   accuracy.median_image_gradient_angle_deg = Median(image_gradient_angles);
   return accuracy;
 }

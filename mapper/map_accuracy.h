@@ -55,6 +55,10 @@ struct MapAccuracy {
   double edge_within_fraction = 0.0;
   // Median angle between a point's 3D gradient and its nearest ground-truth point's, degrees.
   double median_gradient_angle_deg = 0.0;
+  // Fraction of the points whose 3D gradient is within 10 degrees of the ground truth's.
+  double gradient_within_10deg_fraction = 0.0;
+  // Fraction of the points whose 3D gradient is more than 90 degrees off (opposite sign).
+  double gradient_opposite_fraction = 0.0;
   // Median angle between the two gradients projected into the nearest depth view, degrees
   // (what tracking uses: the 3D gradient of method.md §3.4 is only defined up to the viewing
   // direction).

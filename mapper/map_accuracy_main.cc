@@ -118,6 +118,8 @@ int main(int argc, char** argv) {
     json["median_edge_distance_m"] = accuracy.median_edge_distance_m;
     json["edge_within_fraction"] = accuracy.edge_within_fraction;
     json["median_gradient_angle_deg"] = accuracy.median_gradient_angle_deg;
+    json["gradient_within_10deg_fraction"] = accuracy.gradient_within_10deg_fraction;
+    json["gradient_opposite_fraction"] = accuracy.gradient_opposite_fraction;
     json["median_image_gradient_angle_deg"] = accuracy.median_image_gradient_angle_deg;
     json["within_m"] = options.within_m;
     std::cout << json.dump(2) << "\n";

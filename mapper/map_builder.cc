@@ -831,7 +831,10 @@ MapBuildReport BuildMap(const MapBuilderOptions& options_in, ProgressListener* p
     map.keyframes.push_back(keyframe);
     const Camera& keyframe_camera = map.cameras[keyframe.camera_index];
     const Rigid3d world_from_cam = view.cam_from_world.Inverse();
-    for (const DepthPixel& pixel : depths[k].pixels) {
+    const std::vector<std::optional<Eigen::Vector3d>> surface_gradients =
+        SurfaceGradients3d(keyframe_camera, depths[k], options.semidense);
+    for (size_t p = 0; p < depths[k].pixels.size(); ++p) {
+      const DepthPixel& pixel = depths[k].pixels[p];
       Eigen::Vector3d ray;
       if (!keyframe_camera.Unproject(pixel.pixel.cast<double>(), &ray)) continue;
       const Eigen::Vector3d point_in_cam = ray / pixel.inverse_depth;
@@ -842,7 +845,9 @@ MapBuildReport BuildMap(const MapBuilderOptions& options_in, ProgressListener* p
       }
       CandidatePoint candidate;
       candidate.position = world_from_cam * point_in_cam;
-      candidate.gradient = (world_from_cam.rotation * gradient_in_cam).normalized();
+      candidate.gradient =
+          (world_from_cam.rotation * surface_gradients[p].value_or(gradient_in_cam)).normalized();
+      if (surface_gradients[p]) ++report.num_surface_gradients;
       const double sigma = std::sqrt(pixel.inverse_depth_variance);
       candidate.inverse_depth_sigma = sigma;
       candidate.position_sigma = sigma / (pixel.inverse_depth * pixel.inverse_depth) * ray.norm();
@@ -910,6 +915,7 @@ std::string MapBuildReportToJson(const MapBuildReport& report) {
   json["keyframes"] = report.num_keyframes;
   json["sparse_points"] = report.num_sparse_points;
   json["keyframe_points"] = report.num_keyframe_points;
+  json["surface_gradients"] = report.num_surface_gradients;
   json["points"] = report.num_points;
   json["voxel_size"] = report.voxel_size;
   json["colmap_mean_reprojection_error_px"] = report.colmap_mean_reprojection_error_px;

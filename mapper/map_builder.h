@@ -107,6 +107,9 @@ struct MapBuildReport {
   size_t num_sparse_points = 0;
   // Semi-dense points before merging.
   size_t num_keyframe_points = 0;
+  // Semi-dense points whose 3D gradient lies in a fitted surface plane (SurfaceGradients3d);
+  // the others keep the §3.4 gradient of their keyframe.
+  size_t num_surface_gradients = 0;
   // Map points.
   size_t num_points = 0;
   // Voxel edge used for merging, metres (model units when not aligned).

@@ -9,6 +9,7 @@
 #include <optional>
 #include <thread>
 
+#include <Eigen/Eigenvalues>
 #include <opencv2/imgproc.hpp>
 
 #include "core/common/error.h"
@@ -413,6 +414,13 @@ void SemiDenseOptions::Check() const {
           "min_neighbours_to_grow must be in 0..8");
   require(min_keyframe_confirmations >= 0, "min_keyframe_confirmations must be >= 0");
   require(refinement_iterations >= 0, "refinement_iterations must be >= 0");
+  require(surface_window_px >= 0, "surface_window_px must be >= 0");
+  require(min_surface_points >= 3, "min_surface_points must be at least 3");
+  require(surface_max_depth_difference > 0.0, "surface_max_depth_difference must be > 0");
+  require(max_surface_thickness_ratio > 0.0 && max_surface_thickness_ratio < 1.0,
+          "max_surface_thickness_ratio must be in (0, 1)");
+  require(min_surface_width_ratio >= 0.0 && min_surface_width_ratio < 1.0,
+          "min_surface_width_ratio must be in [0, 1)");
   require(num_threads >= 1, "num_threads must be >= 1");
 }
 
@@ -667,6 +675,93 @@ bool ComputeGradient3d(const Camera& camera, const Eigen::Vector2d& pixel,
   if (!(offset.norm() > 0.0)) return false;
   *gradient_in_cam = offset.normalized();
   return true;
+}
+
+std::vector<std::optional<Eigen::Vector3d>> SurfaceGradients3d(const Camera& camera,
+                                                               const KeyframeDepth& depth,
+                                                               const SemiDenseOptions& options) {
+  std::vector<std::optional<Eigen::Vector3d>> gradients(depth.pixels.size());
+  const int window = options.surface_window_px;
+  if (window == 0 || depth.pixels.empty()) return gradients;
+  // Points in the camera, and a pixel -> point index grid.
+  std::vector<Eigen::Vector3d> points(depth.pixels.size(), Eigen::Vector3d::Zero());
+  std::vector<bool> valid(depth.pixels.size(), false);
+  cv::Mat index(camera.height, camera.width, CV_32S, cv::Scalar(-1));
+  for (size_t i = 0; i < depth.pixels.size(); ++i) {
+    const DepthPixel& pixel = depth.pixels[i];
+    Eigen::Vector3d ray;
+    if (!(pixel.inverse_depth > 0.0) || !camera.Unproject(pixel.pixel.cast<double>(), &ray)) {
+      continue;
+    }
+    if (pixel.pixel.x() < 0 || pixel.pixel.y() < 0 || pixel.pixel.x() >= camera.width ||
+        pixel.pixel.y() >= camera.height) {
+      continue;
+    }
+    points[i] = ray / pixel.inverse_depth;
+    valid[i] = true;
+    index.at<int>(pixel.pixel.y(), pixel.pixel.x()) = static_cast<int>(i);
+  }
+  const double max_thickness_squared =
+      options.max_surface_thickness_ratio * options.max_surface_thickness_ratio;
+  const double min_width_squared =
+      options.min_surface_width_ratio * options.min_surface_width_ratio;
+  std::vector<Eigen::Vector3d> neighbourhood;
+  for (size_t i = 0; i < depth.pixels.size(); ++i) {
+    if (!valid[i]) continue;
+    const Eigen::Vector2i& center = depth.pixels[i].pixel;
+    const double max_difference = options.surface_max_depth_difference * points[i].z();
+    neighbourhood.clear();
+    for (int y = std::max(0, center.y() - window);
+         y <= std::min(camera.height - 1, center.y() + window); ++y) {
+      for (int x = std::max(0, center.x() - window);
+           x <= std::min(camera.width - 1, center.x() + window); ++x) {
+        const int other = index.at<int>(y, x);
+        if (other < 0) continue;
+        if (std::abs(points[static_cast<size_t>(other)].z() - points[i].z()) > max_difference) {
+          continue;
+        }
+        neighbourhood.push_back(points[static_cast<size_t>(other)]);
+      }
+    }
+    if (neighbourhood.size() < static_cast<size_t>(options.min_surface_points)) continue;
+    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+    for (const Eigen::Vector3d& point : neighbourhood) mean += point;
+    mean /= static_cast<double>(neighbourhood.size());
+    Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();
+    for (const Eigen::Vector3d& point : neighbourhood) {
+      covariance += (point - mean) * (point - mean).transpose();
+    }
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver(covariance);
+    if (solver.info() != Eigen::Success) continue;
+    const Eigen::Vector3d& eigenvalues = solver.eigenvalues();  // increasing
+    if (!(eigenvalues(2) > 0.0) || eigenvalues(0) > max_thickness_squared * eigenvalues(1) ||
+        eigenvalues(1) < min_width_squared * eigenvalues(2)) {
+      continue;
+    }
+    const Eigen::Vector3d normal = solver.eigenvectors().col(0);
+    Eigen::Vector3d view_gradient;
+    if (!ComputeGradient3d(camera, center.cast<double>(), depth.pixels[i].gradient_direction,
+                           points[i], &view_gradient)) {
+      continue;
+    }
+    // The plane through the camera centre and the image edge (perpendicular to the image
+    // gradient) cuts the surface along the 3D edge; the gradient is the in-surface direction
+    // perpendicular to that edge: the edge plane's normal projected onto the surface.
+    const Eigen::Vector2d& direction = depth.pixels[i].gradient_direction;
+    Eigen::Vector3d edge_in_view;
+    if (!ComputeGradient3d(camera, center.cast<double>(),
+                           Eigen::Vector2d(-direction.y(), direction.x()), points[i],
+                           &edge_in_view)) {
+      continue;
+    }
+    const Eigen::Vector3d edge_plane_normal = points[i].normalized().cross(edge_in_view);
+    Eigen::Vector3d surface_gradient = edge_plane_normal - edge_plane_normal.dot(normal) * normal;
+    if (surface_gradient.norm() < 0.3) continue;  // Surface seen nearly edge-on.
+    surface_gradient.normalize();
+    if (surface_gradient.dot(view_gradient) < 0.0) surface_gradient = -surface_gradient;
+    gradients[i] = surface_gradient;
+  }
+  return gradients;
 }
 
 bool SparseDepthRange(const Rigid3d& cam_from_world, const std::vector<Eigen::Vector3d>& points,

@@ -9,6 +9,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <functional>
+#include <optional>
 #include <vector>
 
 #include <Eigen/Core>
@@ -87,6 +88,20 @@ struct SemiDenseOptions {
   int min_keyframe_confirmations = 2;
   // Gauss-Newton iterations of the final refinement.
   int refinement_iterations = 3;
+  // Surface gradients (SurfaceGradients3d): half-size of the pixel window whose estimated points
+  // give the local surface plane, pixels; 0 keeps the §3.4 gradients.
+  int surface_window_px = 20;
+  // Surface gradients: the window needs at least this many points within
+  // surface_max_depth_difference of the pixel's depth.
+  int min_surface_points = 15;
+  // Surface gradients: points of the window whose depth differs from the pixel's by more than
+  // this fraction of it belong to another surface and are left out.
+  double surface_max_depth_difference = 0.05;
+  // Surface gradients: the points are planar when their smallest principal standard deviation is
+  // below this fraction of the middle one...
+  double max_surface_thickness_ratio = 0.1;
+  // ... and not on one line when the middle one is above this fraction of the largest.
+  double min_surface_width_ratio = 0.15;
   // Worker threads.
   int num_threads = 2;
 
@@ -150,6 +165,18 @@ void EnforceInterKeyframeConsistency(
 bool ComputeGradient3d(const Camera& camera, const Eigen::Vector2d& pixel,
                        const Eigen::Vector2d& gradient_direction,
                        const Eigen::Vector3d& point_in_cam, Eigen::Vector3d* gradient_in_cam);
+
+// Per pixel of `depth` (same order), in the camera frame: the 3D gradient in the surface, the
+// in-surface direction perpendicular to the 3D edge, where the surface is the plane fitted to the
+// keyframe's points within options.surface_window_px of the pixel (same surface: similar depth)
+// and the 3D edge is its intersection with the plane through the camera centre and the image
+// edge; signed like the §3.4 gradient (ComputeGradient3d). Unlike the §3.4 gradient, which lies
+// in the plane facing this keyframe, it is the scene's own gradient (docs/sim-scene.md), the same
+// from every view. std::nullopt where the points are too few, not planar, on one line, or the
+// surface is seen edge-on; every entry is std::nullopt when surface_window_px is 0.
+std::vector<std::optional<Eigen::Vector3d>> SurfaceGradients3d(const Camera& camera,
+                                                               const KeyframeDepth& depth,
+                                                               const SemiDenseOptions& options);
 
 // Depth range [min, max] of the sparse points in front of a camera, from the 2nd and 98th
 // percentiles widened by `margin` (min / margin, max * margin). Returns false with fewer than 3

@@ -216,3 +216,79 @@ TEST(SemiDenseDepth, OptionsAreChecked) {
 
 }  // namespace
 }  // namespace evloc::mapper
+
+namespace evloc::mapper {
+namespace {
+
+TEST(SurfaceGradients3d, RecoversTheInSurfaceGradientOfATiltedPlane) {
+  // Parallel texture lines on a plane tilted away from the camera (a floor-like view); the true
+  // gradient t is in the plane and perpendicular to the lines, which run along x.
+  const Camera camera = Camera::Pinhole(160, 120, 100.0, 100.0, 79.5, 59.5);
+  const Eigen::Vector3d origin(0.0, 0.0, 2.0);
+  const Eigen::Vector3d normal = Eigen::Vector3d(0.0, 0.6, -0.8);
+  const Eigen::Vector3d truth = Eigen::Vector3d(0.0, 0.8, 0.6);
+  KeyframeDepth depth;
+  for (int v = 0; v < camera.height; ++v) {
+    for (int u = 0; u < camera.width; ++u) {
+      Eigen::Vector3d ray;
+      ASSERT_TRUE(camera.Unproject(Eigen::Vector2d(u, v), &ray));
+      const double scale = normal.dot(origin) / normal.dot(ray);
+      const Eigen::Vector3d point = scale * ray;
+      const double across = (point - origin).dot(truth);
+      // Lines every 5 cm, one pixel wide.
+      const double footprint = point.z() / camera.fx * 1.5;
+      const double offset = across - 0.05 * std::round(across / 0.05);
+      if (std::abs(offset) > 0.5 * footprint) continue;
+      // The image gradient is perpendicular to the projected line, towards the projected t.
+      Eigen::Vector2d pixel;
+      Eigen::Vector2d along;
+      Eigen::Vector2d tip;
+      ASSERT_TRUE(camera.Project(point, &pixel));
+      ASSERT_TRUE(camera.Project(point + 1e-3 * Eigen::Vector3d::UnitX(), &along));
+      ASSERT_TRUE(camera.Project(point + 1e-3 * truth, &tip));
+      Eigen::Vector2d gradient_direction(-(along - pixel).y(), (along - pixel).x());
+      if (gradient_direction.dot(tip - pixel) < 0.0) gradient_direction = -gradient_direction;
+      DepthPixel depth_pixel;
+      depth_pixel.pixel = Eigen::Vector2i(u, v);
+      depth_pixel.inverse_depth = 1.0 / point.z();
+      depth_pixel.gradient_direction = gradient_direction.normalized();
+      depth.pixels.push_back(depth_pixel);
+    }
+  }
+  ASSERT_GT(depth.pixels.size(), 500u);
+  const std::vector<std::optional<Eigen::Vector3d>> gradients =
+      SurfaceGradients3d(camera, depth, SemiDenseOptions());
+  ASSERT_EQ(gradients.size(), depth.pixels.size());
+  size_t found = 0;
+  double worst_deg = 0.0;
+  double worst_view_deg = 0.0;
+  for (size_t i = 0; i < gradients.size(); ++i) {
+    if (!gradients[i]) continue;
+    ++found;
+    worst_deg = std::max(worst_deg, std::acos(std::clamp(gradients[i]->dot(truth), -1.0, 1.0)));
+
+    const Eigen::Vector3d point =
+        Eigen::Vector3d(depth.pixels[i].pixel.x() - camera.cx,
+                        depth.pixels[i].pixel.y() - camera.cy, camera.fx) /
+        camera.fx / depth.pixels[i].inverse_depth;
+    Eigen::Vector3d view_gradient;
+    ASSERT_TRUE(ComputeGradient3d(camera, depth.pixels[i].pixel.cast<double>(),
+                                  depth.pixels[i].gradient_direction, point, &view_gradient));
+    worst_view_deg =
+        std::max(worst_view_deg, std::acos(std::clamp(view_gradient.dot(truth), -1.0, 1.0)));
+  }
+  EXPECT_GT(found, depth.pixels.size() / 2);
+
+  EXPECT_LT(worst_deg * 180.0 / std::numbers::pi, 2.0);
+  // The §3.4 gradient faces the camera and misses the tilt.
+  EXPECT_GT(worst_view_deg * 180.0 / std::numbers::pi, 20.0);
+  // Disabled: no surface gradients.
+  SemiDenseOptions disabled;
+  disabled.surface_window_px = 0;
+  for (const auto& gradient : SurfaceGradients3d(camera, depth, disabled)) {
+    EXPECT_FALSE(gradient.has_value());
+  }
+}
+
+}  // namespace
+}  // namespace evloc::mapper
