@@ -5,12 +5,14 @@
 #   BUILD_DIR   a build with evloc-sim, evloc-track and evloc-eval
 #   OUT_DIR     where the datasets and results go (under /tmp: datasets are gigabytes)
 #   SEQUENCE    slow | mid | fast | aggressive (10 s of --motion) or fr1_xyz (the TUM fr1_xyz
-#               ground truth replayed, 30 s); default: mid fr1_xyz
+#               ground truth replayed for FR1_XYZ_DURATION seconds, default 30; the dataset folder
+#               is fr1_xyz-<duration>s); default: mid fr1_xyz
 #   TRACK_FLAGS extra evloc-track flags for every run (e.g. --variant EVT-- --rate 150)
 # Env: VARIANTS="EVT EVT-PR EVT-OH EVT--" and RATES="300 150 100" (defaults: EVT and 300) run
-# every combination. A dataset already in OUT_DIR is reused. Prints one table row per run.
+# every combination. A dataset already in OUT_DIR is reused (rendering is slow: 10 s of mid at
+# 640x480 took 12 min wall here). Prints one table row per run.
 set -euo pipefail
-if [ $# -lt 2 ]; then sed -n 2,13p "$0"; exit 2; fi
+if [ $# -lt 2 ]; then sed -n 2,16p "$0"; exit 2; fi
 BUILD=$(realpath "$1"); OUT=$2; shift 2
 SEQUENCES=(); EXTRA=()
 while [ $# -gt 0 ]; do
@@ -25,11 +27,15 @@ EVAL=$BUILD/tools/eval/evloc-eval
 TUM=${TUM_TRAJECTORY:-/work/shared/data/tum-trajectories/fr1_xyz_groundtruth.txt}
 mkdir -p "$OUT"
 
+FR1_XYZ_DURATION=${FR1_XYZ_DURATION:-30}
+
 generate() {  # sequence name -> dataset folder
   local name=$1 dir=$OUT/$1
+  [ "$name" = fr1_xyz ] && dir=$OUT/fr1_xyz-${FR1_XYZ_DURATION}s
   if [ ! -f "$dir/groundtruth.txt" ]; then
     case $name in
-      fr1_xyz) "$SIM" render --out "$dir" --trajectory "$TUM" --duration 30 --force >&2 ;;
+      fr1_xyz) "$SIM" render --out "$dir" --trajectory "$TUM" --duration "$FR1_XYZ_DURATION" \
+                 --force >&2 ;;
       slow|mid|fast|aggressive) "$SIM" render --out "$dir" --motion "$name" --duration 10 --force >&2 ;;
       *) echo "unknown sequence $name" >&2; exit 2 ;;
     esac
