@@ -867,9 +867,14 @@ MapBuildReport BuildMap(const MapBuilderOptions& options_in, ProgressListener* p
   report.num_points = map.size();
   if (map.size() == 0) {
     throw InvalidArgumentError(
-        "the semi-dense stage found no consistent edge points; the images may lack edges or "
-        "baseline (see report of the COLMAP model in " +
-        text_model.string() + ")");
+        "the semi-dense stage found no consistent edge points (" +
+        std::to_string(selection.keyframes.size()) + " keyframes, " +
+        std::to_string(report.num_keyframe_points) +
+        " keyframe points before merging); the images may lack edges or baseline, or every "
+        "point lacks " +
+        std::to_string(options.semidense.min_keyframe_confirmations) +
+        " confirming keyframes (--min-keyframes, --min-confirmations); see the COLMAP model in " +
+        text_model.string());
   }
   map.provenance.tool = "evloc-mapper build";
   map.provenance.tool_version = EVLOC_VERSION;
