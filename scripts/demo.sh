@@ -54,7 +54,7 @@ run "build a map from the RGB frames (COLMAP at known poses, semi-dense edges)" 
   "$OUT/logs/2-map.log" \
   "$MAPPER" build --images "$DATASET/images" --images-list "$DATASET/images.txt" \
   --calib "$DATASET/calib.yaml" --known-poses "$DATASET/groundtruth.txt" --out "$OUT/map" \
-  --max-keyframes 15
+  --max-keyframes 15 --max-features 2048
 
 run "track the events against the built map (EVT, 300 Hz)" "$OUT/logs/3-track-built-map.log" \
   "$TRACK" --map "$OUT/map" --dataset "$DATASET" --out "$OUT/trajectory_events_built_map.txt" \
