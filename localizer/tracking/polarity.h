@@ -46,4 +46,28 @@ PredictedPolarity PredictPolarity(const Eigen::Vector3d& position_world,
                                   const Rigid3d& previous_cam_from_world,
                                   const PolarityPredictionOptions& options);
 
+// PredictPolarity for many points at one pair of poses: the rotation matrices and the band
+// threshold are computed once (the tracker predicts ~2000 points per step).
+class PolarityPredictor {
+ public:
+  // Predictions at `predicted_cam_from_world` with the flow from `previous_cam_from_world`.
+  PolarityPredictor(const PinholeIntrinsics& intrinsics, const Rigid3d& predicted_cam_from_world,
+                    const Rigid3d& previous_cam_from_world,
+                    const PolarityPredictionOptions& options);
+
+  // Same result as PredictPolarity with the constructor's arguments.
+  PredictedPolarity Predict(const Eigen::Vector3d& position_world,
+                            const Eigen::Vector3d& gradient_world) const;
+
+ private:
+  PinholeIntrinsics intrinsics_;
+  Eigen::Matrix3d predicted_rotation_;
+  Eigen::Vector3d predicted_translation_;
+  Eigen::Matrix3d previous_rotation_;
+  Eigen::Vector3d previous_translation_;
+  PolarityPredictionOptions options_;
+  // sin(neutral_band / 2): |cos angle(d, f)| at or below it is in the band.
+  double band_sine_ = 0;
+};
+
 }  // namespace evloc::tracking

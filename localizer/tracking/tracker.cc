@@ -237,6 +237,8 @@ Tracker::Attempt Tracker::Solve(const Rigid3d& start_world_from_cam,
   scratch_depths_.resize(num_selected);
   scratch_fields_.resize(num_selected);
   const Eigen::Matrix3d start_rotation = start_cam_from_world.RotationMatrix();
+  const PolarityPredictor predictor(intrinsics_, start_cam_from_world, previous_cam_from_world,
+                                    polarity_options_);
   for (size_t i = 0; i < num_selected; ++i) {
     const uint32_t index = selected_[i];
     const Eigen::Vector3d position = map_.positions[index].cast<double>();
@@ -249,8 +251,7 @@ Tracker::Attempt Tracker::Solve(const Rigid3d& start_world_from_cam,
     SurfaceChannel channel = SurfaceChannel::kAll;
     if (predict_polarity) {
       const PredictedPolarity polarity =
-          PredictPolarity(position, map_.gradients[index].cast<double>(), intrinsics_,
-                          start_cam_from_world, previous_cam_from_world, polarity_options_);
+          predictor.Predict(position, map_.gradients[index].cast<double>());
       if (polarity == PredictedPolarity::kOn) channel = SurfaceChannel::kOn;
       if (polarity == PredictedPolarity::kOff) channel = SurfaceChannel::kOff;
     }
