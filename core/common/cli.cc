@@ -37,6 +37,20 @@ int ParseIntFlag(std::string_view flag, std::string_view text) {
   return static_cast<int>(value);
 }
 
+void ParseSizeFlag(std::string_view flag, std::string_view text, int* width, int* height) {
+  const size_t x = text.find('x');
+  if (x == std::string_view::npos) {
+    throw InvalidArgumentError(std::string(flag) + " expects WIDTHxHEIGHT, got '" +
+                               std::string(text) + "'");
+  }
+  *width = ParseIntFlag(flag, text.substr(0, x));
+  *height = ParseIntFlag(flag, text.substr(x + 1));
+  if (*width <= 0 || *height <= 0) {
+    throw InvalidArgumentError(std::string(flag) + " expects positive sizes, got '" +
+                               std::string(text) + "'");
+  }
+}
+
 bool ParseSwitchFlag(std::string_view flag, std::string_view text) {
   if (text == "on" || text == "true" || text == "1") return true;
   if (text == "off" || text == "false" || text == "0") return false;

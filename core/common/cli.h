@@ -18,6 +18,9 @@ int64_t ParseIntegerFlag(std::string_view flag, std::string_view text);
 // Parses a base-10 integer that fits an int. Throws InvalidArgumentError.
 int ParseIntFlag(std::string_view flag, std::string_view text);
 
+// Parses a size "WIDTHxHEIGHT" of two positive integers. Throws InvalidArgumentError.
+void ParseSizeFlag(std::string_view flag, std::string_view text, int* width, int* height);
+
 // Parses "on"/"off" (also "true"/"false", "1"/"0"). Throws InvalidArgumentError.
 bool ParseSwitchFlag(std::string_view flag, std::string_view text);
 

@@ -32,6 +32,16 @@ TEST(ParseIntFlag, RejectsValuesBeyondInt) {
   EXPECT_THROW(ParseIntFlag("--n", "4294967296"), InvalidArgumentError);
 }
 
+TEST(ParseSizeFlag, WidthByHeight) {
+  int width = 0;
+  int height = 0;
+  ParseSizeFlag("--ecd-size", "240x180", &width, &height);
+  EXPECT_EQ(width, 240);
+  EXPECT_EQ(height, 180);
+  EXPECT_THROW(ParseSizeFlag("--ecd-size", "240", &width, &height), InvalidArgumentError);
+  EXPECT_THROW(ParseSizeFlag("--ecd-size", "0x180", &width, &height), InvalidArgumentError);
+}
+
 TEST(ParseSwitchFlag, OnOff) {
   EXPECT_TRUE(ParseSwitchFlag("--polarity", "on"));
   EXPECT_FALSE(ParseSwitchFlag("--polarity", "off"));

@@ -171,12 +171,7 @@ TrackCommandOptions ParseTrackCommandLine(const std::vector<std::string>& argume
     } else if (flag == "--debug-every") {
       options.debug_every_steps = static_cast<int>(ParseIntegerFlag(flag, value));
     } else if (flag == "--ecd-size") {
-      const size_t x = value.find('x');
-      if (x == std::string::npos) {
-        throw InvalidArgumentError("--ecd-size expects WIDTHxHEIGHT, got '" + value + "'");
-      }
-      options.ecd_width = static_cast<int>(ParseIntegerFlag(flag, value.substr(0, x)));
-      options.ecd_height = static_cast<int>(ParseIntegerFlag(flag, value.substr(x + 1)));
+      ParseSizeFlag(flag, value, &options.ecd_width, &options.ecd_height);
     } else {
       throw InvalidArgumentError("unknown flag '" + flag + "' (see --help)");
     }
