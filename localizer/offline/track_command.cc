@@ -14,7 +14,6 @@
 #include "core/trajectory/tum_io.h"
 #include "localizer/offline/debug_images.h"
 #include "maps/map_directory.h"
-#include "tools/sim/dataset.h"
 
 namespace evloc::tracking {
 namespace {
@@ -98,6 +97,19 @@ Options:
 
 Exit codes: 0 success, 1 bad input or failure, 2 bad command line.
 )";
+}
+
+TimedPose ResolveInitialPose(const sim::Dataset& dataset,
+                             const std::optional<Rigid3d>& initial_world_from_cam,
+                             int64_t fallback_t_ns) {
+  const bool has_ground_truth = dataset.ground_truth && !dataset.ground_truth->empty();
+  if (!initial_world_from_cam && !has_ground_truth) {
+    throw InvalidArgumentError("dataset '" + dataset.root.string() +
+                               "' has no groundtruth.txt: give the initial pose with --init-pose");
+  }
+  return TimedPose{has_ground_truth ? dataset.ground_truth->start_ns() : fallback_t_ns,
+                   initial_world_from_cam ? *initial_world_from_cam
+                                          : dataset.ground_truth->poses().front().world_from_cam};
 }
 
 Rigid3d ParsePoseText(const std::string& flag, const std::string& text) {
@@ -188,23 +200,17 @@ OfflineTrackingResult RunTrackCommand(const TrackCommandOptions& options, std::o
   const sim::Dataset dataset = sim::ReadDataset(options.dataset_path, reader_options);
   const bool events_mode = options.tracking.tracker.input == TrackerInput::kEvents;
 
-  // The initial pose and time.
-  Rigid3d initial_world_from_cam;
-  int64_t initial_t_ns = 0;
-  if (options.initial_world_from_cam) {
-    initial_world_from_cam = *options.initial_world_from_cam;
-    if (dataset.ground_truth && !dataset.ground_truth->empty()) {
-      initial_t_ns = dataset.ground_truth->start_ns();
-    } else if (!events_mode && !dataset.images.empty()) {
-      initial_t_ns = dataset.images.front().t_ns;
-    }
-  } else if (dataset.ground_truth && !dataset.ground_truth->empty()) {
-    initial_world_from_cam = dataset.ground_truth->poses().front().world_from_cam;
-    initial_t_ns = dataset.ground_truth->start_ns();
-  } else {
-    throw InvalidArgumentError("dataset '" + options.dataset_path.string() +
-                               "' has no groundtruth.txt: give the initial pose with --init-pose");
+  // The initial pose, at the ground truth's start or else at the first measurement.
+  int64_t first_t_ns = 0;
+  if (events_mode && dataset.events_path) {
+    EventBuffer first;
+    if (OpenEventFile(*dataset.events_path)->Read(1, &first) == 1) first_t_ns = first.t_ns[0];
+  } else if (!events_mode && !dataset.images.empty()) {
+    first_t_ns = dataset.images.front().t_ns;
   }
+  const TimedPose initial = ResolveInitialPose(dataset, options.initial_world_from_cam, first_t_ns);
+  const Rigid3d& initial_world_from_cam = initial.world_from_cam;
+  const int64_t initial_t_ns = initial.t_ns;
 
   const Map map = LoadMap(ResolveMapFile(options.map_path));
   const VisibilityIndex visibility(map);

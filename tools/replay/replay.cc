@@ -121,21 +121,16 @@ ReplayResult RunReplay(const ReplayOptions& options, std::ostream& log) {
     throw InvalidArgumentError("dataset '" + options.dataset.string() +
                                "' has no events.evb or events.txt");
   }
-  const bool has_ground_truth = dataset.ground_truth && !dataset.ground_truth->empty();
-  if (!options.initial_world_from_cam && !has_ground_truth) {
-    throw InvalidArgumentError("dataset '" + options.dataset.string() +
-                               "' has no groundtruth.txt: give the initial pose with --init-pose");
-  }
   const auto reader = OpenEventFile(*dataset.events_path);
   EventSource source(*reader);
   if (!source.has_event()) {
     throw InvalidArgumentError("dataset '" + options.dataset.string() + "' has no events");
   }
   const int64_t first_t_ns = source.event().t_ns;
-  const Rigid3d initial_world_from_cam = options.initial_world_from_cam
-                                             ? *options.initial_world_from_cam
-                                             : dataset.ground_truth->poses().front().world_from_cam;
-  const int64_t initial_t_ns = has_ground_truth ? dataset.ground_truth->start_ns() : first_t_ns;
+  const TimedPose initial =
+      tracking::ResolveInitialPose(dataset, options.initial_world_from_cam, first_t_ns);
+  const Rigid3d& initial_world_from_cam = initial.world_from_cam;
+  const int64_t initial_t_ns = initial.t_ns;
   const bool evt3 = options.encoding == WireEncoding::kEvt3;
   // EVT 3.0 carries microseconds from a sensor origin: sensor time = session time - offset.
   const int64_t sensor_offset_ns = FloorDiv(first_t_ns, 1000) * 1000;
