@@ -17,6 +17,13 @@ static_assert(std::endian::native == std::endian::little,
 // The largest address either format can encode (11-bit coordinates).
 constexpr uint32_t kFormatAddressLimit = 2048;
 
+// Coordinates at or above this are outside the sensor: its size along `axis` when known, else the
+// format's address range.
+uint32_t AddressLimit(const std::optional<SensorSize>& sensor_size, int SensorSize::*axis) {
+  return sensor_size ? std::min<uint32_t>((*sensor_size).*axis, kFormatAddressLimit)
+                     : kFormatAddressLimit;
+}
+
 // Events are decoded into a fixed-size staging buffer (owned by the decoder, allocated once)
 // and appended to the output in blocks, so the hot loop writes without capacity checks.
 class StagingArea {
@@ -83,12 +90,8 @@ void PropheseeDecoderOptions::Check() const {
 
 Evt3Decoder::Evt3Decoder(PropheseeDecoderOptions options) : options_(std::move(options)) {
   options_.Check();
-  width_limit_ = options_.sensor_size
-                     ? std::min<uint32_t>(options_.sensor_size->width, kFormatAddressLimit)
-                     : kFormatAddressLimit;
-  height_limit_ = options_.sensor_size
-                      ? std::min<uint32_t>(options_.sensor_size->height, kFormatAddressLimit)
-                      : kFormatAddressLimit;
+  width_limit_ = AddressLimit(options_.sensor_size, &SensorSize::width);
+  height_limit_ = AddressLimit(options_.sensor_size, &SensorSize::height);
 }
 
 void Evt3Decoder::Reset() { *this = Evt3Decoder(std::move(options_)); }
@@ -259,12 +262,8 @@ void Evt3Decoder::DecodeWords(const uint8_t* bytes, size_t word_count, uint64_t 
 
 Evt2Decoder::Evt2Decoder(PropheseeDecoderOptions options) : options_(std::move(options)) {
   options_.Check();
-  width_limit_ = options_.sensor_size
-                     ? std::min<uint32_t>(options_.sensor_size->width, kFormatAddressLimit)
-                     : kFormatAddressLimit;
-  height_limit_ = options_.sensor_size
-                      ? std::min<uint32_t>(options_.sensor_size->height, kFormatAddressLimit)
-                      : kFormatAddressLimit;
+  width_limit_ = AddressLimit(options_.sensor_size, &SensorSize::width);
+  height_limit_ = AddressLimit(options_.sensor_size, &SensorSize::height);
 }
 
 void Evt2Decoder::Reset() { *this = Evt2Decoder(std::move(options_)); }
