@@ -22,27 +22,11 @@ namespace fixture = service::testing;
 
 constexpr int64_t kDurationNs = 1'500'000'000;
 
-std::filesystem::path WriteDataset(const std::filesystem::path& root) {
-  const std::filesystem::path out = root / "dataset";
-  sim::DatasetWriter writer(out, {});
-  writer.WriteCamera(fixture::TestCamera());
-  std::vector<TimedPose> poses;
-  for (int64_t t = fixture::kInitialTimeNs; t <= kDurationNs; t += 5'000'000) {
-    poses.push_back({t, tracking::testing::SmoothMotion(t)});
-  }
-  writer.WriteGroundTruth(Trajectory(poses));
-  EvbWriter events(writer.staging_dir() / sim::dataset_files::kEventsEvb, SensorSize{320, 240});
-  events.Write(fixture::TestEvents(kDurationNs));
-  events.Close();
-  writer.Commit();
-  return out;
-}
-
 class ReplayBenchmark : public ::testing::Test {
  protected:
   void SetUp() override {
     fixture::WriteTestMap(folder_.path() / "maps", fixture::kTestMapName, fixture::TestMap());
-    dataset_ = WriteDataset(folder_.path());
+    dataset_ = fixture::WriteTestDataset(folder_.path(), kDurationNs);
     service::LocalizerServerOptions options = fixture::TestServerOptions(folder_.path() / "maps");
     options.max_sessions = 16;
     server_ = std::make_unique<service::LocalizerServer>(options);

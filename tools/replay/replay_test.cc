@@ -20,28 +20,11 @@ namespace fixture = service::testing;
 
 constexpr int64_t kDurationNs = 300'000'000;
 
-// Writes a dataset (calib.yaml, events.evb, groundtruth.txt) of the synthetic scene.
-std::filesystem::path WriteTestDataset(const std::filesystem::path& root) {
-  const std::filesystem::path out = root / "dataset";
-  sim::DatasetWriter writer(out, {});
-  writer.WriteCamera(fixture::TestCamera());
-  std::vector<TimedPose> poses;
-  for (int64_t t = fixture::kInitialTimeNs; t <= kDurationNs; t += 5'000'000) {
-    poses.push_back({t, tracking::testing::SmoothMotion(t)});
-  }
-  writer.WriteGroundTruth(Trajectory(poses));
-  EvbWriter events(writer.staging_dir() / sim::dataset_files::kEventsEvb, SensorSize{320, 240});
-  events.Write(fixture::TestEvents(kDurationNs));
-  events.Close();
-  writer.Commit();
-  return out;
-}
-
 class ReplayTest : public ::testing::Test {
  protected:
   void SetUp() override {
     fixture::WriteTestMap(folder_.path() / "maps", fixture::kTestMapName, fixture::TestMap());
-    dataset_ = WriteTestDataset(folder_.path());
+    dataset_ = fixture::WriteTestDataset(folder_.path(), kDurationNs);
     service::LocalizerServerOptions options = fixture::TestServerOptions(folder_.path() / "maps");
     options.queue_packets = 64;
     server_ = std::make_unique<service::LocalizerServer>(options);
@@ -160,7 +143,7 @@ TEST(ReplayTls, ReplaysOverTls) {
   ReplayOptions options;
   options.server = "127.0.0.1:" + std::to_string(server.port());
   options.map_name = fixture::kTestMapName;
-  options.dataset = WriteTestDataset(folder.path());
+  options.dataset = fixture::WriteTestDataset(folder.path(), kDurationNs);
   options.output = folder.path() / "trajectory.txt";
   options.speed = std::nullopt;
   options.duration_s = 0.1;

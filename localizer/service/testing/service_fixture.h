@@ -46,6 +46,10 @@ class TemporaryFolder {
 // Writes `map` as maps_dir/name/map.evmap (and map.ply).
 void WriteTestMap(const std::filesystem::path& maps_dir, const std::string& name, const Map& map);
 
+// Writes a dataset folder root/dataset (calib.yaml, events.evb, groundtruth.txt) of the test
+// scene over [kInitialTimeNs, duration_ns] and returns its path.
+std::filesystem::path WriteTestDataset(const std::filesystem::path& root, int64_t duration_ns);
+
 // Server options for tests: the given map folder, 127.0.0.1 port 0, short idle timeout.
 LocalizerServerOptions TestServerOptions(const std::filesystem::path& maps_dir);
 
