@@ -5,11 +5,15 @@
 #include <cmath>
 #include <condition_variable>
 #include <deque>
+#include <future>
 #include <limits>
 #include <mutex>
+#include <random>
 #include <thread>
 
+#include <grpcpp/generic/generic_stub.h>
 #include <grpcpp/grpcpp.h>
+#include <nlohmann/json.hpp>
 
 #include "core/common/cli.h"
 #include "core/common/error.h"
@@ -43,6 +47,71 @@ int64_t FloorDiv(int64_t numerator, int64_t denominator) {
   return quotient;
 }
 
+double MillisecondsOf(Clock::duration duration) {
+  return std::chrono::duration<double, std::milli>(duration).count();
+}
+
+std::string StatusText(const grpc::Status& status) {
+  return std::to_string(status.error_code()) + " " + status.error_message();
+}
+
+// Throws unless the deadline of a health check is positive.
+void CheckHealthTimeout(double timeout_s) {
+  if (!(timeout_s > 0)) throw InvalidArgumentError("--health-timeout must be positive");
+}
+
+// The checks of the fields a health check uses too.
+void CheckServerOptions(const ReplayOptions& options) {
+  if (options.server.empty()) {
+    throw InvalidArgumentError("--server is required: the localizer's host:port");
+  }
+  if (options.tls_server_name && !options.tls_ca_file) {
+    throw InvalidArgumentError("--tls-server-name needs --tls-ca");
+  }
+  if (!options.lb_policy.empty() && options.lb_policy != "pick_first" &&
+      options.lb_policy != "round_robin") {
+    throw InvalidArgumentError("--lb expects pick_first or round_robin, got '" + options.lb_policy +
+                               "'");
+  }
+}
+
+// A channel to options.server with its credentials, load-balancing policy and, for a client
+// that reconnects, the reconnect backoff.
+std::shared_ptr<grpc::Channel> MakeChannel(const ReplayOptions& options) {
+  grpc::ChannelArguments arguments;
+  arguments.SetMaxReceiveMessageSize(64 << 20);
+  if (!options.lb_policy.empty()) arguments.SetLoadBalancingPolicyName(options.lb_policy);
+  if (options.reconnect > 0) {
+    const int backoff_ms = static_cast<int>(options.reconnect_backoff_ms);
+    arguments.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS, backoff_ms);
+    arguments.SetInt(GRPC_ARG_MIN_RECONNECT_BACKOFF_MS, backoff_ms);
+    arguments.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, static_cast<int>(kMaxReconnectBackoffMs));
+  }
+  std::shared_ptr<grpc::ChannelCredentials> credentials = grpc::InsecureChannelCredentials();
+  if (options.tls_ca_file) {
+    grpc::SslCredentialsOptions ssl;
+    ssl.pem_root_certs = ReadFileToString(*options.tls_ca_file);
+    credentials = grpc::SslCredentials(ssl);
+    if (options.tls_server_name) arguments.SetSslTargetNameOverride(*options.tls_server_name);
+  }
+  return grpc::CreateCustomChannel(options.server, credentials, arguments);
+}
+
+// A status a new session may get past: the server went away or restarts, the connection broke,
+// or (before admission) this replica is full and another one may not be.
+bool IsTransient(const grpc::Status& status, bool started) {
+  switch (status.error_code()) {
+    case grpc::StatusCode::UNAVAILABLE:
+    case grpc::StatusCode::CANCELLED:
+    case grpc::StatusCode::ABORTED:
+      return true;
+    case grpc::StatusCode::RESOURCE_EXHAUSTED:
+      return !started;
+    default:
+      return false;
+  }
+}
+
 // Reads events from a file one at a time, in batches underneath.
 class EventSource {
  public:
@@ -64,17 +133,28 @@ class EventSource {
   size_t index_ = 0;
 };
 
+// Most events in one merged priming packet of a resumed session (1 MiB in PACKED).
+constexpr size_t kMaxPrimingPacketEvents = 131072;
+
+// The events of the session-time window (start_ns, end_ns]: one packet.
+struct Window {
+  int64_t start_ns = 0;
+  int64_t end_ns = 0;
+  // Event times on the session clock (EVT 3.0: rounded up to whole microseconds).
+  EventBuffer events;
+};
+
 // A packet as sent: its last event's time and when it was sent.
 struct SentPacket {
   std::optional<int64_t> last_event_t_ns;
   Clock::time_point sent;
 };
 
-// State shared between the sending loop and the response reader.
+// State shared between the sending loop and the response reader: the figures of every session,
+// and the flow control of the current one.
 struct SharedState {
   std::mutex mutex;
   std::condition_variable pose_arrived;
-  std::deque<SentPacket> sent;
   std::vector<TimedPose> poses;
   std::vector<bool> tracking;
   std::vector<double> client_latency_us;
@@ -83,16 +163,457 @@ struct SharedState {
   std::vector<double> step_ms;
   int64_t lost = 0;
   int64_t backpressure = 0;
-  int64_t last_pose_t_ns = 0;
-  // Window ends of the packets sent whose tracking no pose has confirmed yet.
+  // The last pose received (the initial pose before the first), and when it arrived.
+  TimedPose last_pose;
+  Clock::time_point last_pose_wall;
+  // Current session: packets sent and not yet passed by a pose (for the client latency).
+  std::deque<SentPacket> sent;
+  // Current session: window ends of the packets sent whose tracking no pose has confirmed yet.
   std::deque<int64_t> unconfirmed_window_ends;
+  // Current session: poses received, and when the first one arrived.
+  int64_t session_poses = 0;
+  Clock::time_point first_session_pose_wall;
   bool ended = false;
+  api::SessionEnd end;
 };
+
+// One replay: the dataset, the windows that a new session may need again, and the sessions.
+class Replayer {
+ public:
+  Replayer(const ReplayOptions& options, std::ostream& log) : options_(options), log_(log) {
+    sim::DatasetReaderOptions reader_options;
+    reader_options.ecd_width = options.ecd_width;
+    reader_options.ecd_height = options.ecd_height;
+    dataset_ = sim::ReadDataset(options.dataset, reader_options);
+    if (!dataset_.events_path) {
+      throw InvalidArgumentError("dataset '" + options.dataset.string() +
+                                 "' has no events.evb or events.txt");
+    }
+    reader_ = OpenEventFile(*dataset_.events_path);
+    source_ = std::make_unique<EventSource>(*reader_);
+    if (!source_->has_event()) {
+      throw InvalidArgumentError("dataset '" + options.dataset.string() + "' has no events");
+    }
+    evt3_ = options.encoding == WireEncoding::kEvt3;
+    const int64_t first_t_ns = source_->event().t_ns;
+    initial_ = tracking::ResolveInitialPose(dataset_, options.initial_world_from_cam, first_t_ns);
+    next_window_start_ns_ = SessionTime(first_t_ns) - 1;
+    dataset_start_ns_ = next_window_start_ns_;
+    packet_ns_ = options.packet_us * 1000;
+    prime_ns_ = static_cast<int64_t>(std::llround(options.resume_prime_ms * 1e6));
+    stop_ns_ = options.duration_s
+                   ? initial_.t_ns + static_cast<int64_t>(std::llround(*options.duration_s * 1e9))
+                   : std::numeric_limits<int64_t>::max();
+    channel_ = MakeChannel(options);
+    stub_ = api::Localizer::NewStub(channel_);
+    shared_.last_pose = initial_;
+  }
+
+  ReplayResult Run();
+
+ private:
+  // Session time of a dataset event time: EVT 3.0 carries whole microseconds.
+  int64_t SessionTime(int64_t t_ns) const {
+    return evt3_ ? FloorDiv(t_ns + 999, 1000) * 1000 : t_ns;
+  }
+  // Reads the next window of the dataset into history_; false at the end of the events or of
+  // --duration.
+  bool ProduceWindow();
+  // Drops the sent windows that no new session can need again, shifting `next`.
+  void Prune(size_t* next);
+  // Runs one Track call from `start`: resends the windows of history_ from `start` minus the
+  // priming time (all of them before the first pose), then the rest of the dataset. `started`
+  // tells whether the server admitted it.
+  grpc::Status RunSession(const TimedPose& start, bool resumed, bool* started);
+  // Completes the pending outage once the new session delivered a pose (or ended).
+  void FinishOutage(Clock::time_point resumed_wall);
+  // Wait before reconnect attempt `attempt` (1-based).
+  Clock::duration Backoff(int attempt);
+
+  const ReplayOptions& options_;
+  std::ostream& log_;
+  sim::Dataset dataset_;
+  std::unique_ptr<EventReader> reader_;
+  std::unique_ptr<EventSource> source_;
+  bool evt3_ = false;
+  TimedPose initial_;
+  int64_t next_window_start_ns_ = 0;
+  // Start of the first window: real-time pacing counts from it.
+  int64_t dataset_start_ns_ = 0;
+  int64_t packet_ns_ = 0;
+  int64_t prime_ns_ = 0;
+  int64_t stop_ns_ = 0;
+  std::shared_ptr<grpc::Channel> channel_;
+  std::unique_ptr<api::Localizer::Stub> stub_;
+  // Windows read from the dataset and not yet pruned, in time order.
+  std::deque<Window> history_;
+  SharedState shared_;
+  ReplayResult result_;
+  Clock::time_point wall_start_;
+  // The stream failure being recovered from, with the wall times of the failure and of the
+  // last pose before it.
+  std::optional<Outage> outage_;
+  Clock::time_point failure_wall_;
+  Clock::time_point last_pose_wall_before_failure_;
+  std::minstd_rand jitter_{std::random_device{}()};
+};
+
+bool Replayer::ProduceWindow() {
+  if (!source_->has_event() || next_window_start_ns_ >= stop_ns_) return false;
+  Window window;
+  window.start_ns = next_window_start_ns_;
+  window.end_ns = window.start_ns + packet_ns_;
+  while (source_->has_event() && SessionTime(source_->event().t_ns) <= window.end_ns) {
+    Event event = source_->event();
+    event.t_ns = SessionTime(event.t_ns);
+    window.events.push_back(event);
+    source_->Advance();
+  }
+  next_window_start_ns_ = window.end_ns;
+  history_.push_back(std::move(window));
+  return true;
+}
+
+void Replayer::Prune(size_t* next) {
+  int64_t keep_after_ns = 0;
+  {
+    std::lock_guard<std::mutex> lock(shared_.mutex);
+    // Before the first pose a new session starts from the beginning again.
+    if (shared_.poses.empty()) return;
+    keep_after_ns = shared_.last_pose.t_ns - prime_ns_;
+  }
+  while (*next > 0 && history_.front().end_ns <= keep_after_ns) {
+    history_.pop_front();
+    --*next;
+  }
+}
+
+void Replayer::FinishOutage(Clock::time_point resumed_wall) {
+  if (!outage_) return;
+  outage_->resume_ms = MillisecondsOf(resumed_wall - failure_wall_);
+  outage_->interruption_ms = MillisecondsOf(resumed_wall - last_pose_wall_before_failure_);
+  log_ << "evloc-replay: resumed after " << outage_->resume_ms << " ms (" << outage_->attempts
+       << (outage_->attempts == 1 ? " attempt" : " attempts") << ", " << outage_->interruption_ms
+       << " ms without poses)" << std::endl;
+  result_.outages.push_back(*outage_);
+  outage_.reset();
+}
+
+Clock::duration Replayer::Backoff(int attempt) {
+  const double base =
+      std::min(kMaxReconnectBackoffMs, options_.reconnect_backoff_ms * std::pow(2.0, attempt - 1));
+  std::uniform_real_distribution<double> jitter(0.8, 1.2);
+  return std::chrono::duration_cast<Clock::duration>(
+      std::chrono::duration<double, std::milli>(base * jitter(jitter_)));
+}
+
+grpc::Status Replayer::RunSession(const TimedPose& start, bool resumed, bool* started) {
+  *started = false;
+  // The first window of this session.
+  size_t next = 0;
+  if (resumed) {
+    while (next < history_.size() && history_[next].end_ns <= start.t_ns - prime_ns_) ++next;
+  }
+  const int64_t first_start_ns =
+      next < history_.size() ? history_[next].start_ns : next_window_start_ns_;
+  // EVT 3.0 carries microseconds from a sensor origin: sensor time = session time - offset.
+  const int64_t sensor_offset_ns = FloorDiv(first_start_ns, 1000) * 1000;
+
+  grpc::ClientContext context;
+  if (options_.token) context.AddMetadata("authorization", "Bearer " + *options_.token);
+  auto stream = stub_->Track(&context);
+
+  api::TrackRequest start_request;
+  api::SessionStart* session_start = start_request.mutable_start();
+  session_start->set_map_name(options_.map_name);
+  *session_start->mutable_camera() = service::CameraToProto(dataset_.camera);
+  *session_start->mutable_initial_world_from_cam() = service::RigidToProto(start.world_from_cam);
+  session_start->set_initial_t_ns(start.t_ns);
+  if (options_.step_rate_hz) {
+    session_start->mutable_options()->set_step_rate_hz(*options_.step_rate_hz);
+  }
+  session_start->set_sensor_time_offset_ns(sensor_offset_ns);
+  session_start->set_client_name("evloc-replay " + options_.dataset.filename().string());
+
+  api::TrackResponse response;
+  if (!stream->Write(start_request) || !stream->Read(&response) || !response.has_started()) {
+    return stream->Finish();
+  }
+  *started = true;
+  log_ << "evloc-replay: session " << response.started().session_id() << " on map "
+       << response.started().map().name() << " version " << response.started().map().version()
+       << ", " << response.started().variant() << " at " << response.started().step_rate_hz()
+       << " Hz, " << (evt3_ ? "EVT 3.0" : "PACKED") << " packets of " << options_.packet_us
+       << " us, speed " << (options_.speed ? std::to_string(*options_.speed) : std::string("max"));
+  if (resumed) {
+    log_ << ", resuming at t = " << static_cast<double>(start.t_ns) * 1e-9 << " s";
+  }
+  log_ << std::endl;
+
+  {
+    std::lock_guard<std::mutex> lock(shared_.mutex);
+    shared_.sent.clear();
+    shared_.unconfirmed_window_ends.clear();
+    shared_.ended = false;
+  }
+  std::thread response_reader([&] {
+    api::TrackResponse message;
+    while (stream->Read(&message)) {
+      const auto now = Clock::now();
+      std::lock_guard<std::mutex> lock(shared_.mutex);
+      if (message.has_pose()) {
+        const api::PoseUpdate& pose = message.pose();
+        while (!shared_.sent.empty() && (!shared_.sent.front().last_event_t_ns ||
+                                         *shared_.sent.front().last_event_t_ns <= pose.t_ns())) {
+          shared_.sent.pop_front();
+        }
+        if (!shared_.sent.empty()) {
+          shared_.client_latency_us.push_back(
+              std::chrono::duration<double, std::micro>(now - shared_.sent.front().sent).count());
+        }
+        shared_.server_latency_us.push_back(pose.latency_us());
+        shared_.server_overhead_us.push_back(pose.latency_us() - pose.step_ms() * 1e3);
+        shared_.step_ms.push_back(pose.step_ms());
+        const TimedPose timed{pose.t_ns(),
+                              service::RigidFromProto(pose.world_from_cam(), "PoseUpdate")};
+        shared_.poses.push_back(timed);
+        shared_.tracking.push_back(pose.status() == api::TRACKING);
+        if (pose.status() == api::LOST) ++shared_.lost;
+        shared_.last_pose = timed;
+        shared_.last_pose_wall = now;
+        if (shared_.session_poses++ == 0) shared_.first_session_pose_wall = now;
+        // The step at t ran after every event up to t was ingested.
+        while (!shared_.unconfirmed_window_ends.empty() &&
+               shared_.unconfirmed_window_ends.front() <= pose.t_ns()) {
+          shared_.unconfirmed_window_ends.pop_front();
+        }
+        shared_.pose_arrived.notify_all();
+      } else if (message.has_backpressure()) {
+        ++shared_.backpressure;
+      } else if (message.has_end()) {
+        shared_.end = message.end();
+      }
+    }
+    std::lock_guard<std::mutex> lock(shared_.mutex);
+    shared_.ended = true;
+    shared_.pose_arrived.notify_all();
+  });
+
+  // Packets in flight when pacing by the poses: at most half the server's queue and
+  // max_lead_ms of session time.
+  const size_t max_in_flight = static_cast<size_t>(std::max<int64_t>(
+      1, std::min<int64_t>(response.started().queue_capacity() / 2,
+                           static_cast<int64_t>(options_.max_lead_ms * 1e3) / options_.packet_us)));
+  const auto wait_for_poses = [&] {
+    std::unique_lock<std::mutex> lock(shared_.mutex);
+    // A pose confirms packets; without one for 20 ms (e.g. while the first events only prime
+    // the time surfaces) one more packet goes out.
+    shared_.pose_arrived.wait_for(lock, std::chrono::milliseconds(20), [&] {
+      return shared_.ended || shared_.unconfirmed_window_ends.size() < max_in_flight;
+    });
+  };
+  Evt3Encoder encoder;
+  EventBuffer sensor_events;
+  bool stream_open = true;
+  EventBuffer merged;
+  while (stream_open) {
+    const bool resend = next < history_.size();
+    if (!resend && !ProduceWindow()) break;
+    // One window per packet; on a resumed session the windows up to the resume pose, which
+    // only prime the time surfaces, go out merged into few packets.
+    size_t last = next;
+    const EventBuffer* events = &history_[next].events;
+    if (resumed && history_[next].end_ns <= start.t_ns) {
+      size_t count = events->size();
+      while (last + 1 < history_.size() && history_[last + 1].end_ns <= start.t_ns &&
+             count + history_[last + 1].events.size() <= kMaxPrimingPacketEvents) {
+        count += history_[++last].events.size();
+      }
+      if (last > next) {
+        merged.clear();
+        for (size_t i = next; i <= last; ++i) merged.Append(history_[i].events);
+        events = &merged;
+      }
+    }
+    const int64_t packet_start_ns = history_[next].start_ns;
+    const int64_t packet_end_ns = history_[last].end_ns;
+    api::TrackRequest request;
+    api::EventPacket* packet = request.mutable_events();
+    packet->set_end_t_ns(packet_end_ns);
+    if (evt3_) {
+      packet->set_encoding(api::EVENT_ENCODING_EVT3);
+      sensor_events = *events;
+      for (int64_t& t_ns : sensor_events.t_ns) t_ns -= sensor_offset_ns;
+      encoder.Encode(sensor_events, packet->mutable_data());
+    } else {
+      packet->set_encoding(api::EVENT_ENCODING_PACKED);
+      packet->set_time_base_ns(packet_start_ns);
+      packet->set_data(service::EncodePackedEvents(*events, 0, events->size(), packet_start_ns));
+    }
+    // Pacing: real time from the replay's start, or by the poses. A resumed session that is
+    // behind the real-time schedule catches up paced by the poses, so that it does not
+    // overflow the new server's queue.
+    if (options_.speed) {
+      const auto due =
+          wall_start_ +
+          std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(
+              static_cast<double>(packet_end_ns - dataset_start_ns_) * 1e-9 / *options_.speed));
+      if (resumed && due < Clock::now()) {
+        wait_for_poses();
+      } else {
+        std::this_thread::sleep_until(due);
+      }
+    } else {
+      wait_for_poses();
+    }
+    {
+      std::lock_guard<std::mutex> lock(shared_.mutex);
+      shared_.sent.push_back(
+          {events->empty() ? std::nullopt : std::optional<int64_t>(events->t_ns.back()),
+           Clock::now()});
+      shared_.unconfirmed_window_ends.push_back(packet_end_ns);
+    }
+    stream_open = stream->Write(request);
+    if (resend) {
+      ++result_.packets_resent;
+    } else {
+      result_.events_sent += static_cast<int64_t>(events->size());
+      ++result_.packets_sent;
+    }
+    next = last + 1;
+    Prune(&next);
+    if (outage_) {
+      std::optional<Clock::time_point> resumed_wall;
+      {
+        std::lock_guard<std::mutex> lock(shared_.mutex);
+        if (shared_.session_poses > 0) resumed_wall = shared_.first_session_pose_wall;
+      }
+      if (resumed_wall) FinishOutage(*resumed_wall);
+    }
+  }
+  stream->WritesDone();
+  response_reader.join();
+  return stream->Finish();
+}
+
+ReplayResult Replayer::Run() {
+  wall_start_ = Clock::now();
+  int attempts = 0;
+  Clock::duration last_backoff{};
+  for (;;) {
+    TimedPose start;
+    bool resumed = false;
+    {
+      std::lock_guard<std::mutex> lock(shared_.mutex);
+      start = shared_.last_pose;
+      resumed = !shared_.poses.empty();
+      shared_.session_poses = 0;
+    }
+    bool started = false;
+    grpc::Status status;
+    // A reconnect attempt waits (at most its backoff again) for a connection, so that it does
+    // not fail at once while the channel is still moving to another address.
+    if (attempts > 0 &&
+        !channel_->WaitForConnected(
+            std::chrono::system_clock::now() +
+            std::chrono::duration_cast<std::chrono::system_clock::duration>(last_backoff))) {
+      status = grpc::Status(grpc::StatusCode::UNAVAILABLE,
+                            "no connection to '" + options_.server + "' within " +
+                                std::to_string(MillisecondsOf(last_backoff)) + " ms");
+    } else {
+      status = RunSession(start, resumed, &started);
+    }
+    int64_t session_poses = 0;
+    Clock::time_point first_pose_wall;
+    {
+      std::lock_guard<std::mutex> lock(shared_.mutex);
+      session_poses = shared_.session_poses;
+      first_pose_wall = shared_.first_session_pose_wall;
+    }
+    if (session_poses > 0) attempts = 0;
+    if (outage_ && (session_poses > 0 || status.ok())) {
+      FinishOutage(session_poses > 0 ? first_pose_wall : Clock::now());
+    }
+    if (status.ok()) break;
+    const std::string sent = std::to_string(result_.packets_sent) + " packets";
+    if (options_.reconnect == 0 || !IsTransient(status, started)) {
+      if (!started) {
+        throw Error("the server refused the session (status code, message): " + StatusText(status));
+      }
+      throw Error("the session failed after " + sent + ": " + StatusText(status));
+    }
+    if (!outage_) {
+      std::lock_guard<std::mutex> lock(shared_.mutex);
+      outage_ = Outage{static_cast<int>(status.error_code()), status.error_message(),
+                       shared_.last_pose.t_ns};
+      failure_wall_ = Clock::now();
+      last_pose_wall_before_failure_ =
+          shared_.poses.empty() ? failure_wall_ : shared_.last_pose_wall;
+    }
+    if (++attempts > options_.reconnect) {
+      throw Error("gave up after " + std::to_string(options_.reconnect) +
+                  " reconnect attempts; the last one ended with " + StatusText(status) +
+                  " (the stream first failed after " + sent + " with " +
+                  std::to_string(outage_->status_code) + " " + outage_->status_message + ")");
+    }
+    outage_->attempts = attempts;
+    last_backoff = Backoff(attempts);
+    int64_t resume_t_ns = 0;
+    {
+      std::lock_guard<std::mutex> lock(shared_.mutex);
+      resume_t_ns = shared_.last_pose.t_ns;
+    }
+    log_ << "evloc-replay: stream " << (started ? "failed" : "refused") << " ("
+         << StatusText(status) << "); reconnect " << attempts << "/" << options_.reconnect << " in "
+         << MillisecondsOf(last_backoff)
+         << " ms from the pose at t = " << static_cast<double>(resume_t_ns) * 1e-9 << " s"
+         << std::endl;
+    std::this_thread::sleep_for(last_backoff);
+  }
+
+  ReplayResult& result = result_;
+  result.wall_s = std::chrono::duration<double>(Clock::now() - wall_start_).count();
+  std::lock_guard<std::mutex> lock(shared_.mutex);
+  result.trajectory = Trajectory(shared_.poses);
+  result.tracking = shared_.tracking;
+  result.lost_poses = shared_.lost;
+  result.backpressure_notices = shared_.backpressure;
+  result.client_latency_p50_us = Percentile(shared_.client_latency_us, 0.5);
+  result.client_latency_p99_us = Percentile(shared_.client_latency_us, 0.99);
+  result.server_latency_p50_us = Percentile(shared_.server_latency_us, 0.5);
+  result.server_latency_p99_us = Percentile(shared_.server_latency_us, 0.99);
+  result.server_overhead_p50_us = Percentile(shared_.server_overhead_us, 0.5);
+  result.server_overhead_p99_us = Percentile(shared_.server_overhead_us, 0.99);
+  result.step_p50_ms = Percentile(shared_.step_ms, 0.5);
+  WriteTumTrajectory(options_.output, result.trajectory);
+  if (options_.report) WriteReplayReport(*options_.report, result);
+  log_ << "evloc-replay: sent " << result.events_sent << " events in " << result.packets_sent
+       << " packets, received " << result.trajectory.size() << " poses (" << result.lost_poses
+       << " LOST), " << result.backpressure_notices << " backpressure notices, in " << result.wall_s
+       << " s\n";
+  if (!result.outages.empty()) {
+    std::vector<double> resume_ms;
+    for (const Outage& outage : result.outages) resume_ms.push_back(outage.resume_ms);
+    log_ << "evloc-replay: " << result.outages.size() << " stream failures recovered, "
+         << result.packets_resent << " packets sent again; resume p50 "
+         << Percentile(resume_ms, 0.5) << " ms, max "
+         << *std::max_element(resume_ms.begin(), resume_ms.end()) << " ms\n";
+  }
+  log_ << "evloc-replay: latency client p50 " << result.client_latency_p50_us << " us p99 "
+       << result.client_latency_p99_us << " us; server p50 " << result.server_latency_p50_us
+       << " us p99 " << result.server_latency_p99_us << " us (of which outside the step: p50 "
+       << result.server_overhead_p50_us << " us p99 " << result.server_overhead_p99_us
+       << " us); median step " << result.step_p50_ms << " ms\n"
+       << "evloc-replay: server totals" << (result.outages.empty() ? "" : " (last session)") << ": "
+       << shared_.end.events() << " events, " << shared_.end.poses()
+       << " poses; trajectory written to " << options_.output.string() << "\n";
+  return result;
+}
 
 }  // namespace
 
 void ReplayOptions::Check() const {
-  if (server.empty()) throw InvalidArgumentError("--server is required: the localizer's host:port");
+  CheckServerOptions(*this);
   if (map_name.empty()) throw InvalidArgumentError("--map is required: a map name (ListMaps)");
   if (dataset.empty()) throw InvalidArgumentError("--dataset is required: a dataset folder");
   if (output.empty()) throw InvalidArgumentError("--out is required: the TUM trajectory to write");
@@ -106,234 +627,104 @@ void ReplayOptions::Check() const {
   if (ecd_width <= 0 || ecd_height <= 0) {
     throw InvalidArgumentError("--ecd-size must be WIDTHxHEIGHT with positive sizes");
   }
-  if (tls_server_name && !tls_ca_file) {
-    throw InvalidArgumentError("--tls-server-name needs --tls-ca");
+  if (reconnect < 0) throw InvalidArgumentError("--reconnect must be 0 or more");
+  if (!(reconnect_backoff_ms >= 1 && reconnect_backoff_ms <= kMaxReconnectBackoffMs)) {
+    throw InvalidArgumentError("--reconnect-backoff-ms must be in 1.." +
+                               std::to_string(static_cast<int>(kMaxReconnectBackoffMs)));
+  }
+  // A merged priming packet spans at most this (PACKED offsets are below 2^31 ns).
+  if (!(resume_prime_ms >= 0 && resume_prime_ms <= 1000)) {
+    throw InvalidArgumentError("--resume-prime-ms must be in 0..1000");
   }
 }
 
 ReplayResult RunReplay(const ReplayOptions& options, std::ostream& log) {
   options.Check();
-  sim::DatasetReaderOptions reader_options;
-  reader_options.ecd_width = options.ecd_width;
-  reader_options.ecd_height = options.ecd_height;
-  const sim::Dataset dataset = sim::ReadDataset(options.dataset, reader_options);
-  if (!dataset.events_path) {
-    throw InvalidArgumentError("dataset '" + options.dataset.string() +
-                               "' has no events.evb or events.txt");
-  }
-  const auto reader = OpenEventFile(*dataset.events_path);
-  EventSource source(*reader);
-  if (!source.has_event()) {
-    throw InvalidArgumentError("dataset '" + options.dataset.string() + "' has no events");
-  }
-  const int64_t first_t_ns = source.event().t_ns;
-  const TimedPose initial =
-      tracking::ResolveInitialPose(dataset, options.initial_world_from_cam, first_t_ns);
-  const Rigid3d& initial_world_from_cam = initial.world_from_cam;
-  const int64_t initial_t_ns = initial.t_ns;
-  const bool evt3 = options.encoding == WireEncoding::kEvt3;
-  // EVT 3.0 carries microseconds from a sensor origin: sensor time = session time - offset.
-  const int64_t sensor_offset_ns = FloorDiv(first_t_ns, 1000) * 1000;
-  const auto session_time = [&](int64_t t_ns) {
-    if (!evt3) return t_ns;
-    return sensor_offset_ns + (FloorDiv(t_ns - sensor_offset_ns + 999, 1000)) * 1000;
-  };
+  Replayer replayer(options, log);
+  return replayer.Run();
+}
 
-  grpc::ChannelArguments channel_arguments;
-  channel_arguments.SetMaxReceiveMessageSize(64 << 20);
-  std::shared_ptr<grpc::ChannelCredentials> credentials = grpc::InsecureChannelCredentials();
-  if (options.tls_ca_file) {
-    grpc::SslCredentialsOptions ssl;
-    ssl.pem_root_certs = ReadFileToString(*options.tls_ca_file);
-    credentials = grpc::SslCredentials(ssl);
-    if (options.tls_server_name)
-      channel_arguments.SetSslTargetNameOverride(*options.tls_server_name);
+void WriteReplayReport(const std::filesystem::path& path, const ReplayResult& result) {
+  nlohmann::json outages = nlohmann::json::array();
+  for (const Outage& outage : result.outages) {
+    outages.push_back({{"status_code", outage.status_code},
+                       {"status_message", outage.status_message},
+                       {"resume_t_ns", outage.resume_t_ns},
+                       {"attempts", outage.attempts},
+                       {"resume_ms", outage.resume_ms},
+                       {"interruption_ms", outage.interruption_ms}});
   }
-  auto channel = grpc::CreateCustomChannel(options.server, credentials, channel_arguments);
-  auto stub = api::Localizer::NewStub(channel);
+  const nlohmann::json report = {{"events_sent", result.events_sent},
+                                 {"packets_sent", result.packets_sent},
+                                 {"packets_resent", result.packets_resent},
+                                 {"poses", result.trajectory.size()},
+                                 {"lost_poses", result.lost_poses},
+                                 {"backpressure_notices", result.backpressure_notices},
+                                 {"outages", outages},
+                                 {"client_latency_p50_us", result.client_latency_p50_us},
+                                 {"client_latency_p99_us", result.client_latency_p99_us},
+                                 {"server_latency_p50_us", result.server_latency_p50_us},
+                                 {"server_latency_p99_us", result.server_latency_p99_us},
+                                 {"step_p50_ms", result.step_p50_ms},
+                                 {"wall_s", result.wall_s}};
+  WriteFileAtomically(path, report.dump(2) + "\n");
+}
+
+std::string CheckHealth(const ReplayOptions& options, double timeout_s) {
+  CheckServerOptions(options);
+  CheckHealthTimeout(timeout_s);
+  grpc::GenericStub generic(MakeChannel(options));
   grpc::ClientContext context;
-  if (options.token) context.AddMetadata("authorization", "Bearer " + *options.token);
-  auto stream = stub->Track(&context);
-
-  api::TrackRequest start_request;
-  api::SessionStart* start = start_request.mutable_start();
-  start->set_map_name(options.map_name);
-  *start->mutable_camera() = service::CameraToProto(dataset.camera);
-  *start->mutable_initial_world_from_cam() = service::RigidToProto(initial_world_from_cam);
-  start->set_initial_t_ns(initial_t_ns);
-  if (options.step_rate_hz) start->mutable_options()->set_step_rate_hz(*options.step_rate_hz);
-  start->set_sensor_time_offset_ns(sensor_offset_ns);
-  start->set_client_name("evloc-replay " + options.dataset.filename().string());
-
-  const auto fail = [&](const std::string& what) -> Error {
-    const grpc::Status status = stream->Finish();
-    return Error(what + ": " + std::to_string(status.error_code()) + " " + status.error_message());
-  };
-  api::TrackResponse response;
-  if (!stream->Write(start_request) || !stream->Read(&response) || !response.has_started()) {
-    throw fail("the server refused the session (status code, message)");
-  }
-  log << "evloc-replay: session " << response.started().session_id() << " on map "
-      << response.started().map().name() << " version " << response.started().map().version()
-      << ", " << response.started().variant() << " at " << response.started().step_rate_hz()
-      << " Hz, " << (evt3 ? "EVT 3.0" : "PACKED") << " packets of " << options.packet_us
-      << " us, speed " << (options.speed ? std::to_string(*options.speed) : std::string("max"))
-      << "\n";
-
-  SharedState shared;
-  shared.last_pose_t_ns = initial_t_ns;
-  api::SessionEnd end;
-  std::thread response_reader([&] {
-    api::TrackResponse message;
-    while (stream->Read(&message)) {
-      const auto now = Clock::now();
-      std::lock_guard<std::mutex> lock(shared.mutex);
-      if (message.has_pose()) {
-        const api::PoseUpdate& pose = message.pose();
-        while (!shared.sent.empty() && (!shared.sent.front().last_event_t_ns ||
-                                        *shared.sent.front().last_event_t_ns <= pose.t_ns())) {
-          shared.sent.pop_front();
-        }
-        if (!shared.sent.empty()) {
-          shared.client_latency_us.push_back(
-              std::chrono::duration<double, std::micro>(now - shared.sent.front().sent).count());
-        }
-        shared.server_latency_us.push_back(pose.latency_us());
-        shared.server_overhead_us.push_back(pose.latency_us() - pose.step_ms() * 1e3);
-        shared.step_ms.push_back(pose.step_ms());
-        shared.poses.push_back(
-            {pose.t_ns(), service::RigidFromProto(pose.world_from_cam(), "PoseUpdate")});
-        shared.tracking.push_back(pose.status() == api::TRACKING);
-        if (pose.status() == api::LOST) ++shared.lost;
-        shared.last_pose_t_ns = pose.t_ns();
-        // The step at t ran after every event up to t was ingested.
-        while (!shared.unconfirmed_window_ends.empty() &&
-               shared.unconfirmed_window_ends.front() <= pose.t_ns()) {
-          shared.unconfirmed_window_ends.pop_front();
-        }
-        shared.pose_arrived.notify_all();
-      } else if (message.has_backpressure()) {
-        ++shared.backpressure;
-      } else if (message.has_end()) {
-        end = message.end();
-        shared.ended = true;
-      }
-    }
-    std::lock_guard<std::mutex> lock(shared.mutex);
-    shared.ended = true;
-    shared.pose_arrived.notify_all();
-  });
-
-  ReplayResult result;
-  const auto wall_start = Clock::now();
-  const int64_t packet_ns = options.packet_us * 1000;
-  const int64_t window_origin_ns = session_time(first_t_ns) - 1;
-  // Session time at which the replay stops (no limit without --duration).
-  const int64_t stop_ns =
-      options.duration_s
-          ? initial_t_ns + static_cast<int64_t>(std::llround(*options.duration_s * 1e9))
-          : std::numeric_limits<int64_t>::max();
-  // With --speed max: packets in flight, at most half the server's queue and max_lead_ms.
-  const size_t max_in_flight = static_cast<size_t>(std::max<int64_t>(
-      1, std::min<int64_t>(response.started().queue_capacity() / 2,
-                           static_cast<int64_t>(options.max_lead_ms * 1e3) / options.packet_us)));
-  Evt3Encoder encoder;
-  EventBuffer window_events;
-  bool stream_open = true;
-  for (int64_t window_start = window_origin_ns; stream_open && source.has_event();
-       window_start += packet_ns) {
-    const int64_t window_end = window_start + packet_ns;
-    if (window_start >= stop_ns) break;
-    window_events.clear();
-    while (source.has_event() && session_time(source.event().t_ns) <= window_end) {
-      Event event = source.event();
-      event.t_ns = session_time(event.t_ns) - (evt3 ? sensor_offset_ns : 0);
-      window_events.push_back(event);
-      source.Advance();
-    }
-    api::TrackRequest request;
-    api::EventPacket* packet = request.mutable_events();
-    packet->set_end_t_ns(window_end);
-    if (evt3) {
-      packet->set_encoding(api::EVENT_ENCODING_EVT3);
-      encoder.Encode(window_events, packet->mutable_data());
-    } else {
-      packet->set_encoding(api::EVENT_ENCODING_PACKED);
-      packet->set_time_base_ns(window_start);
-      packet->set_data(
-          service::EncodePackedEvents(window_events, 0, window_events.size(), window_start));
-    }
-    // Pacing.
-    if (options.speed) {
-      const auto due =
-          wall_start +
-          std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(
-              static_cast<double>(window_end - window_origin_ns) * 1e-9 / *options.speed));
-      std::this_thread::sleep_until(due);
-    } else {
-      std::unique_lock<std::mutex> lock(shared.mutex);
-      // A pose confirms packets; without one for 20 ms (e.g. while the first events only prime
-      // the time surfaces) one more packet goes out.
-      shared.pose_arrived.wait_for(lock, std::chrono::milliseconds(20), [&] {
-        return shared.ended || shared.unconfirmed_window_ends.size() < max_in_flight;
-      });
-    }
-    {
-      std::lock_guard<std::mutex> lock(shared.mutex);
-      shared.sent.push_back(
-          {window_events.empty()
-               ? std::nullopt
-               : std::optional<int64_t>(window_events.t_ns.back() + (evt3 ? sensor_offset_ns : 0)),
-           Clock::now()});
-      shared.unconfirmed_window_ends.push_back(window_end);
-    }
-    stream_open = stream->Write(request);
-    result.events_sent += static_cast<int64_t>(window_events.size());
-    ++result.packets_sent;
-  }
-  stream->WritesDone();
-  response_reader.join();
-  const grpc::Status status = stream->Finish();
-  result.wall_s = std::chrono::duration<double>(Clock::now() - wall_start).count();
+  context.set_deadline(std::chrono::system_clock::now() +
+                       std::chrono::duration_cast<std::chrono::system_clock::duration>(
+                           std::chrono::duration<double>(timeout_s)));
+  const grpc::Slice empty_request("", 0);
+  const grpc::ByteBuffer request(&empty_request, 1);  // HealthCheckRequest{service = ""}
+  grpc::ByteBuffer response;
+  std::promise<grpc::Status> done;
+  generic.UnaryCall(&context, "/grpc.health.v1.Health/Check", grpc::StubOptions(), &request,
+                    &response, [&done](grpc::Status status) { done.set_value(status); });
+  const grpc::Status status = done.get_future().get();
   if (!status.ok()) {
-    throw Error("the session failed after " + std::to_string(result.packets_sent) +
-                " packets: " + std::to_string(status.error_code()) + " " + status.error_message());
+    throw Error("health check of '" + options.server + "' failed: " + StatusText(status));
   }
-  result.trajectory = Trajectory(shared.poses);
-  result.tracking = shared.tracking;
-  result.lost_poses = shared.lost;
-  result.backpressure_notices = shared.backpressure;
-  result.client_latency_p50_us = Percentile(shared.client_latency_us, 0.5);
-  result.client_latency_p99_us = Percentile(shared.client_latency_us, 0.99);
-  result.server_latency_p50_us = Percentile(shared.server_latency_us, 0.5);
-  result.server_latency_p99_us = Percentile(shared.server_latency_us, 0.99);
-  result.server_overhead_p50_us = Percentile(shared.server_overhead_us, 0.5);
-  result.server_overhead_p99_us = Percentile(shared.server_overhead_us, 0.99);
-  result.step_p50_ms = Percentile(shared.step_ms, 0.5);
-  WriteTumTrajectory(options.output, result.trajectory);
-  log << "evloc-replay: sent " << result.events_sent << " events in " << result.packets_sent
-      << " packets, received " << result.trajectory.size() << " poses (" << result.lost_poses
-      << " LOST), " << result.backpressure_notices << " backpressure notices, in " << result.wall_s
-      << " s\n"
-      << "evloc-replay: latency client p50 " << result.client_latency_p50_us << " us p99 "
-      << result.client_latency_p99_us << " us; server p50 " << result.server_latency_p50_us
-      << " us p99 " << result.server_latency_p99_us << " us (of which outside the step: p50 "
-      << result.server_overhead_p50_us << " us p99 " << result.server_overhead_p99_us
-      << " us); median step " << result.step_p50_ms << " ms\n"
-      << "evloc-replay: server totals: " << end.events() << " events, " << end.poses()
-      << " poses; trajectory written to " << options.output.string() << "\n";
-  return result;
+  std::vector<grpc::Slice> slices;
+  std::string bytes;
+  if (response.Dump(&slices).ok()) {
+    for (const auto& slice : slices) {
+      bytes.append(reinterpret_cast<const char*>(slice.begin()), slice.size());
+    }
+  }
+  // HealthCheckResponse{ServingStatus status = 1}: absent means UNKNOWN (0); the values fit
+  // one varint byte.
+  int value = 0;
+  if (bytes.size() == 2 && bytes[0] == '\x08') {
+    value = static_cast<unsigned char>(bytes[1]);
+  } else if (!bytes.empty()) {
+    throw Error("health check of '" + options.server + "': unexpected response of " +
+                std::to_string(bytes.size()) + " bytes");
+  }
+  static const char* const kNames[] = {"UNKNOWN", "SERVING", "NOT_SERVING", "SERVICE_UNKNOWN"};
+  if (value > 3) {
+    throw Error("health check of '" + options.server + "': unknown status " +
+                std::to_string(value));
+  }
+  return kNames[value];
 }
 
 std::string ReplayUsage() {
   return R"(Usage: evloc-replay --server HOST:PORT --map NAME --dataset DIR --out TRAJ.txt [options]
+       evloc-replay --health-check --server HOST:PORT [--tls-ca PEM] [--health-timeout S]
 
 Streams a dataset's events to an evloc localizer (docs/api.md) as a live camera would, writes
 the poses it gets back as a TUM trajectory, and prints events sent, poses received and the
-packet-to-pose latency (p50, p99).
+packet-to-pose latency (p50, p99). With --reconnect N, a stream that fails because its server
+went away (UNAVAILABLE, CANCELLED, ABORTED) is started again as a new session at the last pose
+received, and the trajectory continues (docs/deploy.md).
 
 Options:
-  --server HOST:PORT     localizer address (required)
+  --server TARGET        localizer address: HOST:PORT, or a gRPC target such as
+                         ipv4:HOST:PORT,HOST:PORT or dns:///NAME:PORT (required)
   --map NAME             map name on the server (required)
   --dataset DIR          dataset folder, evloc or Event Camera Dataset layout (required)
   --out PATH             output TUM trajectory (required)
@@ -350,21 +741,36 @@ Options:
   --max-lead-ms MS       with --speed max: session time sent ahead of the last pose (default 50)
   --duration S           stop after S seconds of session time after the initial pose
   --ecd-size WxH         sensor size for ECD folders with calib.txt only (default 240x180)
+  --reconnect N          reconnect attempts in a row after a transient failure (default 0: fail)
+  --reconnect-backoff-ms MS
+                         wait before the first attempt, doubled per attempt up to 2000 ms,
+                         +-20 % jitter (default 100)
+  --resume-prime-ms MS   events before the resume pose sent again to prime the new session
+                         (default 100)
+  --lb pick_first|round_robin
+                         gRPC load balancing over the addresses of --server (default pick_first)
+  --report FILE          write the figures as JSON (events, poses, outages, latency)
+  --health-check         only ask the server's grpc.health.v1 service; exit 0 when SERVING
+  --health-timeout S     deadline of --health-check (default 5)
   --help                 print this help
 
-Exit codes: 0 success, 1 failure (including a session the server ended with an error),
-2 bad command line.
+Exit codes: 0 success (or SERVING), 1 failure (a session the server ended with an error, a
+failure past --reconnect attempts, or not SERVING), 2 bad command line.
 )";
 }
 
-ReplayOptions ParseReplayCommandLine(const std::vector<std::string>& arguments, bool* help) {
-  ReplayOptions options;
-  *help = false;
+ReplayCommand ParseReplayCommandLine(const std::vector<std::string>& arguments) {
+  ReplayCommand command;
+  ReplayOptions& options = command.options;
   for (size_t i = 0; i < arguments.size(); ++i) {
     const std::string& flag = arguments[i];
     if (flag == "--help" || flag == "-h") {
-      *help = true;
-      return options;
+      command.help = true;
+      return command;
+    }
+    if (flag == "--health-check") {
+      command.health_check = true;
+      continue;
     }
     if (i + 1 >= arguments.size()) {
       throw InvalidArgumentError(flag.rfind("--", 0) == 0 ? flag + " needs a value"
@@ -408,12 +814,29 @@ ReplayOptions ParseReplayCommandLine(const std::vector<std::string>& arguments, 
       options.duration_s = ParseDoubleFlag(flag, value);
     } else if (flag == "--ecd-size") {
       ParseSizeFlag(flag, value, &options.ecd_width, &options.ecd_height);
+    } else if (flag == "--reconnect") {
+      options.reconnect = ParseIntFlag(flag, value);
+    } else if (flag == "--reconnect-backoff-ms") {
+      options.reconnect_backoff_ms = ParseDoubleFlag(flag, value);
+    } else if (flag == "--resume-prime-ms") {
+      options.resume_prime_ms = ParseDoubleFlag(flag, value);
+    } else if (flag == "--lb") {
+      options.lb_policy = value;
+    } else if (flag == "--report") {
+      options.report = value;
+    } else if (flag == "--health-timeout") {
+      command.health_timeout_s = ParseDoubleFlag(flag, value);
     } else {
       throw InvalidArgumentError("unknown flag '" + flag + "' (see --help)");
     }
   }
-  options.Check();
-  return options;
+  if (command.health_check) {
+    CheckServerOptions(options);
+    CheckHealthTimeout(command.health_timeout_s);
+  } else {
+    options.Check();
+  }
+  return command;
 }
 
 }  // namespace evloc::replay

@@ -24,7 +24,8 @@ enum class WireEncoding {
 
 // Options of a replay; every field is a flag of evloc-replay.
 struct ReplayOptions {
-  // Server address, host:port (--server).
+  // Server address: host:port, or a gRPC target naming several replicas, e.g.
+  // "ipv4:127.0.0.1:50051,127.0.0.1:50052" or "dns:///evloc-localizer-headless:50051" (--server).
   std::string server;
   // Map name on the server (--map).
   std::string map_name;
@@ -59,9 +60,44 @@ struct ReplayOptions {
   int ecd_width = 240;
   // Sensor height for ECD folders.
   int ecd_height = 180;
+  // Most reconnect attempts in a row after the stream failed with a transient status
+  // (UNAVAILABLE, CANCELLED, ABORTED; RESOURCE_EXHAUSTED when refused at admission); 0: fail at
+  // once (--reconnect N). A new session starts at the last pose received, and the count starts
+  // again once it delivers a pose.
+  int reconnect = 0;
+  // Wait before the first reconnect attempt, ms; doubled per further attempt up to
+  // kMaxReconnectBackoffMs, with +-20 % jitter (--reconnect-backoff-ms).
+  double reconnect_backoff_ms = 100.0;
+  // Session time of events before the resume pose that a new session is sent again to prime
+  // its time surfaces, ms (--resume-prime-ms).
+  double resume_prime_ms = 100.0;
+  // gRPC load-balancing policy over the addresses of --server: "pick_first" or "round_robin";
+  // empty: gRPC's default (pick_first) (--lb).
+  std::string lb_policy;
+  // JSON file for the figures of the replay, written when it completes (--report).
+  std::optional<std::filesystem::path> report;
 
   // Throws InvalidArgumentError naming the first invalid field.
   void Check() const;
+};
+
+// Longest wait between two reconnect attempts, ms.
+inline constexpr double kMaxReconnectBackoffMs = 2000.0;
+
+// One stream failure the replay recovered from.
+struct Outage {
+  // gRPC status code and message of the failed stream.
+  int status_code = 0;
+  // The failed stream's status message.
+  std::string status_message;
+  // Session time of the last pose received before the failure (the resume pose), ns.
+  int64_t resume_t_ns = 0;
+  // Reconnect attempts it took (1: the first one succeeded).
+  int attempts = 0;
+  // Wall time from the failure's status to the first pose of the new session, ms.
+  double resume_ms = 0;
+  // Wall time from the last pose before the failure to the first pose after it, ms.
+  double interruption_ms = 0;
 };
 
 // What a replay measured.
@@ -72,8 +108,12 @@ struct ReplayResult {
   std::vector<bool> tracking;
   // Events sent.
   int64_t events_sent = 0;
-  // Packets sent.
+  // Packets sent (each window of the dataset counted once).
   int64_t packets_sent = 0;
+  // Packets sent again to a new session after a stream failure (priming and in-flight ones).
+  int64_t packets_resent = 0;
+  // Stream failures recovered by reconnecting, in order.
+  std::vector<Outage> outages;
   // Poses received with status LOST.
   int64_t lost_poses = 0;
   // Backpressure notices received.
@@ -103,11 +143,32 @@ struct ReplayResult {
 // and Error with the gRPC status for a failed session.
 ReplayResult RunReplay(const ReplayOptions& options, std::ostream& log);
 
+// Writes the figures of `result` as JSON (the --report file), atomically. Throws IoError.
+void WriteReplayReport(const std::filesystem::path& path, const ReplayResult& result);
+
+// Asks the grpc.health.v1 Health/Check service of `options.server` (over TLS with
+// `options.tls_ca_file`) for the server's overall status and returns its name: SERVING,
+// NOT_SERVING, UNKNOWN or SERVICE_UNKNOWN. Throws Error with the gRPC status when the call fails
+// or takes longer than `timeout_s` (evloc-replay --health-check; a container health probe).
+std::string CheckHealth(const ReplayOptions& options, double timeout_s);
+
 // The usage text of evloc-replay.
 std::string ReplayUsage();
 
-// Parses the command line (arguments after the program name); `help` is set for --help.
-// Throws InvalidArgumentError naming the flag.
-ReplayOptions ParseReplayCommandLine(const std::vector<std::string>& arguments, bool* help);
+// What the command line asks for.
+struct ReplayCommand {
+  // Print the usage and exit.
+  bool help = false;
+  // Only check the server's health (--health-check): needs --server only.
+  bool health_check = false;
+  // Deadline of the health check, seconds (--health-timeout).
+  double health_timeout_s = 5.0;
+  // The replay's options (for a health check: the server and TLS fields only).
+  ReplayOptions options;
+};
+
+// Parses the command line (arguments after the program name). Throws InvalidArgumentError
+// naming the flag.
+ReplayCommand ParseReplayCommandLine(const std::vector<std::string>& arguments);
 
 }  // namespace evloc::replay
