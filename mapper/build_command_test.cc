@@ -9,6 +9,7 @@
 #include "core/common/error.h"
 #include "core/common/file_util.h"
 #include "core/common/test_data.h"
+#include "mapper/map_builder.h"
 #include "mapper/middlebury_test_util.h"
 #include "maps/map.h"
 
@@ -111,6 +112,36 @@ TEST(BuildCommand, BadInputsFailWithoutWritingAnything) {
   { std::ofstream(out / "map.evmap") << "previous map"; }
   EXPECT_EQ(RunBuild({"--images", (directory / "good").string(), "--out", out.string()}), 1);
   EXPECT_EQ(ReadFileToString(out / "map.evmap"), "previous map");
+  fs::remove_all(directory);
+}
+
+TEST(BuildCommand, TimeKeyedPosesMayLeaveOutImagesAtTheEnds) {
+  const fs::path directory = evloc::testing::MakeTempDir("build_time_keyed");
+  fs::create_directories(directory / "images");
+  { std::ofstream(directory / "images.txt") << "0.0 a.png\n1.0 b.png\n2.0 c.png\n3.0 d.png\n"; }
+  for (const char* name : {"a.png", "b.png", "c.png", "d.png"}) {
+    WriteImage(directory / "images" / name, 64, 48);
+  }
+  const std::vector<InputImage> images =
+      ListInputImages(directory / "images", directory / "images.txt");
+  // A trajectory from 0.5 s to 3.0 s (ECD slider_depth's starts 22 ms after its first frame).
+  { std::ofstream(directory / "tum.txt") << "0.5 0 0 0 0 0 0 1\n3.0 1 0 0 0 0 0 1\n"; }
+  EXPECT_TRUE(IsTimeKeyedPoseFile(directory / "tum.txt"));
+  const std::map<std::string, Rigid3d> poses = ReadPosesForImages(directory / "tum.txt", images);
+  std::vector<std::string> left_out;
+  const std::vector<InputImage> kept =
+      ImagesWithKnownPoses(images, poses, true, 0.5, "tum.txt", &left_out);
+  ASSERT_EQ(kept.size(), 3u);
+  EXPECT_EQ(kept[0].name, "b.png");
+  EXPECT_EQ(left_out, std::vector<std::string>{"a.png"});
+  EXPECT_NEAR(poses.at("b.png").translation.x(), 0.2, 1e-12);
+  // Named poses must cover every image; a trajectory must cover at least half of them.
+  EXPECT_THROW(ImagesWithKnownPoses(images, poses, false, 0.5, "named.txt", nullptr),
+               InvalidArgumentError);
+  EXPECT_THROW(ImagesWithKnownPoses(images, poses, true, 0.9, "tum.txt", nullptr),
+               InvalidArgumentError);
+  { std::ofstream(directory / "named.txt") << "a.png 0 0 0 0 0 0 1\n"; }
+  EXPECT_FALSE(IsTimeKeyedPoseFile(directory / "named.txt"));
   fs::remove_all(directory);
 }
 

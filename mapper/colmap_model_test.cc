@@ -162,6 +162,40 @@ TEST(ColmapRunner, FailedCommandQuotesItsLog) {
   std::filesystem::remove_all(directory);
 }
 
+// Runs ColmapRunner::Map with a stand-in executable that records its arguments.
+std::string RecordedMapperArguments(const std::optional<Camera>& camera) {
+  const std::filesystem::path directory = testing::MakeTempDir("colmap_runner_mapper_args");
+  const std::filesystem::path fake = directory / "fake-colmap";
+  {
+    std::ofstream script(fake);
+    script << "#!/bin/sh\necho \"$@\" > " << (directory / "arguments.txt").string() << "\n";
+  }
+  std::filesystem::permissions(fake, std::filesystem::perms::owner_all);
+  ColmapOptions options;
+  options.executable = fake.string();
+  options.camera = camera;
+  const ColmapRunner runner(options, directory / "workspace", directory);
+  runner.Map(directory / "sparse");
+  std::ifstream stream(directory / "arguments.txt");
+  std::string text((std::istreambuf_iterator<char>(stream)), std::istreambuf_iterator<char>());
+  std::filesystem::remove_all(directory);
+  return text;
+}
+
+TEST(ColmapRunner, MapperFiltersReprojectionErrorsOnlyWithFixedIntrinsics) {
+  const std::string fixed = RecordedMapperArguments(Camera::Pinhole(640, 480, 500, 500, 320, 240));
+  EXPECT_NE(fixed.find("--Mapper.ba_refine_focal_length 0"), std::string::npos) << fixed;
+  EXPECT_NE(fixed.find("--Mapper.filter_max_reproj_error 1.0"), std::string::npos) << fixed;
+  EXPECT_NE(fixed.find("--Mapper.tri_merge_max_reproj_error 1.5"), std::string::npos) << fixed;
+  const std::string estimated = RecordedMapperArguments(std::nullopt);
+  EXPECT_EQ(estimated.find("filter_max_reproj_error"), std::string::npos) << estimated;
+  EXPECT_EQ(estimated.find("ba_refine_focal_length"), std::string::npos) << estimated;
+
+  ColmapOptions options;
+  options.fixed_camera_max_reprojection_error_px = 0.0;
+  EXPECT_THROW(options.Check(), InvalidArgumentError);
+}
+
 TEST(ColmapRunner, MatcherNamesParse) {
   EXPECT_EQ(ParseMatcherType("auto"), MatcherType::kAuto);
   EXPECT_EQ(ParseMatcherType("sequential"), MatcherType::kSequential);

@@ -130,6 +130,11 @@ void ColmapOptions::Check() const {
     throw InvalidArgumentError("COLMAP abs_pose_min_inlier_ratio must be in (0, 1]");
   }
   if (min_num_matches < 4) throw InvalidArgumentError("COLMAP min_num_matches must be at least 4");
+  if (!(fixed_camera_max_reprojection_error_px >= 0.1 &&
+        fixed_camera_max_reprojection_error_px <= 100.0)) {
+    throw InvalidArgumentError(
+        "COLMAP fixed_camera_max_reprojection_error_px must be in [0.1, 100] pixels");
+  }
   if (camera) camera->Check();
 }
 
@@ -309,9 +314,13 @@ void ColmapRunner::Map(const std::filesystem::path& output_dir) const {
                                         "--Mapper.min_num_matches",
                                         std::to_string(options_.min_num_matches)};
   if (options_.camera) {
+    const double max_error = options_.fixed_camera_max_reprojection_error_px;
     arguments.insert(arguments.end(),
                      {"--Mapper.ba_refine_focal_length", "0", "--Mapper.ba_refine_principal_point",
-                      "0", "--Mapper.ba_refine_extra_params", "0"});
+                      "0", "--Mapper.ba_refine_extra_params", "0",
+                      "--Mapper.filter_max_reproj_error", std::to_string(max_error),
+                      "--Mapper.tri_merge_max_reproj_error", std::to_string(1.5 * max_error),
+                      "--Mapper.tri_complete_max_reproj_error", std::to_string(1.5 * max_error)});
   }
   Run("mapper", arguments);
 }

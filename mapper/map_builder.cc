@@ -66,6 +66,24 @@ double ParseFiniteDouble(const std::string& token, const std::string& source, in
   throw ParseError::AtLine(source, line, "'" + token + "' is not a finite number");
 }
 
+// True when the first data line of a pose file starts with a time (TUM layout) rather than an
+// image name.
+bool IsTimeKeyedPoseText(const std::string& text) {
+  std::istringstream stream(text);
+  std::string line;
+  while (std::getline(stream, line)) {
+    const std::vector<std::string> tokens = Tokenize(line);
+    if (tokens.empty() || tokens[0][0] == '#' || tokens[0] == "timestamp") continue;
+    try {
+      ParseSecondsAsNanoseconds(tokens[0]);
+      return true;
+    } catch (const InvalidArgumentError&) {
+      return false;
+    }
+  }
+  return false;
+}
+
 std::string UtcNow() {
   const std::time_t now = std::time(nullptr);
   std::tm utc{};
@@ -136,7 +154,8 @@ std::string InputFingerprint(const MapBuilderOptions& options,
   text << "matcher " << MatcherTypeName(matcher) << " overlap " << options.colmap.sequential_overlap
        << " features " << options.colmap.max_num_features << " mapper "
        << options.colmap.abs_pose_min_num_inliers << " " << options.colmap.abs_pose_min_inlier_ratio
-       << " " << options.colmap.min_num_matches << "\n";
+       << " " << options.colmap.min_num_matches << " "
+       << options.colmap.fixed_camera_max_reprojection_error_px << "\n";
   if (options.known_poses) {
     text << "known poses\n" << ReadFileToString(*options.known_poses) << "\n";
   }
@@ -429,23 +448,9 @@ std::map<std::string, Rigid3d> ReadPosesForImages(const fs::path& path,
                                                   const std::vector<InputImage>& images) {
   const std::string text = ReadFileToString(path);
   const std::string source = path.string();
-  // Detect the layout from the first data line.
-  std::istringstream stream(text);
   std::string line;
-  bool tum = false;
-  while (std::getline(stream, line)) {
-    const std::vector<std::string> tokens = Tokenize(line);
-    if (tokens.empty() || tokens[0][0] == '#' || tokens[0] == "timestamp") continue;
-    try {
-      ParseSecondsAsNanoseconds(tokens[0]);
-      tum = true;
-    } catch (const InvalidArgumentError&) {
-      tum = false;
-    }
-    break;
-  }
   std::map<std::string, Rigid3d> poses;
-  if (tum) {
+  if (IsTimeKeyedPoseText(text)) {
     const Trajectory trajectory = ReadTumTrajectory(path);
     for (const InputImage& image : images) {
       if (!image.has_time) {
@@ -491,6 +496,41 @@ std::map<std::string, Rigid3d> ReadPosesForImages(const fs::path& path,
   return poses;
 }
 
+bool IsTimeKeyedPoseFile(const fs::path& path) {
+  return IsTimeKeyedPoseText(ReadFileToString(path));
+}
+
+std::vector<InputImage> ImagesWithKnownPoses(const std::vector<InputImage>& images,
+                                             const std::map<std::string, Rigid3d>& poses,
+                                             bool time_keyed, double min_fraction,
+                                             const std::string& source,
+                                             std::vector<std::string>* left_out) {
+  std::vector<InputImage> kept;
+  std::vector<std::string> missing;
+  for (const InputImage& image : images) {
+    if (poses.contains(image.name)) {
+      kept.push_back(image);
+    } else {
+      missing.push_back(image.name);
+    }
+  }
+  if (missing.empty()) return kept;
+  const bool enough = static_cast<double>(kept.size()) >= min_fraction * images.size();
+  if (!time_keyed || !enough || kept.empty()) {
+    std::string list;
+    for (size_t i = 0; i < missing.size() && i < 5; ++i) list += (i ? ", " : "") + missing[i];
+    throw InvalidArgumentError(
+        "the known poses in " + source + " do not match the images: " +
+        std::to_string(missing.size()) + " of " + std::to_string(images.size()) +
+        " images have no pose (" + list + (missing.size() > 5 ? ", ..." : "") + ")" +
+        (time_keyed ? "; their times lie outside the trajectory's time span (at most half of "
+                      "the images may, at the ends of the sequence)"
+                    : ""));
+  }
+  if (left_out != nullptr) *left_out = missing;
+  return kept;
+}
+
 MapBuildReport BuildMap(const MapBuilderOptions& options_in, ProgressListener* progress) {
   options_in.Check();
   MapBuilderOptions options = options_in;
@@ -514,7 +554,7 @@ MapBuildReport BuildMap(const MapBuilderOptions& options_in, ProgressListener* p
   if (error) throw IoError("cannot create " + parent.string() + ": " + error.message());
 
   // Images: listed, readable, one size.
-  const std::vector<InputImage> images = ListInputImages(options.image_dir, options.image_list);
+  std::vector<InputImage> images = ListInputImages(options.image_dir, options.image_list);
   report.num_images = images.size();
   cv::Size image_size;
   for (size_t i = 0; i < images.size(); ++i) {
@@ -552,22 +592,15 @@ MapBuildReport BuildMap(const MapBuilderOptions& options_in, ProgressListener* p
   }
   options.colmap.camera = camera;
 
-  // Known poses must cover every image.
+  // Known poses must cover every image (a trajectory may start late or end early: those images
+  // are left out).
   std::map<std::string, Rigid3d> known_world_from_cams;
   if (options.known_poses) {
     known_world_from_cams = ReadPosesForImages(*options.known_poses, images);
-    std::vector<std::string> missing;
-    for (const InputImage& image : images) {
-      if (!known_world_from_cams.contains(image.name)) missing.push_back(image.name);
-    }
-    if (!missing.empty()) {
-      std::string list;
-      for (size_t i = 0; i < missing.size() && i < 5; ++i) list += (i ? ", " : "") + missing[i];
-      throw InvalidArgumentError("the known poses in " + options.known_poses->string() +
-                                 " do not match the images: " + std::to_string(missing.size()) +
-                                 " of " + std::to_string(images.size()) + " images have no pose (" +
-                                 list + (missing.size() > 5 ? ", ..." : "") + ")");
-    }
+    images = ImagesWithKnownPoses(images, known_world_from_cams,
+                                  IsTimeKeyedPoseFile(*options.known_poses),
+                                  options.min_registered_fraction, options.known_poses->string(),
+                                  &report.images_without_pose);
   }
   // Reference poses for the alignment, read before COLMAP so that a bad file fails early.
   std::map<std::string, Rigid3d> reference_world_from_cams;
@@ -917,6 +950,7 @@ std::string MapBuildReportToJson(const MapBuildReport& report) {
   nlohmann::json json;
   json["images"] = report.num_images;
   json["images_registered"] = report.num_registered;
+  json["images_without_pose"] = report.images_without_pose;
   json["keyframes"] = report.num_keyframes;
   json["sparse_points"] = report.num_sparse_points;
   json["keyframe_points"] = report.num_keyframe_points;

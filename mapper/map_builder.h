@@ -101,6 +101,8 @@ struct MapBuildReport {
   size_t num_images = 0;
   // Images with a pose (registered by COLMAP, or given).
   size_t num_registered = 0;
+  // Images left out because a time-keyed --known-poses trajectory does not cover their times.
+  std::vector<std::string> images_without_pose;
   // Keyframes of the map.
   size_t num_keyframes = 0;
   // Sparse COLMAP points.
@@ -173,5 +175,20 @@ std::vector<InputImage> ListInputImages(const std::filesystem::path& image_dir,
 // TUM files when the images have no times.
 std::map<std::string, Rigid3d> ReadPosesForImages(const std::filesystem::path& path,
                                                   const std::vector<InputImage>& images);
+
+// True when the pose file's first data line starts with a time (TUM layout `t tx ty tz qx qy qz
+// qw`) rather than an image name. Throws IoError when it cannot be read.
+bool IsTimeKeyedPoseFile(const std::filesystem::path& path);
+
+// The images that have a pose in `poses`, in input order. Images without one are an error
+// (InvalidArgumentError naming them and `source`), except when the poses come from a time-keyed
+// trajectory (`time_keyed`) that starts after or ends before some images: those are left out and
+// named in `*left_out` (may be null), provided at least `min_fraction` of the images (and at
+// least one) keep a pose.
+std::vector<InputImage> ImagesWithKnownPoses(const std::vector<InputImage>& images,
+                                             const std::map<std::string, Rigid3d>& poses,
+                                             bool time_keyed, double min_fraction,
+                                             const std::string& source,
+                                             std::vector<std::string>* left_out);
 
 }  // namespace evloc::mapper
