@@ -71,14 +71,8 @@ const char* StatusCodeName(grpc::StatusCode code) {
 
 // An item from the stream reader to the tracking worker.
 struct InboundItem {
-  // Events of one packet (empty for other kinds).
-  EventBuffer events;
-  // A frame, when the item is one.
-  std::optional<cv::Mat> gray;
-  // A pose reset, when the item is one.
-  std::optional<Rigid3d> reset_world_from_cam;
-  // Time of the frame or reset; end of the packet window; ns.
-  int64_t t_ns = 0;
+  // The validated request.
+  SessionItem item;
   // When the reader received the message.
   Clock::time_point received;
 };
@@ -116,7 +110,7 @@ void LocalizerServerOptions::Check() const {
   if (tls_cert_file.has_value() != tls_key_file.has_value()) {
     throw InvalidArgumentError("--tls-cert and --tls-key go together");
   }
-  tracker.Check();
+  session_limits().Check();
 }
 
 void ServerCounters::RecordLatency(double latency_us) {
@@ -168,6 +162,7 @@ std::string LocalizerServerOptions::Describe() const {
        << "idle-timeout: " << idle_timeout_s << " s\n"
        << "queue-packets: " << queue_packets << "\n"
        << "backpressure-fraction: " << backpressure_fraction << "\n"
+       << "max-camera-pixels: " << max_camera_pixels << "\n"
        << "metrics: " << metrics_address.value_or("none") << "\n"
        << "tls: "
        << (tls_cert_file ? tls_cert_file->string() + " + " + tls_key_file->string()
@@ -228,7 +223,10 @@ bool TokenTable::Allows(const std::string& token, const std::string& map_name) c
 class LocalizerServer::Service final : public api::Localizer::Service {
  public:
   Service(const LocalizerServerOptions& options, LogFunction log)
-      : options_(options), log_(std::move(log)), registry_(MapRegistryOptions{options.maps_dir}) {
+      : options_(options),
+        session_limits_(options.session_limits()),
+        log_(std::move(log)),
+        registry_(MapRegistryOptions{options.maps_dir}) {
     if (options.auth_tokens_file) tokens_ = TokenTable::Read(*options.auth_tokens_file);
   }
 
@@ -307,10 +305,12 @@ class LocalizerServer::Service final : public api::Localizer::Service {
   const LocalizerServerOptions& options() const { return options_; }
   MapRegistry& registry() { return registry_; }
   ServerCounters& counters() { return counters_; }
+  const SessionLimits& session_limits() const { return session_limits_; }
   uint64_t NextSessionId() { return ++last_session_id_; }
 
  private:
   LocalizerServerOptions options_;
+  SessionLimits session_limits_;
   LogFunction log_;
   MapRegistry registry_;
   std::optional<TokenTable> tokens_;
@@ -371,34 +371,26 @@ class TrackStream {
       ~ActiveSlot() { --counters.sessions_active; }
     } slot{counters};
 
-    std::shared_ptr<const LoadedMap> map;
-    SessionSettings settings;
-    try {
-      map = service_.registry().Get(start.map_name(), start.map_version());
-      settings = SessionSettingsFromProto(start, options_.tracker);
-      tracker_ = std::make_unique<SessionTracker>(map, settings);
-      decoder_ =
-          std::make_unique<PacketDecoder>(SensorSize{settings.camera.width, settings.camera.height},
-                                          settings.sensor_time_offset_ns);
-    } catch (const MapNotFoundError& error) {
-      return {grpc::StatusCode::NOT_FOUND, error.what()};
-    } catch (const InvalidArgumentError& error) {
-      return {grpc::StatusCode::INVALID_ARGUMENT, error.what()};
-    } catch (const Error& error) {
-      return {grpc::StatusCode::FAILED_PRECONDITION,
-              std::string("map '") + start.map_name() + "' cannot be loaded: " + error.what()};
+    OpenedSession opened;
+    if (grpc::Status status =
+            OpenSession(start, service_.registry(), service_.session_limits(), &opened);
+        !status.ok()) {
+      return status;
     }
-    camera_ = settings.camera;
+    const std::shared_ptr<const LoadedMap>& map = opened.map;
+    const SessionSettings& settings = opened.settings;
+    tracker_ = std::move(opened.tracker);
+    validator_ = std::make_unique<RequestValidator>(settings);
     id_ = service_.NextSessionId();
     ++counters.sessions_started;
     const auto session_start = Clock::now();
-    service_.Log("session " + std::to_string(id_) + " start: map " + map->name + " version " +
-                 map->version + " (" + std::to_string(map->map.size()) + " points), client '" +
-                 start.client_name() + "' " + context_->peer() + ", camera " +
-                 std::to_string(camera_.width) + "x" + std::to_string(camera_.height) + ", " +
-                 (tracker_->takes_frames() ? "frames" : "events") + ", " +
-                 settings.tracker.VariantName() + " at " +
-                 std::to_string(settings.tracker.step_rate_hz) + " Hz");
+    service_.Log(
+        "session " + std::to_string(id_) + " start: map " + map->name + " version " + map->version +
+        " (" + std::to_string(map->map.size()) + " points), client '" + start.client_name() + "' " +
+        context_->peer() + ", camera " + std::to_string(settings.camera.width) + "x" +
+        std::to_string(settings.camera.height) + ", " +
+        (tracker_->takes_frames() ? "frames" : "events") + ", " + settings.tracker.VariantName() +
+        " at " + std::to_string(settings.tracker.step_rate_hz) + " Hz");
 
     api::TrackResponse started;
     started.mutable_started()->set_session_id(id_);
@@ -435,12 +427,13 @@ class TrackStream {
     if (status.ok()) {
       api::TrackResponse end;
       api::SessionEnd* totals = end.mutable_end();
-      totals->set_packets(decoder_->packets());
+      totals->set_packets(validator_->decoder().packets());
       totals->set_events(events_);
       totals->set_frames(frames_);
       totals->set_poses(poses_);
       totals->set_lost_poses(lost_poses_);
       totals->set_backpressure_notices(backpressure_notices_);
+      totals->set_raw_time_adjustments(validator_->decoder().raw_time_adjustments());
       totals->set_duration_s(std::chrono::duration<double>(Clock::now() - session_start).count());
       // The writer fills in the latency figures.
       outbound_.Push(OutboundItem{std::move(end), std::nullopt});
@@ -454,8 +447,8 @@ class TrackStream {
     service_.Log(
         "session " + std::to_string(id_) +
         " end: " + (status.ok() ? std::string("OK") : status.error_message()) + "; " +
-        std::to_string(decoder_->packets()) + " packets, " + std::to_string(events_) + " events, " +
-        std::to_string(frames_) + " frames, " + std::to_string(poses_) + " poses (" +
+        std::to_string(validator_->decoder().packets()) + " packets, " + std::to_string(events_) +
+        " events, " + std::to_string(frames_) + " frames, " + std::to_string(poses_) + " poses (" +
         std::to_string(lost_poses_) + " LOST), latency p50 " +
         std::to_string(static_cast<int64_t>(Percentile(latencies_us_, 0.5))) + " us p99 " +
         std::to_string(static_cast<int64_t>(Percentile(latencies_us_, 0.99))) + " us, " +
@@ -487,57 +480,13 @@ class TrackStream {
   // Reads messages until the client half-closes (OK) or something is wrong (its status).
   grpc::Status ReadLoop() {
     api::TrackRequest request;
-    EventBuffer events;
-    std::optional<int64_t> last_frame_t_ns;
     while (stream_->Read(&request)) {
-      const auto received = Clock::now();
       InboundItem item;
-      item.received = received;
-      try {
-        switch (request.message_case()) {
-          case api::TrackRequest::kStart:
-            return {grpc::StatusCode::FAILED_PRECONDITION,
-                    "a second SessionStart: open a new stream for a new session"};
-          case api::TrackRequest::kEvents:
-            if (tracker_->takes_frames()) {
-              return {grpc::StatusCode::INVALID_ARGUMENT,
-                      "this session tracks frames (options.frames): send Frames, not events"};
-            }
-            decoder_->Decode(request.events(), &item.events);
-            item.t_ns = request.events().end_t_ns();
-            latest_end_t_ns_ = item.t_ns;
-            break;
-          case api::TrackRequest::kFrame:
-            if (!tracker_->takes_frames()) {
-              return {grpc::StatusCode::INVALID_ARGUMENT,
-                      "this session tracks events: set options.frames in SessionStart to send "
-                      "Frames"};
-            }
-            item.gray = FrameFromProto(request.frame(), camera_, last_frame_t_ns);
-            item.t_ns = request.frame().t_ns();
-            last_frame_t_ns = item.t_ns;
-            latest_end_t_ns_ = item.t_ns;
-            break;
-          case api::TrackRequest::kPoseHint: {
-            const int64_t t_ns = request.pose_hint().t_ns();
-            const std::optional<int64_t> last = decoder_->end_t_ns();
-            if (last && t_ns < *last) {
-              return {grpc::StatusCode::INVALID_ARGUMENT,
-                      "PoseHint at " + std::to_string(t_ns) +
-                          " ns lies before the end of the last packet (" + std::to_string(*last) +
-                          " ns)"};
-            }
-            item.reset_world_from_cam =
-                RigidFromProto(request.pose_hint().world_from_cam(), "PoseHint.world_from_cam");
-            item.t_ns = t_ns;
-            break;
-          }
-          default:
-            return {grpc::StatusCode::INVALID_ARGUMENT, "an empty TrackRequest"};
-        }
-      } catch (const InvalidArgumentError& error) {
-        return {grpc::StatusCode::INVALID_ARGUMENT, error.what()};
+      item.received = Clock::now();
+      if (grpc::Status status = validator_->Accept(request, &item.item); !status.ok()) {
+        return status;
       }
+      latest_end_t_ns_ = item.item.t_ns;
       const PushResult pushed = inbound_.TryPush(std::move(item));
       if (pushed == PushResult::kFull) {
         return {grpc::StatusCode::RESOURCE_EXHAUSTED,
@@ -599,18 +548,7 @@ class TrackStream {
       }
       std::vector<tracking::PoseEstimate> estimates;
       try {
-        if (item->gray) {
-          if (auto estimate = tracker_->AddFrame(item->t_ns, *item->gray)) {
-            estimates.push_back(*estimate);
-          }
-          ++frames_;
-        } else if (item->reset_world_from_cam) {
-          tracker_->Reset(*item->reset_world_from_cam, item->t_ns);
-        } else {
-          estimates = tracker_->AddEvents(item->events);
-          events_ += item->events.size();
-          counters.events += static_cast<int64_t>(item->events.size());
-        }
+        estimates = tracker_->Process(item->item);
       } catch (const std::exception& error) {
         {
           std::lock_guard<std::mutex> lock(mutex_);
@@ -621,7 +559,10 @@ class TrackStream {
         context_->TryCancel();
         return;
       }
-      tracked_end_t_ns_ = item->t_ns;
+      if (item->item.kind == SessionItem::Kind::kFrame) ++frames_;
+      events_ += item->item.events.size();
+      counters.events += static_cast<int64_t>(item->item.events.size());
+      tracked_end_t_ns_ = item->item.t_ns;
       ++progress_;
       for (const tracking::PoseEstimate& estimate : estimates) {
         OutboundItem out{api::TrackResponse(), item->received};
@@ -670,9 +611,8 @@ class TrackStream {
   grpc::ServerContext* context_;
   TrackServerStream* stream_;
   uint64_t id_ = 0;
-  Camera camera_;
   std::unique_ptr<SessionTracker> tracker_;
-  std::unique_ptr<PacketDecoder> decoder_;
+  std::unique_ptr<RequestValidator> validator_;
   BoundedQueue<InboundItem> inbound_;
   BoundedQueue<OutboundItem> outbound_;
 

@@ -15,6 +15,7 @@
 #include <string>
 
 #include "localizer/service/map_registry.h"
+#include "localizer/service/session.h"
 #include "localizer/tracking/tracker_options.h"
 
 namespace grpc {
@@ -57,11 +58,15 @@ struct LocalizerServerOptions {
   std::optional<std::filesystem::path> tls_cert_file;
   // PEM private key for TLS (--tls-key).
   std::optional<std::filesystem::path> tls_key_file;
+  // Largest camera a session may declare, width * height pixels (--max-camera-pixels).
+  int64_t max_camera_pixels = SessionLimits{}.max_camera_pixels;
   // Default tracker options of every session (SessionStart.options override them).
   tracking::TrackerOptions tracker;
 
   // Throws InvalidArgumentError naming the first invalid field.
   void Check() const;
+  // What every session is checked against (tracker defaults, camera size).
+  SessionLimits session_limits() const { return {tracker, max_camera_pixels}; }
   // The effective configuration, one "key: value" line per option.
   std::string Describe() const;
 };

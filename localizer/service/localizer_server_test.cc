@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <condition_variable>
 #include <fstream>
 #include <future>
 #include <thread>
@@ -27,23 +28,6 @@ namespace evloc::service {
 namespace {
 
 using testing::TestSessionStart;
-
-// Serves an in-memory event buffer through the EventReader interface.
-class BufferEventReader : public EventReader {
- public:
-  explicit BufferEventReader(const EventBuffer& events) : events_(events) {}
-  size_t Read(size_t max_events, EventBuffer* out) override {
-    const size_t count = std::min(max_events, events_.size() - next_);
-    for (size_t i = 0; i < count; ++i) out->push_back(events_[next_ + i]);
-    next_ += count;
-    return count;
-  }
-  std::optional<SensorSize> sensor_size() const override { return std::nullopt; }
-
- private:
-  const EventBuffer& events_;
-  size_t next_ = 0;
-};
 
 // What a Track call returned.
 struct TrackOutcome {
@@ -169,7 +153,7 @@ TEST_F(LocalizerServerTest, PosesEqualOfflineTrackingOfTheSameEvents) {
 
   tracking::OfflineTrackingOptions options;
   options.tracker.step_rate_hz = 200;
-  BufferEventReader reader(events);
+  testing::BufferEventReader reader(events);
   const Map map = testing::TestMap();
   const VisibilityIndex visibility(map);
   const auto offline = tracking::TrackEventStream(
@@ -178,9 +162,15 @@ TEST_F(LocalizerServerTest, PosesEqualOfflineTrackingOfTheSameEvents) {
 
   const auto poses = outcome.Poses();
   EXPECT_EQ(end.poses(), poses.size());
-  ASSERT_EQ(poses.size(), offline.steps.size());
-  ASSERT_GE(poses.size(), 50u);
-  for (size_t i = 0; i < poses.size(); ++i) {
+  // Offline, a step runs once an event after its time arrives; the server also runs the steps up
+  // to the last packet's end_t_ns (Tracker::AdvanceTo), i.e. after the last event.
+  ASSERT_GE(poses.size(), offline.steps.size());
+  for (size_t i = offline.steps.size(); i < poses.size(); ++i) {
+    EXPECT_GE(poses[i].t_ns(), events.t_ns.back());
+    EXPECT_LE(poses[i].t_ns(), requests.back().events().end_t_ns());
+  }
+  ASSERT_GE(offline.steps.size(), 50u);
+  for (size_t i = 0; i < offline.steps.size(); ++i) {
     const tracking::PoseEstimate& expected = offline.steps[i];
     EXPECT_EQ(poses[i].t_ns(), expected.t_ns);
     const Rigid3d pose = RigidFromProto(poses[i].world_from_cam(), "pose");
@@ -202,6 +192,57 @@ TEST_F(LocalizerServerTest, PosesEqualOfflineTrackingOfTheSameEvents) {
   ASSERT_EQ(lines.size(), 2u);
   EXPECT_NE(lines[0].find("session 1 start"), std::string::npos);
   EXPECT_NE(lines[1].find("session 1 end: OK"), std::string::npos);
+}
+
+// A packet's end_t_ns runs the steps it completes: the pose of step t arrives after the packet
+// whose end_t_ns >= t, without any later packet (docs/api.md, "A Track session").
+TEST_F(LocalizerServerTest, PoseArrivesAfterThePacketThatEndsItsStep) {
+  StartServer();
+  const auto requests = ShortSession();  // 200 Hz steps after kInitialTimeNs, 1 ms packets.
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(120));
+  auto stream = stub_->Track(&context);
+  std::mutex mutex;
+  std::condition_variable arrived;
+  std::vector<int64_t> pose_times;
+  std::thread reader([&] {
+    api::TrackResponse response;
+    while (stream->Read(&response)) {
+      std::lock_guard<std::mutex> lock(mutex);
+      if (response.has_pose()) pose_times.push_back(response.pose().t_ns());
+      arrived.notify_all();
+    }
+  });
+  EXPECT_TRUE(stream->Write(requests[0]));
+  constexpr int64_t kPeriodNs = 5'000'000;
+  int64_t next_step_t_ns = testing::kInitialTimeNs + kPeriodNs;
+  size_t expected = 0;
+  for (size_t i = 1; i < requests.size(); ++i) {
+    EXPECT_TRUE(stream->Write(requests[i]));
+    const int64_t end_t_ns = requests[i].events().end_t_ns();
+    while (next_step_t_ns <= end_t_ns) {
+      ++expected;
+      next_step_t_ns += kPeriodNs;
+    }
+    std::unique_lock<std::mutex> lock(mutex);
+    const bool complete = arrived.wait_for(lock, std::chrono::seconds(20),
+                                           [&] { return pose_times.size() >= expected; });
+    EXPECT_TRUE(complete) << "the pose of the step at " << next_step_t_ns - kPeriodNs
+                          << " ns did not arrive after the packet ending at " << end_t_ns << " ns";
+    EXPECT_EQ(pose_times.size(), expected) << "a step ran after the packet's end";
+    if (!complete || pose_times.size() != expected) {
+      context.TryCancel();
+      break;
+    }
+    if (expected > 0) {
+      EXPECT_EQ(pose_times.back(), next_step_t_ns - kPeriodNs);
+    }
+  }
+  EXPECT_GE(expected, 9u);
+  stream->WritesDone();
+  reader.join();
+  const grpc::Status status = stream->Finish();
+  EXPECT_TRUE(status.ok()) << status.error_message();
 }
 
 TEST_F(LocalizerServerTest, FirstMessageMustBeSessionStart) {

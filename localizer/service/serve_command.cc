@@ -21,6 +21,8 @@ Options:
   --idle-timeout SECONDS     cancel a session that sends nothing this long (default 30)
   --queue-packets N          packets a session may have waiting (default 256)
   --backpressure-fraction F  queue fill that triggers a Backpressure notice (default 0.5)
+  --max-camera-pixels N      largest camera a session may declare, width * height (default
+                             4194304; a session's memory grows with it)
   --auth-tokens FILE         bearer tokens, one per line: TOKEN [map1,map2]
   --metrics IPV4:PORT        serve Prometheus metrics at http://IPV4:PORT/metrics (e.g.
                              127.0.0.1:9464): sessions, events, poses, LOST, rejections,
@@ -72,6 +74,8 @@ ServeCommand ParseServeCommandLine(const std::vector<std::string>& arguments) {
       server.queue_packets = static_cast<int>(ParseIntegerFlag(flag, value));
     } else if (flag == "--backpressure-fraction") {
       server.backpressure_fraction = ParseDoubleFlag(flag, value);
+    } else if (flag == "--max-camera-pixels") {
+      server.max_camera_pixels = ParseIntegerFlag(flag, value);
     } else if (flag == "--auth-tokens") {
       server.auth_tokens_file = value;
     } else if (flag == "--metrics") {

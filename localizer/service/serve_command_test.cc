@@ -27,6 +27,8 @@ TEST(ServeCommand, EveryFlagReachesItsOption) {
                                               "16",
                                               "--backpressure-fraction",
                                               "0.25",
+                                              "--max-camera-pixels",
+                                              "921600",
                                               "--rate",
                                               "250",
                                               "--variant",
@@ -53,6 +55,7 @@ TEST(ServeCommand, EveryFlagReachesItsOption) {
   EXPECT_EQ(server.idle_timeout_s, 2.5);
   EXPECT_EQ(server.queue_packets, 16);
   EXPECT_EQ(server.backpressure_fraction, 0.25);
+  EXPECT_EQ(server.max_camera_pixels, 921600);
   EXPECT_EQ(server.tracker.step_rate_hz, 250);
   EXPECT_EQ(server.tracker.VariantName(), "EVT-PR");
   EXPECT_EQ(server.tracker.max_points, 1000);
@@ -75,6 +78,8 @@ TEST(ServeCommand, BadCommandLinesAreRejectedWithTheFlag) {
   EXPECT_THROW(ParseServeCommandLine({"serve", "--maps", maps, "--max-sessions", "0"}),
                InvalidArgumentError);
   EXPECT_THROW(ParseServeCommandLine({"serve", "--maps", maps, "--threads", "3"}),
+               InvalidArgumentError);
+  EXPECT_THROW(ParseServeCommandLine({"serve", "--maps", maps, "--max-camera-pixels", "0"}),
                InvalidArgumentError);
   EXPECT_THROW(ParseServeCommandLine({"serve", "--maps", maps, "--tls-cert", "c.pem"}),
                InvalidArgumentError);

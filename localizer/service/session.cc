@@ -18,6 +18,18 @@ bool AllFinite(std::initializer_list<double> values) {
 
 std::string PacketName(uint64_t index) { return "event packet " + std::to_string(index); }
 
+// Throws InvalidArgumentError when |t_ns| exceeds kMaxSessionTimeNs.
+void CheckSessionTime(int64_t t_ns, const std::string& what) {
+  if (t_ns < -kMaxSessionTimeNs || t_ns > kMaxSessionTimeNs) {
+    throw InvalidArgumentError(what + " " + std::to_string(t_ns) +
+                               " ns is out of range (|t| <= 2^62 ns)");
+  }
+}
+
+grpc::Status InvalidArgument(const std::string& message) {
+  return {grpc::StatusCode::INVALID_ARGUMENT, message};
+}
+
 }  // namespace
 
 std::string EncodePackedEvents(const EventBuffer& events, size_t begin, size_t end,
@@ -199,19 +211,34 @@ cv::Mat FrameFromProto(const api::Frame& frame, const Camera& camera,
   return gray;
 }
 
+void SessionLimits::Check() const {
+  tracker.Check();
+  if (max_camera_pixels < 1) throw InvalidArgumentError("--max-camera-pixels must be positive");
+}
+
 SessionSettings SessionSettingsFromProto(const api::SessionStart& start,
-                                         const tracking::TrackerOptions& defaults) {
+                                         const SessionLimits& limits) {
   if (!start.has_camera()) throw InvalidArgumentError("SessionStart.camera is missing");
   if (!start.has_initial_world_from_cam()) {
     throw InvalidArgumentError("SessionStart.initial_world_from_cam is missing");
   }
   SessionSettings settings;
   settings.camera = CameraFromProto(start.camera());
+  const int64_t pixels = int64_t{settings.camera.width} * settings.camera.height;
+  if (pixels > limits.max_camera_pixels) {
+    throw InvalidArgumentError("SessionStart.camera: " + std::to_string(settings.camera.width) +
+                               "x" + std::to_string(settings.camera.height) + " = " +
+                               std::to_string(pixels) + " pixels exceeds this server's limit of " +
+                               std::to_string(limits.max_camera_pixels) +
+                               " (evloc-localizer --max-camera-pixels)");
+  }
   settings.initial_world_from_cam =
       RigidFromProto(start.initial_world_from_cam(), "SessionStart.initial_world_from_cam");
+  CheckSessionTime(start.initial_t_ns(), "SessionStart.initial_t_ns");
+  CheckSessionTime(start.sensor_time_offset_ns(), "SessionStart.sensor_time_offset_ns");
   settings.initial_t_ns = start.initial_t_ns();
   settings.sensor_time_offset_ns = start.sensor_time_offset_ns();
-  settings.tracker = defaults;
+  settings.tracker = limits.tracker;
   const api::TrackingOptions& options = start.options();
   try {
     if (!options.variant().empty()) settings.tracker.SetVariant(options.variant());
@@ -245,6 +272,7 @@ void PacketDecoder::Decode(const api::EventPacket& packet, EventBuffer* out) {
   out->clear();
   const uint64_t index = packets_;
   const std::string& data = packet.data();
+  CheckSessionTime(packet.end_t_ns(), PacketName(index) + ": end_t_ns");
   if (end_t_ns_ && packet.end_t_ns() < *end_t_ns_) {
     throw InvalidArgumentError(
         PacketName(index) + ": end_t_ns " + std::to_string(packet.end_t_ns()) +
@@ -267,6 +295,7 @@ void PacketDecoder::Decode(const api::EventPacket& packet, EventBuffer* out) {
                                  std::to_string(data.size()) +
                                  " bytes is not a whole number of 8-byte events");
     }
+    CheckSessionTime(packet.time_base_ns(), PacketName(index) + ": time_base_ns");
     const size_t count = data.size() / kPackedEventBytes;
     out->t_ns.resize(count);
     out->x.resize(count);
@@ -298,6 +327,7 @@ void PacketDecoder::Decode(const api::EventPacket& packet, EventBuffer* out) {
       throw InvalidArgumentError(PacketName(index) + ": malformed raw data: " + error.what());
     }
     for (int64_t& t_ns : out->t_ns) t_ns += sensor_time_offset_ns_;
+    OrderRawTimes(index, out);
   }
   // Order and position checks.
   const size_t count = out->size();
@@ -320,7 +350,87 @@ void PacketDecoder::Decode(const api::EventPacket& packet, EventBuffer* out) {
     }
   }
   end_t_ns_ = packet.end_t_ns();
+  if (count > 0) last_event_t_ns_ = out->t_ns.back();
   ++packets_;
+}
+
+void PacketDecoder::OrderRawTimes(uint64_t index, EventBuffer* events) {
+  std::optional<int64_t> floor_ns;
+  if (end_t_ns_) floor_ns = *end_t_ns_ + 1;
+  if (last_event_t_ns_ && (!floor_ns || *last_event_t_ns_ > *floor_ns)) {
+    floor_ns = last_event_t_ns_;
+  }
+  for (size_t i = 0; i < events->size(); ++i) {
+    int64_t& t_ns = events->t_ns[i];
+    if (floor_ns && t_ns < *floor_ns) {
+      if (*floor_ns - t_ns > kMaxRawTimeAdjustmentNs) {
+        throw InvalidArgumentError(PacketName(index) + ": event " + std::to_string(i) + " at " +
+                                   std::to_string(t_ns) + " ns goes back in time by " +
+                                   std::to_string(*floor_ns - t_ns) +
+                                   " ns (raw streams may go back by at most 1 ms)");
+      }
+      t_ns = *floor_ns;
+      ++raw_time_adjustments_;
+    }
+    floor_ns = t_ns;
+  }
+}
+
+RequestValidator::RequestValidator(const SessionSettings& settings)
+    : camera_(settings.camera),
+      takes_frames_(settings.tracker.input == tracking::TrackerInput::kFrames),
+      decoder_(SensorSize{settings.camera.width, settings.camera.height},
+               settings.sensor_time_offset_ns) {}
+
+grpc::Status RequestValidator::Accept(const api::TrackRequest& request, SessionItem* item) {
+  try {
+    switch (request.message_case()) {
+      case api::TrackRequest::kStart:
+        return {grpc::StatusCode::FAILED_PRECONDITION,
+                "a second SessionStart: open a new stream for a new session"};
+      case api::TrackRequest::kEvents:
+        if (takes_frames_) {
+          return InvalidArgument(
+              "this session tracks frames (options.frames): send Frames, not events");
+        }
+        item->kind = SessionItem::Kind::kEvents;
+        decoder_.Decode(request.events(), &item->events);
+        item->t_ns = request.events().end_t_ns();
+        break;
+      case api::TrackRequest::kFrame:
+        if (!takes_frames_) {
+          return InvalidArgument(
+              "this session tracks events: set options.frames in SessionStart to send Frames");
+        }
+        CheckSessionTime(request.frame().t_ns(), "Frame: t_ns");
+        item->kind = SessionItem::Kind::kFrame;
+        item->gray = FrameFromProto(request.frame(), camera_, last_frame_t_ns_);
+        item->t_ns = request.frame().t_ns();
+        last_frame_t_ns_ = item->t_ns;
+        break;
+      case api::TrackRequest::kPoseHint: {
+        const int64_t t_ns = request.pose_hint().t_ns();
+        CheckSessionTime(t_ns, "PoseHint: t_ns");
+        const std::optional<int64_t> last = decoder_.end_t_ns();
+        if (last && t_ns < *last) {
+          return InvalidArgument("PoseHint at " + std::to_string(t_ns) +
+                                 " ns lies before the end of the last packet (" +
+                                 std::to_string(*last) + " ns)");
+        }
+        item->kind = SessionItem::Kind::kPoseHint;
+        item->world_from_cam =
+            RigidFromProto(request.pose_hint().world_from_cam(), "PoseHint.world_from_cam");
+        item->t_ns = t_ns;
+        break;
+      }
+      default:
+        return InvalidArgument("an empty TrackRequest (set start, events, frame or pose_hint)");
+    }
+  } catch (const InvalidArgumentError& error) {
+    return InvalidArgument(error.what());
+  }
+  latest_t_ns_ = item->t_ns;
+  return grpc::Status::OK;
 }
 
 SessionTracker::SessionTracker(std::shared_ptr<const LoadedMap> map,
@@ -335,31 +445,79 @@ SessionTracker::SessionTracker(std::shared_ptr<const LoadedMap> map,
   }
 }
 
-std::vector<tracking::PoseEstimate> SessionTracker::AddEvents(const EventBuffer& events) {
-  if (started_) return tracker_.AddEvents(events);
-  // As TrackEventStream: events up to the initial time prime the surfaces before the Reset.
-  size_t split = 0;
-  while (split < events.size() && events.t_ns[split] <= settings_.initial_t_ns) ++split;
-  if (split == events.size()) return tracker_.AddEvents(events);
-  head_.clear();
-  tail_.clear();
-  head_.Append(events.t_ns.data(), events.x.data(), events.y.data(), events.polarity.data(), split);
-  tail_.Append(events.t_ns.data() + split, events.x.data() + split, events.y.data() + split,
-               events.polarity.data() + split, events.size() - split);
-  if (!head_.empty()) tracker_.AddEvents(head_);
-  tracker_.Reset(settings_.initial_world_from_cam, settings_.initial_t_ns);
-  started_ = true;
-  return tracker_.AddEvents(tail_);
+std::vector<tracking::PoseEstimate> SessionTracker::Process(const SessionItem& item) {
+  switch (item.kind) {
+    case SessionItem::Kind::kEvents:
+      return AddEvents(item.events, item.t_ns);
+    case SessionItem::Kind::kFrame: {
+      std::vector<tracking::PoseEstimate> estimates;
+      if (item.t_ns <= settings_.initial_t_ns) return estimates;
+      if (auto estimate = tracker_.AddFrame(item.t_ns, item.gray)) {
+        estimates.push_back(std::move(*estimate));
+      }
+      return estimates;
+    }
+    case SessionItem::Kind::kPoseHint:
+      tracker_.Reset(item.world_from_cam, item.t_ns);
+      started_ = true;
+      return {};
+  }
+  return {};
 }
 
-std::optional<tracking::PoseEstimate> SessionTracker::AddFrame(int64_t t_ns, const cv::Mat& gray) {
-  if (t_ns <= settings_.initial_t_ns) return std::nullopt;
-  return tracker_.AddFrame(t_ns, gray);
+std::vector<tracking::PoseEstimate> SessionTracker::AddEvents(const EventBuffer& events,
+                                                              int64_t end_t_ns) {
+  std::vector<tracking::PoseEstimate> estimates;
+  const EventBuffer* tracked = &events;
+  if (!started_) {
+    // As TrackEventStream: events up to the initial time prime the surfaces before the Reset,
+    // which happens once an event after the initial time arrives or a packet end reaches it.
+    size_t split = 0;
+    while (split < events.size() && events.t_ns[split] <= settings_.initial_t_ns) ++split;
+    const EventBuffer* priming = &events;
+    if (split < events.size()) {
+      head_.clear();
+      tail_.clear();
+      head_.Append(events.t_ns.data(), events.x.data(), events.y.data(), events.polarity.data(),
+                   split);
+      tail_.Append(events.t_ns.data() + split, events.x.data() + split, events.y.data() + split,
+                   events.polarity.data() + split, events.size() - split);
+      priming = &head_;
+      tracked = &tail_;
+    } else {
+      tracked = nullptr;
+    }
+    if (!priming->empty()) tracker_.AddEvents(*priming);
+    if (!tracked && end_t_ns < settings_.initial_t_ns) {
+      tracker_.AdvanceTo(end_t_ns);
+      return estimates;
+    }
+    tracker_.Reset(settings_.initial_world_from_cam, settings_.initial_t_ns);
+    started_ = true;
+  }
+  if (tracked && !tracked->empty()) estimates = tracker_.AddEvents(*tracked);
+  for (tracking::PoseEstimate& estimate : tracker_.AdvanceTo(end_t_ns)) {
+    estimates.push_back(std::move(estimate));
+  }
+  return estimates;
 }
 
-void SessionTracker::Reset(const Rigid3d& world_from_cam, int64_t t_ns) {
-  tracker_.Reset(world_from_cam, t_ns);
-  started_ = true;
+grpc::Status OpenSession(const api::SessionStart& start, MapRegistry& registry,
+                         const SessionLimits& limits, OpenedSession* session) {
+  try {
+    // The request is checked before its map is loaded: a bad request costs no map load.
+    session->settings = SessionSettingsFromProto(start, limits);
+    session->map = registry.Get(start.map_name(), start.map_version());
+    session->tracker = std::make_unique<SessionTracker>(session->map, session->settings);
+  } catch (const MapNotFoundError& error) {
+    return {grpc::StatusCode::NOT_FOUND, error.what()};
+  } catch (const InvalidArgumentError& error) {
+    return InvalidArgument(error.what());
+  } catch (const Error& error) {
+    return {grpc::StatusCode::FAILED_PRECONDITION,
+            "map '" + start.map_name() + "' cannot be loaded: " + error.what()};
+  }
+  return grpc::Status::OK;
 }
 
 }  // namespace evloc::service

@@ -1,6 +1,8 @@
-// The transport-free parts of a tracking session (docs/api.md): the settings a SessionStart
-// asks for, the validating decoder of EventPackets (run by the stream reader) and the tracker
-// state (run by the session's tracking worker). The gRPC plumbing is in localizer_server.cc.
+// The transport-free parts of a tracking session (docs/api.md): the admission of a SessionStart,
+// the validation of every later request with the gRPC status of each refusal (run by the stream
+// reader), and the tracker state (run by the session's tracking worker). The threads, queues and
+// the stream itself are in localizer_server.cc; the fuzz targets in fuzz/ drive this code
+// without a network.
 #pragma once
 
 #include <cstdint>
@@ -9,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include <grpcpp/support/status.h>
 #include <opencv2/core.hpp>
 
 #include "core/camera/camera.h"
@@ -65,14 +68,41 @@ struct SessionSettings {
   int64_t sensor_time_offset_ns = 0;
 };
 
-// Reads the settings of a SessionStart on top of `defaults`. Throws InvalidArgumentError when
-// the camera, the pose or an option is invalid (the message names the field).
+// Largest |time| a session accepts (initial time, packet ends, frame and hint times, event
+// times after the sensor offset), ns: 2^62 ns is 146 years, and the bound keeps every time
+// computation far from int64 overflow.
+inline constexpr int64_t kMaxSessionTimeNs = int64_t{1} << 62;
+
+// What the server allows a session (server options, the same for every session).
+struct SessionLimits {
+  // Tracker options of a session that sets none (SessionStart.options override them).
+  tracking::TrackerOptions tracker;
+  // Largest camera, width * height pixels: a session's memory grows with the sensor size
+  // (time surfaces, fields, undistortion table) (--max-camera-pixels).
+  int64_t max_camera_pixels = int64_t{1} << 22;
+
+  // Throws InvalidArgumentError naming the first invalid field.
+  void Check() const;
+};
+
+// Reads the settings of a SessionStart on top of `limits.tracker`. Throws InvalidArgumentError
+// when the camera (also when it exceeds limits.max_camera_pixels), the pose, a time or an option
+// is invalid (the message names the field).
 SessionSettings SessionSettingsFromProto(const api::SessionStart& start,
-                                         const tracking::TrackerOptions& defaults);
+                                         const SessionLimits& limits);
+
+// Most a raw (EVT3 / EVT2) event time may lie before the previous event or the previous packet's
+// end and still be taken (raised to the earliest time allowed), ns. Real sensors emit events a
+// few microseconds out of order (readout order; the EVT 3.0 sample has steps back of 3-11 us),
+// and a client passing raw bytes through cannot know whether more events of the last
+// microsecond will follow a packet.
+inline constexpr int64_t kMaxRawTimeAdjustmentNs = 1'000'000;
 
 // Validates and decodes the EventPackets of one session, in order. Every event must lie on the
 // sensor, after the previous packet's end and at or before its packet's end, in time order;
-// packet ends must not decrease; the encoding must not change. Not thread-safe.
+// packet ends must not decrease; the encoding must not change. Raw (EVT3 / EVT2) events up to
+// kMaxRawTimeAdjustmentNs out of that order are raised to the earliest time allowed (the
+// previous event's time, or the previous end + 1 ns) and counted. Not thread-safe.
 class PacketDecoder {
  public:
   // Events must lie inside `sensor_size`; raw packets get `sensor_time_offset_ns` added.
@@ -87,15 +117,73 @@ class PacketDecoder {
   std::optional<int64_t> end_t_ns() const { return end_t_ns_; }
   // Packets decoded so far.
   uint64_t packets() const { return packets_; }
+  // Raw events whose time was raised to keep the stream in order.
+  uint64_t raw_time_adjustments() const { return raw_time_adjustments_; }
 
  private:
+  // Raises raw event times that go back by at most kMaxRawTimeAdjustmentNs; throws for more.
+  void OrderRawTimes(uint64_t index, EventBuffer* events);
+
   SensorSize sensor_size_;
   int64_t sensor_time_offset_ns_;
   api::EventEncoding encoding_ = api::EVENT_ENCODING_UNSPECIFIED;
   std::unique_ptr<EventStreamDecoder> raw_decoder_;
   EventBuffer raw_events_;
   std::optional<int64_t> end_t_ns_;
+  std::optional<int64_t> last_event_t_ns_;
   uint64_t packets_ = 0;
+  uint64_t raw_time_adjustments_ = 0;
+};
+
+// One request of a running session after validation: what the tracking worker runs.
+struct SessionItem {
+  // What the request was.
+  enum class Kind {
+    // An EventPacket: `events`, then every step up to `t_ns` (its end_t_ns) runs.
+    kEvents,
+    // A Frame: `gray` taken at `t_ns`.
+    kFrame,
+    // A PoseHint: reset to `world_from_cam` at `t_ns`.
+    kPoseHint,
+  };
+  // The kind of request.
+  Kind kind = Kind::kEvents;
+  // kEvents: the decoded events of the packet.
+  EventBuffer events;
+  // kFrame: the grey pixels (CV_8UC1, the camera's size).
+  cv::Mat gray;
+  // kPoseHint: the pose.
+  Rigid3d world_from_cam;
+  // kEvents: the packet's end_t_ns; kFrame: the frame time; kPoseHint: the hint time; ns.
+  int64_t t_ns = 0;
+};
+
+// Validates the requests that follow the SessionStart, in order (the stream reader's side of a
+// session): decodes EventPackets (PacketDecoder), checks Frames and PoseHints, and refuses what
+// docs/api.md refuses. Not thread-safe.
+class RequestValidator {
+ public:
+  // For a session with these settings.
+  explicit RequestValidator(const SessionSettings& settings);
+
+  // Validates `request` and fills `item` for SessionTracker::Process. Returns OK, or the status
+  // that ends the session: FAILED_PRECONDITION for a second SessionStart, INVALID_ARGUMENT for
+  // anything else that is wrong (malformed or out-of-order packet, event outside the sensor, time
+  // going back, a Frame in an event session or events in a frame session, a bad pose, an empty
+  // request). The session cannot continue after an error.
+  grpc::Status Accept(const api::TrackRequest& request, SessionItem* item);
+
+  // The packet decoder (packet count and last end time).
+  const PacketDecoder& decoder() const { return decoder_; }
+  // Session time of the latest request accepted (packet end, frame or hint time), ns.
+  std::optional<int64_t> latest_t_ns() const { return latest_t_ns_; }
+
+ private:
+  Camera camera_;
+  bool takes_frames_ = false;
+  PacketDecoder decoder_;
+  std::optional<int64_t> last_frame_t_ns_;
+  std::optional<int64_t> latest_t_ns_;
 };
 
 // The tracker of one session and its start-up: events up to the initial time prime the time
@@ -107,17 +195,18 @@ class SessionTracker {
   // camera or the options.
   SessionTracker(std::shared_ptr<const LoadedMap> map, const SessionSettings& settings);
 
-  // Ingests time-ordered events; returns the steps that became due.
-  std::vector<tracking::PoseEstimate> AddEvents(const EventBuffer& events);
-  // Tracks a grey frame (frame sessions); returns its step, if one ran.
-  std::optional<tracking::PoseEstimate> AddFrame(int64_t t_ns, const cv::Mat& gray);
-  // Resets the tracker to an external pose at t_ns.
-  void Reset(const Rigid3d& world_from_cam, int64_t t_ns);
+  // Tracks one item that RequestValidator accepted and returns the steps that ran. An EventPacket
+  // runs every step up to its end_t_ns at once (Tracker::AdvanceTo), so the pose of step t is
+  // ready after the packet whose end_t_ns >= t, without waiting for a later packet. Throws only
+  // on a bug (the server reports INTERNAL).
+  std::vector<tracking::PoseEstimate> Process(const SessionItem& item);
 
   // True when the session tracks frames.
   bool takes_frames() const { return takes_frames_; }
 
  private:
+  std::vector<tracking::PoseEstimate> AddEvents(const EventBuffer& events, int64_t end_t_ns);
+
   std::shared_ptr<const LoadedMap> map_;
   SessionSettings settings_;
   tracking::Tracker tracker_;
@@ -126,5 +215,23 @@ class SessionTracker {
   EventBuffer head_;
   EventBuffer tail_;
 };
+
+// A session admitted from its SessionStart: the map version it tracks against, its settings and
+// its tracker.
+struct OpenedSession {
+  // The map (kept alive by the session).
+  std::shared_ptr<const LoadedMap> map;
+  // The settings.
+  SessionSettings settings;
+  // The tracker.
+  std::unique_ptr<SessionTracker> tracker;
+};
+
+// Admits a session: gets the map from `registry` and validates the SessionStart against
+// `limits`. Returns OK with `session` filled, or NOT_FOUND (unknown map or version),
+// INVALID_ARGUMENT (camera, pose, time or options; a camera above limits.max_camera_pixels), or
+// FAILED_PRECONDITION (the map exists but cannot be loaded).
+grpc::Status OpenSession(const api::SessionStart& start, MapRegistry& registry,
+                         const SessionLimits& limits, OpenedSession* session);
 
 }  // namespace evloc::service

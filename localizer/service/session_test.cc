@@ -2,7 +2,16 @@
 
 #include <gtest/gtest.h>
 
+#include <fstream>
+#include <iterator>
+
 #include "core/common/error.h"
+#include "core/common/test_data.h"
+#include "core/events/prophesee_decoder.h"
+#include "core/events/prophesee_raw.h"
+#include "localizer/offline/offline_tracking.h"
+#include "localizer/service/testing/service_fixture.h"
+#include "localizer/tracking/testing/synthetic_scene.h"
 
 namespace evloc::service {
 namespace {
@@ -84,6 +93,36 @@ TEST(PacketDecoder, RejectsBadPackets) {
   }
 }
 
+TEST(PacketDecoder, RawTimesGoingBackSlightlyAreRaisedAndLargerStepsRefused) {
+  // EVT 2.0 words: a time-high word (time bits 33..6), then CD events with time bits 5..0.
+  const auto evt2 = [](std::initializer_list<std::pair<int64_t, int>> events) {
+    std::string data;
+    for (const auto& [t_us, x] : events) {
+      const uint32_t words[2] = {0x80000000u | static_cast<uint32_t>(t_us >> 6),
+                                 0x10000000u | static_cast<uint32_t>(t_us & 63) << 22 |
+                                     static_cast<uint32_t>(x) << 11 | 5u};
+      data.append(reinterpret_cast<const char*>(words), sizeof(words));
+    }
+    return data;
+  };
+  PacketDecoder decoder({320, 240}, 0);
+  EventBuffer decoded;
+  api::EventPacket packet;
+  packet.set_encoding(api::EVENT_ENCODING_EVT2);
+  packet.set_data(evt2({{100, 1}, {97, 2}, {100, 3}}));  // 3 us back inside a packet.
+  packet.set_end_t_ns(100'000);
+  decoder.Decode(packet, &decoded);
+  EXPECT_EQ(decoded.t_ns, (std::vector<int64_t>{100'000, 100'000, 100'000}));
+  packet.set_data(evt2({{100, 4}, {101, 5}}));  // The same microsecond after the end.
+  packet.set_end_t_ns(101'000);
+  decoder.Decode(packet, &decoded);
+  EXPECT_EQ(decoded.t_ns, (std::vector<int64_t>{100'001, 101'000}));
+  EXPECT_EQ(decoder.raw_time_adjustments(), 2u);
+  packet.set_data(evt2({{2'150, 6}, {101, 7}}));  // 2 ms back: refused.
+  packet.set_end_t_ns(2'200'000);
+  EXPECT_THROW(decoder.Decode(packet, &decoded), InvalidArgumentError);
+}
+
 TEST(PacketDecoder, RawEvt3ReservedWordIsInvalid) {
   PacketDecoder decoder({320, 240}, 0);
   EventBuffer decoded;
@@ -92,6 +131,94 @@ TEST(PacketDecoder, RawEvt3ReservedWordIsInvalid) {
   raw.set_data(std::string("\x00\x10", 2));  // type 0x1: reserved
   raw.set_end_t_ns(1'000);
   EXPECT_THROW(decoder.Decode(raw, &decoded), InvalidArgumentError);
+}
+
+// A real camera's raw stream passed straight through in 4 KiB packets, each ending at the latest
+// event time seen so far (what a client reading the camera knows), is accepted whole.
+void ExpectRawRecordingStreams(const std::filesystem::path& path, api::EventEncoding encoding) {
+  std::ifstream file(path, std::ios::binary);
+  const PropheseeRawHeader header = ReadPropheseeRawHeader(file, path.string());
+  const std::string payload((std::istreambuf_iterator<char>(file)),
+                            std::istreambuf_iterator<char>());
+  ASSERT_TRUE(header.sensor_size.has_value());
+  std::unique_ptr<EventStreamDecoder> reference;
+  if (encoding == api::EVENT_ENCODING_EVT3) {
+    reference = std::make_unique<Evt3Decoder>(PropheseeDecoderOptions{});
+  } else {
+    reference = std::make_unique<Evt2Decoder>(PropheseeDecoderOptions{});
+  }
+  PacketDecoder decoder(*header.sensor_size, 0);
+  EventBuffer expected;
+  EventBuffer decoded;
+  size_t events = 0;
+  int64_t end_t_ns = 0;
+  for (size_t offset = 0; offset < payload.size(); offset += 4096) {
+    api::EventPacket packet;
+    packet.set_encoding(encoding);
+    packet.set_data(payload.substr(offset, 4096));
+    expected.clear();
+    reference->Decode(reinterpret_cast<const uint8_t*>(packet.data().data()), packet.data().size(),
+                      &expected);
+    for (int64_t t_ns : expected.t_ns) end_t_ns = std::max(end_t_ns, t_ns);
+    packet.set_end_t_ns(end_t_ns);
+    ASSERT_NO_THROW(decoder.Decode(packet, &decoded)) << "at byte " << offset;
+    ASSERT_EQ(decoded.size(), expected.size());
+    events += decoded.size();
+  }
+  EXPECT_GT(events, 100'000u);
+  // Events of the same microsecond continue across packets (raised by 1 ns after the end), and
+  // the sensor's few-microsecond regressions are raised to the previous time.
+  EXPECT_GE(decoder.raw_time_adjustments(), reference->statistics().time_regressions);
+  EXPECT_LT(decoder.raw_time_adjustments(), events / 100);
+}
+
+TEST(PacketDecoder, RealEvt3RecordingStreamsThrough) {
+  EVLOC_REQUIRE_SHARED_DATA(path, "prophesee/evt3_sample.raw");
+  ExpectRawRecordingStreams(path, api::EVENT_ENCODING_EVT3);
+}
+
+TEST(PacketDecoder, RealEvt2RecordingStreamsThrough) {
+  EVLOC_REQUIRE_SHARED_DATA(path, "prophesee/evt2_sample.raw");
+  ExpectRawRecordingStreams(path, api::EVENT_ENCODING_EVT2);
+}
+
+// The session path (RequestValidator, SessionTracker) gives the offline tracker's poses, and
+// every packet runs the steps up to its end at once.
+TEST(SessionTracker, PacketsGiveTheOfflinePosesWithoutWaitingForTheNextPacket) {
+  const EventBuffer events = testing::TestEvents(120'000'000);
+  auto map = std::make_shared<LoadedMap>();
+  map->map = testing::TestMap();
+  map->visibility = std::make_unique<VisibilityIndex>(map->map);
+  const api::TrackRequest start = testing::TestSessionStart();
+  const SessionSettings settings = SessionSettingsFromProto(start.start(), SessionLimits{});
+  SessionTracker tracker(map, settings);
+  RequestValidator validator(settings);
+  std::vector<tracking::PoseEstimate> served;
+  SessionItem item;
+  for (const api::TrackRequest& packet : testing::PackedPackets(events, 1'000'000)) {
+    ASSERT_TRUE(validator.Accept(packet, &item).ok());
+    for (auto& estimate : tracker.Process(item)) {
+      EXPECT_LE(estimate.t_ns, item.t_ns);
+      served.push_back(estimate);
+    }
+    if (!served.empty() && served.back().t_ns > testing::kInitialTimeNs) {
+      EXPECT_GT(served.back().t_ns + 5'000'000, item.t_ns) << "a step up to the end is missing";
+    }
+  }
+  tracking::OfflineTrackingOptions options;
+  options.tracker = settings.tracker;
+  testing::BufferEventReader reader(events);
+  const auto offline =
+      tracking::TrackEventStream(reader, map->map, map->visibility.get(), settings.camera,
+                                 settings.initial_world_from_cam, settings.initial_t_ns, options);
+  ASSERT_GE(offline.steps.size(), 15u);
+  ASSERT_GE(served.size(), offline.steps.size());
+  for (size_t i = 0; i < offline.steps.size(); ++i) {
+    EXPECT_EQ(served[i].t_ns, offline.steps[i].t_ns);
+    EXPECT_EQ(served[i].world_from_cam.translation, offline.steps[i].world_from_cam.translation)
+        << "step " << i;
+    EXPECT_EQ(served[i].covariance, offline.steps[i].covariance) << "step " << i;
+  }
 }
 
 TEST(SessionSettings, RejectsInvalidCamerasAndOptions) {
@@ -104,10 +231,10 @@ TEST(SessionSettings, RejectsInvalidCamerasAndOptions) {
   start.mutable_camera()->set_cx(160);
   start.mutable_camera()->set_cy(120);
   start.mutable_initial_world_from_cam()->mutable_rotation()->set_w(1);
-  const tracking::TrackerOptions defaults;
+  SessionLimits defaults;
   const SessionSettings settings = SessionSettingsFromProto(start, defaults);
   EXPECT_EQ(settings.camera.width, 320);
-  EXPECT_EQ(settings.tracker.step_rate_hz, defaults.step_rate_hz);
+  EXPECT_EQ(settings.tracker.step_rate_hz, defaults.tracker.step_rate_hz);
 
   api::SessionStart bad = start;
   bad.mutable_camera()->set_fx(-1);
@@ -124,6 +251,17 @@ TEST(SessionSettings, RejectsInvalidCamerasAndOptions) {
   bad = start;
   bad.mutable_options()->set_step_rate_hz(-5);
   EXPECT_THROW(SessionSettingsFromProto(bad, defaults), InvalidArgumentError);
+  bad = start;
+  bad.set_initial_t_ns(int64_t{1} << 62 | 1);
+  EXPECT_THROW(SessionSettingsFromProto(bad, defaults), InvalidArgumentError);
+  // A camera larger than the server allows (a session's memory grows with its pixels).
+  defaults.max_camera_pixels = 320 * 240 - 1;
+  try {
+    SessionSettingsFromProto(start, defaults);
+    FAIL() << "expected the camera size limit";
+  } catch (const InvalidArgumentError& error) {
+    EXPECT_NE(std::string(error.what()).find("--max-camera-pixels"), std::string::npos);
+  }
 }
 
 }  // namespace

@@ -1,5 +1,6 @@
 #include "localizer/service/testing/service_fixture.h"
 
+#include <algorithm>
 #include <atomic>
 #include <random>
 
@@ -24,6 +25,14 @@ EventBuffer TestEvents(int64_t duration_ns) {
   return tracking::testing::SimulateEdgeEvents(
       TestMap(), TestCamera(), [](int64_t t) { return tracking::testing::SmoothMotion(t); }, 0,
       duration_ns);
+}
+
+size_t BufferEventReader::Read(size_t max_events, EventBuffer* out) {
+  const size_t count = std::min(max_events, events_.size() - next_);
+  out->Append(events_.t_ns.data() + next_, events_.x.data() + next_, events_.y.data() + next_,
+              events_.polarity.data() + next_, count);
+  next_ += count;
+  return count;
 }
 
 TemporaryFolder::TemporaryFolder() {
