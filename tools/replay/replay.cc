@@ -81,10 +81,11 @@ std::shared_ptr<grpc::Channel> MakeChannel(const ReplayOptions& options) {
   grpc::ChannelArguments arguments;
   arguments.SetMaxReceiveMessageSize(64 << 20);
   if (!options.lb_policy.empty()) arguments.SetLoadBalancingPolicyName(options.lb_policy);
+  // Not GRPC_ARG_MIN_RECONNECT_BACKOFF_MS: gRPC also takes it as the shortest connect timeout,
+  // and a short one fails connections on a busy host.
   if (options.reconnect > 0) {
     const int backoff_ms = static_cast<int>(options.reconnect_backoff_ms);
     arguments.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS, backoff_ms);
-    arguments.SetInt(GRPC_ARG_MIN_RECONNECT_BACKOFF_MS, backoff_ms);
     arguments.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, static_cast<int>(kMaxReconnectBackoffMs));
   }
   std::shared_ptr<grpc::ChannelCredentials> credentials = grpc::InsecureChannelCredentials();
@@ -98,12 +99,15 @@ std::shared_ptr<grpc::Channel> MakeChannel(const ReplayOptions& options) {
 }
 
 // A status a new session may get past: the server went away or restarts, the connection broke,
-// or (before admission) this replica is full and another one may not be.
+// the stream ended without a status (UNKNOWN: an HTTP/2 proxy cut it when its backend died; the
+// evloc server never sends UNKNOWN itself), or (before admission) this replica is full and
+// another one may not be.
 bool IsTransient(const grpc::Status& status, bool started) {
   switch (status.error_code()) {
     case grpc::StatusCode::UNAVAILABLE:
     case grpc::StatusCode::CANCELLED:
     case grpc::StatusCode::ABORTED:
+    case grpc::StatusCode::UNKNOWN:
       return true;
     case grpc::StatusCode::RESOURCE_EXHAUSTED:
       return !started;
@@ -544,8 +548,11 @@ ReplayResult Replayer::Run() {
     }
     if (!outage_) {
       std::lock_guard<std::mutex> lock(shared_.mutex);
-      outage_ = Outage{static_cast<int>(status.error_code()), status.error_message(),
-                       shared_.last_pose.t_ns};
+      outage_ =
+          Outage{static_cast<int>(status.error_code()), status.error_message(),
+                 std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch())
+                     .count(),
+                 shared_.last_pose.t_ns};
       failure_wall_ = Clock::now();
       last_pose_wall_before_failure_ =
           shared_.poses.empty() ? failure_wall_ : shared_.last_pose_wall;
@@ -649,6 +656,7 @@ void WriteReplayReport(const std::filesystem::path& path, const ReplayResult& re
   for (const Outage& outage : result.outages) {
     outages.push_back({{"status_code", outage.status_code},
                        {"status_message", outage.status_message},
+                       {"failed_at_unix_s", outage.failed_at_unix_s},
                        {"resume_t_ns", outage.resume_t_ns},
                        {"attempts", outage.attempts},
                        {"resume_ms", outage.resume_ms},
@@ -719,7 +727,8 @@ std::string ReplayUsage() {
 Streams a dataset's events to an evloc localizer (docs/api.md) as a live camera would, writes
 the poses it gets back as a TUM trajectory, and prints events sent, poses received and the
 packet-to-pose latency (p50, p99). With --reconnect N, a stream that fails because its server
-went away (UNAVAILABLE, CANCELLED, ABORTED) is started again as a new session at the last pose
+went away (UNAVAILABLE, CANCELLED, ABORTED, or UNKNOWN: ended without a status, as a proxy
+does when its backend dies) is started again as a new session at the last pose
 received, and the trajectory continues (docs/deploy.md).
 
 Options:

@@ -61,9 +61,9 @@ struct ReplayOptions {
   // Sensor height for ECD folders.
   int ecd_height = 180;
   // Most reconnect attempts in a row after the stream failed with a transient status
-  // (UNAVAILABLE, CANCELLED, ABORTED; RESOURCE_EXHAUSTED when refused at admission); 0: fail at
-  // once (--reconnect N). A new session starts at the last pose received, and the count starts
-  // again once it delivers a pose.
+  // (UNAVAILABLE, CANCELLED, ABORTED, UNKNOWN: no status, as from a proxy whose backend died;
+  // RESOURCE_EXHAUSTED when refused at admission); 0: fail at once (--reconnect N). A new session
+  // starts at the last pose received, and the count starts again once it delivers a pose.
   int reconnect = 0;
   // Wait before the first reconnect attempt, ms; doubled per further attempt up to
   // kMaxReconnectBackoffMs, with +-20 % jitter (--reconnect-backoff-ms).
@@ -90,6 +90,8 @@ struct Outage {
   int status_code = 0;
   // The failed stream's status message.
   std::string status_message;
+  // When the failure was seen: wall-clock (system) time, seconds since the Unix epoch.
+  double failed_at_unix_s = 0;
   // Session time of the last pose received before the failure (the resume pose), ns.
   int64_t resume_t_ns = 0;
   // Reconnect attempts it took (1: the first one succeeded).
