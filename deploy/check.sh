@@ -1,0 +1,110 @@
+#!/usr/bin/env bash
+# Checks the deployment files as far as a machine without a container engine or a cluster allows
+# (docs/deploy.md, "What was validated"):
+#   1. deploy/Dockerfile: linted (dockerfile-utils), and the policy of docs/deploy.md (Debian 12
+#      base, a non-root numeric USER and a gRPC HEALTHCHECK in the final stage);
+#   2. Kubernetes manifests: every file under deploy/k8s parses and passes the Kubernetes JSON
+#      schemas with no unknown field (deploy/tools/validate-k8s.mjs); with kubectl present, every
+#      kustomization is rendered and its output validated the same way;
+#   3. deploy/systemd: systemd-analyze verify, with the unit pointing at a built evloc-localizer;
+#   4. the shell scripts: shellcheck, when installed.
+# Usage: deploy/check.sh [BUILD_DIR]   (BUILD_DIR holds the built evloc-localizer; default build)
+# Exit status: 0 passed, 1 a check failed, 77 the tools are not installed (run
+# scripts/install-deploy-tools.sh); ctest reports 77 as skipped.
+set -euo pipefail
+
+ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+BUILD_DIR=${1:-$ROOT/build}
+# Absolute: the systemd unit's ExecStart must be an absolute path.
+if [[ -d "$BUILD_DIR" ]]; then BUILD_DIR=$(cd "$BUILD_DIR" && pwd); fi
+TOOLS="$ROOT/deploy/tools"
+failures=0
+
+fail() {
+  echo "check: FAILED: $*" >&2
+  failures=$((failures + 1))
+}
+
+if ! command -v node >/dev/null 2>&1 || [[ ! -d "$TOOLS/node_modules/kubernetes-models" ]] ||
+   [[ ! -x "$TOOLS/node_modules/.bin/dockerfile-utils" ]]; then
+  echo "check: SKIPPED: the checkers are not installed (node and deploy/tools/node_modules);" \
+       "run scripts/install-deploy-tools.sh" >&2
+  exit 77
+fi
+
+# 1. The container build file.
+echo "check: linting deploy/Dockerfile (dockerfile-utils)"
+lint=$("$TOOLS/node_modules/.bin/dockerfile-utils" lint "$ROOT/deploy/Dockerfile" 2>&1) || true
+if [[ -n "$lint" ]]; then
+  echo "$lint" >&2
+  fail "dockerfile-utils reports problems in deploy/Dockerfile"
+fi
+# The final stage, with continuation lines joined.
+final_stage=$(awk '/\\$/ {sub(/\\$/, ""); held = held $0; next}
+                   {line = held $0; held = ""}
+                   line ~ /^FROM / {stage = ""}
+                   {stage = stage line "\n"}
+                   END {printf "%s", stage}' "$ROOT/deploy/Dockerfile")
+grep -Eq '^FROM debian:12(-slim)?( |$)' <<<"$final_stage" ||
+  fail "the final stage of deploy/Dockerfile is not based on debian:12"
+user=$(grep -E '^USER ' <<<"$final_stage" | tail -1 | awk '{print $2}')
+[[ "$user" =~ ^[1-9][0-9]*(:[1-9][0-9]*)?$ ]] ||
+  fail "the final stage of deploy/Dockerfile must run as a numeric non-root USER (got '${user}')"
+grep -q 'HEALTHCHECK.*--health-check' <<<"$final_stage" ||
+  fail "the final stage of deploy/Dockerfile has no gRPC HEALTHCHECK"
+while read -r stage; do
+  grep -Eq "^FROM debian:12(-slim)? AS ${stage}\$" "$ROOT/deploy/Dockerfile" ||
+    fail "stage '${stage}' of deploy/Dockerfile is not based on debian:12"
+done < <(awk '/^FROM /{print $NF}' "$ROOT/deploy/Dockerfile")
+
+# 2. The Kubernetes manifests, file by file and as kustomize renders them.
+echo "check: validating the Kubernetes manifests (kubernetes-models schemas, unknown fields)"
+mapfile -t manifests < <(find "$ROOT/deploy/k8s" -name '*.yaml' | sort)
+node "$TOOLS/validate-k8s.mjs" "${manifests[@]}" || fail "Kubernetes manifests"
+if command -v kubectl >/dev/null 2>&1; then
+  while read -r kustomization; do
+    dir=$(dirname "$kustomization")
+    if grep -q '^kind: Component' "$kustomization"; then continue; fi
+    echo "check: rendering ${dir#"$ROOT"/} (kubectl kustomize)"
+    if rendered=$(kubectl kustomize "$dir" 2>&1); then
+      node "$TOOLS/validate-k8s.mjs" - <<<"$rendered" || fail "rendered ${dir#"$ROOT"/}"
+    else
+      echo "$rendered" >&2
+      fail "kubectl kustomize ${dir#"$ROOT"/}"
+    fi
+  done < <(find "$ROOT/deploy/k8s" -name kustomization.yaml | sort)
+else
+  echo "check: kubectl is not installed: the kustomizations were not rendered (files checked one" \
+       "by one only)"
+fi
+
+# 3. The systemd unit, pointed at a built binary (verify needs ExecStart to exist).
+if command -v systemd-analyze >/dev/null 2>&1 && [[ -x "$BUILD_DIR/localizer/service/evloc-localizer" ]]; then
+  echo "check: verifying deploy/systemd/evloc-localizer.service (systemd-analyze verify)"
+  unit_dir=$(mktemp -d)
+  trap 'rm -rf "$unit_dir"' EXIT
+  sed "s|/usr/local/bin/evloc-localizer|$BUILD_DIR/localizer/service/evloc-localizer|" \
+    "$ROOT/deploy/systemd/evloc-localizer.service" > "$unit_dir/evloc-localizer.service"
+  verify=$(systemd-analyze verify "$unit_dir/evloc-localizer.service" 2>&1) || true
+  if [[ -n "$verify" ]]; then
+    echo "$verify" >&2
+    fail "systemd-analyze verify reports problems in deploy/systemd/evloc-localizer.service"
+  fi
+else
+  echo "check: systemd unit not verified (needs systemd-analyze and $BUILD_DIR/localizer/service/evloc-localizer)"
+fi
+
+# 4. The shell scripts of deploy/ and the scale-out test.
+if command -v shellcheck >/dev/null 2>&1; then
+  echo "check: shellcheck of the deployment scripts"
+  shellcheck "$ROOT/deploy/check.sh" "$ROOT/deploy/runtime-packages.sh" \
+    "$ROOT/scripts/install-deploy-tools.sh" "$ROOT/scripts/scale-out-test.sh" || fail "shellcheck"
+else
+  echo "check: shellcheck is not installed: scripts not checked"
+fi
+
+if [[ $failures -gt 0 ]]; then
+  echo "check: $failures check(s) failed" >&2
+  exit 1
+fi
+echo "check: all deployment checks passed"
