@@ -7,7 +7,8 @@
 #      schemas with no unknown field (deploy/tools/validate-k8s.mjs); with kubectl present, every
 #      kustomization is rendered and its output validated the same way;
 #   3. deploy/systemd: systemd-analyze verify, with the unit pointing at a built evloc-localizer;
-#   4. the shell scripts: shellcheck, when installed.
+#   4. deploy/runtime-packages.sh (which the Dockerfile's build stage runs) on the built binaries;
+#   5. the shell scripts: shellcheck, when installed.
 # Usage: deploy/check.sh [BUILD_DIR]   (BUILD_DIR holds the built evloc-localizer; default build)
 # Exit status: 0 passed, 1 a check failed, 77 the tools are not installed (run
 # scripts/install-deploy-tools.sh); ctest reports 77 as skipped.
@@ -94,7 +95,23 @@ else
   echo "check: systemd unit not verified (needs systemd-analyze and $BUILD_DIR/localizer/service/evloc-localizer)"
 fi
 
-# 4. The shell scripts of deploy/ and the scale-out test.
+# 4. The runtime package derivation the Dockerfile runs, on the binaries built here.
+binaries=()
+for binary in localizer/service/evloc-localizer tools/replay/evloc-replay mapper/evloc-mapper; do
+  [[ -x "$BUILD_DIR/$binary" ]] && binaries+=("$BUILD_DIR/$binary")
+done
+if [[ ${#binaries[@]} -gt 0 ]]; then
+  echo "check: deriving the runtime packages of ${#binaries[@]} built binaries (deploy/runtime-packages.sh)"
+  if packages=$("$ROOT/deploy/runtime-packages.sh" "${binaries[@]}"); then
+    echo "check: runtime packages: $(tr '\n' ' ' <<<"$packages")"
+  else
+    fail "deploy/runtime-packages.sh on ${binaries[*]}"
+  fi
+else
+  echo "check: no built binaries in $BUILD_DIR: runtime package derivation not exercised"
+fi
+
+# 5. The shell scripts of deploy/ and the scale-out test.
 if command -v shellcheck >/dev/null 2>&1; then
   echo "check: shellcheck of the deployment scripts"
   shellcheck "$ROOT/deploy/check.sh" "$ROOT/deploy/runtime-packages.sh" \

@@ -18,7 +18,9 @@ for binary in "$@"; do
   [[ -x "$binary" ]] || { echo "$0: '$binary' is not an executable" >&2; exit 2; }
   resolved=$(ldd "$binary")
   for soname in $(objdump -p "$binary" | awk '/^ *NEEDED/ {print $2}'); do
-    path=$(awk -v so="$soname" '$1 == so && $3 ~ /^\// {print $3}' <<<"$resolved")
+    # "libx.so.1 => /path (addr)", or "/path/ld-linux-x86-64.so.2 (addr)" for the loader.
+    path=$(awk -v so="$soname" '$1 == so && $3 ~ /^\// {print $3; exit}
+                                $1 ~ /^\// && $1 ~ ("/" so "$") {print $1; exit}' <<<"$resolved")
     [[ -n "$path" ]] || { echo "$0: $binary needs $soname, which ldd cannot find" >&2; exit 1; }
     real=$(readlink -f "$path")
     # dpkg knows the path it installed: /lib/... on merged-/usr systems, or the real path.
