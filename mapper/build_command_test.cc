@@ -5,10 +5,12 @@
 #include <fstream>
 
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "core/common/error.h"
 #include "core/common/file_util.h"
 #include "core/common/test_data.h"
+#include "mapper/map_accuracy.h"
 #include "mapper/map_builder.h"
 #include "mapper/middlebury_test_util.h"
 #include "maps/map.h"
@@ -191,7 +193,7 @@ TEST(BuildCommand, TempleWithKnownPosesEndToEnd) {
               1e-9);
     EXPECT_EQ(keyframe.t_ns, static_cast<int64_t>(view - views.begin()) * 1000000000);
   }
-  const std::vector<double> distances = testing::EdgeDistances(map, image_dir);
+  const std::vector<double> distances = KeyframeEdgeDistances(map, image_dir);
   ASSERT_GT(distances.size(), 300u);
   const double median = distances[distances.size() / 2];
   std::cout << "templeSparseRing 8 images, known poses: " << map.size()

@@ -9,6 +9,8 @@
 #include <pcl/kdtree/kdtree_flann.h>
 #include <pcl/point_cloud.h>
 #include <pcl/point_types.h>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "core/common/error.h"
 
@@ -165,6 +167,39 @@ MapAccuracy MeasureMapAccuracy(const Map& map, const Map& reference,
   accuracy.gradient_opposite_fraction = fraction([](double angle) { return angle > 90.0; });
   accuracy.median_image_gradient_angle_deg = Median(image_gradient_angles);
   return accuracy;
+}
+
+std::vector<double> KeyframeEdgeDistances(const Map& map, const std::filesystem::path& image_dir) {
+  std::vector<double> distances;
+  for (const Keyframe& keyframe : map.keyframes) {
+    const std::filesystem::path path = image_dir / keyframe.image_name;
+    const cv::Mat gray = cv::imread(path.string(), cv::IMREAD_GRAYSCALE);
+    if (gray.empty()) throw IoError("cannot read the keyframe image " + path.string());
+    cv::Mat edges;
+    cv::Canny(gray, edges, 40, 100, 3, true);
+    cv::Mat distance;
+    cv::distanceTransform(255 - edges, distance, cv::DIST_L2, cv::DIST_MASK_PRECISE);
+    const Camera& camera = map.cameras[keyframe.camera_index];
+    for (const uint32_t point : keyframe.visible_points) {
+      Eigen::Vector2d pixel;
+      if (!camera.Project(keyframe.cam_from_world * map.positions[point].cast<double>(), &pixel) ||
+          !camera.IsInside(pixel)) {
+        continue;
+      }
+      // Bilinear interpolation of the distance field at the sub-pixel projection.
+      const int x0 = std::clamp(static_cast<int>(pixel.x()), 0, distance.cols - 2);
+      const int y0 = std::clamp(static_cast<int>(pixel.y()), 0, distance.rows - 2);
+      const double ax = pixel.x() - x0;
+      const double ay = pixel.y() - y0;
+      const double value =
+          (1 - ay) * ((1 - ax) * distance.at<float>(y0, x0) + ax * distance.at<float>(y0, x0 + 1)) +
+          ay *
+              ((1 - ax) * distance.at<float>(y0 + 1, x0) + ax * distance.at<float>(y0 + 1, x0 + 1));
+      distances.push_back(value);
+    }
+  }
+  std::sort(distances.begin(), distances.end());
+  return distances;
 }
 
 }  // namespace evloc::mapper

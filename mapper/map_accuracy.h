@@ -1,9 +1,11 @@
 // Accuracy of a built map against an exact scene (docs/mapper.md, "Accuracy on synthetic
 // sequences"): depth error against rendered depth maps, distance to the ground-truth edge map and
-// the angle between 3D gradients.
+// the angle between 3D gradients; and, for real images, how far the map projects from the
+// keyframe images' edges.
 #pragma once
 
 #include <cstddef>
+#include <filesystem>
 #include <vector>
 
 #include <opencv2/core.hpp>
@@ -70,5 +72,12 @@ struct MapAccuracy {
 MapAccuracy MeasureMapAccuracy(const Map& map, const Map& reference,
                                const std::vector<DepthView>& views,
                                const MapAccuracyOptions& options);
+
+// Edge distance of a map on real images: for each keyframe, the Canny edges (thresholds 40/100 on
+// 8 bits, L2 gradient) of its image `image_dir / keyframe.image_name`, their distance transform,
+// and its bilinear value at the projection of each of the keyframe's visible points (through the
+// keyframe's camera, distortion included). All distances pooled, pixels, sorted ascending. Throws
+// IoError when a keyframe image cannot be read.
+std::vector<double> KeyframeEdgeDistances(const Map& map, const std::filesystem::path& image_dir);
 
 }  // namespace evloc::mapper

@@ -1,7 +1,9 @@
 // evloc-mapper-accuracy: measures a built map against a synthetic dataset's exact scene
-// (gt_map/ and the rendered depth maps; docs/mapper.md, "Accuracy on synthetic sequences").
+// (gt_map/ and the rendered depth maps; docs/mapper.md, "Accuracy on synthetic sequences"), or
+// against the edges of the real keyframe images it was built from (--images).
 // Prints one JSON object on stdout; exit code 2 for a bad command line, 1 for an error.
 
+#include <algorithm>
 #include <filesystem>
 #include <iostream>
 #include <sstream>
@@ -27,11 +29,15 @@ namespace fs = std::filesystem;
 using evloc::mapper::DepthView;
 
 constexpr const char* kUsage = R"(Usage: evloc-mapper-accuracy --map MAPDIR --dataset DIR [options]
+       evloc-mapper-accuracy --map MAPDIR --images DIR
 
 Measures a map against an evloc-sim dataset: depth error against the rendered depth maps (nearest
 frame by camera centre), distance to the exact edges of DIR/gt_map and gradient angles.
+With --images instead: the distance in pixels from each keyframe's projected visible points to
+the nearest Canny edge (40/100) of its image (real data without a ground-truth scene).
   --map MAPDIR         map directory or .evmap file
   --dataset DIR        evloc-sim dataset (calib.yaml, depth.txt, groundtruth.txt, gt_map/)
+  --images DIR         the image folder given to `evloc-mapper build --images`
   --within METRES      threshold of the "within" fractions (default 0.02)
   --depth-stride N     use every N-th depth map (default 1)
 )";
@@ -70,6 +76,7 @@ std::vector<DepthView> ReadDepthViews(const fs::path& dataset, int stride) {
 int main(int argc, char** argv) {
   fs::path map_path;
   fs::path dataset;
+  fs::path image_dir;
   int stride = 1;
   evloc::mapper::MapAccuracyOptions options;
   try {
@@ -85,6 +92,8 @@ int main(int argc, char** argv) {
         map_path = value;
       } else if (flag == "--dataset") {
         dataset = value;
+      } else if (flag == "--images") {
+        image_dir = value;
       } else if (flag == "--within") {
         options.within_m = evloc::ParseDoubleFlag(flag, value);
       } else if (flag == "--depth-stride") {
@@ -93,8 +102,8 @@ int main(int argc, char** argv) {
         throw evloc::InvalidArgumentError("unknown flag '" + flag + "'");
       }
     }
-    if (map_path.empty() || dataset.empty()) {
-      throw evloc::InvalidArgumentError("--map and --dataset are required");
+    if (map_path.empty() || dataset.empty() == image_dir.empty()) {
+      throw evloc::InvalidArgumentError("--map and one of --dataset or --images are required");
     }
     if (stride < 1) throw evloc::InvalidArgumentError("--depth-stride must be at least 1");
     options.Check();
@@ -104,6 +113,26 @@ int main(int argc, char** argv) {
   }
   try {
     const evloc::Map map = evloc::LoadMap(evloc::ResolveMapFile(map_path));
+    if (!image_dir.empty()) {
+      const std::vector<double> distances = evloc::mapper::KeyframeEdgeDistances(map, image_dir);
+      if (distances.empty())
+        throw evloc::InvalidArgumentError("no map point projects into a keyframe");
+      const auto quantile = [&](double q) {
+        return distances[static_cast<size_t>(q * static_cast<double>(distances.size() - 1))];
+      };
+      const size_t within_1px = static_cast<size_t>(
+          std::upper_bound(distances.begin(), distances.end(), 1.0) - distances.begin());
+      nlohmann::json json;
+      json["points"] = map.size();
+      json["keyframes"] = map.keyframes.size();
+      json["edge_projections"] = distances.size();
+      json["median_edge_distance_px"] = quantile(0.5);
+      json["p75_edge_distance_px"] = quantile(0.75);
+      json["p90_edge_distance_px"] = quantile(0.9);
+      json["within_1px_fraction"] = static_cast<double>(within_1px) / distances.size();
+      std::cout << json.dump(2) << "\n";
+      return 0;
+    }
     const evloc::Map reference = evloc::LoadMap(dataset / "gt_map" / evloc::kMapFileName);
     const std::vector<DepthView> views = ReadDepthViews(dataset, stride);
     const evloc::mapper::MapAccuracy accuracy =

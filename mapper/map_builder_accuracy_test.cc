@@ -7,6 +7,7 @@
 #include <numbers>
 
 #include "core/common/test_data.h"
+#include "mapper/map_accuracy.h"
 #include "mapper/map_builder.h"
 #include "mapper/middlebury_test_util.h"
 #include "maps/map.h"
@@ -51,7 +52,7 @@ TEST(MapBuilderAccuracy, TempleKnownPosesMapLiesOnImageEdges) {
   options.known_poses = directory / "poses.txt";
   const MapBuildReport report = BuildMap(options);
   const Map map = LoadMap(options.output_dir / "map.evmap");
-  const std::vector<double> distances = testing::EdgeDistances(map, temple.image_dir);
+  const std::vector<double> distances = KeyframeEdgeDistances(map, temple.image_dir);
   ASSERT_GT(distances.size(), 1000u);
   const double median = distances[distances.size() / 2];
   std::cout << "templeSparseRing, known poses: " << report.num_registered << "/"
@@ -104,7 +105,7 @@ TEST(MapBuilderAccuracy, TempleEstimatedPosesAgreeWithCalibration) {
       worst_view = view.name;
     }
   }
-  const std::vector<double> distances = testing::EdgeDistances(map, temple.image_dir);
+  const std::vector<double> distances = KeyframeEdgeDistances(map, temple.image_dir);
   std::cout << "templeSparseRing, estimated poses (fixed intrinsics, Sim(3) to calibration): "
             << report.num_registered << "/16 registered, alignment RMS "
             << *report.alignment_rms_m * 1000.0 << " mm (scale " << *report.alignment_scale

@@ -1,8 +1,7 @@
-// Test helpers for the Middlebury templeSparseRing data: calibrated poses and the edge-distance
-// accuracy measure of docs/mapper.md.
+// Test helpers for the Middlebury templeSparseRing data: calibrated poses (the edge-distance
+// measure of docs/mapper.md is KeyframeEdgeDistances in mapper/map_accuracy.h).
 #pragma once
 
-#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -10,12 +9,8 @@
 #include <string>
 #include <vector>
 
-#include <opencv2/imgcodecs.hpp>
-#include <opencv2/imgproc.hpp>
-
 #include "core/camera/camera.h"
 #include "core/geometry/rigid3.h"
-#include "maps/map.h"
 
 namespace evloc::mapper::testing {
 
@@ -75,40 +70,6 @@ inline void WriteNamedPoses(const std::filesystem::path& path,
 inline Camera MiddleburyCamera(const MiddleburyView& view, int width, int height) {
   const Eigen::Matrix3d& k = view.calibration;
   return Camera::Pinhole(width, height, k(0, 0), k(1, 1), k(0, 2), k(1, 2));
-}
-
-// Edge-distance measure: for each keyframe, the distance from each projected visible point to
-// the nearest Canny edge pixel of the keyframe's image; all distances pooled.
-inline std::vector<double> EdgeDistances(const Map& map, const std::filesystem::path& image_dir) {
-  std::vector<double> distances;
-  for (const Keyframe& keyframe : map.keyframes) {
-    const cv::Mat gray =
-        cv::imread((image_dir / keyframe.image_name).string(), cv::IMREAD_GRAYSCALE);
-    cv::Mat edges;
-    cv::Canny(gray, edges, 40, 100, 3, true);
-    cv::Mat distance;
-    cv::distanceTransform(255 - edges, distance, cv::DIST_L2, cv::DIST_MASK_PRECISE);
-    const Camera& camera = map.cameras[keyframe.camera_index];
-    for (const uint32_t point : keyframe.visible_points) {
-      Eigen::Vector2d pixel;
-      if (!camera.Project(keyframe.cam_from_world * map.positions[point].cast<double>(), &pixel) ||
-          !camera.IsInside(pixel)) {
-        continue;
-      }
-      // Bilinear interpolation of the distance field at the sub-pixel projection.
-      const int x0 = std::clamp(static_cast<int>(pixel.x()), 0, camera.width - 2);
-      const int y0 = std::clamp(static_cast<int>(pixel.y()), 0, camera.height - 2);
-      const double ax = pixel.x() - x0;
-      const double ay = pixel.y() - y0;
-      const double value =
-          (1 - ay) * ((1 - ax) * distance.at<float>(y0, x0) + ax * distance.at<float>(y0, x0 + 1)) +
-          ay *
-              ((1 - ax) * distance.at<float>(y0 + 1, x0) + ax * distance.at<float>(y0 + 1, x0 + 1));
-      distances.push_back(value);
-    }
-  }
-  std::sort(distances.begin(), distances.end());
-  return distances;
 }
 
 }  // namespace evloc::mapper::testing

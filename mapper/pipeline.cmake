@@ -27,7 +27,7 @@ add_library(evloc_mapper_accuracy ${CMAKE_CURRENT_LIST_DIR}/map_accuracy.cc)
 target_include_directories(evloc_mapper_accuracy PUBLIC ${PROJECT_SOURCE_DIR})
 target_link_libraries(evloc_mapper_accuracy
   PUBLIC evloc_maps evloc_camera evloc_geometry evloc_common opencv_core
-  PRIVATE ${PCL_LIBRARIES})
+  PRIVATE opencv_imgproc opencv_imgcodecs ${PCL_LIBRARIES})
 target_include_directories(evloc_mapper_accuracy SYSTEM PRIVATE ${PCL_INCLUDE_DIRS})
 target_compile_definitions(evloc_mapper_accuracy PRIVATE ${PCL_DEFINITIONS})
 add_executable(evloc-mapper-accuracy ${CMAKE_CURRENT_LIST_DIR}/map_accuracy_main.cc)
@@ -45,5 +45,5 @@ evloc_add_test(NAME evloc_mapper_pipeline_test
 
 evloc_add_test(NAME evloc_mapper_accuracy_test
   SOURCES ${CMAKE_CURRENT_LIST_DIR}/map_builder_accuracy_test.cc
-  LIBS evloc_mapper_pipeline
+  LIBS evloc_mapper_pipeline evloc_mapper_accuracy
   LABELS long)
