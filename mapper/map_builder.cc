@@ -1,5 +1,6 @@
 #include "mapper/map_builder.h"
 
+#include <sys/resource.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -107,6 +108,18 @@ Rigid3d PoseFromTokens(const std::vector<std::string>& tokens, size_t first,
   return Rigid3d(rotation, translation);
 }
 
+// CPU seconds (user + system) used so far by this process and its waited-for children.
+double ProcessCpuSeconds() {
+  double total = 0.0;
+  for (const int who : {RUSAGE_SELF, RUSAGE_CHILDREN}) {
+    rusage usage{};
+    if (getrusage(who, &usage) != 0) continue;
+    total += static_cast<double>(usage.ru_utime.tv_sec + usage.ru_stime.tv_sec) +
+             1e-6 * static_cast<double>(usage.ru_utime.tv_usec + usage.ru_stime.tv_usec);
+  }
+  return total;
+}
+
 // Runs a stage, timing it and reporting progress.
 class StageClock {
  public:
@@ -121,9 +134,10 @@ class StageClock {
   void Run(const std::string& stage, const std::function<bool()>& body) const {
     Progress(stage, 0, 1);
     const Clock::time_point begin = Clock::now();
+    const double cpu_begin = ProcessCpuSeconds();
     const bool reused = body();
-    report_->timings.push_back(
-        {stage, std::chrono::duration<double>(Clock::now() - begin).count(), reused});
+    report_->timings.push_back({stage, std::chrono::duration<double>(Clock::now() - begin).count(),
+                                ProcessCpuSeconds() - cpu_begin, reused});
     Progress(stage, 1, 1);
   }
 
@@ -370,6 +384,14 @@ double MapBuildReport::TotalSeconds(const std::string& prefix) const {
   double total = 0.0;
   for (const StageTiming& timing : timings) {
     if (timing.stage.rfind(prefix, 0) == 0) total += timing.seconds;
+  }
+  return total;
+}
+
+double MapBuildReport::TotalCpuSeconds(const std::string& prefix) const {
+  double total = 0.0;
+  for (const StageTiming& timing : timings) {
+    if (timing.stage.rfind(prefix, 0) == 0) total += timing.cpu_seconds;
   }
   return total;
 }
@@ -980,12 +1002,16 @@ std::string MapBuildReportToJson(const MapBuildReport& report) {
   }
   nlohmann::json timings = nlohmann::json::array();
   for (const StageTiming& timing : report.timings) {
-    timings.push_back(
-        {{"stage", timing.stage}, {"seconds", timing.seconds}, {"reused", timing.reused}});
+    timings.push_back({{"stage", timing.stage},
+                       {"seconds", timing.seconds},
+                       {"cpu_seconds", timing.cpu_seconds},
+                       {"reused", timing.reused}});
   }
   json["timings"] = timings;
   json["colmap_seconds"] = report.TotalSeconds("colmap");
   json["semidense_seconds"] = report.TotalSeconds("semidense");
+  json["colmap_cpu_seconds"] = report.TotalCpuSeconds("colmap");
+  json["semidense_cpu_seconds"] = report.TotalCpuSeconds("semidense");
   return json.dump(2) + "\n";
 }
 

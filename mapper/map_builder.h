@@ -85,12 +85,15 @@ struct MapBuilderOptions {
   void Check() const;
 };
 
-// Wall time of one stage.
+// Wall and CPU time of one stage.
 struct StageTiming {
   // Stage name.
   std::string stage;
-  // Seconds.
+  // Wall seconds.
   double seconds = 0.0;
+  // CPU seconds (user + system) of the mapper's threads and of the child processes (COLMAP) that
+  // ended during the stage: unlike wall time, not inflated by other programs' load.
+  double cpu_seconds = 0.0;
   // True when the stage's result was reused from the COLMAP workspace.
   bool reused = false;
 };
@@ -139,8 +142,10 @@ struct MapBuildReport {
   // Registered image poses in the output frame (world_from_cam), by image name.
   std::map<std::string, Rigid3d> world_from_cams;
 
-  // Sum of the timings of stages whose name starts with `prefix`, seconds.
+  // Sum of the wall timings of stages whose name starts with `prefix`, seconds.
   double TotalSeconds(const std::string& prefix) const;
+  // Sum of the CPU timings of stages whose name starts with `prefix`, seconds.
+  double TotalCpuSeconds(const std::string& prefix) const;
 };
 
 // Runs the pipeline and writes the map directory. Throws InvalidArgumentError for bad options or
