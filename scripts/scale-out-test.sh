@@ -258,6 +258,10 @@ for c, report, evaluation, outages in rows:
     ate = ate_cm(evaluation)
     (affected_ate if outages else unaffected_ate).append(ate)
     lines.append(f"{c:6d}  {outages:7d}  {report['poses']:5d}  {report['lost_poses']:4d}  {report['packets_resent']:6d}  {ate:11.2f}  {evaluation['ate_t_max_cm']:10.2f}  {coverage(evaluation)}")
+latency = [r[1]["client_latency_p50_us"] / 1000 for r in rows if r[1] is not None]
+if latency:
+    lines.append("load: median packet-to-pose latency per client, ms: min %.0f p50 %.0f max %.0f (the queueing a new session waits through too)"
+                 % (min(latency), pct(latency, 0.5), max(latency)))
 if affected_ate and unaffected_ate:
     lines.append("ATE RMSE cm: affected mean %.2f max %.2f; unaffected mean %.2f max %.2f"
                  % (statistics.mean(affected_ate), max(affected_ate), statistics.mean(unaffected_ate), max(unaffected_ate)))

@@ -100,17 +100,17 @@ std::shared_ptr<grpc::Channel> MakeChannel(const ReplayOptions& options) {
 
 // A status a new session may get past: the server went away or restarts, the connection broke,
 // the stream ended without a status (UNKNOWN: an HTTP/2 proxy cut it when its backend died; the
-// evloc server never sends UNKNOWN itself), or (before admission) this replica is full and
-// another one may not be.
-bool IsTransient(const grpc::Status& status, bool started) {
+// evloc server never sends UNKNOWN itself), or the replica is overloaded (RESOURCE_EXHAUSTED:
+// full at admission, or the session's queue overflowed): another replica, or the same one once
+// it caught up, may take the new session, which catches up paced by the poses.
+bool IsTransient(const grpc::Status& status) {
   switch (status.error_code()) {
     case grpc::StatusCode::UNAVAILABLE:
     case grpc::StatusCode::CANCELLED:
     case grpc::StatusCode::ABORTED:
     case grpc::StatusCode::UNKNOWN:
-      return true;
     case grpc::StatusCode::RESOURCE_EXHAUSTED:
-      return !started;
+      return true;
     default:
       return false;
   }
@@ -540,7 +540,7 @@ ReplayResult Replayer::Run() {
     }
     if (status.ok()) break;
     const std::string sent = std::to_string(result_.packets_sent) + " packets";
-    if (options_.reconnect == 0 || !IsTransient(status, started)) {
+    if (options_.reconnect == 0 || !IsTransient(status)) {
       if (!started) {
         throw Error("the server refused the session (status code, message): " + StatusText(status));
       }
@@ -727,9 +727,9 @@ std::string ReplayUsage() {
 Streams a dataset's events to an evloc localizer (docs/api.md) as a live camera would, writes
 the poses it gets back as a TUM trajectory, and prints events sent, poses received and the
 packet-to-pose latency (p50, p99). With --reconnect N, a stream that fails because its server
-went away (UNAVAILABLE, CANCELLED, ABORTED, or UNKNOWN: ended without a status, as a proxy
-does when its backend dies) is started again as a new session at the last pose
-received, and the trajectory continues (docs/deploy.md).
+went away or is overloaded (UNAVAILABLE, CANCELLED, ABORTED, RESOURCE_EXHAUSTED, or UNKNOWN:
+ended without a status, as a proxy does when its backend dies) is started again as a new
+session at the last pose received, and the trajectory continues (docs/deploy.md).
 
 Options:
   --server TARGET        localizer address: HOST:PORT, or a gRPC target such as

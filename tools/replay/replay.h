@@ -62,7 +62,8 @@ struct ReplayOptions {
   int ecd_height = 180;
   // Most reconnect attempts in a row after the stream failed with a transient status
   // (UNAVAILABLE, CANCELLED, ABORTED, UNKNOWN: no status, as from a proxy whose backend died;
-  // RESOURCE_EXHAUSTED when refused at admission); 0: fail at once (--reconnect N). A new session
+  // RESOURCE_EXHAUSTED: the replica is full or the session's queue overflowed); 0: fail at once
+  // (--reconnect N). A new session
   // starts at the last pose received, and the count starts again once it delivers a pose.
   int reconnect = 0;
   // Wait before the first reconnect attempt, ms; doubled per further attempt up to

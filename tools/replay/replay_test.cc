@@ -112,6 +112,9 @@ TEST_F(ReplayTest, RealTimeReplayKeepsPace) {
   ReplayOptions options = Options();
   options.speed = 1.0;
   options.duration_s = 0.1;
+  // 5 ms packets: the 64-packet queue then holds 320 ms, so a busy machine that stalls the
+  // server for a moment does not overflow it.
+  options.packet_us = 5000;
   std::ostringstream log;
   const ReplayResult result = RunReplay(options, log);
   // Real-time pacing: the replay cannot finish before 0.1 s of session time has elapsed on the
@@ -346,6 +349,42 @@ TEST_F(ReplayTest, ReconnectsToAnotherServerAndResumesFromTheLastPose) {
             << served.size() << "; after it: RMS error " << served_rms_m * 1e3
             << " mm (uninterrupted " << reference_rms_m * 1e3 << " mm), worst difference "
             << worst_m * 1e3 << " mm, " << worst_rad * 180 / M_PI << " deg\n";
+}
+
+TEST_F(ReplayTest, RetriesAFullServerUntilASessionEnds) {
+  service::LocalizerServerOptions full_options =
+      fixture::TestServerOptions(folder_.path() / "maps");
+  full_options.max_sessions = 1;
+  service::LocalizerServer full(full_options);
+  // Another client holds the only session for a while.
+  auto stub = fixture::ConnectStub(full.port());
+  grpc::ClientContext holder_context;
+  auto holder = stub->Track(&holder_context);
+  api::TrackResponse started;
+  ASSERT_TRUE(holder->Write(fixture::TestSessionStart()));
+  ASSERT_TRUE(holder->Read(&started));
+  ASSERT_TRUE(started.has_started());
+  std::thread release([&] {
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+    holder->WritesDone();
+    api::TrackResponse response;
+    while (holder->Read(&response)) {
+    }
+    holder->Finish();
+  });
+
+  ReplayOptions options = Options();
+  options.server = "127.0.0.1:" + std::to_string(full.port());
+  options.reconnect = 10;
+  options.reconnect_backoff_ms = 50;
+  options.duration_s = 0.1;
+  std::ostringstream log;
+  const ReplayResult result = RunReplay(options, log);
+  release.join();
+  ASSERT_EQ(result.outages.size(), 1u) << log.str();
+  EXPECT_EQ(result.outages[0].status_code, grpc::StatusCode::RESOURCE_EXHAUSTED);
+  EXPECT_GE(result.outages[0].attempts, 2) << log.str();
+  EXPECT_GE(result.trajectory.size(), 15u);
 }
 
 TEST_F(ReplayTest, GivesUpAfterTheReconnectAttempts) {
