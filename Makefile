@@ -41,7 +41,7 @@ fuzz: deps
 	@cmake --build build-fuzz -j $(JOBS) --target evloc_fuzzers
 
 demo: build
-	@scripts/demo.sh
+	@BUILD_DIR=$(BUILD_DIR) scripts/demo.sh
 
 clean:
 	rm -rf $(BUILD_DIR) build-fuzz
