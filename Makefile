@@ -8,10 +8,15 @@
 
 BUILD_DIR ?= build
 JOBS ?= $(shell nproc)
-CMAKE_GENERATOR := $(shell command -v ninja >/dev/null 2>&1 && echo Ninja || echo "Unix Makefiles")
-CCACHE := $(shell command -v ccache 2>/dev/null)
-CMAKE_FLAGS := -DCMAKE_BUILD_TYPE=Release -DEVLOC_ASSERTIONS=ON \
-  $(if $(CCACHE),-DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_C_COMPILER_LAUNCHER=ccache,)
+# The generator is chosen when the recipe runs (ninja may have just been installed) and only for a
+# new build folder: an existing one keeps the generator it was configured with.
+CMAKE_GENERATOR_FLAG = $$(test -f $(1)/CMakeCache.txt || \
+  { command -v ninja >/dev/null 2>&1 && echo "-G Ninja"; })
+CMAKE_FLAGS := -DCMAKE_BUILD_TYPE=Release -DEVLOC_ASSERTIONS=ON
+# ccache is looked up when the recipe runs, after install-deps.sh has installed it (a fresh
+# machine has no ccache when make parses this file).
+CCACHE_FLAGS = $$(command -v ccache >/dev/null 2>&1 && \
+  echo -DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_C_COMPILER_LAUNCHER=ccache)
 
 .PHONY: deps configure build test test-long bench fuzz demo clean format
 
@@ -19,7 +24,7 @@ deps:
 	@scripts/install-deps.sh
 
 configure: deps
-	@cmake -S . -B $(BUILD_DIR) -G "$(CMAKE_GENERATOR)" $(CMAKE_FLAGS) >/dev/null || \
+	@cmake -S . -B $(BUILD_DIR) $(call CMAKE_GENERATOR_FLAG,$(BUILD_DIR)) $(CMAKE_FLAGS) $(CCACHE_FLAGS) >/dev/null || \
 	  { echo "make: cmake configure failed; rerun 'cmake -S . -B $(BUILD_DIR)' to see why" >&2; exit 1; }
 
 build: configure
@@ -35,9 +40,9 @@ bench: build
 	@scripts/run-benchmarks.sh $(BUILD_DIR)
 
 fuzz: deps
-	@cmake -S . -B build-fuzz -G "$(CMAKE_GENERATOR)" -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+	@cmake -S . -B build-fuzz $(call CMAKE_GENERATOR_FLAG,build-fuzz) -DCMAKE_BUILD_TYPE=RelWithDebInfo \
 	  -DCMAKE_C_COMPILER=clang -DCMAKE_CXX_COMPILER=clang++ -DEVLOC_FUZZ=ON \
-	  $(if $(CCACHE),-DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_C_COMPILER_LAUNCHER=ccache,) >/dev/null
+	  $(CCACHE_FLAGS) >/dev/null
 	@cmake --build build-fuzz -j $(JOBS) --target evloc_fuzzers
 
 demo: build

@@ -30,6 +30,10 @@ nlohmann::json StepsToJson(const OfflineTrackingResult& result) {
                      {"points_selected", step.quality.points_selected},
                      {"points_used", step.quality.points_used},
                      {"on_edge_fraction", step.quality.on_edge_fraction},
+                     {"chance_on_edge_fraction", step.quality.chance_on_edge_fraction},
+                     {"alignment", step.quality.alignment},
+                     {"polarity_predictions", step.quality.polarity_predictions},
+                     {"polarity_matches", step.quality.polarity_matches},
                      {"mean_residual", step.quality.mean_residual},
                      {"iterations", step.quality.iterations},
                      {"recovery_attempts", step.quality.recovery_attempts},
@@ -87,6 +91,14 @@ Options:
   --occlusion on|off     ANNF occlusion culling (default on)
   --max-points N         map points registered per step (default 2500)
   --tau SECONDS          time-surface decay time (default 0.03)
+  --polarity-band DEG    neutral band around 90 degrees between gradient and flow (default 30)
+  --min-flow PX          predicted flows per step shorter than this give no polarity (default 0.05)
+  --polarity-culling on|off
+                         with polarity and occlusion: points claim edge pixels of their
+                         predicted polarity (default on)
+  --velocity-window S    constant-velocity window, seconds (default 0.02)
+  --min-alignment A      a step is bad below this chance-corrected alignment (docs/tracking.md)
+  --max-mean-residual R  a step is bad above this mean field value at the points
   --stats PATH           per-step statistics (status, points, quality, timings) as JSON
   --debug-dir DIR        write debug pictures (time surface with the map, ON/OFF surfaces,
                          predicted gradient and flow)
@@ -176,6 +188,18 @@ TrackCommandOptions ParseTrackCommandLine(const std::vector<std::string>& argume
       tracker.max_points = static_cast<int>(ParseIntegerFlag(flag, value));
     } else if (flag == "--tau") {
       tracker.decay_time_s = ParseDoubleFlag(flag, value);
+    } else if (flag == "--velocity-window") {
+      tracker.velocity_window_s = ParseDoubleFlag(flag, value);
+    } else if (flag == "--polarity-band") {
+      tracker.polarity_neutral_band_deg = ParseDoubleFlag(flag, value);
+    } else if (flag == "--min-flow") {
+      tracker.min_flow_px = ParseDoubleFlag(flag, value);
+    } else if (flag == "--polarity-culling") {
+      tracker.polarity_aware_culling = ParseSwitchFlag(flag, value);
+    } else if (flag == "--min-alignment") {
+      tracker.min_alignment = ParseDoubleFlag(flag, value);
+    } else if (flag == "--max-mean-residual") {
+      tracker.max_mean_residual = ParseDoubleFlag(flag, value);
     } else if (flag == "--stats") {
       options.stats_path = value;
     } else if (flag == "--debug-dir") {

@@ -1,25 +1,32 @@
-// The constant-velocity motion prior on SE(3) (method.md §4.2): the body-frame twist between the
-// last two estimates, extrapolated to the next step time.
+// The constant-velocity motion prior on SE(3) (method.md §4.2): the body-frame twist over the
+// recent estimates, extrapolated to the next step time.
 #pragma once
 
 #include <cstdint>
+#include <deque>
 #include <optional>
+#include <utility>
 
 #include "core/geometry/rigid3.h"
 
 namespace evloc::tracking {
 
-// Predicts world_from_cam at a later time from the last two poses.
+// Predicts world_from_cam at a later time from the recent poses. The velocity is the twist
+// between the newest pose and the oldest one within `window_ns` of it (at least the previous
+// pose): a single step of a few milliseconds turns millimetre pose noise into a velocity noise
+// of decimetres per second, which the window divides by the number of steps it spans.
 class ConstantVelocityModel {
  public:
+  // `window_ns` = 0 takes the velocity from the last two poses only.
+  explicit ConstantVelocityModel(int64_t window_ns = 0) : window_ns_(window_ns) {}
+
   // Forgets the history and sets the pose at t_ns; the velocity becomes zero.
   void Reset(const Rigid3d& world_from_cam, int64_t t_ns);
-  // Adds the estimate at t_ns (after the last one); the velocity becomes the twist between the
-  // previous and this pose divided by the elapsed time. Throws InvalidArgumentError when t_ns is
-  // not after the last time or no pose was set.
+  // Adds the estimate at t_ns (after the last one) and updates the velocity. Throws
+  // InvalidArgumentError when t_ns is not after the last time or no pose was set.
   void Update(const Rigid3d& world_from_cam, int64_t t_ns);
-  // Keeps the last pose but sets the velocity to zero (after a failure).
-  void StopMotion() { velocity_ = Vector6d::Zero(); }
+  // Keeps the last pose but sets the velocity to zero and forgets the history (after a failure).
+  void StopMotion() { Reset(last_world_from_cam_, last_t_ns_.value_or(0)); }
 
   // True once Reset was called.
   bool initialized() const { return last_t_ns_.has_value(); }
@@ -30,14 +37,20 @@ class ConstantVelocityModel {
   // The body-frame twist per second, (v, omega): world_from_cam(t + dt) =
   // world_from_cam(t) * ExpSE3(velocity * dt).
   const Vector6d& velocity() const { return velocity_; }
+  // The time span the velocity was measured over, ns (0 after Reset).
+  int64_t velocity_span_ns() const { return velocity_span_ns_; }
 
   // The pose predicted at t_ns (the last pose when not initialized or at the same time).
   Rigid3d Predict(int64_t t_ns) const;
 
  private:
+  int64_t window_ns_ = 0;
   Rigid3d last_world_from_cam_;
   std::optional<int64_t> last_t_ns_;
   Vector6d velocity_ = Vector6d::Zero();
+  int64_t velocity_span_ns_ = 0;
+  // The poses since the last Reset within the window of the newest (newest last).
+  std::deque<std::pair<int64_t, Rigid3d>> history_;
 };
 
 }  // namespace evloc::tracking

@@ -26,6 +26,47 @@ TEST(ConstantVelocityModel, ExtrapolatesAConstantTwistExactly) {
   EXPECT_LT((model.Predict(25'000'000).translation - pose_at(0.01).translation).norm(), 1e-15);
 }
 
+// Millimetre noise on poses 3.3 ms apart: the last-two-poses velocity is off by decimetres per
+// second, the 20 ms window by a few centimetres per second.
+TEST(ConstantVelocityModel, WindowAveragesPoseNoiseOut) {
+  Vector6d twist;
+  twist << 0.3, -0.1, 0.2, 0.4, -0.2, 0.1;
+  const Rigid3d start(ExpSO3(Eigen::Vector3d(0.2, 0.1, -0.3)), Eigen::Vector3d(1, 2, 3));
+  const int64_t period_ns = 3'333'333;
+  ConstantVelocityModel two_poses(0);
+  ConstantVelocityModel windowed(20'000'000);
+  two_poses.Reset(start, 0);
+  windowed.Reset(start, 0);
+  EXPECT_EQ(windowed.velocity_span_ns(), 0);
+  double worst_two_poses = 0;
+  double worst_windowed = 0;
+  for (int step = 1; step <= 60; ++step) {
+    const int64_t t_ns = step * period_ns;
+    // Alternating +-1 mm along x: the worst case for a two-pose difference.
+    const Eigen::Vector3d noise((step % 2 == 0 ? 1.0 : -1.0) * 1e-3, 0, 0);
+    Rigid3d pose = start * ExpSE3(twist * (static_cast<double>(t_ns) * 1e-9));
+    pose.translation += noise;
+    two_poses.Update(pose, t_ns);
+    windowed.Update(pose, t_ns);
+    if (step >= 7) {
+      EXPECT_GE(windowed.velocity_span_ns(), 20'000'000);
+      EXPECT_LT(windowed.velocity_span_ns(), 20'000'000 + period_ns);
+      worst_two_poses =
+          std::max(worst_two_poses, (two_poses.velocity().head<3>() - twist.head<3>()).norm());
+      worst_windowed =
+          std::max(worst_windowed, (windowed.velocity().head<3>() - twist.head<3>()).norm());
+    }
+  }
+  EXPECT_GT(worst_two_poses, 0.5);  // 2 mm / 3.3 ms = 0.6 m/s.
+  EXPECT_LT(worst_windowed, 0.12);  // 2 mm / 20 ms = 0.1 m/s.
+  // A constant twist without noise is still exact over the window.
+  windowed.Reset(start, 0);
+  for (int step = 1; step <= 10; ++step) {
+    windowed.Update(start * ExpSE3(twist * (step * 0.005)), step * 5'000'000);
+  }
+  EXPECT_LT((windowed.velocity() - twist).norm(), 1e-9);
+}
+
 TEST(ConstantVelocityModel, RejectsUpdatesThatDoNotMoveForwardInTime) {
   ConstantVelocityModel model;
   EXPECT_THROW(model.Update(Rigid3d(), 10), InvalidArgumentError);

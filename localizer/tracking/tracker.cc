@@ -42,7 +42,8 @@ Tracker::Tracker(const Map& map, const VisibilityIndex* visibility, const Camera
       decay_{options.decay_time_s * 1e9, options.empty_threshold},
       polarity_options_{options.polarity_neutral_band_deg, options.gradient_probe_depth_fraction,
                         options.min_flow_px},
-      surface_(table_) {
+      surface_(table_),
+      motion_(std::llround(options.velocity_window_s * 1e9)) {
   if (map.positions.size() != map.gradients.size()) {
     throw InvalidArgumentError("Tracker: the map has not one gradient per point.");
   }
@@ -84,7 +85,8 @@ std::vector<PoseEstimate> Tracker::AddEvents(const EventBuffer& events) {
   const int64_t* t_ns = events.t_ns.data();
   // Reject the whole packet before storing anything when it goes back in time.
   if (count > 0) {
-    bool ordered = !last_event_t_ns_ || t_ns[0] >= *last_event_t_ns_;
+    bool ordered = (!last_event_t_ns_ || t_ns[0] >= *last_event_t_ns_) &&
+                   (!complete_until_t_ns_ || t_ns[0] > *complete_until_t_ns_);
     for (size_t i = 1; i < count; ++i) ordered &= t_ns[i] >= t_ns[i - 1];
     if (!ordered) {
       throw InvalidArgumentError("Tracker::AddEvents: event time stamps must not decrease.");
@@ -122,6 +124,24 @@ std::vector<PoseEstimate> Tracker::AddEvents(const EventBuffer& events) {
     }
   }
   if (count > 0) last_event_t_ns_ = t_ns[count - 1];
+  return estimates;
+}
+
+std::vector<PoseEstimate> Tracker::AdvanceTo(int64_t t_ns) {
+  if (last_event_t_ns_ && t_ns < *last_event_t_ns_) {
+    throw InvalidArgumentError("Tracker::AdvanceTo: the time " + std::to_string(t_ns) +
+                               " ns is before the last event (" +
+                               std::to_string(*last_event_t_ns_) + " ns).");
+  }
+  if (!complete_until_t_ns_ || t_ns > *complete_until_t_ns_) complete_until_t_ns_ = t_ns;
+  std::vector<PoseEstimate> estimates;
+  if (options_.input != TrackerInput::kEvents || options_.events_per_step || !initialized()) {
+    return estimates;
+  }
+  while (next_step_t_ns_ <= t_ns) {
+    estimates.push_back(Step(next_step_t_ns_));
+    next_step_t_ns_ += period_ns_;
+  }
   return estimates;
 }
 
@@ -170,6 +190,10 @@ void Tracker::UpdateSurfaces(int64_t t_ns) {
   }
   // O(1): the edge search reads the surface in a window around each query.
   edges_.Build(surface_, SurfaceChannel::kAll, t_ns, decay_);
+  if (options_.use_polarity) {
+    polarity_edges_[0].Build(surface_, SurfaceChannel::kOn, t_ns, decay_);
+    polarity_edges_[1].Build(surface_, SurfaceChannel::kOff, t_ns, decay_);
+  }
 }
 
 PotentialField* Tracker::Field(SurfaceChannel channel) {
@@ -206,6 +230,11 @@ void Tracker::SelectPoints(const Rigid3d& predicted_world_from_cam) {
   has_selection_ = true;
 }
 
+bool Tracker::InsideImage(const Eigen::Vector2d& pixel) const {
+  return pixel.x() >= 0 && pixel.y() >= 0 && pixel.x() <= surface_.width() - 1 &&
+         pixel.y() <= surface_.height() - 1;
+}
+
 bool Tracker::NearEdge(const Eigen::Vector2d& pixel) const {
   const int x = static_cast<int>(std::lround(pixel.x()));
   const int y = static_cast<int>(std::lround(pixel.y()));
@@ -222,6 +251,7 @@ bool Tracker::NearEdge(const Eigen::Vector2d& pixel) const {
 bool Tracker::IsGood(const TrackingQuality& quality) const {
   return quality.points_used >= options_.min_points &&
          quality.on_edge_fraction >= options_.min_on_edge_fraction &&
+         quality.alignment >= options_.min_alignment &&
          quality.mean_residual <= options_.max_mean_residual;
 }
 
@@ -257,7 +287,30 @@ Tracker::Attempt Tracker::Solve(const Rigid3d& start_world_from_cam,
     }
     scratch_fields_[i] = Field(channel);
   }
-  if (options_.use_occlusion_culling) {
+  if (options_.use_occlusion_culling && predict_polarity && options_.polarity_aware_culling) {
+    // Each point claims the nearest edge pixel of its own surface: ON points compete for pixels
+    // that fired ON, OFF points for OFF pixels, unsigned points for any active pixel.
+    scratch_keep_.assign(num_selected, 0);
+    for (int channel = 0; channel < 3; ++channel) {
+      const PotentialField* field = Field(static_cast<SurfaceChannel>(channel));
+      scratch_group_.clear();
+      scratch_group_pixels_.clear();
+      scratch_group_depths_.clear();
+      for (size_t i = 0; i < num_selected; ++i) {
+        if (scratch_fields_[i] != field) continue;
+        scratch_group_.push_back(i);
+        scratch_group_pixels_.push_back(scratch_pixels_[i]);
+        scratch_group_depths_.push_back(scratch_depths_[i]);
+      }
+      if (scratch_group_.empty()) continue;
+      const NearestEdgeField& edges = channel == 0 ? edges_ : polarity_edges_[channel - 1];
+      zbuffer_.Cull(scratch_group_pixels_, scratch_group_depths_, edges, options_.annf_radius_px,
+                    &scratch_group_keep_);
+      for (size_t k = 0; k < scratch_group_.size(); ++k) {
+        scratch_keep_[scratch_group_[k]] = scratch_group_keep_[k];
+      }
+    }
+  } else if (options_.use_occlusion_culling) {
     zbuffer_.Cull(scratch_pixels_, scratch_depths_, edges_, options_.annf_radius_px,
                   &scratch_keep_);
   } else {
@@ -277,23 +330,32 @@ Tracker::Attempt Tracker::Solve(const Rigid3d& start_world_from_cam,
   const Eigen::Vector3d& estimate_translation = attempt.registration.cam_from_world.translation;
   // On-edge fraction over every selected point, culled or not: culling keeps only points near
   // edges, so counting the survivors alone would flatter a wrong pose.
+  // The chance level: each point displaced by one of four 4-pixel offsets (not along the image
+  // axes, so that axis-aligned structure does not line up with its own copy).
+  static const Eigen::Vector2d kChanceOffsets[4] = {
+      {4.0, 1.0}, {-1.0, 4.0}, {-4.0, -1.0}, {1.0, -4.0}};
   int in_image = 0;
   int on_edge = 0;
+  int chance_trials = 0;
+  int chance_on_edge = 0;
   for (const uint32_t index : selected_) {
     Eigen::Vector2d pixel;
     const Eigen::Vector3d point_in_cam =
         estimate_rotation * map_.positions[index].cast<double>() + estimate_translation;
-    if (!intrinsics_.Project(point_in_cam, &pixel)) continue;
-    if (pixel.x() < 0 || pixel.y() < 0 || pixel.x() > surface_.width() - 1 ||
-        pixel.y() > surface_.height() - 1) {
-      continue;
-    }
+    if (!intrinsics_.Project(point_in_cam, &pixel) || !InsideImage(pixel)) continue;
+    const Eigen::Vector2d displaced = pixel + kChanceOffsets[in_image % 4];
     ++in_image;
     on_edge += NearEdge(pixel) ? 1 : 0;
+    if (InsideImage(displaced)) {
+      ++chance_trials;
+      chance_on_edge += NearEdge(displaced) ? 1 : 0;
+    }
   }
-  // Check the confident polarity predictions against the events: the nearest active pixel of a
-  // point predicted ON should have fired ON last (and OFF for OFF).
+  // Check the confident polarity predictions against the events the point fired in this step:
+  // the freshest pixel within 1 px of its projection must have fired since the previous step,
+  // and its last event must have the predicted polarity (ON for ON, OFF for OFF).
   if (predict_polarity) {
+    const int64_t fresh_since_t_ns = last_step_t_ns_;
     for (size_t i = 0; i < num_selected; ++i) {
       const PotentialField* field = scratch_fields_[i];
       const bool on = field == Field(SurfaceChannel::kOn);
@@ -301,23 +363,38 @@ Tracker::Attempt Tracker::Solve(const Rigid3d& start_world_from_cam,
       Eigen::Vector2d pixel;
       const Eigen::Vector3d point_in_cam =
           estimate_rotation * map_.positions[selected_[i]].cast<double>() + estimate_translation;
-      if (!intrinsics_.Project(point_in_cam, &pixel)) continue;
-      int edge_pixel;
-      float distance;
-      if (!edges_.Nearest(static_cast<int>(std::lround(pixel.x())),
-                          static_cast<int>(std::lround(pixel.y())), options_.on_edge_radius_px,
-                          &edge_pixel, &distance)) {
-        continue;
+      if (!intrinsics_.Project(point_in_cam, &pixel) || !InsideImage(pixel)) continue;
+      const int cx = static_cast<int>(std::lround(pixel.x()));
+      const int cy = static_cast<int>(std::lround(pixel.y()));
+      int best_x = -1;
+      int best_y = -1;
+      int64_t best_t_ns = fresh_since_t_ns;
+      for (const auto& [dx, dy] : {std::pair{0, 0}, {1, 0}, {-1, 0}, {0, 1}, {0, -1}}) {
+        const int x = cx + dx;
+        const int y = cy + dy;
+        if (x < 0 || y < 0 || x >= surface_.width() || y >= surface_.height()) continue;
+        const int64_t t_last = surface_.LastTimestamp(SurfaceChannel::kAll, x, y);
+        if (t_last > best_t_ns && t_last <= step_t_ns_) {
+          best_t_ns = t_last;
+          best_x = x;
+          best_y = y;
+        }
       }
-      const int x = edge_pixel % surface_.width();
-      const int y = edge_pixel / surface_.width();
-      const bool fired_on = surface_.LastTimestamp(SurfaceChannel::kOn, x, y) >=
-                            surface_.LastTimestamp(SurfaceChannel::kOff, x, y);
+      if (best_x < 0) continue;
+      const bool fired_on = surface_.LastTimestamp(SurfaceChannel::kOn, best_x, best_y) >=
+                            surface_.LastTimestamp(SurfaceChannel::kOff, best_x, best_y);
       ++attempt.quality.polarity_predictions;
       attempt.quality.polarity_matches += fired_on == on ? 1 : 0;
     }
   }
   attempt.quality.on_edge_fraction = in_image > 0 ? static_cast<double>(on_edge) / in_image : 0;
+  attempt.quality.chance_on_edge_fraction =
+      chance_trials > 0 ? static_cast<double>(chance_on_edge) / chance_trials : 0;
+  attempt.quality.alignment =
+      attempt.quality.chance_on_edge_fraction < 1
+          ? (attempt.quality.on_edge_fraction - attempt.quality.chance_on_edge_fraction) /
+                (1 - attempt.quality.chance_on_edge_fraction)
+          : 0;
   attempt.quality.mean_residual = attempt.registration.mean_residual;
   attempt.quality.points_used = attempt.registration.points_used;
   attempt.quality.points_selected = static_cast<int>(num_selected);
@@ -351,12 +428,21 @@ PoseEstimate Tracker::Step(int64_t t_ns) {
 
   const Clock::time_point solve_start = Clock::now();
   const Rigid3d previous = motion_.last_world_from_cam();
-  Attempt best = Solve(predicted, was_tracking ? &previous : nullptr);
+  // Polarity needs the direction of the image motion: only once the velocity spans half its
+  // window (right after a Reset it is zero, then the noisy difference of two close poses).
+  const bool velocity_settled =
+      2 * motion_.velocity_span_ns() >= std::llround(options_.velocity_window_s * 1e9) &&
+      motion_.velocity_span_ns() > 0;
+  Attempt best = Solve(predicted, was_tracking && velocity_settled ? &previous : nullptr);
   int recovery_attempts = 0;
   if (!best.good && options_.enable_recovery) {
     // Retry from the last good pose, then from perturbations around it, with the unsigned
     // surface (the motion, hence the polarity prediction, is what failed).
-    std::vector<Rigid3d> starts = {last_good_world_from_cam_};
+    // First the prediction itself with the unsigned surface: when the motion turns within a
+    // step, the constant-velocity flow points the wrong way and so does every polarity.
+    std::vector<Rigid3d> starts;
+    if (was_tracking && velocity_settled && options_.use_polarity) starts.push_back(predicted);
+    starts.push_back(last_good_world_from_cam_);
     const double t = options_.recovery_translation_m;
     const double r = options_.recovery_rotation_deg * kRadiansPerDegree;
     for (int axis = 0; axis < 6; ++axis) {
@@ -370,9 +456,9 @@ PoseEstimate Tracker::Step(int64_t t_ns) {
     for (const Rigid3d& start : starts) {
       Attempt attempt = Solve(start, nullptr);
       ++recovery_attempts;
-      const bool better = (attempt.good && !best.good) ||
-                          (attempt.good == best.good &&
-                           attempt.quality.on_edge_fraction > best.quality.on_edge_fraction);
+      const bool better =
+          (attempt.good && !best.good) ||
+          (attempt.good == best.good && attempt.quality.alignment > best.quality.alignment);
       if (better) best = std::move(attempt);
       if (best.good) break;
     }

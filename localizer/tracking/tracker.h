@@ -42,6 +42,14 @@ struct TrackingQuality {
   // Fraction of the selected points (before occlusion culling) inside the image that lie within
   // on_edge_radius_px of an active edge pixel at the estimate.
   double on_edge_fraction = 0;
+  // The same fraction for the points displaced by 4 pixels (one of four directions per point):
+  // what an unrelated pose scores by chance on this step's edges. High on dense, textured event
+  // images; low when few pixels are active.
+  double chance_on_edge_fraction = 0;
+  // Chance-corrected alignment, (on_edge - chance) / (1 - chance): 1 when every point lies on an
+  // edge, 0 when the points fit no better than displaced copies of themselves. Unlike the mean
+  // residual it does not depend on how fresh the events are (how fast the camera moves).
+  double alignment = 0;
   // Mean field value at the registered points (0 on fresh edges, 1 far from any).
   double mean_residual = 1;
   // Number of points registered (after occlusion culling, inside the image).
@@ -52,10 +60,10 @@ struct TrackingQuality {
   int iterations = 0;
   // Number of recovery attempts run in this step (0 when the first solve was good).
   int recovery_attempts = 0;
-  // Points with a confident (ON or OFF) polarity prediction that lie on an active edge pixel at
-  // the estimate (within on_edge_radius_px).
+  // Points with a confident (ON or OFF) polarity prediction that fired in this step: a pixel
+  // within 1 px of their projection at the estimate has an event since the previous step.
   int polarity_predictions = 0;
-  // Of those, the points whose nearest active edge pixel fired last with the predicted polarity.
+  // Of those, the points whose freshest such pixel fired last with the predicted polarity.
   int polarity_matches = 0;
 };
 
@@ -107,6 +115,14 @@ class Tracker {
   // or the tracker takes frames; an event outside the sensor throws too.
   std::vector<PoseEstimate> AddEvents(const EventBuffer& events);
 
+  // Declares that every event with t_ns <= `t_ns` has been given (a packet's end time, or a
+  // quiet sensor): runs every fixed-rate step whose time is at most `t_ns` without waiting for a
+  // later event, so a pose need not wait for the next packet. Events given afterwards must be
+  // later than `t_ns`. Steps and poses are the same as when the next event triggers them. Does
+  // nothing in every-N-events mode, for frame trackers, or before the first Reset (except to
+  // record the bound). Throws InvalidArgumentError when `t_ns` is before the last event.
+  std::vector<PoseEstimate> AdvanceTo(int64_t t_ns);
+
   // Runs one Canny-VT step on a grey frame (CV_8UC1, the camera's size) taken at t_ns. Returns
   // nothing before the first Reset. Throws InvalidArgumentError when the tracker takes events,
   // the image is of another type or size, or t_ns is not after the last step.
@@ -135,6 +151,7 @@ class Tracker {
   void SelectPoints(const Rigid3d& predicted_world_from_cam);
   Attempt Solve(const Rigid3d& start_world_from_cam, const Rigid3d* previous_world_from_cam);
   bool IsGood(const TrackingQuality& quality) const;
+  bool InsideImage(const Eigen::Vector2d& pixel) const;
   bool NearEdge(const Eigen::Vector2d& pixel) const;
   PotentialField* Field(SurfaceChannel channel);
 
@@ -152,6 +169,8 @@ class Tracker {
   cv::Mat frame_distance_px_;
   // Active edge pixels (events) or Canny edges (frames) of the current step.
   NearestEdgeField edges_;
+  // Active ON and OFF pixels, for polarity-aware occlusion culling.
+  NearestEdgeField polarity_edges_[2];
   EdgeZBuffer zbuffer_;
   ConstantVelocityModel motion_;
   TrackingStatus status_ = TrackingStatus::kTracking;
@@ -170,6 +189,8 @@ class Tracker {
   int64_t next_step_t_ns_ = 0;
   int64_t events_since_step_ = 0;
   std::optional<int64_t> last_event_t_ns_;
+  // Every later event must be after this time (set by AdvanceTo).
+  std::optional<int64_t> complete_until_t_ns_;
   int64_t last_step_t_ns_ = 0;
 
   // Per-step scratch.
@@ -178,6 +199,10 @@ class Tracker {
   std::vector<uint8_t> scratch_keep_;
   std::vector<PotentialField*> scratch_fields_;
   std::vector<RegistrationPoint> scratch_points_;
+  std::vector<size_t> scratch_group_;
+  std::vector<Eigen::Vector2d> scratch_group_pixels_;
+  std::vector<double> scratch_group_depths_;
+  std::vector<uint8_t> scratch_group_keep_;
 };
 
 }  // namespace evloc::tracking

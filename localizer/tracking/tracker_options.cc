@@ -59,6 +59,10 @@ void TrackerOptions::Check() const {
       "min_on_edge_fraction must be in [0, 1].");
   Require(std::isfinite(on_edge_radius_px) && on_edge_radius_px >= 0 && on_edge_radius_px <= 10,
           "on_edge_radius_px must be in [0, 10].");
+  Require(std::isfinite(velocity_window_s) && velocity_window_s >= 0 && velocity_window_s <= 1,
+          "velocity_window_s must be in [0, 1] seconds.");
+  Require(std::isfinite(min_alignment) && min_alignment >= -1 && min_alignment <= 1,
+          "min_alignment must be in [-1, 1].");
   Require(std::isfinite(max_mean_residual) && max_mean_residual > 0,
           "max_mean_residual must be positive.");
   Require(std::isfinite(recovery_translation_m) && recovery_translation_m >= 0,

@@ -92,6 +92,12 @@ struct TrackerOptions {
   // Re-run the selection at least every this many steps.
   int reselect_every_steps = 10;
 
+  // --- Motion prior ---
+  // The constant velocity is measured between the newest estimate and the one at least this
+  // long before it (seconds; 0 = the last two steps). Pose noise divided by one step period
+  // swamps the velocity; the polarity prediction needs its direction.
+  double velocity_window_s = 0.02;
+
   // --- Polarity-aware registration (signed time surfaces) ---
   // Register points against the ON or OFF surface of their predicted polarity.
   bool use_polarity = true;
@@ -109,6 +115,9 @@ struct TrackerOptions {
   bool use_occlusion_culling = true;
   // Radius within which a point looks for its nearest active edge pixel, pixels.
   double annf_radius_px = 5.0;
+  // With polarity too (EVT): a point with a confident polarity prediction looks for the nearest
+  // pixel that fired with that polarity (the edge it registers against), not any active pixel.
+  bool polarity_aware_culling = true;
 
   // --- Registration ---
   // Solver options.
@@ -122,8 +131,12 @@ struct TrackerOptions {
   double min_on_edge_fraction = 0.35;
   // Distance within which a projected point counts as on an edge, pixels.
   double on_edge_radius_px = 1.5;
-  // A step whose mean field value at the points is above this is bad.
-  double max_mean_residual = 0.75;
+  // A step whose chance-corrected alignment (TrackingQuality::alignment) is below this is bad.
+  double min_alignment = 0.2;
+  // A step whose mean field value at the points is above this is bad (1 disables the test: the
+  // mean field value grows when the camera slows down and fewer pixels are fresh, so it cannot
+  // tell a wrong pose from a slow one; min_alignment does).
+  double max_mean_residual = 1.0;
   // On a bad step, retry from the last good pose and around it before declaring LOST.
   bool enable_recovery = true;
   // Translation of the recovery perturbations (along each camera axis, both signs), metres.

@@ -129,6 +129,54 @@ TEST(Tracker, OutputDoesNotDependOnHowEventsAreSplitIntoPackets) {
   }
 }
 
+// A packet's end time (AdvanceTo) runs the steps it completes at once instead of waiting for the
+// next event, with the same poses.
+TEST(Tracker, AdvanceToRunsCompletedStepsWithTheSamePoses) {
+  const Sequence& sequence = SmoothSequence();
+  TrackerOptions options;
+  Tracker reference(sequence.map, nullptr, sequence.camera, options);
+  reference.Reset(testing::SmoothMotion(kStartNs), kStartNs);
+  const std::vector<PoseEstimate> expected = reference.AddEvents(sequence.events);
+  ASSERT_GT(expected.size(), 20u);
+
+  Tracker tracker(sequence.map, nullptr, sequence.camera, options);
+  tracker.Reset(testing::SmoothMotion(kStartNs), kStartNs);
+  std::vector<PoseEstimate> all;
+  const size_t count = sequence.events.size();
+  // 1 ms windows: every window ends just before the first event of the next one.
+  size_t begin = 0;
+  int64_t window_end_ns = sequence.events.t_ns[0] + 1'000'000;
+  while (begin < count) {
+    size_t end = begin;
+    while (end < count && sequence.events.t_ns[end] <= window_end_ns) ++end;
+    EventBuffer chunk;
+    chunk.Append(sequence.events.t_ns.data() + begin, sequence.events.x.data() + begin,
+                 sequence.events.y.data() + begin, sequence.events.polarity.data() + begin,
+                 end - begin);
+    for (PoseEstimate& estimate : tracker.AddEvents(chunk)) all.push_back(estimate);
+    const size_t before = all.size();
+    for (PoseEstimate& estimate : tracker.AdvanceTo(window_end_ns)) all.push_back(estimate);
+    // Every step at or before the window's end has run.
+    if (!all.empty()) {
+      EXPECT_GT(all.back().t_ns + 1'000'000'000 / 300, window_end_ns);
+    }
+    for (size_t i = before; i < all.size(); ++i) EXPECT_LE(all[i].t_ns, window_end_ns);
+    begin = end;
+    window_end_ns += 1'000'000;
+  }
+  // The reference waits for an event after the last step time; the advanced tracker may have run
+  // one more step at the end.
+  ASSERT_GE(all.size(), expected.size());
+  all.resize(expected.size());
+  ExpectIdentical(expected, all);
+
+  // An event at or before the declared time is rejected.
+  EventBuffer late;
+  late.push_back({window_end_ns - 1'000'000, 3, 4, 1});
+  EXPECT_THROW(tracker.AddEvents(late), InvalidArgumentError);
+  EXPECT_THROW(tracker.AdvanceTo(sequence.events.t_ns.back() - 1), InvalidArgumentError);
+}
+
 TEST(Tracker, RejectsEventsGoingBackInTime) {
   const Sequence& sequence = SmoothSequence();
   Tracker tracker(sequence.map, nullptr, sequence.camera, TrackerOptions{});
