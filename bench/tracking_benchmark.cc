@@ -117,6 +117,33 @@ BENCHMARK(BM_TrackingStep)
     ->Args({1, 1, 1, 1})
     ->Unit(benchmark::kMicrosecond);
 
+// The whole 400 ms sequence (120 steps) per iteration, from a fresh tracker: a fixed amount of
+// work, so that instruction counts (valgrind --tool=callgrind --toggle-collect='*Tracker::Step*')
+// compare before and after a change independently of the machine's load. items_per_second is
+// steps per second of CPU time.
+void BM_TrackingSequence(benchmark::State& state) {
+  const Scene& scene = GetScene();
+  TrackerOptions options;
+  options.max_points = 2000;
+  options.use_polarity = state.range(0) != 0;
+  options.use_occlusion_culling = state.range(1) != 0;
+  int64_t steps = 0;
+  for (auto _ : state) {
+    state.PauseTiming();
+    Tracker tracker(scene.map, nullptr, scene.camera, options);
+    tracker.AddEvents(scene.warm_up);
+    tracker.Reset(testing::SmoothMotion(kStartNs), kStartNs);
+    state.ResumeTiming();
+    for (const EventBuffer& packet : scene.packets) {
+      steps += static_cast<int64_t>(tracker.AddEvents(packet).size());
+    }
+  }
+  state.SetItemsProcessed(steps);
+  state.SetLabel(options.VariantName());
+}
+// Args: polarity, occlusion.
+BENCHMARK(BM_TrackingSequence)->Args({1, 1})->Args({0, 0})->Unit(benchmark::kMillisecond);
+
 // Event ingestion: one look-up and two stores per event, 640x480, events on a moving edge
 // pattern (realistic locality) or uniformly random pixels (worst case).
 void BM_Ingestion(benchmark::State& state) {

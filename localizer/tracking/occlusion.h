@@ -4,6 +4,8 @@
 // nearest point wins), and points with no edge pixel within the radius drop out.
 #pragma once
 
+#include <cmath>
+#include <cstddef>
 #include <cstdint>
 #include <utility>
 #include <vector>
@@ -45,6 +47,23 @@ class NearestEdgeField {
   // y * width + x, and its distance in pixels. False when (x, y) is outside the image or no edge
   // pixel lies within the radius.
   bool Nearest(int x, int y, double radius_px, int* edge_pixel_index, float* distance_px) const;
+  // Nearest for the pixel nearest to `pixel` (rounded half away from zero, as std::lround);
+  // false for non-finite or far-off coordinates too.
+  bool Nearest(const Eigen::Vector2d& pixel, double radius_px, int* edge_pixel_index,
+               float* distance_px) const {
+    int x;
+    int y;
+    return RoundToPixel(pixel, &x, &y) && Nearest(x, y, radius_px, edge_pixel_index, distance_px);
+  }
+
+  // Rounds `pixel` half away from zero (as std::lround, without its library call); false when a
+  // coordinate is not finite or beyond 1e8 in magnitude (outputs untouched).
+  static bool RoundToPixel(const Eigen::Vector2d& pixel, int* x, int* y) {
+    if (!(std::abs(pixel.x()) <= 1e8 && std::abs(pixel.y()) <= 1e8)) return false;
+    *x = RoundHalfAwayFromZero(pixel.x());
+    *y = RoundHalfAwayFromZero(pixel.y());
+    return true;
+  }
 
  private:
   struct Offset {
@@ -52,7 +71,25 @@ class NearestEdgeField {
     int dy;
     float distance;
   };
-  const std::vector<Offset>& Offsets(double radius_px) const;
+  // The window of one radius: offsets by increasing distance then row-major order, and the same
+  // offsets as row-major index differences for the image width they were made for.
+  struct Window {
+    double radius_px = -1;
+    int width = 0;
+    std::vector<Offset> offsets;
+    std::vector<std::ptrdiff_t> index_offsets;
+  };
+  const Window& WindowFor(double radius_px) const;
+  // |value| <= 1e8: the exact difference value - trunc(value) decides, as std::lround.
+  static int RoundHalfAwayFromZero(double value) {
+    const int truncated = static_cast<int>(value);
+    const double fraction = value - truncated;
+    return truncated + (fraction >= 0.5 ? 1 : 0) - (fraction <= -0.5 ? 1 : 0);
+  }
+  // The first edge pixel among `window` around row-major index `centre` (the window lies inside
+  // the image), or -1, with its position in the window.
+  template <typename IsEdgeAt>
+  static int FirstEdge(const Window& window, size_t centre, IsEdgeAt&& is_edge, size_t* position);
 
   int width_ = 0;
   int height_ = 0;
@@ -62,9 +99,10 @@ class NearestEdgeField {
   // ... or per-pixel last time stamps with the earliest time stamp that is still active.
   const int64_t* last_t_ns_ = nullptr;
   int64_t min_active_t_ns_ = 0;
-  // Per radius asked for, the window offsets within it by increasing distance then row-major
-  // order (a tracker asks for two radii: occlusion and on-edge).
-  mutable std::vector<std::pair<double, std::vector<Offset>>> offsets_;
+  // Per radius asked for, its window (a tracker asks for two radii: occlusion and on-edge); the
+  // last one used is tried first.
+  mutable std::vector<Window> windows_;
+  mutable size_t last_window_ = 0;
 };
 
 // The z-buffer keyed by edge pixel. Reuses its storage across steps.

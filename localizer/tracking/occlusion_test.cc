@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <random>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -34,6 +35,43 @@ TEST(NearestEdgeField, FindsTheNearestEdgePixel) {
   // An image without edges has no nearest edge.
   annf.Build(cv::Mat::zeros(30, 40, CV_8UC1));
   EXPECT_FALSE(annf.Nearest(8, 10, 5.0, &index, &distance));
+}
+
+// RoundToPixel rounds half away from zero exactly as std::lround, at and around the halves, and
+// refuses non-finite and far-off coordinates; Nearest of a real pixel searches from it.
+TEST(NearestEdgeField, RoundsPixelsAsLroundWithoutTheLibraryCall) {
+  std::vector<double> values = {0.0, -0.0, 0.5, -0.5, 1.5, -1.5, 2.5, -2.5, 1e8, -1e8, 3.0, -3.0};
+  for (const double half : {0.5, 1.5, 2.5, 319.5, -0.5, -1.5, -239.5}) {
+    values.push_back(std::nextafter(half, 1e9));
+    values.push_back(std::nextafter(half, -1e9));
+  }
+  std::mt19937 random(3);
+  std::uniform_real_distribution<double> uniform(-1000.0, 1000.0);
+  for (int i = 0; i < 10000; ++i) values.push_back(uniform(random));
+  for (const double value : values) {
+    int x = 0;
+    int y = 0;
+    ASSERT_TRUE(NearestEdgeField::RoundToPixel(Eigen::Vector2d(value, -value), &x, &y));
+    EXPECT_EQ(x, std::lround(value)) << value;
+    EXPECT_EQ(y, std::lround(-value)) << value;
+  }
+  int x = 7;
+  int y = 7;
+  EXPECT_FALSE(NearestEdgeField::RoundToPixel(Eigen::Vector2d(NAN, 1.0), &x, &y));
+  EXPECT_FALSE(NearestEdgeField::RoundToPixel(Eigen::Vector2d(1.0, INFINITY), &x, &y));
+  EXPECT_FALSE(NearestEdgeField::RoundToPixel(Eigen::Vector2d(2e8, 1.0), &x, &y));
+  EXPECT_EQ(x, 7);
+
+  cv::Mat edges = cv::Mat::zeros(30, 40, CV_8UC1);
+  edges.at<uint8_t>(10, 5) = 255;
+  NearestEdgeField annf;
+  annf.Build(edges);
+  int index;
+  float distance;
+  ASSERT_TRUE(annf.Nearest(Eigen::Vector2d(7.5, 9.6), 5.0, &index, &distance));  // (8, 10)
+  EXPECT_EQ(index, 10 * 40 + 5);
+  EXPECT_NEAR(distance, 3.0, 1e-6);
+  EXPECT_FALSE(annf.Nearest(Eigen::Vector2d(NAN, 10.0), 5.0, &index, &distance));
 }
 
 // The window search agrees with a brute-force search over every edge pixel, for a mask and for

@@ -25,20 +25,40 @@ struct Linearization {
   int points_used = 0;
 };
 
+// The pose cam_from_world as a row-major 3x4 matrix of plain doubles: the hot loop transforms
+// with it without Eigen's expression machinery (which the compiler does not always inline).
+struct PoseMatrix {
+  double r[9];
+  double t[3];
+
+  explicit PoseMatrix(const Rigid3d& cam_from_world) {
+    const Eigen::Matrix3d rotation = cam_from_world.RotationMatrix();
+    for (int i = 0; i < 3; ++i) {
+      for (int j = 0; j < 3; ++j) r[3 * i + j] = rotation(i, j);
+      t[i] = cam_from_world.translation(i);
+    }
+  }
+};
+
 // The residual of one point and, when `jacobian` (6 values) is not null, its derivative with
-// respect to the left increment, at the pose (rotation, translation) = cam_from_world as a matrix.
-// `Field` is the concrete field type so that the per-sample call is not virtual in the hot loop.
+// respect to the left increment, at `pose` (cam_from_world). `Field` is the concrete field type
+// so that the per-sample call is not virtual in the hot loop.
 template <typename Field>
-inline bool ResidualAndJacobian(Field& field, const PinholeIntrinsics& intrinsics,
-                                const Eigen::Matrix3d& rotation, const Eigen::Vector3d& translation,
-                                const Eigen::Vector3d& position_world, double margin_px,
-                                double* residual, double* jacobian) {
-  const Eigen::Vector3d point_in_cam = rotation * position_world + translation;
-  const double z = point_in_cam.z();
+[[gnu::always_inline]] inline bool ResidualAndJacobian(
+    Field& field, const PinholeIntrinsics& intrinsics, const PoseMatrix& pose,
+    const Eigen::Vector3d& position_world, double margin_px, double* residual, double* jacobian) {
+  const double* r = pose.r;
+  const double px = position_world.x();
+  const double py = position_world.y();
+  const double pz = position_world.z();
+  // The sums in the order Eigen's `rotation * p + t` uses (results are bit-identical to it).
+  const double cam_x = (r[0] * px + r[1] * py + r[2] * pz) + pose.t[0];
+  const double cam_y = (r[3] * px + r[4] * py + r[5] * pz) + pose.t[1];
+  const double z = (r[6] * px + (r[7] * py + r[8] * pz)) + pose.t[2];
   if (!(z > Camera::kMinDepth)) return false;
   const double inverse_z = 1.0 / z;
-  const double x = point_in_cam.x() * inverse_z;
-  const double y = point_in_cam.y() * inverse_z;
+  const double x = cam_x * inverse_z;
+  const double y = cam_y * inverse_z;
   const double u = intrinsics.fx * x + intrinsics.cx;
   const double v = intrinsics.fy * y + intrinsics.cy;
   if (!(u >= margin_px && v >= margin_px && u <= field.width() - 1 - margin_px &&
@@ -55,48 +75,60 @@ inline bool ResidualAndJacobian(Field& field, const PinholeIntrinsics& intrinsic
     jacobian[0] = a0;
     jacobian[1] = a1;
     jacobian[2] = a2;
-    jacobian[3] = point_in_cam.y() * a2 - point_in_cam.z() * a1;
-    jacobian[4] = point_in_cam.z() * a0 - point_in_cam.x() * a2;
-    jacobian[5] = point_in_cam.x() * a1 - point_in_cam.y() * a0;
+    jacobian[3] = cam_y * a2 - z * a1;
+    jacobian[4] = z * a0 - cam_x * a2;
+    jacobian[5] = cam_x * a1 - cam_y * a0;
   }
   return true;
 }
 
 // Normal equations and cost of all points at one pose. `Field` is the concrete type of every
-// point's field (PotentialField when they differ).
-template <typename Field>
+// point's field (PotentialField when they differ); `kLoss` the robust loss, so that the weight
+// and cost are inline in the loop.
+template <typename Field, RobustLoss kLoss>
 Linearization Linearize(const std::vector<RegistrationPoint>& points,
                         const PinholeIntrinsics& intrinsics, const Rigid3d& cam_from_world,
                         const RegistrationOptions& options) {
   Linearization result;
+  const double scale = options.robust_scale;
   // Points outside the image cost as much as a point far from every edge (residual 1), so that
   // costs at different poses compare the same point set.
-  const double outside_cost = RobustCost(options.loss, options.robust_scale, 1.0);
-  const Eigen::Matrix3d rotation = cam_from_world.RotationMatrix();
-  const Eigen::Vector3d& translation = cam_from_world.translation;
-  // J^T W J in the upper triangle only (21 products per point), row-major packed.
+  const double outside_cost = RobustCost(kLoss, scale, 1.0);
+  const PoseMatrix pose(cam_from_world);
+  // J^T W J in the upper triangle only (21 products per point), row-major packed; the loops
+  // are unrolled so that the 27 sums stay in registers.
   double information[21] = {};
   double gradient[6] = {};
+  double cost = 0;
+  double weighted_squared_residuals = 0;
+  double sum_residuals = 0;
+  int points_used = 0;
   for (const RegistrationPoint& point : points) {
     double residual;
     double jacobian[6];
-    if (!ResidualAndJacobian(static_cast<Field&>(*point.field), intrinsics, rotation, translation,
+    if (!ResidualAndJacobian(static_cast<Field&>(*point.field), intrinsics, pose,
                              point.position_world, options.image_margin_px, &residual, jacobian)) {
-      result.cost += outside_cost;
+      cost += outside_cost;
       continue;
     }
-    const double weight = RobustWeight(options.loss, options.robust_scale, residual);
+    const double weight = RobustWeight(kLoss, scale, residual);
     int k = 0;
+#pragma GCC unroll 6
     for (int i = 0; i < 6; ++i) {
       const double weighted = weight * jacobian[i];
       gradient[i] += weighted * residual;
+#pragma GCC unroll 6
       for (int j = i; j < 6; ++j) information[k++] += weighted * jacobian[j];
     }
-    result.cost += RobustCost(options.loss, options.robust_scale, residual);
-    result.weighted_squared_residuals += weight * residual * residual;
-    result.sum_residuals += residual;
-    ++result.points_used;
+    cost += RobustCost(kLoss, scale, residual);
+    weighted_squared_residuals += weight * residual * residual;
+    sum_residuals += residual;
+    ++points_used;
   }
+  result.cost = cost;
+  result.weighted_squared_residuals = weighted_squared_residuals;
+  result.sum_residuals = sum_residuals;
+  result.points_used = points_used;
   int k = 0;
   for (int i = 0; i < 6; ++i) {
     result.gradient(i) = gradient[i];
@@ -126,18 +158,29 @@ FieldKind CommonFieldKind(const std::vector<RegistrationPoint>& points) {
   return FieldKind::kMixed;
 }
 
-Linearization LinearizeAny(FieldKind kind, const std::vector<RegistrationPoint>& points,
-                           const PinholeIntrinsics& intrinsics, const Rigid3d& cam_from_world,
-                           const RegistrationOptions& options) {
+template <RobustLoss kLoss>
+Linearization LinearizeWithLoss(FieldKind kind, const std::vector<RegistrationPoint>& points,
+                                const PinholeIntrinsics& intrinsics, const Rigid3d& cam_from_world,
+                                const RegistrationOptions& options) {
   switch (kind) {
     case FieldKind::kTimeSurface:
-      return Linearize<TimeSurfaceField>(points, intrinsics, cam_from_world, options);
+      return Linearize<TimeSurfaceField, kLoss>(points, intrinsics, cam_from_world, options);
     case FieldKind::kDense:
-      return Linearize<DenseField>(points, intrinsics, cam_from_world, options);
+      return Linearize<DenseField, kLoss>(points, intrinsics, cam_from_world, options);
     case FieldKind::kMixed:
       break;
   }
-  return Linearize<PotentialField>(points, intrinsics, cam_from_world, options);
+  return Linearize<PotentialField, kLoss>(points, intrinsics, cam_from_world, options);
+}
+
+Linearization LinearizeAny(FieldKind kind, const std::vector<RegistrationPoint>& points,
+                           const PinholeIntrinsics& intrinsics, const Rigid3d& cam_from_world,
+                           const RegistrationOptions& options) {
+  if (options.loss == RobustLoss::kCauchy) {
+    return LinearizeWithLoss<RobustLoss::kCauchy>(kind, points, intrinsics, cam_from_world,
+                                                  options);
+  }
+  return LinearizeWithLoss<RobustLoss::kHuber>(kind, points, intrinsics, cam_from_world, options);
 }
 
 // sigma^2 H^-1, with unconstrained directions given a large variance.
@@ -167,35 +210,8 @@ Matrix6d Covariance(const Linearization& linearization, bool* well_conditioned) 
 bool EvaluatePointResidual(PotentialField& field, const PinholeIntrinsics& intrinsics,
                            const Rigid3d& cam_from_world, const Eigen::Vector3d& position_world,
                            double margin_px, double* residual, RowVector6d* jacobian) {
-  return ResidualAndJacobian(field, intrinsics, cam_from_world.RotationMatrix(),
-                             cam_from_world.translation, position_world, margin_px, residual,
-                             jacobian ? jacobian->data() : nullptr);
-}
-
-double RobustWeight(RobustLoss loss, double scale, double residual) {
-  const double magnitude = std::abs(residual);
-  switch (loss) {
-    case RobustLoss::kHuber:
-      return magnitude <= scale ? 1.0 : scale / magnitude;
-    case RobustLoss::kCauchy: {
-      const double ratio = residual / scale;
-      return 1.0 / (1.0 + ratio * ratio);
-    }
-  }
-  return 1.0;
-}
-
-double RobustCost(RobustLoss loss, double scale, double residual) {
-  const double magnitude = std::abs(residual);
-  switch (loss) {
-    case RobustLoss::kHuber:
-      return magnitude <= scale ? 0.5 * residual * residual : scale * (magnitude - 0.5 * scale);
-    case RobustLoss::kCauchy: {
-      const double ratio = residual / scale;
-      return 0.5 * scale * scale * std::log1p(ratio * ratio);
-    }
-  }
-  return 0.5 * residual * residual;
+  return ResidualAndJacobian(field, intrinsics, PoseMatrix(cam_from_world), position_world,
+                             margin_px, residual, jacobian ? jacobian->data() : nullptr);
 }
 
 RegistrationResult RegisterPoints(const std::vector<RegistrationPoint>& points,

@@ -8,6 +8,7 @@
 // covariance of delta is also the covariance of xi in world_from_cam * ExpSE3(xi).
 #pragma once
 
+#include <cmath>
 #include <vector>
 
 #include <Eigen/Core>
@@ -71,10 +72,33 @@ bool EvaluatePointResidual(PotentialField& field, const PinholeIntrinsics& intri
                            double margin_px, double* residual, RowVector6d* jacobian);
 
 // Weight w(r) of iteratively reweighted least squares for the robust loss, and the loss rho(r)
-// scaled so that rho(r) ~ r^2 / 2 near zero.
-double RobustWeight(RobustLoss loss, double scale, double residual);
+// scaled so that rho(r) ~ r^2 / 2 near zero. Inline: the solver calls both for every point.
+inline double RobustWeight(RobustLoss loss, double scale, double residual) {
+  const double magnitude = std::abs(residual);
+  switch (loss) {
+    case RobustLoss::kHuber:
+      return magnitude <= scale ? 1.0 : scale / magnitude;
+    case RobustLoss::kCauchy: {
+      const double ratio = residual / scale;
+      return 1.0 / (1.0 + ratio * ratio);
+    }
+  }
+  return 1.0;
+}
+
 // The robust loss value (see RobustWeight).
-double RobustCost(RobustLoss loss, double scale, double residual);
+inline double RobustCost(RobustLoss loss, double scale, double residual) {
+  const double magnitude = std::abs(residual);
+  switch (loss) {
+    case RobustLoss::kHuber:
+      return magnitude <= scale ? 0.5 * residual * residual : scale * (magnitude - 0.5 * scale);
+    case RobustLoss::kCauchy: {
+      const double ratio = residual / scale;
+      return 0.5 * scale * scale * std::log1p(ratio * ratio);
+    }
+  }
+  return 0.5 * residual * residual;
+}
 
 // The outcome of a registration.
 struct RegistrationResult {

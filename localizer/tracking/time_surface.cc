@@ -119,7 +119,11 @@ cv::Mat TimeSurface::ActiveMask(SurfaceChannel channel, int64_t t_ns,
 
 TimeSurfaceField::TimeSurfaceField(const TimeSurface& surface, SurfaceChannel channel,
                                    const SurfaceDecay& decay, bool smooth)
-    : surface_(surface), channel_(channel), decay_(decay), smooth_(smooth) {
+    : surface_(surface),
+      channel_(channel),
+      decay_(decay),
+      max_active_age_ns_(decay.MaxActiveAgeNs()),
+      smooth_(smooth) {
   const size_t num_pixels = static_cast<size_t>(surface.width()) * surface.height();
   raw_.assign(num_pixels, Memo{});
   if (smooth_) smoothed_.assign(num_pixels, Memo{});
@@ -137,9 +141,13 @@ void TimeSurfaceField::SetTime(int64_t t_ns) {
 }
 
 float TimeSurfaceField::ComputeRaw(size_t index) const {
-  const int x = static_cast<int>(index % surface_.width());
-  const int y = static_cast<int>(index / surface_.width());
-  return static_cast<float>(1.0 - decay_.Value(surface_.LastTimestamp(channel_, x, y), t_ns_));
+  // As 1 - decay_.Value(last_t, t_ns_), with the age bound computed once.
+  const int64_t last_t = surface_.LastTimestamps(channel_)[index];
+  if (last_t == kNeverFired) return 1.0f;
+  const int64_t age_ns = std::max<int64_t>(0, t_ns_ - last_t);
+  if (age_ns > max_active_age_ns_) return 1.0f;
+  const double value = std::exp(-static_cast<double>(age_ns) / decay_.decay_time_ns);
+  return static_cast<float>(1.0 - (value > decay_.empty_threshold ? value : 0.0));
 }
 
 float TimeSurfaceField::SmoothedValue(int x, int y) {

@@ -160,6 +160,8 @@ class TimeSurfaceField final : public PotentialField {
   const TimeSurface& surface_;
   SurfaceChannel channel_;
   SurfaceDecay decay_;
+  // decay_.MaxActiveAgeNs(), computed once (it takes a logarithm).
+  int64_t max_active_age_ns_ = 0;
   bool smooth_;
   int64_t t_ns_ = 0;
   // Memo stamp of the current time; a value is valid when its stamp equals this.
