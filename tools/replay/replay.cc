@@ -254,6 +254,8 @@ class Replayer {
   SharedState shared_;
   ReplayResult result_;
   Clock::time_point wall_start_;
+  // Track calls opened so far.
+  int sessions_ = 0;
   // The stream failure being recovered from, with the wall times of the failure and of the
   // last pose before it.
   std::optional<Outage> outage_;
@@ -313,6 +315,8 @@ Clock::duration Replayer::Backoff(int attempt) {
 
 grpc::Status Replayer::RunSession(const TimedPose& start, bool resumed, bool* started) {
   *started = false;
+  // A later session sends what it must send again as fast as the poses confirm it.
+  const bool catching_up = ++sessions_ > 1;
   // The first window of this session.
   size_t next = 0;
   if (resumed) {
@@ -454,7 +458,7 @@ grpc::Status Replayer::RunSession(const TimedPose& start, bool resumed, bool* st
       packet->set_time_base_ns(packet_start_ns);
       packet->set_data(service::EncodePackedEvents(*events, 0, events->size(), packet_start_ns));
     }
-    // Pacing: real time from the replay's start, or by the poses. A resumed session that is
+    // Pacing: real time from the replay's start, or by the poses. A later session that is
     // behind the real-time schedule catches up paced by the poses, so that it does not
     // overflow the new server's queue.
     if (options_.speed) {
@@ -462,7 +466,7 @@ grpc::Status Replayer::RunSession(const TimedPose& start, bool resumed, bool* st
           wall_start_ +
           std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(
               static_cast<double>(packet_end_ns - dataset_start_ns_) * 1e-9 / *options_.speed));
-      if (resumed && due < Clock::now()) {
+      if (catching_up && due < Clock::now()) {
         wait_for_poses();
       } else {
         std::this_thread::sleep_until(due);
