@@ -5,6 +5,8 @@
 #include <functional>
 #include <limits>
 #include <numbers>
+#include <sstream>
+#include <string>
 
 #include <pcl/kdtree/kdtree_flann.h>
 #include <pcl/point_cloud.h>
@@ -13,6 +15,9 @@
 #include <opencv2/imgproc.hpp>
 
 #include "core/common/error.h"
+#include "core/common/file_util.h"
+#include "core/trajectory/trajectory.h"
+#include "core/trajectory/tum_io.h"
 
 namespace evloc::mapper {
 namespace {
@@ -82,6 +87,7 @@ MapAccuracy MeasureMapAccuracy(const Map& map, const Map& reference,
   MapAccuracy accuracy;
   accuracy.num_points = map.size();
   std::vector<double> depth_errors;
+  std::vector<double> signed_depth_errors;
   std::vector<double> edge_distances;
   std::vector<double> gradient_angles;
   std::vector<double> image_gradient_angles;
@@ -123,17 +129,22 @@ MapAccuracy MeasureMapAccuracy(const Map& map, const Map& reference,
       const int u = static_cast<int>(std::lround(pixel.x()));
       const int w = static_cast<int>(std::lround(pixel.y()));
       double best = std::numeric_limits<double>::infinity();
+      double best_signed = 0.0;
       for (int dy = -window; dy <= window; ++dy) {
         for (int dx = -window; dx <= window; ++dx) {
           const int x = u + dx;
           const int y = w + dy;
           if (x < 0 || y < 0 || x >= view.depth_m.cols || y >= view.depth_m.rows) continue;
           const float depth = view.depth_m.at<float>(y, x);
-          if (depth > 0.0f) best = std::min(best, std::abs(in_cam.z() - depth));
+          if (depth > 0.0f && std::abs(in_cam.z() - depth) < best) {
+            best = std::abs(in_cam.z() - depth);
+            best_signed = in_cam.z() - depth;
+          }
         }
       }
       if (!std::isfinite(best)) continue;
       depth_errors.push_back(best);
+      signed_depth_errors.push_back(best_signed);
       Eigen::Vector2d direction;
       Eigen::Vector2d reference_direction;
       if (ImageDirection(view, point, gradient, &direction) &&
@@ -153,6 +164,7 @@ MapAccuracy MeasureMapAccuracy(const Map& map, const Map& reference,
   };
   accuracy.num_depth_compared = depth_errors.size();
   accuracy.median_depth_error_m = Median(depth_errors);
+  accuracy.median_signed_depth_error_m = Median(signed_depth_errors);
   accuracy.depth_within_fraction = fraction_within(depth_errors);
   accuracy.median_edge_distance_m = Median(edge_distances);
   accuracy.edge_within_fraction = fraction_within(edge_distances);
@@ -200,6 +212,36 @@ std::vector<double> KeyframeEdgeDistances(const Map& map, const std::filesystem:
   }
   std::sort(distances.begin(), distances.end());
   return distances;
+}
+
+std::vector<DepthView> ReadDatasetDepthViews(const std::filesystem::path& dataset, int stride) {
+  if (stride < 1) throw InvalidArgumentError("the depth-map stride must be at least 1");
+  const Camera camera = ReadCameraYaml(dataset / "calib.yaml");
+  const Trajectory trajectory = ReadTumTrajectory(dataset / "groundtruth.txt");
+  std::istringstream lines(ReadFileToString(dataset / "depth.txt"));
+  std::vector<DepthView> views;
+  std::string line;
+  int index = 0;
+  while (std::getline(lines, line)) {
+    std::istringstream fields(line);
+    std::string time;
+    std::string path;
+    if (!(fields >> time >> path) || time[0] == '#') continue;
+    if (index++ % stride != 0) continue;
+    const std::optional<Rigid3d> world_from_cam =
+        trajectory.Lookup(ParseSecondsAsNanoseconds(time));
+    if (!world_from_cam) continue;
+    const cv::Mat millimetres = cv::imread((dataset / path).string(), cv::IMREAD_UNCHANGED);
+    if (millimetres.empty() || millimetres.type() != CV_16UC1) {
+      throw IoError("cannot read the 16-bit depth map " + (dataset / path).string());
+    }
+    DepthView view;
+    view.camera = camera;
+    view.cam_from_world = world_from_cam->Inverse();
+    millimetres.convertTo(view.depth_m, CV_32F, 1e-3);
+    views.push_back(std::move(view));
+  }
+  return views;
 }
 
 }  // namespace evloc::mapper

@@ -26,6 +26,11 @@ struct DepthView {
   cv::Mat depth_m;
 };
 
+// The rendered depth maps of an evloc-sim dataset (depth.txt: `t path` lines of 16-bit PNGs in
+// millimetres; calib.yaml; groundtruth.txt for the poses), every `stride`-th one. Throws IoError /
+// ParseError for unreadable or malformed files, InvalidArgumentError for a stride below 1.
+std::vector<DepthView> ReadDatasetDepthViews(const std::filesystem::path& dataset, int stride = 1);
+
 // Options of MeasureMapAccuracy.
 struct MapAccuracyOptions {
   // Points within this distance count as accurate, metres (the "within" fractions).
@@ -49,6 +54,9 @@ struct MapAccuracy {
   size_t num_depth_compared = 0;
   // Median depth error against the nearest depth view (by camera centre), metres.
   double median_depth_error_m = 0.0;
+  // Median of the signed depth error (map depth minus rendered depth), metres: a bias, e.g. from a
+  // scale error of estimated poses, shows here.
+  double median_signed_depth_error_m = 0.0;
   // Fraction of the compared points with a depth error within within_m.
   double depth_within_fraction = 0.0;
   // Median distance to the ground-truth edges (segment of the two nearest points), metres.

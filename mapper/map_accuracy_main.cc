@@ -6,19 +6,14 @@
 #include <algorithm>
 #include <filesystem>
 #include <iostream>
-#include <sstream>
 #include <string>
 #include <vector>
 
 #include <nlohmann/json.hpp>
-#include <opencv2/imgcodecs.hpp>
 
 #include "core/camera/camera.h"
 #include "core/common/cli.h"
 #include "core/common/error.h"
-#include "core/common/file_util.h"
-#include "core/trajectory/trajectory.h"
-#include "core/trajectory/tum_io.h"
 #include "mapper/map_accuracy.h"
 #include "maps/map.h"
 #include "maps/map_directory.h"
@@ -41,35 +36,6 @@ the nearest Canny edge (40/100) of its image (real data without a ground-truth s
   --within METRES      threshold of the "within" fractions (default 0.02)
   --depth-stride N     use every N-th depth map (default 1)
 )";
-
-std::vector<DepthView> ReadDepthViews(const fs::path& dataset, int stride) {
-  const evloc::Camera camera = evloc::ReadCameraYaml(dataset / "calib.yaml");
-  const evloc::Trajectory trajectory = evloc::ReadTumTrajectory(dataset / "groundtruth.txt");
-  std::istringstream lines(evloc::ReadFileToString(dataset / "depth.txt"));
-  std::vector<DepthView> views;
-  std::string line;
-  int index = 0;
-  while (std::getline(lines, line)) {
-    std::istringstream fields(line);
-    std::string time;
-    std::string path;
-    if (!(fields >> time >> path) || time[0] == '#') continue;
-    if (index++ % stride != 0) continue;
-    const std::optional<evloc::Rigid3d> world_from_cam =
-        trajectory.Lookup(evloc::ParseSecondsAsNanoseconds(time));
-    if (!world_from_cam) continue;
-    const cv::Mat millimetres = cv::imread((dataset / path).string(), cv::IMREAD_UNCHANGED);
-    if (millimetres.empty() || millimetres.type() != CV_16UC1) {
-      throw evloc::IoError("cannot read the 16-bit depth map " + (dataset / path).string());
-    }
-    DepthView view;
-    view.camera = camera;
-    view.cam_from_world = world_from_cam->Inverse();
-    millimetres.convertTo(view.depth_m, CV_32F, 1e-3);
-    views.push_back(std::move(view));
-  }
-  return views;
-}
 
 }  // namespace
 
@@ -134,7 +100,7 @@ int main(int argc, char** argv) {
       return 0;
     }
     const evloc::Map reference = evloc::LoadMap(dataset / "gt_map" / evloc::kMapFileName);
-    const std::vector<DepthView> views = ReadDepthViews(dataset, stride);
+    const std::vector<DepthView> views = evloc::mapper::ReadDatasetDepthViews(dataset, stride);
     const evloc::mapper::MapAccuracy accuracy =
         evloc::mapper::MeasureMapAccuracy(map, reference, views, options);
     nlohmann::json json;
@@ -143,6 +109,7 @@ int main(int argc, char** argv) {
     json["depth_views"] = views.size();
     json["depth_compared_points"] = accuracy.num_depth_compared;
     json["median_depth_error_m"] = accuracy.median_depth_error_m;
+    json["median_signed_depth_error_m"] = accuracy.median_signed_depth_error_m;
     json["depth_within_fraction"] = accuracy.depth_within_fraction;
     json["median_edge_distance_m"] = accuracy.median_edge_distance_m;
     json["edge_within_fraction"] = accuracy.edge_within_fraction;

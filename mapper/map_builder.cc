@@ -25,6 +25,7 @@
 #include "core/trajectory/trajectory.h"
 #include "core/trajectory/tum_io.h"
 #include "mapper/colmap_model.h"
+#include "mapper/pose_alignment.h"
 #include "maps/map_directory.h"
 
 #ifndef EVLOC_VERSION
@@ -147,12 +148,13 @@ class StageClock {
   Clock::time_point start_;
 };
 
-// Fingerprint of the inputs that determine the COLMAP result.
-std::string InputFingerprint(const MapBuilderOptions& options,
-                             const std::vector<InputImage>& images,
-                             const std::optional<Camera>& camera, MatcherType matcher) {
+// Fingerprint of the inputs that determine the COLMAP features and matches (the workspace's
+// fingerprint.txt): images, camera, matcher, features.
+std::string WorkspaceFingerprint(const MapBuilderOptions& options,
+                                 const std::vector<InputImage>& images,
+                                 const std::optional<Camera>& camera, MatcherType matcher) {
   std::ostringstream text;
-  text << "evloc-mapper colmap workspace v1\n";
+  text << "evloc-mapper colmap workspace v2\n";
   text << "images " << fs::absolute(options.image_dir).lexically_normal().string() << "\n";
   for (const InputImage& image : images) {
     std::error_code error;
@@ -166,9 +168,19 @@ std::string InputFingerprint(const MapBuilderOptions& options,
     text << "camera estimated\n";
   }
   text << "matcher " << MatcherTypeName(matcher) << " overlap " << options.colmap.sequential_overlap
-       << " features " << options.colmap.max_num_features << " mapper "
-       << options.colmap.abs_pose_min_num_inliers << " " << options.colmap.abs_pose_min_inlier_ratio
-       << " " << options.colmap.min_num_matches << " "
+       << " features " << options.colmap.max_num_features << "\n";
+  return text.str();
+}
+
+// Fingerprint of the model stage (mapper or triangulation) on top of the workspace's: its options
+// and the known poses. Known and estimated poses keep separate models, so one workspace serves
+// both without matching twice.
+std::string ModelFingerprint(const MapBuilderOptions& options,
+                             const std::string& workspace_fingerprint) {
+  std::ostringstream text;
+  text << workspace_fingerprint;
+  text << "mapper " << options.colmap.abs_pose_min_num_inliers << " "
+       << options.colmap.abs_pose_min_inlier_ratio << " " << options.colmap.min_num_matches << " "
        << options.colmap.fixed_camera_max_reprojection_error_px << "\n";
   if (options.known_poses) {
     text << "known poses\n" << ReadFileToString(*options.known_poses) << "\n";
@@ -651,28 +663,30 @@ MapBuildReport BuildMap(const MapBuilderOptions& options_in, ProgressListener* p
   const MatcherType matcher = runner.EffectiveMatcher(images.size());
   report.matcher = MatcherTypeName(matcher);
   report.pose_source = options.known_poses ? "known" : "estimated";
-  const std::string fingerprint = InputFingerprint(options, images, camera, matcher);
+  const std::string fingerprint = WorkspaceFingerprint(options, images, camera, matcher);
+  const std::string model_fingerprint = ModelFingerprint(options, fingerprint);
   PrepareWorkspace(workspace, fingerprint);
   std::vector<std::string> image_names;
   for (const InputImage& image : images) image_names.push_back(image.name);
 
-  const auto cached_stage = [&](const std::string& stage, const std::function<void()>& body) {
+  const auto cached_stage = [&](const std::string& stage, const std::string& stage_fingerprint,
+                                const std::function<void()>& body) {
     const fs::path marker = workspace / (stage + ".done");
     clock.Run(stage, [&] {
-      if (MarkerMatches(marker, fingerprint)) return true;
+      if (MarkerMatches(marker, stage_fingerprint)) return true;
       body();
-      WriteFileAtomically(marker, fingerprint);
+      WriteFileAtomically(marker, stage_fingerprint);
       return false;
     });
   };
-  cached_stage("colmap_features", [&] {
+  cached_stage("colmap_features", fingerprint, [&] {
     fs::remove(runner.DatabasePath(), error);
     runner.ExtractFeatures(image_names);
   });
-  cached_stage("colmap_matching", [&] { runner.MatchFeatures(images.size()); });
-  const fs::path text_model = workspace / "sparse_txt";
+  cached_stage("colmap_matching", fingerprint, [&] { runner.MatchFeatures(images.size()); });
+  const fs::path text_model = workspace / (options.known_poses ? "triangulated_txt" : "sparse_txt");
   if (options.known_poses) {
-    cached_stage("colmap_triangulation", [&] {
+    cached_stage("colmap_triangulation", model_fingerprint, [&] {
       const std::map<std::string, uint32_t> ids = ReadDatabaseImageIds(runner.DatabasePath());
       const std::vector<uint32_t> camera_ids = ReadDatabaseCameraIds(runner.DatabasePath());
       if (camera_ids.size() != 1) {
@@ -704,7 +718,7 @@ MapBuildReport BuildMap(const MapBuilderOptions& options_in, ProgressListener* p
       runner.ConvertToText(triangulated, text_model);
     });
   } else {
-    cached_stage("colmap_mapper", [&] {
+    cached_stage("colmap_mapper", model_fingerprint, [&] {
       const fs::path sparse = workspace / "sparse";
       fs::remove_all(sparse, error);
       runner.Map(sparse);
@@ -747,36 +761,26 @@ MapBuildReport BuildMap(const MapBuilderOptions& options_in, ProgressListener* p
   // Alignment to the reference positions.
   clock.Run("alignment", [&] {
     if (!options.align_to) return false;
-    std::vector<Eigen::Vector3d> source;
-    std::vector<Eigen::Vector3d> target;
+    std::vector<Rigid3d> model_poses;
+    std::vector<Rigid3d> reference_poses;
     for (const auto& [id, image] : model.images) {
       const auto reference = reference_world_from_cams.find(image.name);
       if (reference == reference_world_from_cams.end()) continue;
-      source.push_back(image.cam_from_world.Inverse().translation);
-      target.push_back(reference->second.translation);
+      model_poses.push_back(image.cam_from_world.Inverse());
+      reference_poses.push_back(reference->second);
     }
-    if (source.size() < 3) {
-      throw InvalidArgumentError("only " + std::to_string(source.size()) +
+    if (model_poses.size() < 3) {
+      throw InvalidArgumentError("only " + std::to_string(model_poses.size()) +
                                  " registered images have a reference pose in " +
                                  options.align_to->string() + "; the alignment needs 3");
     }
-    Eigen::Matrix3Xd source_matrix(3, source.size());
-    Eigen::Matrix3Xd target_matrix(3, target.size());
-    for (size_t i = 0; i < source.size(); ++i) {
-      source_matrix.col(i) = source[i];
-      target_matrix.col(i) = target[i];
-    }
-    const Sim3d world_from_model = AlignUmeyama(source_matrix, target_matrix, true);
-    double sum_squared = 0.0;
-    double max_residual = 0.0;
-    for (size_t i = 0; i < source.size(); ++i) {
-      const double residual = (world_from_model * source[i] - target[i]).norm();
-      sum_squared += residual * residual;
-      max_residual = std::max(max_residual, residual);
-    }
-    report.alignment_num_images = source.size();
-    report.alignment_rms_m = std::sqrt(sum_squared / static_cast<double>(source.size()));
-    report.alignment_max_m = max_residual;
+    const PoseAlignment alignment = AlignPoses(model_poses, reference_poses);
+    const Sim3d& world_from_model = alignment.reference_from_model;
+    report.alignment_num_images = alignment.num_poses;
+    report.alignment_rms_m = alignment.centre_rms;
+    report.alignment_max_m = alignment.centre_max;
+    report.alignment_rotation_rms_deg = alignment.rotation_rms_deg;
+    report.alignment_rotation_max_deg = alignment.rotation_max_deg;
     report.alignment_scale = world_from_model.scale;
     report.world_from_model = world_from_model;
     for (auto& [id, image] : model.images) {
@@ -988,6 +992,8 @@ std::string MapBuildReportToJson(const MapBuildReport& report) {
     alignment["images"] = report.alignment_num_images;
     alignment["rms_m"] = *report.alignment_rms_m;
     alignment["max_m"] = *report.alignment_max_m;
+    alignment["rotation_rms_deg"] = *report.alignment_rotation_rms_deg;
+    alignment["rotation_max_deg"] = *report.alignment_rotation_max_deg;
     alignment["scale"] = *report.alignment_scale;
     const Eigen::Quaterniond& q = report.world_from_model.rotation;
     alignment["world_from_model"] = {

@@ -60,8 +60,8 @@ struct MapBuilderOptions {
   // the image-list times) or `IMAGE_NAME tx ty tz qx qy qz qw`. Poses are kept; COLMAP only
   // triangulates. Needs fixed intrinsics.
   std::optional<std::filesystem::path> known_poses;
-  // Reference world_from_cam poses (same layouts) whose positions the model is aligned to by a
-  // Sim(3) Umeyama fit, giving metric scale and the user's frame.
+  // Reference world_from_cam poses (same layouts) the model is aligned to by a Sim(3) fit of the
+  // camera centres and orientations (AlignPoses), giving metric scale and the user's frame.
   std::optional<std::filesystem::path> align_to;
   // COLMAP workspace, kept between runs and reused when the inputs match; std::nullopt:
   // `<output_dir>.colmap-workspace` beside the output.
@@ -133,6 +133,10 @@ struct MapBuildReport {
   std::optional<double> alignment_rms_m;
   // Largest aligned camera-centre residual, metres.
   std::optional<double> alignment_max_m;
+  // RMS of the aligned camera-orientation residuals, degrees.
+  std::optional<double> alignment_rotation_rms_deg;
+  // Largest aligned camera-orientation residual, degrees.
+  std::optional<double> alignment_rotation_max_deg;
   // Scale of the alignment.
   std::optional<double> alignment_scale;
   // The model-to-world similarity applied (identity without --align-to).

@@ -10,6 +10,7 @@ add_library(evloc_mapper_pipeline
   ${CMAKE_CURRENT_LIST_DIR}/keyframe_selection.cc
   ${CMAKE_CURRENT_LIST_DIR}/semidense_depth.cc
   ${CMAKE_CURRENT_LIST_DIR}/map_merge.cc
+  ${CMAKE_CURRENT_LIST_DIR}/pose_alignment.cc
   ${CMAKE_CURRENT_LIST_DIR}/map_builder.cc
   ${CMAKE_CURRENT_LIST_DIR}/build_command.cc)
 target_include_directories(evloc_mapper_pipeline PUBLIC ${PROJECT_SOURCE_DIR})
@@ -27,7 +28,7 @@ add_library(evloc_mapper_accuracy ${CMAKE_CURRENT_LIST_DIR}/map_accuracy.cc)
 target_include_directories(evloc_mapper_accuracy PUBLIC ${PROJECT_SOURCE_DIR})
 target_link_libraries(evloc_mapper_accuracy
   PUBLIC evloc_maps evloc_camera evloc_geometry evloc_common opencv_core
-  PRIVATE opencv_imgproc opencv_imgcodecs ${PCL_LIBRARIES})
+  PRIVATE evloc_trajectory opencv_imgproc opencv_imgcodecs ${PCL_LIBRARIES})
 target_include_directories(evloc_mapper_accuracy SYSTEM PRIVATE ${PCL_INCLUDE_DIRS})
 target_compile_definitions(evloc_mapper_accuracy PRIVATE ${PCL_DEFINITIONS})
 add_executable(evloc-mapper-accuracy ${CMAKE_CURRENT_LIST_DIR}/map_accuracy_main.cc)
@@ -39,6 +40,7 @@ evloc_add_test(NAME evloc_mapper_pipeline_test
           ${CMAKE_CURRENT_LIST_DIR}/keyframe_selection_test.cc
           ${CMAKE_CURRENT_LIST_DIR}/semidense_depth_test.cc
           ${CMAKE_CURRENT_LIST_DIR}/map_merge_test.cc
+          ${CMAKE_CURRENT_LIST_DIR}/pose_alignment_test.cc
           ${CMAKE_CURRENT_LIST_DIR}/build_command_test.cc
           ${CMAKE_CURRENT_LIST_DIR}/map_accuracy_test.cc
   LIBS evloc_mapper_pipeline evloc_mapper_accuracy evloc_trajectory)
