@@ -9,6 +9,8 @@
 
 #include <opencv2/imgproc.hpp>
 
+#include "localizer/tracking/polarity.h"
+
 namespace evloc::tracking {
 namespace {
 
@@ -49,6 +51,32 @@ cv::Mat RenderTrackingDebugImage(const Tracker& tracker, const Map& map,
   cv::merge(std::vector<cv::Mat>{off, cv::Mat::zeros(on.size(), CV_8UC1), on}, panel_polarity);
   cv::Mat panel_flow;
   cv::cvtColor(all / 3, panel_flow, cv::COLOR_GRAY2BGR);
+  // Panel 4: the events since the previous step (dim red ON, dim blue OFF) and each point's
+  // predicted polarity (bright red ON, bright blue OFF, grey unsigned).
+  const TimeSurface& surface = tracker.time_surface();
+  const int64_t previous_t_ns =
+      step.t_ns - static_cast<int64_t>(std::llround(1e9 / tracker.options().step_rate_hz));
+  cv::Mat panel_prediction(all.size(), CV_8UC3, cv::Scalar(0, 0, 0));
+  for (int y = 0; y < surface.height(); ++y) {
+    auto* row = panel_prediction.ptr<cv::Vec3b>(y);
+    for (int x = 0; x < surface.width(); ++x) {
+      const int64_t t_on = surface.LastTimestamp(SurfaceChannel::kOn, x, y);
+      const int64_t t_off = surface.LastTimestamp(SurfaceChannel::kOff, x, y);
+      if (std::max(t_on, t_off) <= previous_t_ns) continue;
+      row[x] = t_on >= t_off ? cv::Vec3b(0, 0, 110) : cv::Vec3b(110, 0, 0);
+    }
+  }
+  const PolarityPredictionOptions polarity_options{tracker.options().polarity_neutral_band_deg,
+                                                   tracker.options().gradient_probe_depth_fraction,
+                                                   tracker.options().min_flow_px};
+  // The flow over one step period from the motion prior's velocity (less noisy than the
+  // difference of two estimates).
+  const Rigid3d flow_origin_world_from_cam =
+      step.world_from_cam *
+      ExpSE3(-tracker.velocity() * (static_cast<double>(step.t_ns - previous_t_ns) * 1e-9));
+  const PolarityPredictor predictor(PinholeIntrinsics::FromCamera(camera),
+                                    step.world_from_cam.Inverse(),
+                                    flow_origin_world_from_cam.Inverse(), polarity_options);
 
   std::vector<uint32_t> points;
   if (visibility != nullptr) {
@@ -69,6 +97,12 @@ cv::Mat RenderTrackingDebugImage(const Tracker& tracker, const Map& map,
     const bool on_edge = all.at<uint8_t>(ToPoint(pixel)) > 0;
     cv::circle(panel_map, ToPoint(pixel), 1,
                on_edge ? cv::Scalar(0, 220, 0) : cv::Scalar(0, 0, 255), cv::FILLED);
+    const PredictedPolarity polarity =
+        predictor.Predict(p_world, map.gradients[index].cast<double>());
+    panel_prediction.at<cv::Vec3b>(ToPoint(pixel)) =
+        polarity == PredictedPolarity::kOn    ? cv::Vec3b(0, 0, 255)
+        : polarity == PredictedPolarity::kOff ? cv::Vec3b(255, 0, 0)
+                                              : cv::Vec3b(160, 160, 160);
     if (k % stride != 0) continue;
     // Predicted gradient: project P + s g, with s a small fraction of the depth.
     const double probe = 0.02 * p_cam.z();
@@ -99,8 +133,11 @@ cv::Mat RenderTrackingDebugImage(const Tracker& tracker, const Map& map,
               0.4, cv::Scalar(255, 255, 255), 1, cv::LINE_AA);
   cv::putText(panel_flow, "gradient (yellow), flow x5 (cyan)", cv::Point(5, 15),
               cv::FONT_HERSHEY_SIMPLEX, 0.4, cv::Scalar(255, 255, 255), 1, cv::LINE_AA);
+  cv::putText(panel_prediction, "predicted ON/OFF/none; last step's events dim", cv::Point(5, 15),
+              cv::FONT_HERSHEY_SIMPLEX, 0.4, cv::Scalar(255, 255, 255), 1, cv::LINE_AA);
   cv::Mat picture;
-  cv::hconcat(std::vector<cv::Mat>{panel_map, panel_polarity, panel_flow}, picture);
+  cv::hconcat(std::vector<cv::Mat>{panel_map, panel_polarity, panel_flow, panel_prediction},
+              picture);
   return picture;
 }
 

@@ -352,10 +352,9 @@ Tracker::Attempt Tracker::Solve(const Rigid3d& start_world_from_cam,
     }
   }
   // Check the confident polarity predictions against the events the point fired in this step:
-  // the freshest pixel within 1 px of its projection must have fired since the previous step,
-  // and its last event must have the predicted polarity (ON for ON, OFF for OFF).
+  // when the pixel it projects to at the estimate has an event since the previous step, its last
+  // event must have the predicted polarity (ON for ON, OFF for OFF).
   if (predict_polarity) {
-    const int64_t fresh_since_t_ns = last_step_t_ns_;
     for (size_t i = 0; i < num_selected; ++i) {
       const PotentialField* field = scratch_fields_[i];
       const bool on = field == Field(SurfaceChannel::kOn);
@@ -364,27 +363,13 @@ Tracker::Attempt Tracker::Solve(const Rigid3d& start_world_from_cam,
       const Eigen::Vector3d point_in_cam =
           estimate_rotation * map_.positions[selected_[i]].cast<double>() + estimate_translation;
       if (!intrinsics_.Project(point_in_cam, &pixel) || !InsideImage(pixel)) continue;
-      const int cx = static_cast<int>(std::lround(pixel.x()));
-      const int cy = static_cast<int>(std::lround(pixel.y()));
-      int best_x = -1;
-      int best_y = -1;
-      int64_t best_t_ns = fresh_since_t_ns;
-      for (const auto& [dx, dy] : {std::pair{0, 0}, {1, 0}, {-1, 0}, {0, 1}, {0, -1}}) {
-        const int x = cx + dx;
-        const int y = cy + dy;
-        if (x < 0 || y < 0 || x >= surface_.width() || y >= surface_.height()) continue;
-        const int64_t t_last = surface_.LastTimestamp(SurfaceChannel::kAll, x, y);
-        if (t_last > best_t_ns && t_last <= step_t_ns_) {
-          best_t_ns = t_last;
-          best_x = x;
-          best_y = y;
-        }
-      }
-      if (best_x < 0) continue;
-      const bool fired_on = surface_.LastTimestamp(SurfaceChannel::kOn, best_x, best_y) >=
-                            surface_.LastTimestamp(SurfaceChannel::kOff, best_x, best_y);
+      const int x = static_cast<int>(std::lround(pixel.x()));
+      const int y = static_cast<int>(std::lround(pixel.y()));
+      const int64_t t_on = surface_.LastTimestamp(SurfaceChannel::kOn, x, y);
+      const int64_t t_off = surface_.LastTimestamp(SurfaceChannel::kOff, x, y);
+      if (std::max(t_on, t_off) <= last_step_t_ns_) continue;
       ++attempt.quality.polarity_predictions;
-      attempt.quality.polarity_matches += fired_on == on ? 1 : 0;
+      attempt.quality.polarity_matches += (t_on >= t_off) == on ? 1 : 0;
     }
   }
   attempt.quality.on_edge_fraction = in_image > 0 ? static_cast<double>(on_edge) / in_image : 0;

@@ -60,10 +60,10 @@ struct TrackingQuality {
   int iterations = 0;
   // Number of recovery attempts run in this step (0 when the first solve was good).
   int recovery_attempts = 0;
-  // Points with a confident (ON or OFF) polarity prediction that fired in this step: a pixel
-  // within 1 px of their projection at the estimate has an event since the previous step.
+  // Points with a confident (ON or OFF) polarity prediction that fired in this step: the pixel
+  // they project to at the estimate has an event since the previous step.
   int polarity_predictions = 0;
-  // Of those, the points whose freshest such pixel fired last with the predicted polarity.
+  // Of those, the points whose pixel fired last with the predicted polarity.
   int polarity_matches = 0;
 };
 
