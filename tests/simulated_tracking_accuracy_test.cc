@@ -39,7 +39,7 @@ TEST(SimulatedSequence, TracksOneSecondOfDavis240WithinACentimetreAndAHalfAndNev
   EXPECT_EQ(result.lost_steps, 0);
   EXPECT_GE(result.steps.size(), 290u);  // 300 Hz over 1 s.
   // The polarity predictions agree with the simulator's events (brightness constancy sign).
-  // Measured 0.77 here; the inverted sign scores 1 - that, a coin 0.5.
+  // Measured 0.76 here (own pixel, 240x180); the inverted sign scores 1 - that, a coin 0.5.
   int64_t predictions = 0;
   int64_t matches = 0;
   for (const PoseEstimate& step : result.steps) {
@@ -57,7 +57,7 @@ TEST(SimulatedSequence, TracksOneSecondOfDavis240WithinACentimetreAndAHalfAndNev
   const EvaluationResult scores =
       EvaluateTrajectory(ReadTumTrajectory(render.out_dir / "groundtruth.txt"),
                          ReadTumTrajectory(track.output_path), evaluation);
-  // Measured: 1.2 cm and 0.3 deg over 1.5 s of the same motion (docs/accuracy.md); a lost or
+  // Measured 0.92 cm and 0.31 deg (docs/accuracy.md); a lost or
   // drifting tracker is off by decimetres.
   EXPECT_LT(scores.ate_translation_cm.rmse, 2.5);
   EXPECT_LT(scores.ate_rotation_deg.rmse, 1.0);
