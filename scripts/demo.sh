@@ -2,7 +2,7 @@
 # make demo: evloc end to end on data it makes itself (docs/demo.md).
 #   1. simulate a camera circling in the synthetic room: RGB frames, events, ground truth (evloc-sim)
 #   2. build a map from the RGB frames alone: COLMAP estimates the poses, the map is aligned to the
-#      ground-truth positions (evloc-mapper build --align-to)
+#      ground-truth poses (evloc-mapper build --align-to)
 #   3. start the localizer service on loopback (evloc-localizer serve) and wait for gRPC health
 #   4. stream the events to it (evloc-replay), against the built map and the simulator's exact map
 #   5. stop the service and check that it stopped cleanly
@@ -192,9 +192,12 @@ import json, sys
 report, bound = json.load(open(sys.argv[1])), float(sys.argv[2])
 alignment = report["alignment"]
 rms, worst = alignment["rms_m"] * 100, alignment["max_m"] * 100
+rotation = (f", orientations RMS {alignment['rotation_rms_deg']:.3f} deg"
+            if "rotation_rms_deg" in alignment else "")
 print(f"{report['images_registered']}/{report['images']} frames registered by COLMAP, "
-      f"{report['points']} map points from {report['keyframes']} keyframes; camera centres vs "
-      f"ground truth after the Sim(3) alignment: RMS {rms:.2f} cm, worst {worst:.2f} cm")
+      f"{report['points']} map points from {report['keyframes']} keyframes; COLMAP's cameras vs "
+      f"ground truth after the Sim(3) alignment: centres RMS {rms:.2f} cm, worst {worst:.2f} cm"
+      f"{rotation}")
 if report["images_registered"] < report["images"]:
     sys.exit("COLMAP left frames out: the reconstruction is incomplete")
 if not rms <= bound:
@@ -304,7 +307,7 @@ print(f"{info['camera']['width']}x{info['camera']['height']} camera '{camera}', 
 print(f"Map: {report['points']} points from {report['keyframes']} keyframes; COLMAP registered "
       f"{report['images_registered']}/{report['images']} frames without their poses;")
 print(f"its camera centres fit the ground-truth ones (Sim(3)) with RMS "
-      f"{report['alignment']['rms_m'] * 100:.2f} cm.")
+      f"{report['alignment']['rms_m'] * 100:.2f} cm (the map's frame is the ground truth's).")
 print()
 print("Tracking: the events streamed through the gRPC service (evloc-replay --speed max, at most")
 print("5 ms of events ahead of the last pose). ATE/RPE: no alignment, association 0.02 s, RPE over")
