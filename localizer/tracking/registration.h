@@ -117,8 +117,9 @@ struct RegistrationResult {
   int points_used = 0;
   // Number of LM trials (linearisations) run.
   int iterations = 0;
-  // True when the solve stopped on a small increment or a negligible (predicted) decrease of the
-  // cost rather than on max_iterations.
+  // True when the solve stopped on a small increment, a negligible (predicted) decrease of the
+  // cost or an increment that moves the points by a negligible fraction of a pixel, rather than on
+  // max_iterations.
   bool converged = false;
   // True when H had full rank at the estimate (otherwise the covariance is large, 1e6).
   bool well_conditioned = false;
