@@ -31,11 +31,7 @@ void NearestEdgeField::Build(const TimeSurface& surface, SurfaceChannel channel,
   height_ = surface.height();
 }
 
-const NearestEdgeField::Window& NearestEdgeField::WindowFor(double radius_px) const {
-  if (last_window_ < windows_.size() && windows_[last_window_].radius_px == radius_px &&
-      windows_[last_window_].width == width_) {
-    return windows_[last_window_];
-  }
+const NearestEdgeField::Window& NearestEdgeField::FindOrMakeWindow(double radius_px) const {
   for (size_t i = 0; i < windows_.size(); ++i) {
     if (windows_[i].radius_px == radius_px && windows_[i].width == width_) {
       last_window_ = i;

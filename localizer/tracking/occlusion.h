@@ -79,7 +79,14 @@ class NearestEdgeField {
     std::vector<Offset> offsets;
     std::vector<std::ptrdiff_t> index_offsets;
   };
-  const Window& WindowFor(double radius_px) const;
+  const Window& WindowFor(double radius_px) const {
+    if (last_window_ < windows_.size()) {
+      const Window& last = windows_[last_window_];
+      if (last.radius_px == radius_px && last.width == width_) return last;
+    }
+    return FindOrMakeWindow(radius_px);
+  }
+  const Window& FindOrMakeWindow(double radius_px) const;
   // |value| <= 1e8: the exact difference value - trunc(value) decides, as std::lround.
   static int RoundHalfAwayFromZero(double value) {
     const int truncated = static_cast<int>(value);

@@ -25,29 +25,51 @@ class PotentialField {
   virtual bool Sample(double u, double v, double* value, Eigen::Vector2d* gradient) = 0;
 };
 
-// Bilinear interpolation of a field given by a value function of integer pixels; the derivative
-// is the exact derivative of the interpolant. `value_at(x, y)` returns float.
-template <typename ValueAt>
-inline bool SampleBilinear(int width, int height, double u, double v, ValueAt&& value_at,
-                           double* value, Eigen::Vector2d* gradient) {
+// The bilinear cell of (u, v): its top-left pixel (x0, y0) and the fractions a = u - x0,
+// b = v - y0. False when (u, v) is not inside the image (outputs untouched). On the last row or
+// column the cell to the left (or above) is used.
+inline bool LocateCell(int width, int height, double u, double v, int* x0, int* y0, double* a,
+                       double* b) {
   if (!(u >= 0 && v >= 0 && u <= width - 1 && v <= height - 1)) return false;
-  int x0 = static_cast<int>(u);
-  int y0 = static_cast<int>(v);
-  // On the last row or column, use the cell to the left (or above).
-  if (x0 >= width - 1) x0 = width - 2;
-  if (y0 >= height - 1) y0 = height - 2;
-  if (x0 < 0 || y0 < 0) return false;
-  const double a = u - x0;
-  const double b = v - y0;
-  const double f00 = value_at(x0, y0);
-  const double f10 = value_at(x0 + 1, y0);
-  const double f01 = value_at(x0, y0 + 1);
-  const double f11 = value_at(x0 + 1, y0 + 1);
+  int x = static_cast<int>(u);
+  int y = static_cast<int>(v);
+  if (x >= width - 1) x = width - 2;
+  if (y >= height - 1) y = height - 2;
+  if (x < 0 || y < 0) return false;
+  *x0 = x;
+  *y0 = y;
+  *a = u - x;
+  *b = v - y;
+  return true;
+}
+
+// The bilinear interpolant of a cell with corner values f00 at (x0, y0), f10 at (x0 + 1, y0), f01
+// at (x0, y0 + 1) and f11, at fractions (a, b), and when `gradient` is not null its exact
+// derivative (d/du, d/dv).
+inline void InterpolateCell(double a, double b, double f00, double f10, double f01, double f11,
+                            double* value, Eigen::Vector2d* gradient) {
   *value = (1 - b) * ((1 - a) * f00 + a * f10) + b * ((1 - a) * f01 + a * f11);
   if (gradient != nullptr) {
     (*gradient)(0) = (1 - b) * (f10 - f00) + b * (f11 - f01);
     (*gradient)(1) = (1 - a) * (f01 - f00) + a * (f11 - f10);
   }
+}
+
+// Bilinear interpolation of a field given by a value function of integer pixels; the derivative
+// is the exact derivative of the interpolant. `value_at(x, y)` returns float.
+template <typename ValueAt>
+inline bool SampleBilinear(int width, int height, double u, double v, ValueAt&& value_at,
+                           double* value, Eigen::Vector2d* gradient) {
+  int x0;
+  int y0;
+  double a;
+  double b;
+  if (!LocateCell(width, height, u, v, &x0, &y0, &a, &b)) return false;
+  const double f00 = value_at(x0, y0);
+  const double f10 = value_at(x0 + 1, y0);
+  const double f01 = value_at(x0, y0 + 1);
+  const double f11 = value_at(x0 + 1, y0 + 1);
+  InterpolateCell(a, b, f00, f10, f01, f11, value, gradient);
   return true;
 }
 

@@ -99,23 +99,31 @@ template <typename Field>
   return true;
 }
 
-// Normal equations and cost of all points at one pose. `Field` is the concrete type of every
+// What one used point contributes to the normal equations: its Jacobian row, robust weight and
+// residual. Linearize writes the rows; Accumulate sums them only for the linearisations the
+// solver keeps (a rejected trial needs its cost alone).
+struct JacobianRow {
+  double jacobian[6];
+  double weight;
+  double residual;
+};
+
+// Cost of all points at one pose, and their Jacobian rows in `rows` (one per used point, in point
+// order; information and gradient are left to Accumulate). `Field` is the concrete type of every
 // point's field (PotentialField when they differ); `kLoss` the robust loss, so that the weight
 // and cost are inline in the loop.
 template <typename Field, RobustLoss kLoss>
 Linearization Linearize(const std::vector<RegistrationPoint>& points,
                         const PinholeIntrinsics& intrinsics, const Rigid3d& cam_from_world,
-                        const RegistrationOptions& options) {
+                        const RegistrationOptions& options, std::vector<JacobianRow>* rows) {
   Linearization result;
   const double scale = options.robust_scale;
   // Points outside the image cost as much as a point far from every edge (residual 1), so that
   // costs at different poses compare the same point set.
   const double outside_cost = RobustCost(kLoss, scale, 1.0);
   const PoseMatrix pose(cam_from_world);
-  // J^T W J in the upper triangle only (21 products per point), row-major packed; the loops
-  // are unrolled so that the 27 sums stay in registers.
-  double information[21] = {};
-  double gradient[6] = {};
+  if (rows->size() < points.size()) rows->resize(points.size());
+  JacobianRow* row = rows->data();
   double cost = 0;
   double weighted_squared_residuals = 0;
   double sum_residuals = 0;
@@ -123,23 +131,17 @@ Linearization Linearize(const std::vector<RegistrationPoint>& points,
   int points_used = 0;
   for (const RegistrationPoint& point : points) {
     double residual;
-    double jacobian[6];
     double inverse_depth;
     if (!ResidualAndJacobian(static_cast<Field&>(*point.field), intrinsics, pose,
-                             point.position_world, options.image_margin_px, &residual, jacobian,
-                             &inverse_depth)) {
+                             point.position_world, options.image_margin_px, &residual,
+                             row->jacobian, &inverse_depth)) {
       cost += outside_cost;
       continue;
     }
     const double weight = RobustWeight(kLoss, scale, residual);
-    int k = 0;
-#pragma GCC unroll 6
-    for (int i = 0; i < 6; ++i) {
-      const double weighted = weight * jacobian[i];
-      gradient[i] += weighted * residual;
-#pragma GCC unroll 6
-      for (int j = i; j < 6; ++j) information[k++] += weighted * jacobian[j];
-    }
+    row->weight = weight;
+    row->residual = residual;
+    ++row;
     cost += RobustCost(kLoss, scale, residual);
     weighted_squared_residuals += weight * residual * residual;
     sum_residuals += residual;
@@ -151,16 +153,58 @@ Linearization Linearize(const std::vector<RegistrationPoint>& points,
   result.sum_residuals = sum_residuals;
   result.sum_inverse_depths = sum_inverse_depths;
   result.points_used = points_used;
-  int k = 0;
+  return result;
+}
+
+// Two doubles in one SIMD register (SSE2 on x86-64, NEON on ARM64; GCC and Clang).
+typedef double Double2 __attribute__((vector_size(16)));
+
+// The information J^T W J and gradient J^T W r of the first linearization->points_used rows.
+// Each entry is summed in point order with the products formed as (w J_i) J_j and (w J_i) r, so
+// the result is bit-identical to a scalar loop; pairs of entries share one SIMD operation.
+void Accumulate(const std::vector<JacobianRow>& rows, Linearization* linearization) {
+  // Upper-triangle rows as pairs: row i holds columns from 2 * floor(i / 2) on.
+  Double2 h0[3] = {}, h1[3] = {}, h2[2] = {}, h3[2] = {}, h4 = {}, h5 = {}, g[3] = {};
+  for (int n = 0; n < linearization->points_used; ++n) {
+    const JacobianRow& row = rows[n];
+    const Double2 j01 = {row.jacobian[0], row.jacobian[1]};
+    const Double2 j23 = {row.jacobian[2], row.jacobian[3]};
+    const Double2 j45 = {row.jacobian[4], row.jacobian[5]};
+    const double w = row.weight;
+    const Double2 weighted01 = j01 * w;
+    const Double2 weighted23 = j23 * w;
+    const Double2 weighted45 = j45 * w;
+    g[0] += weighted01 * row.residual;
+    g[1] += weighted23 * row.residual;
+    g[2] += weighted45 * row.residual;
+    h0[0] += weighted01[0] * j01;
+    h0[1] += weighted01[0] * j23;
+    h0[2] += weighted01[0] * j45;
+    h1[0] += weighted01[1] * j01;
+    h1[1] += weighted01[1] * j23;
+    h1[2] += weighted01[1] * j45;
+    h2[0] += weighted23[0] * j23;
+    h2[1] += weighted23[0] * j45;
+    h3[0] += weighted23[1] * j23;
+    h3[1] += weighted23[1] * j45;
+    h4 += weighted45[0] * j45;
+    h5 += weighted45[1] * j45;
+  }
+  const double upper[6][6] = {
+      {h0[0][0], h0[0][1], h0[1][0], h0[1][1], h0[2][0], h0[2][1]},
+      {0, h1[0][1], h1[1][0], h1[1][1], h1[2][0], h1[2][1]},
+      {0, 0, h2[0][0], h2[0][1], h2[1][0], h2[1][1]},
+      {0, 0, 0, h3[0][1], h3[1][0], h3[1][1]},
+      {0, 0, 0, 0, h4[0], h4[1]},
+      {0, 0, 0, 0, 0, h5[1]},
+  };
   for (int i = 0; i < 6; ++i) {
-    result.gradient(i) = gradient[i];
+    linearization->gradient(i) = g[i / 2][i % 2];
     for (int j = i; j < 6; ++j) {
-      result.information(i, j) = information[k];
-      result.information(j, i) = information[k];
-      ++k;
+      linearization->information(i, j) = upper[i][j];
+      linearization->information(j, i) = upper[i][j];
     }
   }
-  return result;
 }
 
 // The concrete field type shared by every point, so that Linearize samples without a virtual
@@ -183,26 +227,29 @@ FieldKind CommonFieldKind(const std::vector<RegistrationPoint>& points) {
 template <RobustLoss kLoss>
 Linearization LinearizeWithLoss(FieldKind kind, const std::vector<RegistrationPoint>& points,
                                 const PinholeIntrinsics& intrinsics, const Rigid3d& cam_from_world,
-                                const RegistrationOptions& options) {
+                                const RegistrationOptions& options,
+                                std::vector<JacobianRow>* rows) {
   switch (kind) {
     case FieldKind::kTimeSurface:
-      return Linearize<TimeSurfaceField, kLoss>(points, intrinsics, cam_from_world, options);
+      return Linearize<TimeSurfaceField, kLoss>(points, intrinsics, cam_from_world, options, rows);
     case FieldKind::kDense:
-      return Linearize<DenseField, kLoss>(points, intrinsics, cam_from_world, options);
+      return Linearize<DenseField, kLoss>(points, intrinsics, cam_from_world, options, rows);
     case FieldKind::kMixed:
       break;
   }
-  return Linearize<PotentialField, kLoss>(points, intrinsics, cam_from_world, options);
+  return Linearize<PotentialField, kLoss>(points, intrinsics, cam_from_world, options, rows);
 }
 
+// Linearize for the loss of `options`; the rows go to `rows` (see Accumulate).
 Linearization LinearizeAny(FieldKind kind, const std::vector<RegistrationPoint>& points,
                            const PinholeIntrinsics& intrinsics, const Rigid3d& cam_from_world,
-                           const RegistrationOptions& options) {
+                           const RegistrationOptions& options, std::vector<JacobianRow>* rows) {
   if (options.loss == RobustLoss::kCauchy) {
-    return LinearizeWithLoss<RobustLoss::kCauchy>(kind, points, intrinsics, cam_from_world,
-                                                  options);
+    return LinearizeWithLoss<RobustLoss::kCauchy>(kind, points, intrinsics, cam_from_world, options,
+                                                  rows);
   }
-  return LinearizeWithLoss<RobustLoss::kHuber>(kind, points, intrinsics, cam_from_world, options);
+  return LinearizeWithLoss<RobustLoss::kHuber>(kind, points, intrinsics, cam_from_world, options,
+                                               rows);
 }
 
 // sigma^2 H^-1, with unconstrained directions given a large variance.
@@ -248,7 +295,11 @@ RegistrationResult RegisterPoints(const std::vector<RegistrationPoint>& points,
   RegistrationResult result;
   result.cam_from_world = initial_cam_from_world;
   const FieldKind kind = CommonFieldKind(points);
-  Linearization current = LinearizeAny(kind, points, intrinsics, initial_cam_from_world, options);
+  // Reused across solves (a tracker solves at every step).
+  thread_local std::vector<JacobianRow> rows;
+  Linearization current =
+      LinearizeAny(kind, points, intrinsics, initial_cam_from_world, options, &rows);
+  Accumulate(rows, &current);
   double damping = options.initial_damping;
   double growth = 2.0;
   const double focal_px = std::max(intrinsics.fx, intrinsics.fy);
@@ -261,7 +312,7 @@ RegistrationResult RegisterPoints(const std::vector<RegistrationPoint>& points,
     if (!increment.allFinite()) break;
     ++result.iterations;
     const Rigid3d candidate = ExpSE3(increment) * result.cam_from_world;
-    Linearization trial = LinearizeAny(kind, points, intrinsics, candidate, options);
+    Linearization trial = LinearizeAny(kind, points, intrinsics, candidate, options, &rows);
     const bool small = increment.head<3>().norm() < options.min_increment &&
                        increment.tail<3>().norm() < options.min_increment;
     // Gain ratio: actual over predicted decrease of the (robust) cost (Nielsen's LM update).
@@ -279,6 +330,7 @@ RegistrationResult RegisterPoints(const std::vector<RegistrationPoint>& points,
     if (trial.cost < current.cost) {
       converged |= current.cost - trial.cost < negligible;
       result.cam_from_world = candidate;
+      Accumulate(rows, &trial);
       current = trial;
       const double factor = 2 * gain - 1;
       damping *= std::max(1.0 / 3.0, 1.0 - factor * factor * factor);

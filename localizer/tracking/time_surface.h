@@ -124,20 +124,36 @@ class TimeSurfaceField final : public PotentialField {
 
   // The unsmoothed value 1 - T at pixel (x, y), 1 where empty, memoised. Unchecked.
   float RawValue(int x, int y) {
-    Memo& memo = raw_[static_cast<size_t>(y) * surface_.width() + x];
-    if (memo.stamp != stamp_) [[unlikely]] {
-      memo.value = ComputeRaw(static_cast<size_t>(y) * surface_.width() + x);
-      memo.stamp = stamp_;
-    }
-    return memo.value;
+    const size_t index = static_cast<size_t>(y) * surface_.width() + x;
+    return RawValue(&raw_[index], index, stamp_);
   }
   // The field value at pixel (x, y) (smoothed when enabled), memoised. Unchecked.
   float ValueAt(int x, int y) { return smooth_ ? SmoothedValue(x, y) : RawValue(x, y); }
 
-  bool Sample(double u, double v, double* value, Eigen::Vector2d* gradient) override {
-    return SampleBilinear(
-        surface_.width(), surface_.height(), u, v, [this](int x, int y) { return ValueAt(x, y); },
-        value, gradient);
+  // Inline even where it is large: the solver's hot loop calls it through the concrete type.
+  [[gnu::always_inline]] bool Sample(double u, double v, double* value,
+                                     Eigen::Vector2d* gradient) override {
+    if (smooth_) {
+      return SampleBilinear(
+          surface_.width(), surface_.height(), u, v,
+          [this](int x, int y) { return SmoothedValue(x, y); }, value, gradient);
+    }
+    int x0;
+    int y0;
+    double a;
+    double b;
+    if (!LocateCell(surface_.width(), surface_.height(), u, v, &x0, &y0, &a, &b)) return false;
+    // The four raw values of the cell from one base index, with the stamp read once.
+    const size_t width = surface_.width();
+    const size_t index = y0 * width + x0;
+    Memo* memo = raw_.data() + index;
+    const uint32_t stamp = stamp_;
+    const double f00 = RawValue(memo, index, stamp);
+    const double f10 = RawValue(memo + 1, index + 1, stamp);
+    const double f01 = RawValue(memo + width, index + width, stamp);
+    const double f11 = RawValue(memo + width + 1, index + width + 1, stamp);
+    InterpolateCell(a, b, f00, f10, f01, f11, value, gradient);
+    return true;
   }
 
   // The whole field as an image (CV_32FC1), computed densely; equal to ValueAt everywhere up to
@@ -154,6 +170,14 @@ class TimeSurfaceField final : public PotentialField {
     float value = 1.0f;
   };
 
+  // The memoised raw value of pixel `index` (memo = &raw_[index]) at `stamp` (= stamp_).
+  float RawValue(Memo* memo, size_t index, uint32_t stamp) {
+    if (memo->stamp != stamp) [[unlikely]] {
+      memo->value = ComputeRaw(index);
+      memo->stamp = stamp;
+    }
+    return memo->value;
+  }
   float ComputeRaw(size_t index) const;
   float SmoothedValue(int x, int y);
 
