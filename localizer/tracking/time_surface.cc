@@ -119,11 +119,7 @@ cv::Mat TimeSurface::ActiveMask(SurfaceChannel channel, int64_t t_ns,
 
 TimeSurfaceField::TimeSurfaceField(const TimeSurface& surface, SurfaceChannel channel,
                                    const SurfaceDecay& decay, bool smooth)
-    : surface_(surface),
-      channel_(channel),
-      decay_(decay),
-      max_active_age_ns_(decay.MaxActiveAgeNs()),
-      smooth_(smooth) {
+    : surface_(surface), channel_(channel), decay_(decay), exponential_(decay), smooth_(smooth) {
   const size_t num_pixels = static_cast<size_t>(surface.width()) * surface.height();
   raw_.assign(num_pixels, Memo{});
   if (smooth_) smoothed_.assign(num_pixels, Memo{});
@@ -138,16 +134,6 @@ void TimeSurfaceField::SetTime(int64_t t_ns) {
     std::fill(smoothed_.begin(), smoothed_.end(), Memo{});
     stamp_ = 1;
   }
-}
-
-float TimeSurfaceField::ComputeRaw(size_t index) const {
-  // As 1 - decay_.Value(last_t, t_ns_), with the age bound computed once.
-  const int64_t last_t = surface_.LastTimestamps(channel_)[index];
-  if (last_t == kNeverFired) return 1.0f;
-  const int64_t age_ns = std::max<int64_t>(0, t_ns_ - last_t);
-  if (age_ns > max_active_age_ns_) return 1.0f;
-  const double value = std::exp(-static_cast<double>(age_ns) / decay_.decay_time_ns);
-  return static_cast<float>(1.0 - (value > decay_.empty_threshold ? value : 0.0));
 }
 
 float TimeSurfaceField::SmoothedValue(int x, int y) {
@@ -174,18 +160,18 @@ float TimeSurfaceField::SmoothedValue(int x, int y) {
 
 cv::Mat TimeSurfaceField::RenderDense() const {
   cv::Mat raw(surface_.height(), surface_.width(), CV_32FC1);
-  const int64_t max_age_ns = decay_.MaxActiveAgeNs();
-  for (int y = 0; y < surface_.height(); ++y) {
-    float* row = raw.ptr<float>(y);
-    for (int x = 0; x < surface_.width(); ++x) {
-      const int64_t last_t = surface_.LastTimestamp(channel_, x, y);
-      // Most pixels are empty: skip the exp for them.
-      row[x] = (last_t == kNeverFired || t_ns_ - last_t > max_age_ns)
-                   ? 1.0f
-                   : static_cast<float>(1.0 - decay_.Value(last_t, t_ns_));
-    }
-  }
+  const size_t num_pixels = static_cast<size_t>(surface_.width()) * surface_.height();
+  float* values = raw.ptr<float>(0);
+  for (size_t index = 0; index < num_pixels; ++index) values[index] = ComputeRaw(index);
   return smooth_ ? SmoothField(raw) : raw;
+}
+
+DecayExponential::DecayExponential(const SurfaceDecay& decay)
+    : inverse_tau_ns_(1.0 / decay.decay_time_ns), max_active_age_ns_(decay.MaxActiveAgeExactNs()) {
+  const double largest = static_cast<double>(max_active_age_ns_) * inverse_tau_ns_;
+  const int steps = static_cast<int>(largest * kStepsPerUnit) + 2;
+  table_.resize(steps);
+  for (int k = 0; k < steps; ++k) table_[k] = std::exp(-static_cast<double>(k) / kStepsPerUnit);
 }
 
 }  // namespace evloc::tracking

@@ -93,6 +93,28 @@ TEST(TimeSurface, FieldIsOneMinusExponentialDecayWithEmptyThreshold) {
   EXPECT_EQ(cv::countNonZero(mask), 3);
 }
 
+// The table-and-polynomial exponential of the lazy field agrees with std::exp to 1e-10 relative
+// over the whole active window, for several decay times and thresholds.
+TEST(TimeSurface, DecayExponentialMatchesExpOverTheActiveWindow) {
+  for (const SurfaceDecay decay : {SurfaceDecay{30e6, 0.1}, SurfaceDecay{5e6, 0.01},
+                                   SurfaceDecay{100e6, 0.5}, SurfaceDecay{1234.5, 1e-6}}) {
+    const DecayExponential exponential(decay);
+    ASSERT_EQ(exponential.max_active_age_ns(), decay.MaxActiveAgeExactNs());
+    const int64_t last = exponential.max_active_age_ns();
+    for (int64_t age : {int64_t{0}, int64_t{1}, last / 3, last - 1, last}) {
+      const double exact = std::exp(-static_cast<double>(age) / decay.decay_time_ns);
+      EXPECT_NEAR(exponential(age), exact, 1e-10 * exact) << age;
+    }
+    std::mt19937_64 random(9);
+    std::uniform_int_distribution<int64_t> ages(0, last);
+    for (int i = 0; i < 100000; ++i) {
+      const int64_t age = ages(random);
+      const double exact = std::exp(-static_cast<double>(age) / decay.decay_time_ns);
+      ASSERT_NEAR(exponential(age), exact, 1e-10 * exact) << age;
+    }
+  }
+}
+
 TEST(TimeSurface, LazySmoothedFieldEqualsDenseRebuildAndItsGradientMatchesDifferences) {
   const UndistortionTable table(Camera::Pinhole(64, 48, 50, 50, 31.5, 23.5));
   TimeSurface surface(table);
