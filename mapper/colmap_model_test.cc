@@ -162,38 +162,45 @@ TEST(ColmapRunner, FailedCommandQuotesItsLog) {
   std::filesystem::remove_all(directory);
 }
 
-// Runs ColmapRunner::Map with a stand-in executable that records its arguments.
-std::string RecordedMapperArguments(const std::optional<Camera>& camera) {
-  const std::filesystem::path directory = testing::MakeTempDir("colmap_runner_mapper_args");
+// A stand-in COLMAP executable that appends its arguments to `<directory>/arguments.txt`.
+std::filesystem::path WriteRecordingColmap(const std::filesystem::path& directory) {
   const std::filesystem::path fake = directory / "fake-colmap";
   {
     std::ofstream script(fake);
-    script << "#!/bin/sh\necho \"$@\" > " << (directory / "arguments.txt").string() << "\n";
+    script << "#!/bin/sh\necho \"$@\" >> " << (directory / "arguments.txt").string() << "\n";
   }
   std::filesystem::permissions(fake, std::filesystem::perms::owner_all);
-  ColmapOptions options;
-  options.executable = fake.string();
-  options.camera = camera;
-  const ColmapRunner runner(options, directory / "workspace", directory);
-  runner.Map(directory / "sparse");
-  std::ifstream stream(directory / "arguments.txt");
-  std::string text((std::istreambuf_iterator<char>(stream)), std::istreambuf_iterator<char>());
-  std::filesystem::remove_all(directory);
-  return text;
+  return fake;
 }
 
-TEST(ColmapRunner, MapperFiltersReprojectionErrorsOnlyWithFixedIntrinsics) {
-  const std::string fixed = RecordedMapperArguments(Camera::Pinhole(640, 480, 500, 500, 320, 240));
-  EXPECT_NE(fixed.find("--Mapper.ba_refine_focal_length 0"), std::string::npos) << fixed;
-  EXPECT_NE(fixed.find("--Mapper.filter_max_reproj_error 1.0"), std::string::npos) << fixed;
-  EXPECT_NE(fixed.find("--Mapper.tri_merge_max_reproj_error 1.5"), std::string::npos) << fixed;
-  const std::string estimated = RecordedMapperArguments(std::nullopt);
-  EXPECT_EQ(estimated.find("filter_max_reproj_error"), std::string::npos) << estimated;
-  EXPECT_EQ(estimated.find("ba_refine_focal_length"), std::string::npos) << estimated;
-
+TEST(ColmapRunner, FixedIntrinsicsAreNotRefinedAndTheModelIsFiltered) {
+  const std::filesystem::path directory = testing::MakeTempDir("colmap_runner_arguments");
   ColmapOptions options;
-  options.fixed_camera_max_reprojection_error_px = 0.0;
-  EXPECT_THROW(options.Check(), InvalidArgumentError);
+  options.executable = WriteRecordingColmap(directory).string();
+  options.camera = Camera::Pinhole(640, 480, 500, 500, 320, 240);
+  const ColmapRunner fixed(options, directory / "workspace", directory);
+  fixed.Map(directory / "sparse");
+  fixed.RefineModel(directory / "sparse" / "0", directory / "refined");
+  options.camera.reset();
+  const ColmapRunner estimated(options, directory / "workspace", directory);
+  estimated.Map(directory / "sparse");
+  std::ifstream stream(directory / "arguments.txt");
+  std::vector<std::string> lines;
+  for (std::string line; std::getline(stream, line);) lines.push_back(line);
+  ASSERT_EQ(lines.size(), 4u);
+  EXPECT_NE(lines[0].find("mapper "), std::string::npos) << lines[0];
+  EXPECT_NE(lines[0].find("--Mapper.ba_refine_focal_length 0"), std::string::npos) << lines[0];
+  EXPECT_EQ(lines[0].find("filter_max_reproj_error"), std::string::npos) << lines[0];
+  EXPECT_NE(lines[1].find("point_filtering"), std::string::npos) << lines[1];
+  EXPECT_NE(lines[1].find("--max_reproj_error 1.0"), std::string::npos) << lines[1];
+  EXPECT_NE(lines[2].find("bundle_adjuster"), std::string::npos) << lines[2];
+  EXPECT_NE(lines[2].find("--BundleAdjustment.refine_focal_length 0"), std::string::npos);
+  EXPECT_EQ(lines[3].find("ba_refine_focal_length"), std::string::npos) << lines[3];
+  std::filesystem::remove_all(directory);
+
+  ColmapOptions bad;
+  bad.fixed_camera_max_reprojection_error_px = 0.0;
+  EXPECT_THROW(bad.Check(), InvalidArgumentError);
 }
 
 TEST(ColmapRunner, MatcherNamesParse) {

@@ -314,15 +314,25 @@ void ColmapRunner::Map(const std::filesystem::path& output_dir) const {
                                         "--Mapper.min_num_matches",
                                         std::to_string(options_.min_num_matches)};
   if (options_.camera) {
-    const double max_error = options_.fixed_camera_max_reprojection_error_px;
     arguments.insert(arguments.end(),
                      {"--Mapper.ba_refine_focal_length", "0", "--Mapper.ba_refine_principal_point",
-                      "0", "--Mapper.ba_refine_extra_params", "0",
-                      "--Mapper.filter_max_reproj_error", std::to_string(max_error),
-                      "--Mapper.tri_merge_max_reproj_error", std::to_string(1.5 * max_error),
-                      "--Mapper.tri_complete_max_reproj_error", std::to_string(1.5 * max_error)});
+                      "0", "--Mapper.ba_refine_extra_params", "0"});
   }
   Run("mapper", arguments);
+}
+
+void ColmapRunner::RefineModel(const std::filesystem::path& input_model,
+                               const std::filesystem::path& output_model) const {
+  const std::filesystem::path filtered = output_model.string() + ".filtered";
+  CreateDirectories(filtered);
+  CreateDirectories(output_model);
+  Run("point_filtering",
+      {"--input_path", input_model.string(), "--output_path", filtered.string(),
+       "--max_reproj_error", std::to_string(options_.fixed_camera_max_reprojection_error_px)});
+  Run("bundle_adjuster",
+      {"--input_path", filtered.string(), "--output_path", output_model.string(),
+       "--BundleAdjustment.refine_focal_length", "0", "--BundleAdjustment.refine_principal_point",
+       "0", "--BundleAdjustment.refine_extra_params", "0"});
 }
 
 void ColmapRunner::Triangulate(const std::filesystem::path& input_model,

@@ -4,13 +4,16 @@
 #include <cmath>
 #include <functional>
 #include <limits>
+#include <map>
 #include <numbers>
+#include <optional>
 #include <sstream>
 #include <string>
 
 #include <pcl/kdtree/kdtree_flann.h>
 #include <pcl/point_cloud.h>
 #include <pcl/point_types.h>
+#include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -18,6 +21,8 @@
 #include "core/common/file_util.h"
 #include "core/trajectory/trajectory.h"
 #include "core/trajectory/tum_io.h"
+#include "tools/sim/ground_truth_map.h"
+#include "tools/sim/scene.h"
 
 namespace evloc::mapper {
 namespace {
@@ -70,8 +75,16 @@ void MapAccuracyOptions::Check() const {
 
 MapAccuracy MeasureMapAccuracy(const Map& map, const Map& reference,
                                const std::vector<DepthView>& views,
-                               const MapAccuracyOptions& options) {
+                               const MapAccuracyOptions& options,
+                               std::vector<PointAccuracy>* per_point,
+                               const std::vector<bool>& reference_gradient_defined) {
   options.Check();
+  if (!reference_gradient_defined.empty() &&
+      reference_gradient_defined.size() != reference.size()) {
+    throw InvalidArgumentError("reference_gradient_defined has " +
+                               std::to_string(reference_gradient_defined.size()) + " flags for " +
+                               std::to_string(reference.size()) + " reference points");
+  }
   if (map.size() == 0) throw InvalidArgumentError("the measured map is empty");
   if (reference.size() < 2) throw InvalidArgumentError("the reference map has fewer than 2 points");
   pcl::PointCloud<pcl::PointXYZ>::Ptr cloud(new pcl::PointCloud<pcl::PointXYZ>);
@@ -82,7 +95,17 @@ MapAccuracy MeasureMapAccuracy(const Map& map, const Map& reference,
   pcl::KdTreeFLANN<pcl::PointXYZ> tree;
   tree.setInputCloud(cloud);
   std::vector<Eigen::Vector3d> centers;
-  for (const DepthView& view : views) centers.push_back(view.cam_from_world.Inverse().translation);
+  std::map<int64_t, size_t> view_by_time;
+  for (size_t v = 0; v < views.size(); ++v) {
+    centers.push_back(views[v].cam_from_world.Inverse().translation);
+    if (views[v].t_ns) view_by_time.emplace(*views[v].t_ns, v);
+  }
+  // The view taken within 1 ms of t_ns.
+  const auto view_of_time = [&](int64_t t_ns) -> std::optional<size_t> {
+    const auto after = view_by_time.lower_bound(t_ns - 1000000);
+    if (after == view_by_time.end() || after->first > t_ns + 1000000) return std::nullopt;
+    return after->second;
+  };
 
   MapAccuracy accuracy;
   accuracy.num_points = map.size();
@@ -90,10 +113,15 @@ MapAccuracy MeasureMapAccuracy(const Map& map, const Map& reference,
   std::vector<double> signed_depth_errors;
   std::vector<double> edge_distances;
   std::vector<double> gradient_angles;
+  std::vector<double> defined_gradient_angles;
   std::vector<double> image_gradient_angles;
   std::vector<int> indices(2);
   std::vector<float> squared_distances(2);
   const int window = options.depth_window_half_size_px;
+  constexpr double kNotMeasured = std::numeric_limits<double>::quiet_NaN();
+  if (per_point != nullptr) {
+    per_point->assign(map.size(), {kNotMeasured, kNotMeasured, kNotMeasured, kNotMeasured, 0});
+  }
   for (size_t i = 0; i < map.size(); ++i) {
     const Eigen::Vector3d point = map.positions[i].cast<double>();
     const Eigen::Vector3d gradient = map.gradients[i].cast<double>();
@@ -111,14 +139,27 @@ MapAccuracy MeasureMapAccuracy(const Map& map, const Map& reference,
     edge_distances.push_back(distance);
     const Eigen::Vector3d reference_gradient = reference.gradients[indices[0]].cast<double>();
     gradient_angles.push_back(AngleDeg(gradient, reference_gradient));
+    if (reference_gradient_defined.empty() || reference_gradient_defined[indices[0]]) {
+      defined_gradient_angles.push_back(gradient_angles.back());
+    }
+    if (per_point != nullptr) {
+      (*per_point)[i].edge_distance_m = distance;
+      (*per_point)[i].gradient_angle_deg = gradient_angles.back();
+      (*per_point)[i].reference_index = static_cast<uint32_t>(indices[0]);
+    }
 
-    // The nearest depth view (by camera centre) in which the point projects with valid depth.
+    // The view of the point's source keyframe (it observed the point there: no occlusion), else
+    // the nearest depth view (by camera centre) in which the point projects with valid depth.
     std::vector<std::pair<double, size_t>> by_distance;
+    const uint32_t source = i < map.source_keyframe.size() ? map.source_keyframe[i] : kNoKeyframe;
+    const std::optional<size_t> source_view =
+        source < map.keyframes.size() ? view_of_time(map.keyframes[source].t_ns) : std::nullopt;
     for (size_t v = 0; v < views.size(); ++v) {
-      by_distance.emplace_back((centers[v] - point).squaredNorm(), v);
+      // The source view first (distance -1), then by distance.
+      by_distance.emplace_back(source_view == v ? -1.0 : (centers[v] - point).squaredNorm(), v);
     }
     std::sort(by_distance.begin(), by_distance.end());
-    for (const auto& [unused, v] : by_distance) {
+    for (const auto& [order, v] : by_distance) {
       const DepthView& view = views[v];
       const Eigen::Vector3d in_cam = view.cam_from_world * point;
       Eigen::Vector2d pixel;
@@ -145,6 +186,8 @@ MapAccuracy MeasureMapAccuracy(const Map& map, const Map& reference,
       if (!std::isfinite(best)) continue;
       depth_errors.push_back(best);
       signed_depth_errors.push_back(best_signed);
+      if (order < 0.0) ++accuracy.num_depth_in_source_view;
+      if (per_point != nullptr) (*per_point)[i].depth_error_m = best;
       Eigen::Vector2d direction;
       Eigen::Vector2d reference_direction;
       if (ImageDirection(view, point, gradient, &direction) &&
@@ -152,6 +195,9 @@ MapAccuracy MeasureMapAccuracy(const Map& map, const Map& reference,
         image_gradient_angles.push_back(
             AngleDeg(Eigen::Vector3d(direction.x(), direction.y(), 0),
                      Eigen::Vector3d(reference_direction.x(), reference_direction.y(), 0)));
+        if (per_point != nullptr) {
+          (*per_point)[i].image_gradient_angle_deg = image_gradient_angles.back();
+        }
       }
       break;
     }
@@ -169,14 +215,20 @@ MapAccuracy MeasureMapAccuracy(const Map& map, const Map& reference,
   accuracy.median_edge_distance_m = Median(edge_distances);
   accuracy.edge_within_fraction = fraction_within(edge_distances);
   accuracy.median_gradient_angle_deg = Median(gradient_angles);
-  const auto fraction = [&](const std::function<bool(double)>& predicate) {
-    if (gradient_angles.empty()) return 0.0;
-    return static_cast<double>(
-               std::count_if(gradient_angles.begin(), gradient_angles.end(), predicate)) /
-           static_cast<double>(gradient_angles.size());
+  const auto fraction = [](const std::vector<double>& angles,
+                           const std::function<bool(double)>& predicate) {
+    if (angles.empty()) return 0.0;
+    return static_cast<double>(std::count_if(angles.begin(), angles.end(), predicate)) /
+           static_cast<double>(angles.size());
   };
-  accuracy.gradient_within_10deg_fraction = fraction([](double angle) { return angle <= 10.0; });
-  accuracy.gradient_opposite_fraction = fraction([](double angle) { return angle > 90.0; });
+  const auto within_10deg = [](double angle) { return angle <= 10.0; };
+  const auto opposite = [](double angle) { return angle > 90.0; };
+  accuracy.gradient_within_10deg_fraction = fraction(gradient_angles, within_10deg);
+  accuracy.gradient_opposite_fraction = fraction(gradient_angles, opposite);
+  accuracy.num_gradient_defined = defined_gradient_angles.size();
+  accuracy.median_gradient_angle_defined_deg = Median(defined_gradient_angles);
+  accuracy.gradient_within_10deg_defined_fraction = fraction(defined_gradient_angles, within_10deg);
+  accuracy.gradient_opposite_defined_fraction = fraction(defined_gradient_angles, opposite);
   accuracy.median_image_gradient_angle_deg = Median(image_gradient_angles);
   return accuracy;
 }
@@ -238,10 +290,42 @@ std::vector<DepthView> ReadDatasetDepthViews(const std::filesystem::path& datase
     DepthView view;
     view.camera = camera;
     view.cam_from_world = world_from_cam->Inverse();
+    view.t_ns = ParseSecondsAsNanoseconds(time);
     millimetres.convertTo(view.depth_m, CV_32F, 1e-3);
     views.push_back(std::move(view));
   }
   return views;
+}
+
+std::vector<bool> ReferenceGradientDefined(const std::filesystem::path& dataset,
+                                           const Map& reference) {
+  const std::filesystem::path info_path = dataset / "info.json";
+  nlohmann::json info;
+  try {
+    info = nlohmann::json::parse(ReadFileToString(info_path));
+  } catch (const nlohmann::json::exception& error) {
+    throw ParseError(info_path.string(), "JSON", error.what());
+  }
+  const std::string scene_name = info.value("/options/scene"_json_pointer, std::string());
+  const sim::Scene scene = scene_name.empty() || scene_name == "default room"
+                               ? sim::MakeDefaultRoom()
+                               : sim::LoadSceneJson(scene_name);
+  const std::vector<sim::GroundTruthEdgePoint> edges =
+      sim::SampleGroundTruthEdges(scene, sim::GroundTruthMapOptions());
+  if (edges.size() != reference.size()) {
+    throw InvalidArgumentError("the scene of " + info_path.string() + " gives " +
+                               std::to_string(edges.size()) + " edge points, the gt_map has " +
+                               std::to_string(reference.size()));
+  }
+  std::vector<bool> defined(edges.size());
+  for (size_t i = 0; i < edges.size(); ++i) {
+    if ((edges[i].position - reference.positions[i].cast<double>()).norm() > 1e-4) {
+      throw InvalidArgumentError("edge point " + std::to_string(i) + " of the scene of " +
+                                 info_path.string() + " differs from the gt_map's");
+    }
+    defined[i] = edges[i].kind != sim::EdgeKind::kConvexCrease;
+  }
+  return defined;
 }
 
 }  // namespace evloc::mapper

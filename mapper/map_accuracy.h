@@ -5,7 +5,9 @@
 #pragma once
 
 #include <cstddef>
+#include <cstdint>
 #include <filesystem>
+#include <optional>
 #include <vector>
 
 #include <opencv2/core.hpp>
@@ -24,12 +26,23 @@ struct DepthView {
   Rigid3d cam_from_world;
   // z along the optical axis, metres, CV_32F; 0 where nothing was hit.
   cv::Mat depth_m;
+  // Capture time, nanoseconds: the view of a map keyframe with the same t_ns is the one whose
+  // rays observed the keyframe's points.
+  std::optional<int64_t> t_ns;
 };
 
 // The rendered depth maps of an evloc-sim dataset (depth.txt: `t path` lines of 16-bit PNGs in
 // millimetres; calib.yaml; groundtruth.txt for the poses), every `stride`-th one. Throws IoError /
 // ParseError for unreadable or malformed files, InvalidArgumentError for a stride below 1.
 std::vector<DepthView> ReadDatasetDepthViews(const std::filesystem::path& dataset, int stride = 1);
+
+// Per point of an evloc-sim dataset's gt_map: whether its gradient is defined by the scene
+// (texture edges and concave creases) or not (convex creases). The edges are sampled again from
+// the dataset's scene (info.json "scene": the default room or a scene JSON) with the options the
+// simulator uses, and must match the reference map point for point. Throws IoError / ParseError
+// when info.json or the scene cannot be read, InvalidArgumentError when the points differ.
+std::vector<bool> ReferenceGradientDefined(const std::filesystem::path& dataset,
+                                           const Map& reference);
 
 // Options of MeasureMapAccuracy.
 struct MapAccuracyOptions {
@@ -52,7 +65,12 @@ struct MapAccuracy {
   size_t num_points = 0;
   // Points that project into a depth view with valid depth nearby.
   size_t num_depth_compared = 0;
-  // Median depth error against the nearest depth view (by camera centre), metres.
+  // Of those, the points compared in the view of their source keyframe (along the rays that
+  // observed them); the others in the nearest view by camera centre.
+  size_t num_depth_in_source_view = 0;
+  // Median depth error along the optical axis of the compared view (the source keyframe's when
+  // a view has its time, else the nearest by camera centre, which may see the point occluded),
+  // metres.
   double median_depth_error_m = 0.0;
   // Median of the signed depth error (map depth minus rendered depth), metres: a bias, e.g. from a
   // scale error of estimated poses, shows here.
@@ -73,13 +91,40 @@ struct MapAccuracy {
   // (what tracking uses: the 3D gradient of method.md §3.4 is only defined up to the viewing
   // direction).
   double median_image_gradient_angle_deg = 0.0;
+  // The gradient measures restricted to points whose nearest ground-truth point has a defined
+  // gradient (reference_gradient_defined; all points without it).
+  size_t num_gradient_defined = 0;
+  double median_gradient_angle_defined_deg = 0.0;
+  double gradient_within_10deg_defined_fraction = 0.0;
+  double gradient_opposite_defined_fraction = 0.0;
 };
 
-// Measures `map` against the exact `reference` map and rendered `views`. Throws
-// InvalidArgumentError when the options are bad or either map is empty.
+// The measures of one map point (NaN where not measured).
+struct PointAccuracy {
+  // Smallest |depth error| around the projection into the nearest depth view, metres.
+  double depth_error_m = 0.0;
+  // Distance to the ground-truth edges, metres.
+  double edge_distance_m = 0.0;
+  // 3D gradient angle to the nearest ground-truth point's, degrees.
+  double gradient_angle_deg = 0.0;
+  // Angle of the two gradients projected into the nearest depth view, degrees.
+  double image_gradient_angle_deg = 0.0;
+  // Index of the nearest ground-truth point.
+  uint32_t reference_index = 0;
+};
+
+// Measures `map` against the exact `reference` map and rendered `views`; with `per_point`, also
+// the measures of every map point (same order as the map). `reference_gradient_defined` (one flag
+// per reference point, or empty: all defined) marks the reference points whose gradient an image
+// can show: false for convex creases, which are occluding contours from some viewpoints (their
+// image contrast is against the background, docs/sim-scene.md) or hidden behind a touching box.
+// Throws InvalidArgumentError when the options are bad, either map is empty, or the flags do not
+// match the reference.
 MapAccuracy MeasureMapAccuracy(const Map& map, const Map& reference,
                                const std::vector<DepthView>& views,
-                               const MapAccuracyOptions& options);
+                               const MapAccuracyOptions& options,
+                               std::vector<PointAccuracy>* per_point = nullptr,
+                               const std::vector<bool>& reference_gradient_defined = {});
 
 // Edge distance of a map on real images: for each keyframe, the Canny edges (thresholds 40/100 on
 // 8 bits, L2 gradient) of its image `image_dir / keyframe.image_name`, their distance transform,

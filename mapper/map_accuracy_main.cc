@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <filesystem>
 #include <iostream>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -14,6 +15,7 @@
 #include "core/camera/camera.h"
 #include "core/common/cli.h"
 #include "core/common/error.h"
+#include "core/common/file_util.h"
 #include "mapper/map_accuracy.h"
 #include "maps/map.h"
 #include "maps/map_directory.h"
@@ -27,7 +29,8 @@ constexpr const char* kUsage = R"(Usage: evloc-mapper-accuracy --map MAPDIR --da
        evloc-mapper-accuracy --map MAPDIR --images DIR
 
 Measures a map against an evloc-sim dataset: depth error against the rendered depth maps (nearest
-frame by camera centre), distance to the exact edges of DIR/gt_map and gradient angles.
+frame by camera centre), distance to the exact edges of DIR/gt_map and gradient angles (also
+without the convex creases, whose image gradient depends on the background).
 With --images instead: the distance in pixels from each keyframe's projected visible points to
 the nearest Canny edge (40/100) of its image (real data without a ground-truth scene).
   --map MAPDIR         map directory or .evmap file
@@ -35,6 +38,8 @@ the nearest Canny edge (40/100) of its image (real data without a ground-truth s
   --images DIR         the image folder given to `evloc-mapper build --images`
   --within METRES      threshold of the "within" fractions (default 0.02)
   --depth-stride N     use every N-th depth map (default 1)
+  --points-csv FILE    also write one line per map point: x y z gx gy gz depth_error_m
+                       edge_distance_m gradient_angle_deg image_gradient_angle_deg reference_index
 )";
 
 }  // namespace
@@ -43,6 +48,7 @@ int main(int argc, char** argv) {
   fs::path map_path;
   fs::path dataset;
   fs::path image_dir;
+  fs::path points_csv;
   int stride = 1;
   evloc::mapper::MapAccuracyOptions options;
   try {
@@ -60,6 +66,8 @@ int main(int argc, char** argv) {
         dataset = value;
       } else if (flag == "--images") {
         image_dir = value;
+      } else if (flag == "--points-csv") {
+        points_csv = value;
       } else if (flag == "--within") {
         options.within_m = evloc::ParseDoubleFlag(flag, value);
       } else if (flag == "--depth-stride") {
@@ -101,13 +109,39 @@ int main(int argc, char** argv) {
     }
     const evloc::Map reference = evloc::LoadMap(dataset / "gt_map" / evloc::kMapFileName);
     const std::vector<DepthView> views = evloc::mapper::ReadDatasetDepthViews(dataset, stride);
-    const evloc::mapper::MapAccuracy accuracy =
-        evloc::mapper::MeasureMapAccuracy(map, reference, views, options);
+    // Convex creases have no image-defined gradient; without the scene, every point counts.
+    std::vector<bool> gradient_defined;
+    std::string gradient_defined_note = "convex creases excluded";
+    try {
+      gradient_defined = evloc::mapper::ReferenceGradientDefined(dataset, reference);
+    } catch (const evloc::Error& error) {
+      gradient_defined_note = std::string("no edge kinds (") + error.what() + "): all points";
+    }
+    std::vector<evloc::mapper::PointAccuracy> per_point;
+    const evloc::mapper::MapAccuracy accuracy = evloc::mapper::MeasureMapAccuracy(
+        map, reference, views, options, points_csv.empty() ? nullptr : &per_point,
+        gradient_defined);
+    if (!points_csv.empty()) {
+      std::ostringstream csv;
+      csv.precision(7);
+      csv << "x y z gx gy gz depth_error_m edge_distance_m gradient_angle_deg "
+             "image_gradient_angle_deg reference_index\n";
+      for (size_t i = 0; i < per_point.size(); ++i) {
+        const Eigen::Vector3f& p = map.positions[i];
+        const Eigen::Vector3f& g = map.gradients[i];
+        const evloc::mapper::PointAccuracy& a = per_point[i];
+        csv << p.x() << ' ' << p.y() << ' ' << p.z() << ' ' << g.x() << ' ' << g.y() << ' ' << g.z()
+            << ' ' << a.depth_error_m << ' ' << a.edge_distance_m << ' ' << a.gradient_angle_deg
+            << ' ' << a.image_gradient_angle_deg << ' ' << a.reference_index << '\n';
+      }
+      evloc::WriteFileAtomically(points_csv, csv.str());
+    }
     nlohmann::json json;
     json["points"] = accuracy.num_points;
     json["reference_points"] = reference.size();
     json["depth_views"] = views.size();
     json["depth_compared_points"] = accuracy.num_depth_compared;
+    json["depth_compared_in_source_view"] = accuracy.num_depth_in_source_view;
     json["median_depth_error_m"] = accuracy.median_depth_error_m;
     json["median_signed_depth_error_m"] = accuracy.median_signed_depth_error_m;
     json["depth_within_fraction"] = accuracy.depth_within_fraction;
@@ -117,6 +151,12 @@ int main(int argc, char** argv) {
     json["gradient_within_10deg_fraction"] = accuracy.gradient_within_10deg_fraction;
     json["gradient_opposite_fraction"] = accuracy.gradient_opposite_fraction;
     json["median_image_gradient_angle_deg"] = accuracy.median_image_gradient_angle_deg;
+    json["gradient_defined_points"] = accuracy.num_gradient_defined;
+    json["gradient_defined_note"] = gradient_defined_note;
+    json["median_gradient_angle_defined_deg"] = accuracy.median_gradient_angle_defined_deg;
+    json["gradient_within_10deg_defined_fraction"] =
+        accuracy.gradient_within_10deg_defined_fraction;
+    json["gradient_opposite_defined_fraction"] = accuracy.gradient_opposite_defined_fraction;
     json["within_m"] = options.within_m;
     std::cout << json.dump(2) << "\n";
     return 0;

@@ -179,7 +179,8 @@ std::string ModelFingerprint(const MapBuilderOptions& options,
                              const std::string& workspace_fingerprint) {
   std::ostringstream text;
   text << workspace_fingerprint;
-  text << "mapper " << options.colmap.abs_pose_min_num_inliers << " "
+  // v2: the estimated model with fixed intrinsics is filtered and adjusted after mapping.
+  text << "model v2 mapper " << options.colmap.abs_pose_min_num_inliers << " "
        << options.colmap.abs_pose_min_inlier_ratio << " " << options.colmap.min_num_matches << " "
        << options.colmap.fixed_camera_max_reprojection_error_px << "\n";
   if (options.known_poses) {
@@ -739,6 +740,14 @@ MapBuildReport BuildMap(const MapBuilderOptions& options_in, ProgressListener* p
             "COLMAP could not reconstruct any image pair (no model written); the images may "
             "lack texture or overlap; see " +
             (runner.LogDir() / "mapper.log").string());
+      }
+      if (camera) {
+        // Calibrated intrinsics: drop the observations COLMAP's 4 px kept, adjust again.
+        const fs::path refined = workspace / "refined";
+        fs::remove_all(refined, error);
+        fs::remove_all(refined.string() + ".filtered", error);
+        runner.RefineModel(best, refined);
+        best = refined;
       }
       fs::remove_all(text_model, error);
       runner.ConvertToText(best, text_model);

@@ -90,30 +90,60 @@ TEST(MapBuilderAccuracy, TempleEstimatedPosesAgreeWithCalibration) {
   Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
   for (const Eigen::Vector3f& position : map.positions) centroid += position.cast<double>();
   centroid /= static_cast<double>(map.size());
-  double max_rotation_deg = 0.0;
-  double max_relative_position = 0.0;
-  std::string worst_view;
+  // The poses as the mapper aligned them (centres and orientations, AlignPoses), and re-aligned
+  // by the camera centres alone (Umeyama: the usual evaluation, minimising the position errors).
+  std::vector<Rigid3d> aligned;
+  std::vector<Rigid3d> truths;
   for (const testing::MiddleburyView& view : temple.views) {
     const auto estimated = report.world_from_cams.find(view.name);
     ASSERT_NE(estimated, report.world_from_cams.end()) << view.name;
-    const Rigid3d truth = view.cam_from_world.Inverse();
-    const double rotation_deg =
-        AngleBetween(estimated->second.rotation, truth.rotation) * 180.0 / std::numbers::pi;
-    const double object_distance = (truth.translation - centroid).norm();
-    const double relative =
-        (estimated->second.translation - truth.translation).norm() / object_distance;
-    max_rotation_deg = std::max(max_rotation_deg, rotation_deg);
-    if (relative > max_relative_position) {
-      max_relative_position = relative;
-      worst_view = view.name;
-    }
+    aligned.push_back(estimated->second);
+    truths.push_back(view.cam_from_world.Inverse());
   }
+  Eigen::Matrix3Xd source(3, aligned.size());
+  Eigen::Matrix3Xd target(3, aligned.size());
+  for (size_t i = 0; i < aligned.size(); ++i) {
+    source.col(static_cast<Eigen::Index>(i)) = aligned[i].translation;
+    target.col(static_cast<Eigen::Index>(i)) = truths[i].translation;
+  }
+  const Sim3d centres_only = AlignUmeyama(source, target, true);
+  struct Worst {
+    double rotation_deg = 0.0;
+    double relative_position = 0.0;
+    std::string view;
+  };
+  const auto worst_of = [&](const Sim3d& realignment) {
+    Worst worst;
+    for (size_t i = 0; i < aligned.size(); ++i) {
+      const Rigid3d pose = realignment.TransformPose(aligned[i]);
+      const double rotation_deg =
+          AngleBetween(pose.rotation, truths[i].rotation) * 180.0 / std::numbers::pi;
+      const double relative = (pose.translation - truths[i].translation).norm() /
+                              (truths[i].translation - centroid).norm();
+      worst.rotation_deg = std::max(worst.rotation_deg, rotation_deg);
+      if (relative > worst.relative_position) {
+        worst.relative_position = relative;
+        worst.view = temple.views[i].name;
+      }
+    }
+    return worst;
+  };
+  const Worst as_mapped = worst_of(Sim3d());
+  const Worst by_centres = worst_of(centres_only);
+  std::cout << "templeSparseRing, estimated poses against the calibration: as aligned by the "
+               "mapper (centres and orientations): max rotation error "
+            << as_mapped.rotation_deg << " deg, max position error "
+            << 100.0 * as_mapped.relative_position << " % of the object distance ("
+            << as_mapped.view << "); re-aligned by the centres alone: " << by_centres.rotation_deg
+            << " deg, " << 100.0 * by_centres.relative_position << " % (" << by_centres.view
+            << ")\n";
+  // The requirement is checked with the centre alignment (the usual one).
+  const double max_rotation_deg = by_centres.rotation_deg;
+  const double max_relative_position = by_centres.relative_position;
   const std::vector<double> distances = KeyframeEdgeDistances(map, temple.image_dir);
   std::cout << "templeSparseRing, estimated poses (fixed intrinsics, Sim(3) to calibration): "
             << report.num_registered << "/16 registered, alignment RMS "
-            << *report.alignment_rms_m * 1000.0 << " mm (scale " << *report.alignment_scale
-            << "), max rotation error " << max_rotation_deg << " deg, max position error "
-            << 100.0 * max_relative_position << " % of the object distance (" << worst_view << "); "
+            << *report.alignment_rms_m * 1000.0 << " mm (scale " << *report.alignment_scale << "); "
             << map.size() << " points, median edge distance " << distances[distances.size() / 2]
             << " px\n";
   PrintTimings(report);

@@ -28,7 +28,8 @@ add_library(evloc_mapper_accuracy ${CMAKE_CURRENT_LIST_DIR}/map_accuracy.cc)
 target_include_directories(evloc_mapper_accuracy PUBLIC ${PROJECT_SOURCE_DIR})
 target_link_libraries(evloc_mapper_accuracy
   PUBLIC evloc_maps evloc_camera evloc_geometry evloc_common opencv_core
-  PRIVATE evloc_trajectory opencv_imgproc opencv_imgcodecs ${PCL_LIBRARIES})
+  PRIVATE evloc_trajectory evloc_sim_world nlohmann_json::nlohmann_json opencv_imgproc
+          opencv_imgcodecs ${PCL_LIBRARIES})
 target_include_directories(evloc_mapper_accuracy SYSTEM PRIVATE ${PCL_INCLUDE_DIRS})
 target_compile_definitions(evloc_mapper_accuracy PRIVATE ${PCL_DEFINITIONS})
 add_executable(evloc-mapper-accuracy ${CMAKE_CURRENT_LIST_DIR}/map_accuracy_main.cc)
@@ -49,3 +50,9 @@ evloc_add_test(NAME evloc_mapper_accuracy_test
   SOURCES ${CMAKE_CURRENT_LIST_DIR}/map_builder_accuracy_test.cc
   LIBS evloc_mapper_pipeline evloc_mapper_accuracy
   LABELS long)
+
+# The short synthetic-room check of the default suite: render 30 frames (no events), map with the
+# known poses, measure against the exact scene (about 40 s of CPU).
+evloc_add_test(NAME evloc_mapper_synthetic_test
+  SOURCES ${CMAKE_CURRENT_LIST_DIR}/synthetic_room_test.cc
+  LIBS evloc_mapper_pipeline evloc_mapper_accuracy evloc_sim evloc_sim_world opencv_imgcodecs)

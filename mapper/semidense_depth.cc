@@ -415,6 +415,10 @@ void SemiDenseOptions::Check() const {
   require(min_keyframe_confirmations >= 0, "min_keyframe_confirmations must be >= 0");
   require(refinement_iterations >= 0, "refinement_iterations must be >= 0");
   require(surface_window_px >= 0, "surface_window_px must be >= 0");
+  require(surface_window_doublings >= 0 && surface_window_doublings <= 4,
+          "surface_window_doublings must be in [0, 4]");
+  require(surface_max_slope >= 0.0, "surface_max_slope must be >= 0");
+  require(surface_edge_band_px >= 0.0, "surface_edge_band_px must be >= 0");
   require(min_surface_points >= 3, "min_surface_points must be at least 3");
   require(surface_max_depth_difference > 0.0, "surface_max_depth_difference must be > 0");
   require(max_surface_thickness_ratio > 0.0 && max_surface_thickness_ratio < 1.0,
@@ -683,10 +687,13 @@ std::vector<std::optional<Eigen::Vector3d>> SurfaceGradients3d(const Camera& cam
   std::vector<std::optional<Eigen::Vector3d>> gradients(depth.pixels.size());
   const int window = options.surface_window_px;
   if (window == 0 || depth.pixels.empty()) return gradients;
-  // Points in the camera, and a pixel -> point index grid.
+  // Points in the camera, bucketed in square cells of the base window's size.
   std::vector<Eigen::Vector3d> points(depth.pixels.size(), Eigen::Vector3d::Zero());
   std::vector<bool> valid(depth.pixels.size(), false);
-  cv::Mat index(camera.height, camera.width, CV_32S, cv::Scalar(-1));
+  const int cell = window;
+  const int cells_x = (camera.width + cell - 1) / cell;
+  const int cells_y = (camera.height + cell - 1) / cell;
+  std::vector<std::vector<uint32_t>> buckets(static_cast<size_t>(cells_x * cells_y));
   for (size_t i = 0; i < depth.pixels.size(); ++i) {
     const DepthPixel& pixel = depth.pixels[i];
     Eigen::Vector3d ray;
@@ -699,46 +706,68 @@ std::vector<std::optional<Eigen::Vector3d>> SurfaceGradients3d(const Camera& cam
     }
     points[i] = ray / pixel.inverse_depth;
     valid[i] = true;
-    index.at<int>(pixel.pixel.y(), pixel.pixel.x()) = static_cast<int>(i);
+    buckets[static_cast<size_t>((pixel.pixel.y() / cell) * cells_x + pixel.pixel.x() / cell)]
+        .push_back(static_cast<uint32_t>(i));
   }
   const double max_thickness_squared =
       options.max_surface_thickness_ratio * options.max_surface_thickness_ratio;
   const double min_width_squared =
       options.min_surface_width_ratio * options.min_surface_width_ratio;
   std::vector<Eigen::Vector3d> neighbourhood;
+  // The points within `half_size` pixels of `center` on the same surface (similar depth).
+  const auto gather = [&](size_t i, int half_size) {
+    const Eigen::Vector2i& center = depth.pixels[i].pixel;
+    const Eigen::Vector2d& bright = depth.pixels[i].gradient_direction;
+    const double max_difference =
+        points[i].z() * std::max(options.surface_max_depth_difference,
+                                 options.surface_max_slope * half_size / camera.fx);
+    neighbourhood.clear();
+    const int x_begin = std::max(0, (center.x() - half_size) / cell);
+    const int x_end = std::min(cells_x - 1, (center.x() + half_size) / cell);
+    const int y_begin = std::max(0, (center.y() - half_size) / cell);
+    const int y_end = std::min(cells_y - 1, (center.y() + half_size) / cell);
+    for (int cy = y_begin; cy <= y_end; ++cy) {
+      for (int cx = x_begin; cx <= x_end; ++cx) {
+        for (const uint32_t other : buckets[static_cast<size_t>(cy * cells_x + cx)]) {
+          const Eigen::Vector2i& at = depth.pixels[other].pixel;
+          if (std::abs(at.x() - center.x()) > half_size ||
+              std::abs(at.y() - center.y()) > half_size ||
+              std::abs(points[other].z() - points[i].z()) > max_difference ||
+              (at - center).cast<double>().dot(bright) < -options.surface_edge_band_px) {
+            continue;
+          }
+          neighbourhood.push_back(points[other]);
+        }
+      }
+    }
+  };
   for (size_t i = 0; i < depth.pixels.size(); ++i) {
     if (!valid[i]) continue;
     const Eigen::Vector2i& center = depth.pixels[i].pixel;
-    const double max_difference = options.surface_max_depth_difference * points[i].z();
-    neighbourhood.clear();
-    for (int y = std::max(0, center.y() - window);
-         y <= std::min(camera.height - 1, center.y() + window); ++y) {
-      for (int x = std::max(0, center.x() - window);
-           x <= std::min(camera.width - 1, center.x() + window); ++x) {
-        const int other = index.at<int>(y, x);
-        if (other < 0) continue;
-        if (std::abs(points[static_cast<size_t>(other)].z() - points[i].z()) > max_difference) {
-          continue;
-        }
-        neighbourhood.push_back(points[static_cast<size_t>(other)]);
+    // The smallest window whose points form a plane (planar, and not one line).
+    std::optional<Eigen::Vector3d> plane_normal;
+    for (int doubling = 0; doubling <= options.surface_window_doublings && !plane_normal;
+         ++doubling) {
+      gather(i, window << doubling);
+      if (neighbourhood.size() < static_cast<size_t>(options.min_surface_points)) continue;
+      Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+      for (const Eigen::Vector3d& point : neighbourhood) mean += point;
+      mean /= static_cast<double>(neighbourhood.size());
+      Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();
+      for (const Eigen::Vector3d& point : neighbourhood) {
+        covariance += (point - mean) * (point - mean).transpose();
       }
+      const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver(covariance);
+      if (solver.info() != Eigen::Success) continue;
+      const Eigen::Vector3d& eigenvalues = solver.eigenvalues();  // increasing
+      if (!(eigenvalues(2) > 0.0) || eigenvalues(0) > max_thickness_squared * eigenvalues(1) ||
+          eigenvalues(1) < min_width_squared * eigenvalues(2)) {
+        continue;
+      }
+      plane_normal = solver.eigenvectors().col(0);
     }
-    if (neighbourhood.size() < static_cast<size_t>(options.min_surface_points)) continue;
-    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-    for (const Eigen::Vector3d& point : neighbourhood) mean += point;
-    mean /= static_cast<double>(neighbourhood.size());
-    Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();
-    for (const Eigen::Vector3d& point : neighbourhood) {
-      covariance += (point - mean) * (point - mean).transpose();
-    }
-    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver(covariance);
-    if (solver.info() != Eigen::Success) continue;
-    const Eigen::Vector3d& eigenvalues = solver.eigenvalues();  // increasing
-    if (!(eigenvalues(2) > 0.0) || eigenvalues(0) > max_thickness_squared * eigenvalues(1) ||
-        eigenvalues(1) < min_width_squared * eigenvalues(2)) {
-      continue;
-    }
-    const Eigen::Vector3d normal = solver.eigenvectors().col(0);
+    if (!plane_normal) continue;
+    const Eigen::Vector3d& normal = *plane_normal;
     Eigen::Vector3d view_gradient;
     if (!ComputeGradient3d(camera, center.cast<double>(), depth.pixels[i].gradient_direction,
                            points[i], &view_gradient)) {

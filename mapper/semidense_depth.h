@@ -91,12 +91,24 @@ struct SemiDenseOptions {
   // Surface gradients (SurfaceGradients3d): half-size of the pixel window whose estimated points
   // give the local surface plane, pixels; 0 keeps the §3.4 gradients.
   int surface_window_px = 20;
+  // Surface gradients: when the window's points are too few, or lie on one line (a single edge:
+  // under a sideways motion only the edges across it get depth), the window is doubled up to
+  // this many times (20 -> 40 -> 80 px).
+  int surface_window_doublings = 2;
   // Surface gradients: the window needs at least this many points within
   // surface_max_depth_difference of the pixel's depth.
   int min_surface_points = 15;
   // Surface gradients: points of the window whose depth differs from the pixel's by more than
-  // this fraction of it belong to another surface and are left out.
+  // this fraction of it, and by more than surface_max_slope times the window's half-width at the
+  // pixel's depth, belong to another surface and are left out (the second bound keeps floors and
+  // walls seen at a grazing angle, whose depth changes fast across the window).
   double surface_max_depth_difference = 0.05;
+  double surface_max_slope = 3.0;
+  // Surface gradients: only the points on the brighter side of the edge (and on the edge line,
+  // within this many pixels of it) are fitted. The gradient points into the brighter side, so on
+  // a crease it lies in the brighter face, as defined by the ground-truth map of
+  // docs/sim-scene.md; on a texture edge both sides are the same plane.
+  double surface_edge_band_px = 1.0;
   // Surface gradients: the points are planar when their smallest principal standard deviation is
   // below this fraction of the middle one...
   double max_surface_thickness_ratio = 0.1;

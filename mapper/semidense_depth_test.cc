@@ -290,5 +290,80 @@ TEST(SurfaceGradients3d, RecoversTheInSurfaceGradientOfATiltedPlane) {
   }
 }
 
+// A floor-wall crease whose brighter side is the floor: the gradient lies in the floor (pointing
+// from the crease towards the camera), although the wall's points are as close in the image.
+// Vertical lines every 10 cm on both faces give each face its plane; the wall (facing the camera)
+// alone would give the wall's in-plane direction, 90 degrees off.
+TEST(SurfaceGradients3d, ACreaseGradientLiesInTheBrighterFace) {
+  const Camera camera = Camera::Pinhole(160, 120, 100.0, 100.0, 79.5, 59.5);
+  const double wall_z = 2.5;
+  const double floor_y = 1.0;  // seen at 22 degrees at the crease (below 17: edge-on)
+  const int crease_row = static_cast<int>(std::lround(camera.cy + camera.fy * floor_y / wall_z));
+  KeyframeDepth depth;
+  std::vector<bool> on_crease;
+  const auto add = [&](int u, int v, const Eigen::Vector3d& point, const Eigen::Vector2d& direction,
+                       bool crease) {
+    DepthPixel pixel;
+    pixel.pixel = Eigen::Vector2i(u, v);
+    pixel.inverse_depth = 1.0 / point.z();
+    pixel.gradient_direction = direction.normalized();
+    depth.pixels.push_back(pixel);
+    on_crease.push_back(crease);
+  };
+  for (int v = 0; v < camera.height; ++v) {
+    for (int u = 0; u < camera.width; ++u) {
+      Eigen::Vector3d ray;
+      ASSERT_TRUE(camera.Unproject(Eigen::Vector2d(u, v), &ray));
+      if (v == crease_row) {
+        // The crease: brighter below (the floor).
+        add(u, v, ray * (wall_z / ray.z()), Eigen::Vector2d(0.0, 1.0), true);
+        continue;
+      }
+      // Wall above the crease row, floor below.
+      const Eigen::Vector3d point =
+          v < crease_row ? ray * (wall_z / ray.z()) : ray * (floor_y / ray.y());
+      const double footprint = point.z() / camera.fx * 1.5;
+      const double offset = point.x() - 0.1 * std::round(point.x() / 0.1);
+      if (std::abs(offset) > 0.5 * footprint) continue;
+      // A line along the face's vertical (wall) or depth (floor) direction; the image gradient is
+      // perpendicular to its projection.
+      const Eigen::Vector3d along =
+          v < crease_row ? Eigen::Vector3d::UnitY() : Eigen::Vector3d::UnitZ();
+      Eigen::Vector2d pixel;
+      Eigen::Vector2d next;
+      ASSERT_TRUE(camera.Project(point, &pixel));
+      ASSERT_TRUE(camera.Project(point + 1e-3 * along, &next));
+      add(u, v, point, Eigen::Vector2d(-(next - pixel).y(), (next - pixel).x()), false);
+    }
+  }
+  const Eigen::Vector3d truth(0.0, 0.0, -1.0);  // in the floor, from the crease to the camera
+  // Crease pixels away from the image border, and how many got a gradient within 2 degrees.
+  const auto count = [&](const SemiDenseOptions& options, size_t* right) {
+    const std::vector<std::optional<Eigen::Vector3d>> gradients =
+        SurfaceGradients3d(camera, depth, options);
+    size_t crease_pixels = 0;
+    *right = 0;
+    for (size_t i = 0; i < gradients.size(); ++i) {
+      if (!on_crease[i] || depth.pixels[i].pixel.x() < 30 || depth.pixels[i].pixel.x() > 130) {
+        continue;
+      }
+      ++crease_pixels;
+      if (gradients[i] && gradients[i]->dot(truth) > std::cos(2.0 * std::numbers::pi / 180.0)) {
+        ++*right;
+      }
+    }
+    return crease_pixels;
+  };
+  size_t right = 0;
+  const size_t crease_pixels = count(SemiDenseOptions(), &right);
+  ASSERT_GT(crease_pixels, 50u);
+  EXPECT_GT(right, crease_pixels * 9 / 10);
+  // Fitting both sides mixes the two faces: no plane, or the wrong one.
+  SemiDenseOptions both_sides;
+  both_sides.surface_edge_band_px = 1e9;
+  count(both_sides, &right);
+  EXPECT_LT(right, crease_pixels / 10);
+}
+
 }  // namespace
 }  // namespace evloc::mapper
