@@ -889,43 +889,46 @@ MapBuildReport BuildMap(const MapBuilderOptions& options_in, ProgressListener* p
 
   // Points in the world, with 3D gradients.
   std::vector<CandidatePoint> candidates;
-  for (size_t k = 0; k < selection.keyframes.size(); ++k) {
-    const RegisteredView& view = views[selection.keyframes[k]];
-    Keyframe keyframe;
-    keyframe.cam_from_world = view.cam_from_world;
-    keyframe.camera_index = camera_index_of_id.at(view_camera_ids[selection.keyframes[k]]);
-    keyframe.t_ns = view.t_ns;
-    keyframe.image_name = view.image_name;
-    map.keyframes.push_back(keyframe);
-    const Camera& keyframe_camera = map.cameras[keyframe.camera_index];
-    const Rigid3d world_from_cam = view.cam_from_world.Inverse();
-    const std::vector<std::optional<Eigen::Vector3d>> surface_gradients =
-        SurfaceGradients3d(keyframe_camera, depths[k], options.semidense);
-    for (size_t p = 0; p < depths[k].pixels.size(); ++p) {
-      const DepthPixel& pixel = depths[k].pixels[p];
-      Eigen::Vector3d ray;
-      if (!keyframe_camera.Unproject(pixel.pixel.cast<double>(), &ray)) continue;
-      const Eigen::Vector3d point_in_cam = ray / pixel.inverse_depth;
-      Eigen::Vector3d gradient_in_cam;
-      if (!ComputeGradient3d(keyframe_camera, pixel.pixel.cast<double>(), pixel.gradient_direction,
-                             point_in_cam, &gradient_in_cam)) {
-        continue;
+  clock.Run("semidense_gradients", [&] {
+    for (size_t k = 0; k < selection.keyframes.size(); ++k) {
+      const RegisteredView& view = views[selection.keyframes[k]];
+      Keyframe keyframe;
+      keyframe.cam_from_world = view.cam_from_world;
+      keyframe.camera_index = camera_index_of_id.at(view_camera_ids[selection.keyframes[k]]);
+      keyframe.t_ns = view.t_ns;
+      keyframe.image_name = view.image_name;
+      map.keyframes.push_back(keyframe);
+      const Camera& keyframe_camera = map.cameras[keyframe.camera_index];
+      const Rigid3d world_from_cam = view.cam_from_world.Inverse();
+      const std::vector<std::optional<Eigen::Vector3d>> surface_gradients =
+          SurfaceGradients3d(keyframe_camera, depths[k], options.semidense);
+      for (size_t p = 0; p < depths[k].pixels.size(); ++p) {
+        const DepthPixel& pixel = depths[k].pixels[p];
+        Eigen::Vector3d ray;
+        if (!keyframe_camera.Unproject(pixel.pixel.cast<double>(), &ray)) continue;
+        const Eigen::Vector3d point_in_cam = ray / pixel.inverse_depth;
+        Eigen::Vector3d gradient_in_cam;
+        if (!ComputeGradient3d(keyframe_camera, pixel.pixel.cast<double>(),
+                               pixel.gradient_direction, point_in_cam, &gradient_in_cam)) {
+          continue;
+        }
+        CandidatePoint candidate;
+        candidate.position = world_from_cam * point_in_cam;
+        candidate.gradient =
+            (world_from_cam.rotation * surface_gradients[p].value_or(gradient_in_cam)).normalized();
+        if (surface_gradients[p]) ++report.num_surface_gradients;
+        const double sigma = std::sqrt(pixel.inverse_depth_variance);
+        candidate.inverse_depth_sigma = sigma;
+        candidate.position_sigma = sigma / (pixel.inverse_depth * pixel.inverse_depth) * ray.norm();
+        candidate.pixel_footprint = point_in_cam.z() / keyframe_camera.fx;
+        candidate.gradient_magnitude = pixel.gradient_magnitude;
+        candidate.source_keyframe = static_cast<uint32_t>(k);
+        candidate.observing_keyframes = pixel.confirming_keyframes;
+        candidates.push_back(std::move(candidate));
       }
-      CandidatePoint candidate;
-      candidate.position = world_from_cam * point_in_cam;
-      candidate.gradient =
-          (world_from_cam.rotation * surface_gradients[p].value_or(gradient_in_cam)).normalized();
-      if (surface_gradients[p]) ++report.num_surface_gradients;
-      const double sigma = std::sqrt(pixel.inverse_depth_variance);
-      candidate.inverse_depth_sigma = sigma;
-      candidate.position_sigma = sigma / (pixel.inverse_depth * pixel.inverse_depth) * ray.norm();
-      candidate.pixel_footprint = point_in_cam.z() / keyframe_camera.fx;
-      candidate.gradient_magnitude = pixel.gradient_magnitude;
-      candidate.source_keyframe = static_cast<uint32_t>(k);
-      candidate.observing_keyframes = pixel.confirming_keyframes;
-      candidates.push_back(std::move(candidate));
     }
-  }
+    return false;
+  });
   report.num_keyframe_points = candidates.size();
   clock.Run("merge", [&] {
     const MergeStatistics statistics = MergePoints(candidates, options.merge, &map);
