@@ -3,7 +3,7 @@
 // mapped by BuildMap with the known poses and measured against the exact scene with the
 // thresholds of the full run (scripts/accuracy/mapper_synthetic.sh). COLMAP's estimated poses are
 // left to the full 90-frame circle of that script: on a 2 s path they vary between runs (camera
-// centres 12 to 33 mm off at worst after the alignment, map depth 3 to 54 mm median measured).
+// centres 11 to 33 mm off at worst after the alignment, map depth 3 to 54 mm median measured).
 #include <gtest/gtest.h>
 
 #include <ctime>

@@ -7,8 +7,8 @@
 #
 # Usage: scripts/accuracy/slider_depth.sh [OUT_DIR] [BUILD_DIR]
 #   OUT_DIR    results (default /tmp/evloc-slider): slider_map/ (its COLMAP workspace beside it is
-#              reused when the inputs match), slider_events/, est.txt, stats.json, eval.json,
-#              eval.png, debug/ (tracking pictures)
+#              reused when the inputs match), slider_events/, slider_run/ (est.txt, stats.json,
+#              eval.json, eval.png, debug/: tracking pictures)
 #   BUILD_DIR  build tree with evloc-mapper, evloc-mapper-accuracy, evloc-sim, evloc-track and
 #              evloc-eval (default build)
 # Env: EVLOC_DATA_DIR (default ../shared/data from the project root), CONTRAST (ESIM threshold of
@@ -24,7 +24,8 @@ if [[ ! -f "$data/images.txt" ]]; then
   echo "slider_depth not found in $data (set EVLOC_DATA_DIR)" >&2
   exit 1
 fi
-mkdir -p "$out"
+mkdir -p "$out/slider_run"
+run=$out/slider_run
 
 echo "== map from the frames at the slider poses"
 rm -rf "$out/slider_map"
@@ -42,13 +43,13 @@ echo "== events from the frames (contrast ${CONTRAST:-0.5})"
   --contrast "${CONTRAST:-0.5}" --force
 
 echo "== tracking"
-rm -rf "$out/debug"
+rm -rf "$run/debug"
 # shellcheck disable=SC2086
 /usr/bin/time -f "evloc-track: %e s wall, %U s user, %S s system" \
   "$build/localizer/offline/evloc-track" --map "$out/slider_map" --dataset "$out/slider_events" \
-  --out "$out/est.txt" --stats "$out/stats.json" --debug-dir "$out/debug" --quiet \
+  --out "$run/est.txt" --stats "$run/stats.json" --debug-dir "$run/debug" --quiet \
   ${TRACK_FLAGS:-}
-/usr/bin/python3 - "$out/stats.json" <<'EOF'
+/usr/bin/python3 - "$run/stats.json" <<'EOF'
 import json, sys
 stats = json.load(open(sys.argv[1]))
 lost = [step["t_s"] for step in stats["per_step"] if step["status"] != "TRACKING"]
@@ -57,5 +58,5 @@ print(f"steps {stats['steps']}, LOST {len(lost)}" +
 EOF
 
 echo "== trajectory error against the slider ground truth (no alignment)"
-"$build/tools/eval/evloc-eval" --gt "$data/groundtruth.txt" --est "$out/est.txt" --align none \
-  --json "$out/eval.json" --plot "$out/eval.png"
+"$build/tools/eval/evloc-eval" --gt "$data/groundtruth.txt" --est "$run/est.txt" --align none \
+  --json "$run/eval.json" --plot "$run/eval.png"
