@@ -1,7 +1,15 @@
 #include "localizer/offline/offline_tracking.h"
 
 #include <chrono>
+#include <condition_variable>
+#include <deque>
+#include <exception>
+#include <mutex>
+#include <optional>
 #include <string>
+#include <thread>
+#include <utility>
+#include <vector>
 
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -23,12 +31,94 @@ void Record(const PoseEstimate& step, const Tracker& tracker, const StepCallback
   if (on_step) on_step(step, tracker);
 }
 
+// Reads batches of `batch_events` from a reader on a second thread, at most `depth` batches ahead
+// of the consumer (a bounded queue; the buffers are recycled). Next returns them in order;
+// an exception of the reader is rethrown by Next after the batches read before it.
+class ReadAheadQueue {
+ public:
+  ReadAheadQueue(EventReader& reader, size_t batch_events, int depth)
+      : reader_(reader), batch_events_(batch_events), free_(depth) {
+    thread_ = std::thread([this] { Produce(); });
+  }
+  ReadAheadQueue(const ReadAheadQueue&) = delete;
+  ReadAheadQueue& operator=(const ReadAheadQueue&) = delete;
+  ~ReadAheadQueue() {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      stop_ = true;
+    }
+    changed_.notify_all();
+    thread_.join();
+  }
+
+  // Swaps the next batch into `batch` (whose old buffer is recycled); false at the end.
+  bool Next(EventBuffer* batch) {
+    std::unique_lock<std::mutex> lock(mutex_);
+    changed_.wait(lock, [this] { return !filled_.empty() || finished_; });
+    if (filled_.empty()) {
+      if (error_) std::rethrow_exception(error_);
+      return false;
+    }
+    std::swap(*batch, filled_.front());
+    free_.push_back(std::move(filled_.front()));
+    filled_.pop_front();
+    lock.unlock();
+    changed_.notify_all();
+    return true;
+  }
+
+ private:
+  void Produce() {
+    EventBuffer batch;
+    try {
+      while (true) {
+        {
+          std::unique_lock<std::mutex> lock(mutex_);
+          changed_.wait(lock, [this] { return !free_.empty() || stop_; });
+          if (stop_) break;
+          batch = std::move(free_.back());
+          free_.pop_back();
+        }
+        batch.clear();
+        const size_t count = reader_.Read(batch_events_, &batch);
+        std::lock_guard<std::mutex> lock(mutex_);
+        if (count == 0) break;
+        filled_.push_back(std::move(batch));
+        changed_.notify_all();
+      }
+    } catch (...) {
+      std::lock_guard<std::mutex> lock(mutex_);
+      error_ = std::current_exception();
+    }
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      finished_ = true;
+    }
+    changed_.notify_all();
+  }
+
+  EventReader& reader_;
+  const size_t batch_events_;
+  std::mutex mutex_;
+  std::condition_variable changed_;
+  // Buffers waiting to be filled, and filled batches in reading order.
+  std::vector<EventBuffer> free_;
+  std::deque<EventBuffer> filled_;
+  std::exception_ptr error_;
+  bool finished_ = false;
+  bool stop_ = false;
+  std::thread thread_;
+};
+
 }  // namespace
 
 void OfflineTrackingOptions::Check() const {
   tracker.Check();
   if (read_batch_events == 0) {
     throw InvalidArgumentError("offline tracking: read_batch_events must be positive");
+  }
+  if (read_ahead_batches < 0 || read_ahead_batches > 1024) {
+    throw InvalidArgumentError("offline tracking: read_ahead_batches must be in 0..1024");
   }
 }
 
@@ -45,12 +135,19 @@ OfflineTrackingResult TrackEventStream(EventReader& reader, const Map& map,
   Tracker tracker(map, visibility, camera, options.tracker);
   OfflineTrackingResult result;
   EventBuffer batch;
-  EventBuffer before_start;
   bool started = false;
-  while (true) {
+  std::optional<ReadAheadQueue> read_ahead;
+  if (options.read_ahead_batches > 0) {
+    read_ahead.emplace(reader, options.read_batch_events, options.read_ahead_batches);
+  }
+  // The next batch, from the read-ahead thread or read here; false at the end.
+  auto next_batch = [&]() -> bool {
+    if (read_ahead) return read_ahead->Next(&batch);
     batch.clear();
-    const size_t count = reader.Read(options.read_batch_events, &batch);
-    if (count == 0) break;
+    return reader.Read(options.read_batch_events, &batch) > 0;
+  };
+  while (next_batch()) {
+    const size_t count = batch.size();
     result.measurements += static_cast<int64_t>(count);
     if (!started) {
       // Split the batch at the initial time: events up to it are stored before the Reset so that

@@ -25,6 +25,9 @@ struct OfflineTrackingOptions {
   TrackerOptions tracker;
   // Events read from the file per batch; any value gives the same poses (batching invariance).
   size_t read_batch_events = 1 << 16;
+  // Batches a second thread reads (and decodes) ahead of the tracker, so that reading overlaps
+  // tracking; 0 reads on the calling thread. The poses do not depend on it.
+  int read_ahead_batches = 4;
 
   // Throws InvalidArgumentError when a field is out of range.
   void Check() const;
@@ -48,7 +51,10 @@ struct OfflineTrackingResult {
 using StepCallback = std::function<void(const PoseEstimate& step, const Tracker& tracker)>;
 
 // Tracks the events of `reader` from `initial_world_from_cam` at `initial_t_ns`; events before
-// initial_t_ns only prime the time surfaces. Throws what the reader and the tracker throw.
+// initial_t_ns only prime the time surfaces. With read_ahead_batches > 0 a second thread calls
+// `reader` (it must not be used elsewhere meanwhile); the steps run and `on_step` is called on the
+// calling thread. Throws what the reader and the tracker throw (a reader error after the events
+// read before it have been tracked, as without the thread).
 OfflineTrackingResult TrackEventStream(EventReader& reader, const Map& map,
                                        const VisibilityIndex* visibility, const Camera& camera,
                                        const Rigid3d& initial_world_from_cam, int64_t initial_t_ns,

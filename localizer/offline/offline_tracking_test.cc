@@ -62,6 +62,21 @@ TEST(TrackEventStream, FollowsSyntheticMotionAndIgnoresReadBatchSize) {
   EXPECT_EQ(result.lost_steps, 0);
   EXPECT_LT(MaxTranslationError(result), 0.02);
 
+  // Read on the calling thread instead of the read-ahead thread: the same poses.
+  OfflineTrackingOptions same_thread = options;
+  same_thread.read_ahead_batches = 0;
+  BufferEventReader same_thread_reader(events);
+  const OfflineTrackingResult sequential =
+      TrackEventStream(same_thread_reader, map, nullptr, camera, testing::SmoothMotion(20'000'000),
+                       20'000'000, same_thread);
+  ASSERT_EQ(sequential.trajectory.size(), result.trajectory.size());
+  for (size_t i = 0; i < sequential.trajectory.size(); ++i) {
+    EXPECT_EQ(sequential.trajectory.poses()[i].world_from_cam.translation,
+              result.trajectory.poses()[i].world_from_cam.translation);
+    EXPECT_EQ(sequential.trajectory.poses()[i].world_from_cam.rotation.coeffs(),
+              result.trajectory.poses()[i].world_from_cam.rotation.coeffs());
+  }
+
   options.read_batch_events = 777;
   BufferEventReader small_batches(events);
   const OfflineTrackingResult again = TrackEventStream(
@@ -72,6 +87,48 @@ TEST(TrackEventStream, FollowsSyntheticMotionAndIgnoresReadBatchSize) {
     EXPECT_EQ(again.trajectory.poses()[i].world_from_cam.translation,
               result.trajectory.poses()[i].world_from_cam.translation);
   }
+}
+
+// A reader that fails after some events: the error reaches the caller whether the events are
+// read on the calling thread or ahead on a second one, and the read-ahead thread stops cleanly.
+class FailingEventReader : public EventReader {
+ public:
+  FailingEventReader(const EventBuffer& events, size_t fail_after)
+      : events_(events), fail_after_(fail_after) {}
+  size_t Read(size_t max_events, EventBuffer* out) override {
+    if (next_ >= fail_after_) throw ParseError::AtByte("broken.evb", 1234, "corrupt chunk");
+    const size_t count = std::min({max_events, events_.size() - next_, fail_after_ - next_});
+    for (size_t i = 0; i < count; ++i) out->push_back(events_[next_ + i]);
+    next_ += count;
+    return count;
+  }
+  std::optional<SensorSize> sensor_size() const override { return std::nullopt; }
+
+ private:
+  const EventBuffer& events_;
+  size_t fail_after_;
+  size_t next_ = 0;
+};
+
+TEST(TrackEventStream, ReaderErrorsReachTheCallerWithOrWithoutReadAhead) {
+  const Map map = testing::MakeRectangleMap(testing::DefaultRectangles(), 0.01);
+  const Camera camera = TestCamera();
+  const EventBuffer events = testing::SimulateEdgeEvents(
+      map, camera, [](int64_t t) { return testing::SmoothMotion(t); }, 0, 200'000'000);
+  ASSERT_GT(events.size(), 5000u);
+  for (const int read_ahead : {0, 1, 4}) {
+    OfflineTrackingOptions options;
+    options.read_batch_events = 1000;
+    options.read_ahead_batches = read_ahead;
+    FailingEventReader reader(events, events.size() / 2);
+    EXPECT_THROW(TrackEventStream(reader, map, nullptr, camera, testing::SmoothMotion(20'000'000),
+                                  20'000'000, options),
+                 ParseError)
+        << read_ahead;
+  }
+  OfflineTrackingOptions bad;
+  bad.read_ahead_batches = -1;
+  EXPECT_THROW(bad.Check(), InvalidArgumentError);
 }
 
 TEST(TrackFrameSequence, FollowsRenderedFrames) {
