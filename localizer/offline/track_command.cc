@@ -93,6 +93,8 @@ Options:
   --tau SECONDS          time-surface decay time (default 0.03)
   --polarity-band DEG    neutral band around 90 degrees between gradient and flow (default 30)
   --min-flow PX          predicted flows per step shorter than this give no polarity (default 0.05)
+  --two-stage on|off     with polarity: an unsigned solve first, then the signed one from its
+                         result (default on; off = one signed solve, as the paper)
   --polarity-culling on|off
                          with polarity and occlusion: points claim edge pixels of their
                          predicted polarity (default on)
@@ -194,6 +196,8 @@ TrackCommandOptions ParseTrackCommandLine(const std::vector<std::string>& argume
       tracker.polarity_neutral_band_deg = ParseDoubleFlag(flag, value);
     } else if (flag == "--min-flow") {
       tracker.min_flow_px = ParseDoubleFlag(flag, value);
+    } else if (flag == "--two-stage") {
+      tracker.polarity_after_unsigned_solve = ParseSwitchFlag(flag, value);
     } else if (flag == "--polarity-culling") {
       tracker.polarity_aware_culling = ParseSwitchFlag(flag, value);
     } else if (flag == "--min-alignment") {

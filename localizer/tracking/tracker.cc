@@ -418,15 +418,30 @@ PoseEstimate Tracker::Step(int64_t t_ns) {
   const bool velocity_settled =
       2 * motion_.velocity_span_ns() >= std::llround(options_.velocity_window_s * 1e9) &&
       motion_.velocity_span_ns() > 0;
-  Attempt best = Solve(predicted, was_tracking && velocity_settled ? &previous : nullptr);
+  const bool predict_polarity = was_tracking && velocity_settled && options_.use_polarity;
+  Attempt best;
+  bool solved_unsigned_from_prediction = false;
+  if (predict_polarity && options_.polarity_after_unsigned_solve) {
+    // Unsigned first, then signed from there: the signed surfaces split the edges of thin lines
+    // apart, but a polarity predicted from a wrong flow (the motion turned within the step)
+    // attracts points to the wrong edges; starting the signed solve from the unsigned optimum
+    // predicts the polarities from a flow measured up to it.
+    Attempt coarse = Solve(predicted, nullptr);
+    solved_unsigned_from_prediction = true;
+    best = Solve(coarse.registration.cam_from_world.Inverse(), &previous);
+    best.quality.iterations += coarse.quality.iterations;
+    if (coarse.good && !best.good) best = std::move(coarse);
+  } else {
+    best = Solve(predicted, predict_polarity ? &previous : nullptr);
+  }
   int recovery_attempts = 0;
   if (!best.good && options_.enable_recovery) {
-    // Retry from the last good pose, then from perturbations around it, with the unsigned
-    // surface (the motion, hence the polarity prediction, is what failed).
-    // First the prediction itself with the unsigned surface: when the motion turns within a
-    // step, the constant-velocity flow points the wrong way and so does every polarity.
+    // Retry with the unsigned surface (the motion, hence the polarity prediction, is what
+    // failed): from the prediction itself unless that was done (a motion that turns within a
+    // step makes the constant-velocity flow, and every polarity, point the wrong way), then from
+    // the last good pose and from perturbations around it.
     std::vector<Rigid3d> starts;
-    if (was_tracking && velocity_settled && options_.use_polarity) starts.push_back(predicted);
+    if (predict_polarity && !solved_unsigned_from_prediction) starts.push_back(predicted);
     starts.push_back(last_good_world_from_cam_);
     const double t = options_.recovery_translation_m;
     const double r = options_.recovery_rotation_deg * kRadiansPerDegree;

@@ -56,7 +56,7 @@ struct TrackingQuality {
   int points_used = 0;
   // Number of points selected from the map before occlusion culling.
   int points_selected = 0;
-  // LM iterations of the accepted attempt.
+  // LM iterations of the accepted attempt (of both solves when it is two-stage).
   int iterations = 0;
   // Number of recovery attempts run in this step (0 when the first solve was good).
   int recovery_attempts = 0;

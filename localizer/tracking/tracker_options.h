@@ -109,6 +109,10 @@ struct TrackerOptions {
   double gradient_probe_depth_fraction = 0.01;
   // Predicted flows shorter than this (pixels per step) give no polarity prediction.
   double min_flow_px = 0.05;
+  // Solve with the unsigned surface from the prediction first, then with the signed surfaces
+  // from that result (polarities predicted at it). Off: one signed solve from the prediction,
+  // as the paper (cheaper, but a wrong flow at a turn of the motion misleads every point).
+  bool polarity_after_unsigned_solve = true;
 
   // --- Occlusion culling (ANNF z-buffer) ---
   // Keep only the nearest point among those claiming one edge pixel; drop points far from edges.
