@@ -92,6 +92,7 @@ std::vector<PoseEstimate> Tracker::AddEvents(const EventBuffer& events) {
       throw InvalidArgumentError("Tracker::AddEvents: event time stamps must not decrease.");
     }
   }
+  if (count > 0 && !first_event_t_ns_) first_event_t_ns_ = t_ns[0];
   std::vector<PoseEstimate> estimates;
   size_t begin = 0;
   while (begin < count) {
@@ -435,6 +436,20 @@ PoseEstimate Tracker::Step(int64_t t_ns) {
     best = Solve(predicted, predict_polarity ? &previous : nullptr);
   }
   int recovery_attempts = 0;
+  // While the surfaces hold less than one decay time of events (the start of a stream), a bad
+  // fit means too few events, not a wrong pose: hold the pose instead of declaring LOST.
+  const bool warming_up =
+      was_tracking && (!first_event_t_ns_ || t_ns - *first_event_t_ns_ < decay_.decay_time_ns);
+  if (!best.good && warming_up) {
+    estimate.world_from_cam = predicted;
+    estimate.covariance = Matrix6d::Identity() * 1e6;
+    estimate.quality = best.quality;
+    estimate.status = TrackingStatus::kTracking;
+    estimate.timings.solve_ms = MillisecondsSince(solve_start);
+    last_step_t_ns_ = t_ns;
+    estimate.timings.total_ms = MillisecondsSince(step_start);
+    return estimate;
+  }
   if (!best.good && options_.enable_recovery) {
     // Retry with the unsigned surface (the motion, hence the polarity prediction, is what
     // failed): from the prediction itself unless that was done (a motion that turns within a

@@ -189,6 +189,8 @@ class Tracker {
   int64_t next_step_t_ns_ = 0;
   int64_t events_since_step_ = 0;
   std::optional<int64_t> last_event_t_ns_;
+  // The first event ever given (the surfaces are full one decay time after it).
+  std::optional<int64_t> first_event_t_ns_;
   // Every later event must be after this time (set by AdvanceTo).
   std::optional<int64_t> complete_until_t_ns_;
   int64_t last_step_t_ns_ = 0;
