@@ -237,8 +237,10 @@ bool Tracker::InsideImage(const Eigen::Vector2d& pixel) const {
 }
 
 bool Tracker::NearEdge(const Eigen::Vector2d& pixel) const {
-  const int x = static_cast<int>(std::lround(pixel.x()));
-  const int y = static_cast<int>(std::lround(pixel.y()));
+  int x;
+  int y;
+  // Rounds as std::lround, without its library call (two calls per point in Assess).
+  if (!NearestEdgeField::RoundToPixel(pixel, &x, &y)) return false;
   if (x < 0 || y < 0 || x >= surface_.width() || y >= surface_.height()) return false;
   const double radius = options_.on_edge_radius_px;
   if (options_.input == TrackerInput::kFrames) {
@@ -257,7 +259,7 @@ bool Tracker::IsGood(const TrackingQuality& quality) const {
 }
 
 Tracker::Attempt Tracker::Solve(const Rigid3d& start_world_from_cam,
-                                const Rigid3d* previous_world_from_cam) {
+                                const Rigid3d* previous_world_from_cam, bool assess) {
   const Rigid3d start_cam_from_world = start_world_from_cam.Inverse();
   const bool predict_polarity = options_.use_polarity && previous_world_from_cam != nullptr &&
                                 options_.input == TrackerInput::kEvents;
@@ -327,8 +329,18 @@ Tracker::Attempt Tracker::Solve(const Rigid3d& start_world_from_cam,
   Attempt attempt;
   attempt.registration =
       RegisterPoints(points, intrinsics_, start_cam_from_world, options_.registration);
-  const Eigen::Matrix3d estimate_rotation = attempt.registration.cam_from_world.RotationMatrix();
-  const Eigen::Vector3d& estimate_translation = attempt.registration.cam_from_world.translation;
+  attempt.quality.mean_residual = attempt.registration.mean_residual;
+  attempt.quality.points_used = attempt.registration.points_used;
+  attempt.quality.points_selected = static_cast<int>(num_selected);
+  attempt.quality.iterations = attempt.registration.iterations;
+  if (assess) Assess(predict_polarity, &attempt);
+  return attempt;
+}
+
+void Tracker::Assess(bool predicted_polarity, Attempt* attempt) {
+  const size_t num_selected = selected_.size();
+  const Eigen::Matrix3d estimate_rotation = attempt->registration.cam_from_world.RotationMatrix();
+  const Eigen::Vector3d& estimate_translation = attempt->registration.cam_from_world.translation;
   // On-edge fraction over every selected point, culled or not: culling keeps only points near
   // edges, so counting the survivors alone would flatter a wrong pose.
   // The chance level: each point displaced by one of four 4-pixel offsets (not along the image
@@ -355,7 +367,7 @@ Tracker::Attempt Tracker::Solve(const Rigid3d& start_world_from_cam,
   // Check the confident polarity predictions against the events the point fired in this step:
   // when the pixel it projects to at the estimate has an event since the previous step, its last
   // event must have the predicted polarity (ON for ON, OFF for OFF).
-  if (predict_polarity) {
+  if (predicted_polarity) {
     for (size_t i = 0; i < num_selected; ++i) {
       const PotentialField* field = scratch_fields_[i];
       const bool on = field == Field(SurfaceChannel::kOn);
@@ -363,30 +375,28 @@ Tracker::Attempt Tracker::Solve(const Rigid3d& start_world_from_cam,
       Eigen::Vector2d pixel;
       const Eigen::Vector3d point_in_cam =
           estimate_rotation * map_.positions[selected_[i]].cast<double>() + estimate_translation;
-      if (!intrinsics_.Project(point_in_cam, &pixel) || !InsideImage(pixel)) continue;
-      const int x = static_cast<int>(std::lround(pixel.x()));
-      const int y = static_cast<int>(std::lround(pixel.y()));
+      int x;
+      int y;
+      if (!intrinsics_.Project(point_in_cam, &pixel) || !InsideImage(pixel) ||
+          !NearestEdgeField::RoundToPixel(pixel, &x, &y)) {
+        continue;
+      }
       const int64_t t_on = surface_.LastTimestamp(SurfaceChannel::kOn, x, y);
       const int64_t t_off = surface_.LastTimestamp(SurfaceChannel::kOff, x, y);
       if (std::max(t_on, t_off) <= last_step_t_ns_) continue;
-      ++attempt.quality.polarity_predictions;
-      attempt.quality.polarity_matches += (t_on >= t_off) == on ? 1 : 0;
+      ++attempt->quality.polarity_predictions;
+      attempt->quality.polarity_matches += (t_on >= t_off) == on ? 1 : 0;
     }
   }
-  attempt.quality.on_edge_fraction = in_image > 0 ? static_cast<double>(on_edge) / in_image : 0;
-  attempt.quality.chance_on_edge_fraction =
+  attempt->quality.on_edge_fraction = in_image > 0 ? static_cast<double>(on_edge) / in_image : 0;
+  attempt->quality.chance_on_edge_fraction =
       chance_trials > 0 ? static_cast<double>(chance_on_edge) / chance_trials : 0;
-  attempt.quality.alignment =
-      attempt.quality.chance_on_edge_fraction < 1
-          ? (attempt.quality.on_edge_fraction - attempt.quality.chance_on_edge_fraction) /
-                (1 - attempt.quality.chance_on_edge_fraction)
+  attempt->quality.alignment =
+      attempt->quality.chance_on_edge_fraction < 1
+          ? (attempt->quality.on_edge_fraction - attempt->quality.chance_on_edge_fraction) /
+                (1 - attempt->quality.chance_on_edge_fraction)
           : 0;
-  attempt.quality.mean_residual = attempt.registration.mean_residual;
-  attempt.quality.points_used = attempt.registration.points_used;
-  attempt.quality.points_selected = static_cast<int>(num_selected);
-  attempt.quality.iterations = attempt.registration.iterations;
-  attempt.good = IsGood(attempt.quality);
-  return attempt;
+  attempt->good = IsGood(attempt->quality);
 }
 
 PoseEstimate Tracker::Step(int64_t t_ns) {
@@ -427,11 +437,15 @@ PoseEstimate Tracker::Step(int64_t t_ns) {
     // apart, but a polarity predicted from a wrong flow (the motion turned within the step)
     // attracts points to the wrong edges; starting the signed solve from the unsigned optimum
     // predicts the polarities from a flow measured up to it.
-    Attempt coarse = Solve(predicted, nullptr);
+    // The unsigned result's quality only matters when the signed one is bad: assessed then.
+    Attempt coarse = Solve(predicted, nullptr, /*assess=*/false);
     solved_unsigned_from_prediction = true;
     best = Solve(coarse.registration.cam_from_world.Inverse(), &previous);
     best.quality.iterations += coarse.quality.iterations;
-    if (coarse.good && !best.good) best = std::move(coarse);
+    if (!best.good) {
+      Assess(/*predicted_polarity=*/false, &coarse);
+      if (coarse.good) best = std::move(coarse);
+    }
   } else {
     best = Solve(predicted, predict_polarity ? &previous : nullptr);
   }

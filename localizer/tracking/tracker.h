@@ -149,7 +149,15 @@ class Tracker {
   PoseEstimate Step(int64_t t_ns);
   void UpdateSurfaces(int64_t t_ns);
   void SelectPoints(const Rigid3d& predicted_world_from_cam);
-  Attempt Solve(const Rigid3d& start_world_from_cam, const Rigid3d* previous_world_from_cam);
+  // Predicts polarities (when `previous_world_from_cam` is given), culls, registers from the
+  // start pose and, when `assess`, judges the result (Assess); otherwise only the quality fields
+  // that come from the registration are set and `good` is false.
+  Attempt Solve(const Rigid3d& start_world_from_cam, const Rigid3d* previous_world_from_cam,
+                bool assess = true);
+  // On-edge, chance and alignment figures of `attempt` at its estimate over the current
+  // selection, the polarity check when its points had `predicted_polarity` (the per-point fields
+  // of the last Solve), and `good`.
+  void Assess(bool predicted_polarity, Attempt* attempt);
   bool IsGood(const TrackingQuality& quality) const;
   bool InsideImage(const Eigen::Vector2d& pixel) const;
   bool NearEdge(const Eigen::Vector2d& pixel) const;
