@@ -451,9 +451,11 @@ PoseEstimate Tracker::Step(int64_t t_ns) {
   }
   int recovery_attempts = 0;
   // While the surfaces hold less than one decay time of events (the start of a stream), a bad
-  // fit means too few events, not a wrong pose: hold the pose instead of declaring LOST.
+  // fit means too few events, not a wrong pose: hold the pose instead of declaring LOST. Frames
+  // are whole at once: no warm-up.
   const bool warming_up =
-      was_tracking && (!first_event_t_ns_ || t_ns - *first_event_t_ns_ < decay_.decay_time_ns);
+      was_tracking && options_.input == TrackerInput::kEvents &&
+      (!first_event_t_ns_ || t_ns - *first_event_t_ns_ < decay_.decay_time_ns);
   if (!best.good && warming_up) {
     estimate.world_from_cam = predicted;
     estimate.covariance = Matrix6d::Identity() * 1e6;

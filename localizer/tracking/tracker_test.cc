@@ -240,6 +240,63 @@ TEST(Tracker, DeclaresLostWhenEventsStopMatchingAndRecoversAfterReset) {
   }
 }
 
+TEST(Tracker, HoldsThePoseWhileTheSurfacesFillAtTheStartOfAStream) {
+  // A stream whose first events come 10 ms after the initial pose (a camera that starts late):
+  // until one decay time after the first event the surfaces are too empty to judge a pose, so
+  // those steps keep the prediction with a huge covariance instead of declaring LOST.
+  const Sequence& sequence = SmoothSequence();
+  const int64_t first_event_ns = kStartNs + 10'000'000;
+  EventBuffer late;
+  for (size_t i = 0; i < sequence.events.size(); ++i) {
+    if (sequence.events.t_ns[i] >= first_event_ns) late.push_back(sequence.events[i]);
+  }
+  Tracker tracker(sequence.map, nullptr, sequence.camera, TrackerOptions{});
+  tracker.Reset(testing::SmoothMotion(kStartNs), kStartNs);
+  const std::vector<PoseEstimate> estimates = tracker.AddEvents(late);
+  ASSERT_GE(estimates.size(), 90u);
+  int held = 0;
+  for (const PoseEstimate& estimate : estimates) {
+    EXPECT_EQ(estimate.status, TrackingStatus::kTracking) << estimate.t_ns;
+    if (estimate.t_ns < first_event_ns) {
+      // No event yet: nothing to register against.
+      EXPECT_GE(estimate.covariance(0, 0), 1e5) << estimate.t_ns;
+    }
+    if (estimate.covariance(0, 0) >= 1e5) {
+      ++held;
+      EXPECT_LT(estimate.t_ns, first_event_ns + 30'000'000) << "held after the warm-up";
+    }
+    if (estimate.t_ns >= first_event_ns + 30'000'000) {
+      EXPECT_LT(PositionError(estimate), 0.02) << estimate.t_ns;
+    }
+  }
+  EXPECT_GE(held, 3);
+}
+
+TEST(Tracker, FrameBasedTwinDeclaresLostWhenFramesStopMatching) {
+  // Frames carry no warm-up: a 30 cm jump of the camera is LOST at once.
+  const Sequence& sequence = SmoothSequence();
+  const int64_t jump_ns = 150'000'000;
+  TrackerOptions options;
+  options.input = TrackerInput::kFrames;
+  Tracker tracker(sequence.map, nullptr, sequence.camera, options);
+  tracker.Reset(testing::SmoothMotion(0), 0);
+  const std::vector<testing::Rectangle> rectangles = testing::DefaultRectangles();
+  int lost_after_jump = 0;
+  for (int64_t t_ns = 10'000'000; t_ns <= 250'000'000; t_ns += 10'000'000) {
+    Rigid3d pose = testing::SmoothMotion(t_ns);
+    if (t_ns >= jump_ns) pose.translation += Eigen::Vector3d(0.3, -0.2, 0.0);
+    const std::optional<PoseEstimate> estimate =
+        tracker.AddFrame(t_ns, testing::RenderRectangles(rectangles, sequence.camera, pose));
+    ASSERT_TRUE(estimate.has_value());
+    if (t_ns < jump_ns) {
+      EXPECT_EQ(estimate->status, TrackingStatus::kTracking) << t_ns;
+    } else {
+      lost_after_jump += estimate->status == TrackingStatus::kLost ? 1 : 0;
+    }
+  }
+  EXPECT_EQ(lost_after_jump, 11);
+}
+
 TEST(Tracker, FrameBasedTwinTracksRenderedFrames) {
   const Sequence& sequence = SmoothSequence();
   TrackerOptions options;
