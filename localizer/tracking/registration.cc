@@ -62,14 +62,26 @@ struct PoseMatrix {
   }
 };
 
-// The residual of one point and, when `jacobian` (6 values) is not null, its derivative with
-// respect to the left increment, at `pose` (cam_from_world). `Field` is the concrete field type
-// so that the per-sample call is not virtual in the hot loop.
-template <typename Field>
-[[gnu::always_inline]] inline bool ResidualAndJacobian(
-    Field& field, const PinholeIntrinsics& intrinsics, const PoseMatrix& pose,
-    const Eigen::Vector3d& position_world, double margin_px, double* residual, double* jacobian,
-    double* inverse_depth = nullptr) {
+// A point transformed into the camera at one pose and projected: camera coordinates, inverse
+// depth, normalised coordinates (x, y) and pixel (u, v).
+struct ProjectedPoint {
+  double cam_x;
+  double cam_y;
+  double z;
+  double inverse_z;
+  double x;
+  double y;
+  double u;
+  double v;
+};
+
+// Projects `position_world` at `pose` (cam_from_world). False when the point is behind the camera
+// or its pixel is not inside the `width` x `height` image shrunk by `margin_px`.
+[[gnu::always_inline]] inline bool ProjectPoint(const PinholeIntrinsics& intrinsics,
+                                                const PoseMatrix& pose,
+                                                const Eigen::Vector3d& position_world,
+                                                double margin_px, int width, int height,
+                                                ProjectedPoint* projected) {
   const double* r = pose.r;
   const double px = position_world.x();
   const double py = position_world.y();
@@ -84,27 +96,49 @@ template <typename Field>
   const double y = cam_y * inverse_z;
   const double u = intrinsics.fx * x + intrinsics.cx;
   const double v = intrinsics.fy * y + intrinsics.cy;
-  if (!(u >= margin_px && v >= margin_px && u <= field.width() - 1 - margin_px &&
-        v <= field.height() - 1 - margin_px)) {
+  if (!(u >= margin_px && v >= margin_px && u <= width - 1 - margin_px &&
+        v <= height - 1 - margin_px)) {
     return false;
   }
+  *projected = {cam_x, cam_y, z, inverse_z, x, y, u, v};
+  return true;
+}
+
+// The residual of a projected point and, when `jacobian` (6 values) is not null, its derivative
+// with respect to the left increment. `Field` is the concrete field type so that the per-sample
+// call is not virtual in the hot loop. False when the field has no value there.
+template <typename Field>
+[[gnu::always_inline]] inline bool SampleProjected(Field& field,
+                                                   const PinholeIntrinsics& intrinsics,
+                                                   const ProjectedPoint& point, double* residual,
+                                                   double* jacobian) {
   Eigen::Vector2d field_gradient;
-  if (!field.Sample(u, v, residual, jacobian ? &field_gradient : nullptr)) return false;
-  if (inverse_depth != nullptr) *inverse_depth = inverse_z;
+  if (!field.Sample(point.u, point.v, residual, jacobian ? &field_gradient : nullptr)) {
+    return false;
+  }
   if (jacobian != nullptr) {
     // dr/dp = grad F * d pi/d p; dr/d omega = dr/dp * (-Hat(p)) = p x dr/dp.
-    const double a0 = field_gradient.x() * intrinsics.fx * inverse_z;
-    const double a1 = field_gradient.y() * intrinsics.fy * inverse_z;
-    const double a2 = -(a0 * x + a1 * y);
+    const double a0 = field_gradient.x() * intrinsics.fx * point.inverse_z;
+    const double a1 = field_gradient.y() * intrinsics.fy * point.inverse_z;
+    const double a2 = -(a0 * point.x + a1 * point.y);
     jacobian[0] = a0;
     jacobian[1] = a1;
     jacobian[2] = a2;
-    jacobian[3] = cam_y * a2 - z * a1;
-    jacobian[4] = z * a0 - cam_x * a2;
-    jacobian[5] = cam_x * a1 - cam_y * a0;
+    jacobian[3] = point.cam_y * a2 - point.z * a1;
+    jacobian[4] = point.z * a0 - point.cam_x * a2;
+    jacobian[5] = point.cam_x * a1 - point.cam_y * a0;
   }
   return true;
 }
+
+// Hints the cell a concrete field will sample at (u, v) into the cache; nothing for fields of
+// unknown type.
+template <typename Field>
+inline void PrefetchCell(const Field& field, double u, double v) {
+  field.Prefetch(u, v);
+}
+template <>
+inline void PrefetchCell<PotentialField>(const PotentialField&, double, double) {}
 
 // What one used point contributes to the normal equations: its Jacobian row, robust weight and
 // residual. Linearize writes the rows; Accumulate sums them only for the linearisations the
@@ -115,33 +149,69 @@ struct JacobianRow {
   double residual;
 };
 
+// The per-point storage of Linearize, reused across trials and solves.
+struct LinearizeWorkspace {
+  // Jacobian rows of the used points (see Accumulate).
+  std::vector<JacobianRow> rows;
+  // Per point, its projection at the pose being linearised, and whether it is valid.
+  std::vector<ProjectedPoint> projected;
+  std::vector<uint8_t> inside;
+};
+
+// How many points ahead Linearize prefetches the field cell a point will sample: the cells of
+// successive points lie far apart in the image, and most of a sample's time was the wait for
+// its memo's cache lines.
+constexpr size_t kPrefetchDistance = 8;
+
 // Cost of all points at one pose, and their Jacobian rows in `rows` (one per used point, in point
 // order; information and gradient are left to Accumulate). `Field` is the concrete type of every
 // point's field (PotentialField when they differ); `kLoss` the robust loss, so that the weight
-// and cost are inline in the loop.
+// and cost are inline in the loop. Two passes: every point is projected first, then the fields
+// are sampled with the cells of later points prefetched.
 template <typename Field, RobustLoss kLoss>
 Linearization Linearize(const std::vector<RegistrationPoint>& points,
                         const PinholeIntrinsics& intrinsics, const Rigid3d& cam_from_world,
-                        const RegistrationOptions& options, std::vector<JacobianRow>* rows) {
+                        const RegistrationOptions& options, LinearizeWorkspace* workspace) {
+  std::vector<JacobianRow>* rows = &workspace->rows;
+  std::vector<ProjectedPoint>* projected = &workspace->projected;
+  std::vector<uint8_t>* inside = &workspace->inside;
   Linearization result;
   const double scale = options.robust_scale;
   // Points outside the image cost as much as a point far from every edge (residual 1), so that
   // costs at different poses compare the same point set.
   const double outside_cost = RobustCost(kLoss, scale, 1.0);
   const PoseMatrix pose(cam_from_world);
-  if (rows->size() < points.size()) rows->resize(points.size());
+  const size_t num_points = points.size();
+  if (rows->size() < num_points) rows->resize(num_points);
+  if (projected->size() < num_points) projected->resize(num_points);
+  if (inside->size() < num_points) inside->resize(num_points);
+  ProjectedPoint* projection = projected->data();
+  uint8_t* is_inside = inside->data();
+  for (size_t i = 0; i < num_points; ++i) {
+    const Field& field = static_cast<const Field&>(*points[i].field);
+    is_inside[i] = ProjectPoint(intrinsics, pose, points[i].position_world, options.image_margin_px,
+                                field.width(), field.height(), &projection[i]);
+  }
+  for (size_t i = 0; i < std::min(num_points, kPrefetchDistance); ++i) {
+    if (is_inside[i]) {
+      PrefetchCell(static_cast<const Field&>(*points[i].field), projection[i].u, projection[i].v);
+    }
+  }
   JacobianRow* row = rows->data();
   double cost = 0;
   double weighted_squared_residuals = 0;
   double sum_residuals = 0;
   double sum_inverse_depths = 0;
   int points_used = 0;
-  for (const RegistrationPoint& point : points) {
+  for (size_t i = 0; i < num_points; ++i) {
+    const size_t ahead = i + kPrefetchDistance;
+    if (ahead < num_points && is_inside[ahead]) {
+      PrefetchCell(static_cast<const Field&>(*points[ahead].field), projection[ahead].u,
+                   projection[ahead].v);
+    }
     double residual;
-    double inverse_depth;
-    if (!ResidualAndJacobian(static_cast<Field&>(*point.field), intrinsics, pose,
-                             point.position_world, options.image_margin_px, &residual,
-                             row->jacobian, &inverse_depth)) {
+    if (!is_inside[i] || !SampleProjected(static_cast<Field&>(*points[i].field), intrinsics,
+                                          projection[i], &residual, row->jacobian)) {
       cost += outside_cost;
       continue;
     }
@@ -152,7 +222,7 @@ Linearization Linearize(const std::vector<RegistrationPoint>& points,
     cost += RobustCost(kLoss, scale, residual);
     weighted_squared_residuals += weight * residual * residual;
     sum_residuals += residual;
-    sum_inverse_depths += inverse_depth;
+    sum_inverse_depths += projection[i].inverse_z;
     ++points_used;
   }
   result.cost = cost;
@@ -234,29 +304,29 @@ FieldKind CommonFieldKind(const std::vector<RegistrationPoint>& points) {
 template <RobustLoss kLoss>
 Linearization LinearizeWithLoss(FieldKind kind, const std::vector<RegistrationPoint>& points,
                                 const PinholeIntrinsics& intrinsics, const Rigid3d& cam_from_world,
-                                const RegistrationOptions& options,
-                                std::vector<JacobianRow>* rows) {
+                                const RegistrationOptions& options, LinearizeWorkspace* workspace) {
   switch (kind) {
     case FieldKind::kTimeSurface:
-      return Linearize<TimeSurfaceField, kLoss>(points, intrinsics, cam_from_world, options, rows);
+      return Linearize<TimeSurfaceField, kLoss>(points, intrinsics, cam_from_world, options,
+                                                workspace);
     case FieldKind::kDense:
-      return Linearize<DenseField, kLoss>(points, intrinsics, cam_from_world, options, rows);
+      return Linearize<DenseField, kLoss>(points, intrinsics, cam_from_world, options, workspace);
     case FieldKind::kMixed:
       break;
   }
-  return Linearize<PotentialField, kLoss>(points, intrinsics, cam_from_world, options, rows);
+  return Linearize<PotentialField, kLoss>(points, intrinsics, cam_from_world, options, workspace);
 }
 
-// Linearize for the loss of `options`; the rows go to `rows` (see Accumulate).
+// Linearize for the loss of `options`; the rows go to workspace->rows (see Accumulate).
 Linearization LinearizeAny(FieldKind kind, const std::vector<RegistrationPoint>& points,
                            const PinholeIntrinsics& intrinsics, const Rigid3d& cam_from_world,
-                           const RegistrationOptions& options, std::vector<JacobianRow>* rows) {
+                           const RegistrationOptions& options, LinearizeWorkspace* workspace) {
   if (options.loss == RobustLoss::kCauchy) {
     return LinearizeWithLoss<RobustLoss::kCauchy>(kind, points, intrinsics, cam_from_world, options,
-                                                  rows);
+                                                  workspace);
   }
   return LinearizeWithLoss<RobustLoss::kHuber>(kind, points, intrinsics, cam_from_world, options,
-                                               rows);
+                                               workspace);
 }
 
 // sigma^2 H^-1, with unconstrained directions given a large variance.
@@ -286,8 +356,11 @@ Matrix6d Covariance(const Linearization& linearization, bool* well_conditioned) 
 bool EvaluatePointResidual(PotentialField& field, const PinholeIntrinsics& intrinsics,
                            const Rigid3d& cam_from_world, const Eigen::Vector3d& position_world,
                            double margin_px, double* residual, RowVector6d* jacobian) {
-  return ResidualAndJacobian(field, intrinsics, PoseMatrix(cam_from_world), position_world,
-                             margin_px, residual, jacobian ? jacobian->data() : nullptr);
+  ProjectedPoint projected;
+  return ProjectPoint(intrinsics, PoseMatrix(cam_from_world), position_world, margin_px,
+                      field.width(), field.height(), &projected) &&
+         SampleProjected(field, intrinsics, projected, residual,
+                         jacobian ? jacobian->data() : nullptr);
 }
 
 RegistrationResult RegisterPoints(const std::vector<RegistrationPoint>& points,
@@ -303,10 +376,10 @@ RegistrationResult RegisterPoints(const std::vector<RegistrationPoint>& points,
   result.cam_from_world = initial_cam_from_world;
   const FieldKind kind = CommonFieldKind(points);
   // Reused across solves (a tracker solves at every step).
-  thread_local std::vector<JacobianRow> rows;
+  thread_local LinearizeWorkspace workspace;
   Linearization current =
-      LinearizeAny(kind, points, intrinsics, initial_cam_from_world, options, &rows);
-  Accumulate(rows, &current);
+      LinearizeAny(kind, points, intrinsics, initial_cam_from_world, options, &workspace);
+  Accumulate(workspace.rows, &current);
   double damping = options.initial_damping;
   double growth = 2.0;
   const double focal_px = std::max(intrinsics.fx, intrinsics.fy);
@@ -335,7 +408,7 @@ RegistrationResult RegisterPoints(const std::vector<RegistrationPoint>& points,
     if (!increment.allFinite()) break;
     ++result.iterations;
     const Rigid3d candidate = ExpSE3(increment) * result.cam_from_world;
-    Linearization trial = LinearizeAny(kind, points, intrinsics, candidate, options, &rows);
+    Linearization trial = LinearizeAny(kind, points, intrinsics, candidate, options, &workspace);
     const bool small = increment.head<3>().norm() < options.min_increment &&
                        increment.tail<3>().norm() < options.min_increment;
     // Gain ratio: actual over predicted decrease of the (robust) cost (Nielsen's LM update).
@@ -353,7 +426,7 @@ RegistrationResult RegisterPoints(const std::vector<RegistrationPoint>& points,
     if (trial.cost < current.cost) {
       converged |= current.cost - trial.cost < negligible;
       result.cam_from_world = candidate;
-      Accumulate(rows, &trial);
+      Accumulate(workspace.rows, &trial);
       current = trial;
       const double factor = 2 * gain - 1;
       damping *= std::max(1.0 / 3.0, 1.0 - factor * factor * factor);

@@ -187,6 +187,18 @@ class TimeSurfaceField final : public PotentialField {
     return true;
   }
 
+  // Hints the memoised values of the bilinear cell at (u, v) into the cache ahead of Sample (the
+  // solver calls it a few points ahead). (u, v) must lie inside the image. No effect on values.
+  void Prefetch(double u, double v) const {
+    const size_t width = surface_.width();
+    const size_t index = static_cast<size_t>(v) * width + static_cast<size_t>(u);
+    const Memo* memo = (smooth_ ? smoothed_.data() : raw_.data()) + index;
+    __builtin_prefetch(memo);
+    __builtin_prefetch(memo + 1);
+    __builtin_prefetch(memo + width);
+    __builtin_prefetch(memo + width + 1);
+  }
+
   // The whole field as an image (CV_32FC1), computed densely; equal to ValueAt everywhere up to
   // float rounding. Used by FieldEvaluation::kDense and by tests.
   cv::Mat RenderDense() const;
