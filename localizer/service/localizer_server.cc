@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
+#include <condition_variable>
 #include <fstream>
 #include <mutex>
 #include <sstream>
@@ -18,6 +20,7 @@
 #include "evloc/localizer.grpc.pb.h"
 #include "localizer/service/bounded_queue.h"
 #include "localizer/service/metrics_http.h"
+#include "localizer/service/percentile.h"
 #include "localizer/service/session.h"
 
 namespace evloc::service {
@@ -25,15 +28,6 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 using TrackServerStream = grpc::ServerReaderWriter<api::TrackResponse, api::TrackRequest>;
-
-double Percentile(std::vector<double> values, double fraction) {
-  if (values.empty()) return 0.0;
-  const size_t index = std::min(values.size() - 1,
-                                static_cast<size_t>(fraction * static_cast<double>(values.size())));
-  std::nth_element(values.begin(), values.begin() + static_cast<std::ptrdiff_t>(index),
-                   values.end());
-  return values[index];
-}
 
 double MicrosecondsSince(Clock::time_point start) {
   return std::chrono::duration<double, std::micro>(Clock::now() - start).count();
@@ -46,43 +40,12 @@ std::string Trim(const std::string& text) {
   return text.substr(begin, end - begin + 1);
 }
 
-const char* StatusCodeName(grpc::StatusCode code) {
-  switch (code) {
-    case grpc::StatusCode::CANCELLED:
-      return "CANCELLED";
-    case grpc::StatusCode::INVALID_ARGUMENT:
-      return "INVALID_ARGUMENT";
-    case grpc::StatusCode::NOT_FOUND:
-      return "NOT_FOUND";
-    case grpc::StatusCode::PERMISSION_DENIED:
-      return "PERMISSION_DENIED";
-    case grpc::StatusCode::RESOURCE_EXHAUSTED:
-      return "RESOURCE_EXHAUSTED";
-    case grpc::StatusCode::FAILED_PRECONDITION:
-      return "FAILED_PRECONDITION";
-    case grpc::StatusCode::UNAUTHENTICATED:
-      return "UNAUTHENTICATED";
-    case grpc::StatusCode::INTERNAL:
-      return "INTERNAL";
-    default:
-      return "error";
-  }
-}
-
 // An item from the stream reader to the tracking worker.
 struct InboundItem {
   // The validated request.
   SessionItem item;
   // When the reader received the message.
   Clock::time_point received;
-};
-
-// An item from the tracking worker (or the reader, for notices) to the stream writer.
-struct OutboundItem {
-  // The message.
-  api::TrackResponse response;
-  // For PoseUpdates: when the packet that completed the step was received.
-  std::optional<Clock::time_point> received;
 };
 
 }  // namespace
@@ -111,6 +74,17 @@ void LocalizerServerOptions::Check() const {
     throw InvalidArgumentError("--tls-cert and --tls-key go together");
   }
   session_limits().Check();
+}
+
+SessionLimits LocalizerServerOptions::session_limits() const {
+  SessionLimits limits;
+  limits.tracker = tracker;
+  limits.max_camera_pixels = max_camera_pixels;
+  limits.max_packet_span_ns = std::isfinite(max_packet_span_s) && max_packet_span_s > 0
+                                  ? std::llround(std::min(max_packet_span_s, 1e9) * 1e9)
+                                  : 0;
+  limits.max_step_rate_hz = max_step_rate_hz;
+  return limits;
 }
 
 void ServerCounters::RecordLatency(double latency_us) {
@@ -163,6 +137,8 @@ std::string LocalizerServerOptions::Describe() const {
        << "queue-packets: " << queue_packets << "\n"
        << "backpressure-fraction: " << backpressure_fraction << "\n"
        << "max-camera-pixels: " << max_camera_pixels << "\n"
+       << "max-packet-span: " << max_packet_span_s << " s\n"
+       << "max-rate: " << max_step_rate_hz << " Hz\n"
        << "metrics: " << metrics_address.value_or("none") << "\n"
        << "tls: "
        << (tls_cert_file ? tls_cert_file->string() + " + " + tls_key_file->string()
@@ -320,9 +296,14 @@ class LocalizerServer::Service final : public api::Localizer::Service {
 
 namespace {
 
-// The state of one Track call: its reader (the gRPC handler thread), its tracking worker and its
-// writer, joined by bounded queues. Only the writer thread writes to the stream once the session
-// runs; no lock is held across a stream write.
+// The state of one Track call: its reader (the gRPC handler thread) and its tracking worker,
+// joined by a bounded queue, and a watchdog. The worker writes each pose to the stream itself, as
+// soon as its step has run (no further thread hand-off: on a busy machine every hand-off waits
+// for a core); it is the only writer while the session runs, so the reader never waits for a
+// write (it leaves a Backpressure notice for the worker, which sends it after the item it is
+// tracking). The watchdog cancels the call when nothing moves (no message read, no item tracked,
+// no response written) for the idle timeout: a client that sends nothing, or that stops reading
+// its responses so that a write blocks, cannot hold a session forever.
 class TrackStream {
  public:
   TrackStream(LocalizerServer::Service& service, grpc::ServerContext* context,
@@ -332,7 +313,6 @@ class TrackStream {
         context_(context),
         stream_(stream),
         inbound_(static_cast<size_t>(options_.queue_packets)),
-        outbound_(4096),
         backpressure_threshold_(std::max<size_t>(
             1, static_cast<size_t>(options_.backpressure_fraction *
                                    static_cast<double>(options_.queue_packets)))) {}
@@ -380,7 +360,7 @@ class TrackStream {
     const std::shared_ptr<const LoadedMap>& map = opened.map;
     const SessionSettings& settings = opened.settings;
     tracker_ = std::move(opened.tracker);
-    validator_ = std::make_unique<RequestValidator>(settings);
+    validator_ = std::make_unique<RequestValidator>(settings, service_.session_limits());
     id_ = service_.NextSessionId();
     ++counters.sessions_started;
     const auto session_start = Clock::now();
@@ -402,24 +382,20 @@ class TrackStream {
       return {grpc::StatusCode::CANCELLED, "the client went away"};
     }
 
-    std::thread writer([this] {
-      WriterLoop();
-      writer_done_ = true;
-    });
-    std::thread worker([this] {
-      WorkerLoop();
-      worker_done_ = true;
-    });
+    std::thread watchdog([this] { WatchdogLoop(); });
+    std::thread worker([this] { WorkerLoop(); });
     grpc::Status status = ReadLoop();
-    // Let the worker track what is queued (after an error: nothing more), then let the writer
-    // send what is left; a client that stops reading cannot hold the session forever.
+    // Let the worker track and send what is queued (after an error: nothing more; the watchdog
+    // ends a drain that makes no progress).
     if (status.ok()) {
       inbound_.Close();
     } else {
       inbound_.Abort();
     }
-    WaitOrCancel(worker_done_);
     worker.join();
+    // A notice left by the reader goes out also when the session ends with an error (an
+    // overflow follows its notice).
+    WritePendingNotice();
     if (status.ok()) {
       std::lock_guard<std::mutex> lock(mutex_);
       if (!worker_status_.ok()) status = worker_status_;
@@ -435,12 +411,17 @@ class TrackStream {
       totals->set_backpressure_notices(backpressure_notices_);
       totals->set_raw_time_adjustments(validator_->decoder().raw_time_adjustments());
       totals->set_duration_s(std::chrono::duration<double>(Clock::now() - session_start).count());
-      // The writer fills in the latency figures.
-      outbound_.Push(OutboundItem{std::move(end), std::nullopt});
+      totals->set_latency_p50_us(Percentile(latencies_us_, 0.5));
+      totals->set_latency_p99_us(Percentile(latencies_us_, 0.99));
+      Write(end);
     }
-    outbound_.Close();
-    WaitOrCancel(writer_done_);
-    writer.join();
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      session_over_ = true;
+    }
+    watchdog_cv_.notify_all();
+    watchdog.join();
+    if (status.ok() && idle_) status = IdleStatus();
     if (status.ok() && write_failed_) {
       status = grpc::Status(grpc::StatusCode::CANCELLED, "the client went away");
     }
@@ -451,28 +432,43 @@ class TrackStream {
         " events, " + std::to_string(frames_) + " frames, " + std::to_string(poses_) + " poses (" +
         std::to_string(lost_poses_) + " LOST), latency p50 " +
         std::to_string(static_cast<int64_t>(Percentile(latencies_us_, 0.5))) + " us p99 " +
-        std::to_string(static_cast<int64_t>(Percentile(latencies_us_, 0.99))) + " us, " +
+        std::to_string(static_cast<int64_t>(Percentile(latencies_us_, 0.99))) +
+        " us (in the queue p50 " +
+        std::to_string(static_cast<int64_t>(Percentile(queue_us_, 0.5))) + " p99 " +
+        std::to_string(static_cast<int64_t>(Percentile(queue_us_, 0.99))) +
+        " us; stream write p50 " +
+        std::to_string(static_cast<int64_t>(Percentile(write_us_, 0.5))) + " p99 " +
+        std::to_string(static_cast<int64_t>(Percentile(write_us_, 0.99))) + " us), " +
         std::to_string(backpressure_notices_) + " backpressure notices, " +
         std::to_string(std::chrono::duration<double>(Clock::now() - session_start).count()) + " s");
     return status;
   }
 
  private:
-  // Waits until `done` is set; cancels the call when neither the worker nor the writer made
-  // progress for the idle timeout (a client that stopped reading its responses).
-  void WaitOrCancel(const std::atomic<bool>& done) {
-    const auto limit = std::chrono::duration<double>(options_.idle_timeout_s);
+  // The status of a session the watchdog cancelled.
+  grpc::Status IdleStatus() const {
+    return {grpc::StatusCode::CANCELLED,
+            "nothing received, tracked or sent for " + std::to_string(options_.idle_timeout_s) +
+                " s (idle timeout: the client sent nothing or stopped reading its responses)"};
+  }
+
+  // Until the session is over: cancels the call (once) when progress_ did not change for the
+  // idle timeout.
+  void WatchdogLoop() {
+    const auto limit = std::chrono::duration_cast<Clock::duration>(
+        std::chrono::duration<double>(options_.idle_timeout_s));
+    const auto poll = std::min<Clock::duration>(limit / 10, std::chrono::milliseconds(100));
     uint64_t last_progress = progress_.load();
     auto last_change = Clock::now();
-    while (!done) {
-      std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    std::unique_lock<std::mutex> lock(mutex_);
+    while (!watchdog_cv_.wait_for(lock, poll, [&] { return session_over_; })) {
       const uint64_t progress = progress_.load();
       if (progress != last_progress) {
         last_progress = progress;
         last_change = Clock::now();
-      } else if (Clock::now() - last_change > limit) {
+      } else if (!idle_ && Clock::now() - last_change > limit) {
+        idle_ = true;
         context_->TryCancel();
-        last_change = Clock::now();
       }
     }
   }
@@ -481,6 +477,7 @@ class TrackStream {
   grpc::Status ReadLoop() {
     api::TrackRequest request;
     while (stream_->Read(&request)) {
+      ++progress_;
       InboundItem item;
       item.received = Clock::now();
       if (grpc::Status status = validator_->Accept(request, &item.item); !status.ok()) {
@@ -500,10 +497,7 @@ class TrackStream {
     if (context_->IsCancelled()) {
       std::lock_guard<std::mutex> lock(mutex_);
       if (!worker_status_.ok()) return worker_status_;
-      if (idle_) {
-        return {grpc::StatusCode::CANCELLED,
-                "no message for " + std::to_string(options_.idle_timeout_s) + " s (idle timeout)"};
-      }
+      if (idle_) return IdleStatus();
       return {grpc::StatusCode::CANCELLED, "the client cancelled or went away"};
     }
     std::lock_guard<std::mutex> lock(mutex_);
@@ -525,27 +519,50 @@ class TrackStream {
     notice.mutable_backpressure()->set_queue_capacity(static_cast<uint32_t>(inbound_.capacity()));
     notice.mutable_backpressure()->set_behind_ns(latest_end_t_ns_ - tracked_end_t_ns_.load());
     ++backpressure_notices_;
-    outbound_.PushFront(OutboundItem{std::move(notice), std::nullopt});
+    // The reader must keep reading: the worker sends the notice after the item it is tracking.
+    std::lock_guard<std::mutex> lock(notice_mutex_);
+    pending_notice_ = std::move(notice);  // A newer notice replaces one not sent yet.
   }
 
-  // Tracks the queued items in order and hands the poses to the writer.
+  // Writes a pending Backpressure notice, if any; false when the client is gone. Only one thread
+  // writes at a time: Run before the worker starts and after it joined, the worker in between.
+  bool WritePendingNotice() {
+    std::optional<api::TrackResponse> notice;
+    {
+      std::lock_guard<std::mutex> lock(notice_mutex_);
+      notice.swap(pending_notice_);
+    }
+    return !notice || WriteNow(*notice);
+  }
+
+  // Writes a pending notice, then `response`; false when the client is gone (same thread rule).
+  bool Write(const api::TrackResponse& response) {
+    return WritePendingNotice() && WriteNow(response);
+  }
+
+  // Writes `response` to the stream; false when the client is gone.
+  bool WriteNow(const api::TrackResponse& response) {
+    if (write_failed_) return false;
+    if (!stream_->Write(response)) {
+      write_failed_ = true;
+      return false;
+    }
+    ++progress_;
+    return true;
+  }
+
+  // Tracks the queued items in order and writes each pose as soon as its step has run.
   void WorkerLoop() {
-    const auto idle_timeout = std::chrono::duration_cast<Clock::duration>(
-        std::chrono::duration<double>(options_.idle_timeout_s));
     ServerCounters& counters = service_.counters();
+    api::TrackResponse response;
     while (true) {
       bool timed_out = false;
-      std::optional<InboundItem> item = inbound_.Pop(idle_timeout, &timed_out);
+      std::optional<InboundItem> item = inbound_.Pop(std::chrono::seconds(1), &timed_out);
       if (!item) {
-        if (timed_out) {
-          {
-            std::lock_guard<std::mutex> lock(mutex_);
-            idle_ = true;
-          }
-          context_->TryCancel();
-        }
+        if (timed_out) continue;  // The watchdog handles an idle session.
         return;
       }
+      const auto dequeued = Clock::now();
       std::vector<tracking::PoseEstimate> estimates;
       try {
         estimates = tracker_->Process(item->item);
@@ -564,45 +581,32 @@ class TrackStream {
       counters.events += static_cast<int64_t>(item->item.events.size());
       tracked_end_t_ns_ = item->item.t_ns;
       ++progress_;
+      if (!WritePendingNotice()) {
+        inbound_.Abort();
+        return;
+      }
       for (const tracking::PoseEstimate& estimate : estimates) {
-        OutboundItem out{api::TrackResponse(), item->received};
-        *out.response.mutable_pose() = PoseUpdateFromEstimate(estimate);
+        *response.mutable_pose() = PoseUpdateFromEstimate(estimate);
         ++poses_;
         ++counters.poses;
         if (estimate.status == tracking::TrackingStatus::kLost) {
           ++lost_poses_;
           ++counters.lost_poses;
         }
-        if (outbound_.Push(std::move(out)) == PushResult::kClosed) return;
-      }
-    }
-  }
-
-  // Writes the outbound messages until the queue is closed and drained, or the client is gone.
-  void WriterLoop() {
-    while (true) {
-      bool timed_out = false;
-      std::optional<OutboundItem> item = outbound_.Pop(std::chrono::seconds(1), &timed_out);
-      if (!item) {
-        if (timed_out) continue;
-        return;
-      }
-      if (item->received) {
-        const double latency_us = MicrosecondsSince(*item->received);
-        item->response.mutable_pose()->set_latency_us(latency_us);
+        queue_us_.push_back(
+            std::chrono::duration<double, std::micro>(dequeued - item->received).count());
+        const auto write_start = Clock::now();
+        const double latency_us =
+            std::chrono::duration<double, std::micro>(write_start - item->received).count();
+        response.mutable_pose()->set_latency_us(latency_us);
         latencies_us_.push_back(latency_us);
-        service_.counters().RecordLatency(latency_us);
+        counters.RecordLatency(latency_us);
+        if (!Write(response)) {
+          inbound_.Abort();
+          return;
+        }
+        write_us_.push_back(MicrosecondsSince(write_start));
       }
-      if (item->response.has_end()) {
-        item->response.mutable_end()->set_latency_p50_us(Percentile(latencies_us_, 0.5));
-        item->response.mutable_end()->set_latency_p99_us(Percentile(latencies_us_, 0.99));
-      }
-      if (!stream_->Write(item->response)) {
-        write_failed_ = true;
-        outbound_.Abort();
-        return;
-      }
-      ++progress_;
     }
   }
 
@@ -614,7 +618,6 @@ class TrackStream {
   std::unique_ptr<SessionTracker> tracker_;
   std::unique_ptr<RequestValidator> validator_;
   BoundedQueue<InboundItem> inbound_;
-  BoundedQueue<OutboundItem> outbound_;
 
   // Reader state.
   size_t backpressure_threshold_;
@@ -629,17 +632,29 @@ class TrackStream {
   uint64_t poses_ = 0;
   uint64_t lost_poses_ = 0;
 
-  // Writer state (read after the writer joined).
+  // Per pose: latency (received to handed to gRPC), time the packet waited in the queue, time
+  // of the stream write; microseconds (written by the worker, read after it joined).
   std::vector<double> latencies_us_;
-  std::atomic<bool> write_failed_{false};
+  std::vector<double> queue_us_;
+  std::vector<double> write_us_;
 
-  // Shared between threads.
-  std::atomic<bool> worker_done_{false};
-  std::atomic<bool> writer_done_{false};
+  // Set when a stream write failed (the client is gone).
+  std::atomic<bool> write_failed_{false};
+  // A Backpressure notice from the reader that the worker has not sent yet (guarded by
+  // notice_mutex_).
+  std::mutex notice_mutex_;
+  std::optional<api::TrackResponse> pending_notice_;
+
+  // Shared between threads: messages read + items tracked + responses written (the watchdog's
+  // sign of life); the rest is guarded by mutex_.
   std::atomic<uint64_t> progress_{0};
   std::mutex mutex_;
+  std::condition_variable watchdog_cv_;
   grpc::Status worker_status_;
+  // Set by the watchdog when it cancelled the call.
   bool idle_ = false;
+  // Set by Run when the session is over (stops the watchdog).
+  bool session_over_ = false;
 };
 
 }  // namespace

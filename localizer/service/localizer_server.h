@@ -60,13 +60,18 @@ struct LocalizerServerOptions {
   std::optional<std::filesystem::path> tls_key_file;
   // Largest camera a session may declare, width * height pixels (--max-camera-pixels).
   int64_t max_camera_pixels = SessionLimits{}.max_camera_pixels;
+  // Most a packet's end (or a PoseHint) may lie after the session time, seconds
+  // (--max-packet-span).
+  double max_packet_span_s = 1.0;
+  // Highest step rate a session may ask for, Hz (--max-rate).
+  double max_step_rate_hz = SessionLimits{}.max_step_rate_hz;
   // Default tracker options of every session (SessionStart.options override them).
   tracking::TrackerOptions tracker;
 
   // Throws InvalidArgumentError naming the first invalid field.
   void Check() const;
   // What every session is checked against (tracker defaults, camera size).
-  SessionLimits session_limits() const { return {tracker, max_camera_pixels}; }
+  SessionLimits session_limits() const;
   // The effective configuration, one "key: value" line per option.
   std::string Describe() const;
 };

@@ -291,6 +291,19 @@ TEST_F(LocalizerServerTest, TimeGoingBackIsInvalidArgument) {
   EXPECT_EQ(RunTrack(*stub_, requests).status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
 }
 
+// A packet ending far after the session time would make the tracker run a step per period up to
+// it (hours of steps for a wrong clock): refused (found by evloc_session_requests_fuzzer).
+TEST_F(LocalizerServerTest, PacketEndingFarAheadIsInvalidArgument) {
+  StartServer();
+  auto requests = ShortSession();
+  requests[30].mutable_events()->set_end_t_ns(requests[29].events().end_t_ns() + 3'000'000'000);
+  const TrackOutcome outcome = RunTrack(*stub_, requests);
+  EXPECT_EQ(outcome.status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_NE(outcome.status.error_message().find("--max-packet-span"), std::string::npos)
+      << outcome.status.error_message();
+  EXPECT_LT(outcome.Poses().size(), 20u);
+}
+
 TEST_F(LocalizerServerTest, MalformedPacketIsInvalidArgument) {
   StartServer();
   auto requests = ShortSession();
@@ -359,6 +372,31 @@ TEST_F(LocalizerServerTest, IdleSessionIsCancelled) {
   }));
 }
 
+// A client that stops reading its responses and sends nothing more, without ending the stream:
+// the server's writes block once gRPC's flow-control window is full, and the watchdog ends the
+// session after the idle timeout (it would otherwise hold its slot forever).
+TEST_F(LocalizerServerTest, ClientThatStopsReadingIsCancelled) {
+  StartServer([](LocalizerServerOptions& options) { options.idle_timeout_s = 0.5; });
+  std::vector<api::TrackRequest> requests{TestSessionStart()};
+  requests[0].mutable_start()->mutable_options()->set_step_rate_hz(5000);
+  for (auto& packet : testing::PackedPackets(testing::TestEvents(300'000'000), 10'000'000)) {
+    requests.push_back(packet);
+  }
+  grpc::ClientContext context;
+  auto stream = stub_->Track(&context);
+  for (const api::TrackRequest& request : requests) ASSERT_TRUE(stream->Write(request));
+  ASSERT_TRUE(Eventually([&] { return server_->counters().sessions_active == 1; }));
+  // Neither read nor half-close: only the watchdog can end the session.
+  EXPECT_TRUE(Eventually([&] { return server_->counters().sessions_active == 0; }));
+  EXPECT_TRUE(Eventually([&] {
+    const auto lines = LogLines();
+    return !lines.empty() && lines.back().find("stopped reading") != std::string::npos;
+  }));
+  // Far fewer poses were written than the 1500 steps of the stream (the writes blocked).
+  EXPECT_LT(server_->counters().poses.load(), 1500);
+  context.TryCancel();
+}
+
 TEST_F(LocalizerServerTest, OverflowingSessionIsToldThenStopped) {
   StartServer([](LocalizerServerOptions& options) {
     options.queue_packets = 4;
@@ -370,8 +408,9 @@ TEST_F(LocalizerServerTest, OverflowingSessionIsToldThenStopped) {
   for (auto& packet : testing::PackedPackets(events, 50'000)) requests.push_back(packet);
   const TrackOutcome outcome = RunTrack(*stub_, requests);
   EXPECT_EQ(outcome.status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
+  EXPECT_NE(outcome.status.error_message().find("overflowed"), std::string::npos);
   EXPECT_GE(outcome.Count(api::TrackResponse::kBackpressure), 1);
-  EXPECT_LT(outcome.written, requests.size());
+  // (The client's writes may all have been accepted by gRPC's buffers before the status came.)
 }
 
 TEST_F(LocalizerServerTest, ServesHealthChecks) {

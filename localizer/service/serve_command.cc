@@ -23,6 +23,9 @@ Options:
   --backpressure-fraction F  queue fill that triggers a Backpressure notice (default 0.5)
   --max-camera-pixels N      largest camera a session may declare, width * height (default
                              4194304; a session's memory grows with it)
+  --max-packet-span SECONDS  most a packet's end_t_ns (or a pose hint) may lie after the session
+                             time: bounds the steps one request runs (default 1)
+  --max-rate HZ              highest step rate a session may ask for (default 10000)
   --auth-tokens FILE         bearer tokens, one per line: TOKEN [map1,map2]
   --metrics IPV4:PORT        serve Prometheus metrics at http://IPV4:PORT/metrics (e.g.
                              127.0.0.1:9464): sessions, events, poses, LOST, rejections,
@@ -76,6 +79,10 @@ ServeCommand ParseServeCommandLine(const std::vector<std::string>& arguments) {
       server.backpressure_fraction = ParseDoubleFlag(flag, value);
     } else if (flag == "--max-camera-pixels") {
       server.max_camera_pixels = ParseIntegerFlag(flag, value);
+    } else if (flag == "--max-packet-span") {
+      server.max_packet_span_s = ParseDoubleFlag(flag, value);
+    } else if (flag == "--max-rate") {
+      server.max_step_rate_hz = ParseDoubleFlag(flag, value);
     } else if (flag == "--auth-tokens") {
       server.auth_tokens_file = value;
     } else if (flag == "--metrics") {

@@ -29,6 +29,10 @@ TEST(ServeCommand, EveryFlagReachesItsOption) {
                                               "0.25",
                                               "--max-camera-pixels",
                                               "921600",
+                                              "--max-packet-span",
+                                              "0.5",
+                                              "--max-rate",
+                                              "2000",
                                               "--rate",
                                               "250",
                                               "--variant",
@@ -56,6 +60,8 @@ TEST(ServeCommand, EveryFlagReachesItsOption) {
   EXPECT_EQ(server.queue_packets, 16);
   EXPECT_EQ(server.backpressure_fraction, 0.25);
   EXPECT_EQ(server.max_camera_pixels, 921600);
+  EXPECT_EQ(server.session_limits().max_packet_span_ns, 500'000'000);
+  EXPECT_EQ(server.max_step_rate_hz, 2000);
   EXPECT_EQ(server.tracker.step_rate_hz, 250);
   EXPECT_EQ(server.tracker.VariantName(), "EVT-PR");
   EXPECT_EQ(server.tracker.max_points, 1000);
@@ -81,6 +87,11 @@ TEST(ServeCommand, BadCommandLinesAreRejectedWithTheFlag) {
                InvalidArgumentError);
   EXPECT_THROW(ParseServeCommandLine({"serve", "--maps", maps, "--max-camera-pixels", "0"}),
                InvalidArgumentError);
+  EXPECT_THROW(ParseServeCommandLine({"serve", "--maps", maps, "--max-packet-span", "0"}),
+               InvalidArgumentError);
+  EXPECT_THROW(
+      ParseServeCommandLine({"serve", "--maps", maps, "--rate", "400", "--max-rate", "300"}),
+      InvalidArgumentError);
   EXPECT_THROW(ParseServeCommandLine({"serve", "--maps", maps, "--tls-cert", "c.pem"}),
                InvalidArgumentError);
   EXPECT_THROW(ParseServeCommandLine({"serve", "--maps", maps + "/missing"}), InvalidArgumentError);

@@ -32,6 +32,37 @@ grpc::Status InvalidArgument(const std::string& message) {
 
 }  // namespace
 
+const char* StatusCodeName(grpc::StatusCode code) {
+  switch (code) {
+    case grpc::StatusCode::OK:
+      return "OK";
+    case grpc::StatusCode::CANCELLED:
+      return "CANCELLED";
+    case grpc::StatusCode::UNKNOWN:
+      return "UNKNOWN";
+    case grpc::StatusCode::INVALID_ARGUMENT:
+      return "INVALID_ARGUMENT";
+    case grpc::StatusCode::DEADLINE_EXCEEDED:
+      return "DEADLINE_EXCEEDED";
+    case grpc::StatusCode::NOT_FOUND:
+      return "NOT_FOUND";
+    case grpc::StatusCode::PERMISSION_DENIED:
+      return "PERMISSION_DENIED";
+    case grpc::StatusCode::RESOURCE_EXHAUSTED:
+      return "RESOURCE_EXHAUSTED";
+    case grpc::StatusCode::FAILED_PRECONDITION:
+      return "FAILED_PRECONDITION";
+    case grpc::StatusCode::UNAUTHENTICATED:
+      return "UNAUTHENTICATED";
+    case grpc::StatusCode::INTERNAL:
+      return "INTERNAL";
+    case grpc::StatusCode::UNAVAILABLE:
+      return "UNAVAILABLE";
+    default:
+      return "other";
+  }
+}
+
 std::string EncodePackedEvents(const EventBuffer& events, size_t begin, size_t end,
                                int64_t time_base_ns) {
   std::string data(kPackedEventBytes * (end - begin), '\0');
@@ -54,6 +85,30 @@ std::string EncodePackedEvents(const EventBuffer& events, size_t begin, size_t e
     out[7] = static_cast<uint8_t>(events.y[i] >> 8);
   }
   return data;
+}
+
+std::vector<api::EventPacket> PackEventWindows(const EventBuffer& events, int64_t origin_ns,
+                                               int64_t window_ns) {
+  if (window_ns < 1 || window_ns > 0x7fffffff) {
+    throw InvalidArgumentError("PackEventWindows: the window must be 1 .. 2^31 - 1 ns");
+  }
+  if (!events.empty() && events.t_ns.front() <= origin_ns) {
+    throw InvalidArgumentError("PackEventWindows: the first event lies at or before the origin");
+  }
+  std::vector<api::EventPacket> packets;
+  size_t begin = 0;
+  for (int64_t window_start = origin_ns; begin < events.size(); window_start += window_ns) {
+    const int64_t window_end = window_start + window_ns;
+    size_t end = begin;
+    while (end < events.size() && events.t_ns[end] <= window_end) ++end;
+    api::EventPacket& packet = packets.emplace_back();
+    packet.set_encoding(api::EVENT_ENCODING_PACKED);
+    packet.set_time_base_ns(window_start);
+    packet.set_end_t_ns(window_end);
+    packet.set_data(EncodePackedEvents(events, begin, end, window_start));
+    begin = end;
+  }
+  return packets;
 }
 
 Camera CameraFromProto(const map_format::Camera& camera) {
@@ -214,6 +269,14 @@ cv::Mat FrameFromProto(const api::Frame& frame, const Camera& camera,
 void SessionLimits::Check() const {
   tracker.Check();
   if (max_camera_pixels < 1) throw InvalidArgumentError("--max-camera-pixels must be positive");
+  if (max_packet_span_ns < 1 || max_packet_span_ns > (int64_t{1} << 60)) {
+    throw InvalidArgumentError("--max-packet-span must be positive and at most 2^60 ns");
+  }
+  if (!(max_step_rate_hz > 0)) throw InvalidArgumentError("--max-rate must be positive");
+  if (tracker.step_rate_hz > max_step_rate_hz) {
+    throw InvalidArgumentError("--rate " + std::to_string(tracker.step_rate_hz) +
+                               " exceeds --max-rate " + std::to_string(max_step_rate_hz));
+  }
 }
 
 SessionSettings SessionSettingsFromProto(const api::SessionStart& start,
@@ -257,6 +320,12 @@ SessionSettings SessionSettingsFromProto(const api::SessionStart& start,
     settings.tracker.input =
         options.frames() ? tracking::TrackerInput::kFrames : tracking::TrackerInput::kEvents;
     settings.tracker.Check();
+    if (settings.tracker.step_rate_hz > limits.max_step_rate_hz) {
+      throw InvalidArgumentError("step_rate_hz " + std::to_string(settings.tracker.step_rate_hz) +
+                                 " exceeds this server's limit of " +
+                                 std::to_string(limits.max_step_rate_hz) +
+                                 " Hz (evloc-localizer --max-rate)");
+    }
   } catch (const InvalidArgumentError& error) {
     throw InvalidArgumentError(std::string("SessionStart.options: ") + error.what());
   }
@@ -269,6 +338,7 @@ PacketDecoder::PacketDecoder(SensorSize sensor_size, int64_t sensor_time_offset_
 }
 
 void PacketDecoder::Decode(const api::EventPacket& packet, EventBuffer* out) {
+  uint64_t adjustments = 0;
   out->clear();
   const uint64_t index = packets_;
   const std::string& data = packet.data();
@@ -327,7 +397,7 @@ void PacketDecoder::Decode(const api::EventPacket& packet, EventBuffer* out) {
       throw InvalidArgumentError(PacketName(index) + ": malformed raw data: " + error.what());
     }
     for (int64_t& t_ns : out->t_ns) t_ns += sensor_time_offset_ns_;
-    OrderRawTimes(index, out);
+    adjustments = OrderRawTimes(index, out);
   }
   // Order and position checks.
   const size_t count = out->size();
@@ -351,10 +421,12 @@ void PacketDecoder::Decode(const api::EventPacket& packet, EventBuffer* out) {
   }
   end_t_ns_ = packet.end_t_ns();
   if (count > 0) last_event_t_ns_ = out->t_ns.back();
+  raw_time_adjustments_ += adjustments;
   ++packets_;
 }
 
-void PacketDecoder::OrderRawTimes(uint64_t index, EventBuffer* events) {
+uint64_t PacketDecoder::OrderRawTimes(uint64_t index, EventBuffer* events) const {
+  uint64_t adjustments = 0;
   std::optional<int64_t> floor_ns;
   if (end_t_ns_) floor_ns = *end_t_ns_ + 1;
   if (last_event_t_ns_ && (!floor_ns || *last_event_t_ns_ > *floor_ns)) {
@@ -370,15 +442,18 @@ void PacketDecoder::OrderRawTimes(uint64_t index, EventBuffer* events) {
                                    " ns (raw streams may go back by at most 1 ms)");
       }
       t_ns = *floor_ns;
-      ++raw_time_adjustments_;
+      ++adjustments;
     }
     floor_ns = t_ns;
   }
+  return adjustments;
 }
 
-RequestValidator::RequestValidator(const SessionSettings& settings)
+RequestValidator::RequestValidator(const SessionSettings& settings, const SessionLimits& limits)
     : camera_(settings.camera),
       takes_frames_(settings.tracker.input == tracking::TrackerInput::kFrames),
+      max_packet_span_ns_(limits.max_packet_span_ns),
+      session_t_ns_(settings.initial_t_ns),
       decoder_(SensorSize{settings.camera.width, settings.camera.height},
                settings.sensor_time_offset_ns) {}
 
@@ -394,8 +469,11 @@ grpc::Status RequestValidator::Accept(const api::TrackRequest& request, SessionI
               "this session tracks frames (options.frames): send Frames, not events");
         }
         item->kind = SessionItem::Kind::kEvents;
+        CheckSpan(request.events().end_t_ns(),
+                  ("event packet " + std::to_string(decoder_.packets()) + ": end_t_ns").c_str());
         decoder_.Decode(request.events(), &item->events);
         item->t_ns = request.events().end_t_ns();
+        session_t_ns_ = std::max(session_t_ns_, item->t_ns);
         break;
       case api::TrackRequest::kFrame:
         if (!takes_frames_) {
@@ -411,6 +489,7 @@ grpc::Status RequestValidator::Accept(const api::TrackRequest& request, SessionI
       case api::TrackRequest::kPoseHint: {
         const int64_t t_ns = request.pose_hint().t_ns();
         CheckSessionTime(t_ns, "PoseHint: t_ns");
+        CheckSpan(t_ns, "PoseHint: t_ns");
         const std::optional<int64_t> last = decoder_.end_t_ns();
         if (last && t_ns < *last) {
           return InvalidArgument("PoseHint at " + std::to_string(t_ns) +
@@ -421,6 +500,7 @@ grpc::Status RequestValidator::Accept(const api::TrackRequest& request, SessionI
         item->world_from_cam =
             RigidFromProto(request.pose_hint().world_from_cam(), "PoseHint.world_from_cam");
         item->t_ns = t_ns;
+        session_t_ns_ = std::max(session_t_ns_, t_ns);
         break;
       }
       default:
@@ -431,6 +511,22 @@ grpc::Status RequestValidator::Accept(const api::TrackRequest& request, SessionI
   }
   latest_t_ns_ = item->t_ns;
   return grpc::Status::OK;
+}
+
+void RequestValidator::CheckSpan(int64_t t_ns, const char* what) const {
+  // |session time| <= 2^62 ns and the span <= 2^60 ns: the sum cannot overflow.
+  CheckSessionTime(t_ns, what);
+  if (t_ns > session_t_ns_ + max_packet_span_ns_) {
+    throw InvalidArgumentError(
+        std::string(what) + " " + std::to_string(t_ns) + " ns lies " +
+        std::to_string((static_cast<double>(t_ns) - static_cast<double>(session_t_ns_)) * 1e-9) +
+        " s after the session time " + std::to_string(session_t_ns_) +
+        " ns (initial time, previous packet end or pose hint); one request may advance the "
+        "session by at most " +
+        std::to_string(static_cast<double>(max_packet_span_ns_) * 1e-9) +
+        " s (evloc-localizer --max-packet-span): send shorter packets, or check that "
+        "initial_t_ns and the event times use the same clock");
+  }
 }
 
 SessionTracker::SessionTracker(std::shared_ptr<const LoadedMap> map,

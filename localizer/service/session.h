@@ -24,6 +24,9 @@
 
 namespace evloc::service {
 
+// The name of a gRPC status code as docs/api.md writes it (e.g. "RESOURCE_EXHAUSTED").
+const char* StatusCodeName(grpc::StatusCode code);
+
 // Bytes per event of the PACKED encoding.
 inline constexpr size_t kPackedEventBytes = 8;
 
@@ -32,6 +35,14 @@ inline constexpr size_t kPackedEventBytes = 8;
 // 2^31 ns or more after it.
 std::string EncodePackedEvents(const EventBuffer& events, size_t begin, size_t end,
                                int64_t time_base_ns);
+
+// Splits time-ordered events into PACKED EventPackets of consecutive windows
+// (origin_ns + k window_ns, origin_ns + (k + 1) window_ns], k = 0, 1, ... up to the window of
+// the last event (for clients and tests); a window without events gives an empty packet. Throws
+// InvalidArgumentError when window_ns is not in 1..2^31 - 1 or an event lies at or before
+// origin_ns.
+std::vector<api::EventPacket> PackEventWindows(const EventBuffer& events, int64_t origin_ns,
+                                               int64_t window_ns);
 
 // Converts a protobuf camera. Throws InvalidArgumentError naming the problem when the model is
 // unset or the camera fails Camera::Check().
@@ -80,6 +91,13 @@ struct SessionLimits {
   // Largest camera, width * height pixels: a session's memory grows with the sensor size
   // (time surfaces, fields, undistortion table) (--max-camera-pixels).
   int64_t max_camera_pixels = int64_t{1} << 22;
+  // Most an EventPacket's end_t_ns or a PoseHint's time may lie after the session time (the latest
+  // of the initial time, the previous packet's end and the last hint), ns: one request can then
+  // make the tracker run at most max_packet_span_ns * max_step_rate_hz / 1e9 steps
+  // (--max-packet-span).
+  int64_t max_packet_span_ns = 1'000'000'000;
+  // Highest step rate a session may ask for, Hz (--max-rate).
+  double max_step_rate_hz = 10'000;
 
   // Throws InvalidArgumentError naming the first invalid field.
   void Check() const;
@@ -87,7 +105,7 @@ struct SessionLimits {
 
 // Reads the settings of a SessionStart on top of `limits.tracker`. Throws InvalidArgumentError
 // when the camera (also when it exceeds limits.max_camera_pixels), the pose, a time or an option
-// is invalid (the message names the field).
+// (also a step rate above limits.max_step_rate_hz) is invalid (the message names the field).
 SessionSettings SessionSettingsFromProto(const api::SessionStart& start,
                                          const SessionLimits& limits);
 
@@ -117,12 +135,13 @@ class PacketDecoder {
   std::optional<int64_t> end_t_ns() const { return end_t_ns_; }
   // Packets decoded so far.
   uint64_t packets() const { return packets_; }
-  // Raw events whose time was raised to keep the stream in order.
+  // Raw events of the accepted packets whose time was raised to keep the stream in order.
   uint64_t raw_time_adjustments() const { return raw_time_adjustments_; }
 
  private:
-  // Raises raw event times that go back by at most kMaxRawTimeAdjustmentNs; throws for more.
-  void OrderRawTimes(uint64_t index, EventBuffer* events);
+  // Raises raw event times that go back by at most kMaxRawTimeAdjustmentNs and returns how many
+  // it raised; throws InvalidArgumentError for a larger step back.
+  uint64_t OrderRawTimes(uint64_t index, EventBuffer* events) const;
 
   SensorSize sensor_size_;
   int64_t sensor_time_offset_ns_;
@@ -163,14 +182,15 @@ struct SessionItem {
 // docs/api.md refuses. Not thread-safe.
 class RequestValidator {
  public:
-  // For a session with these settings.
-  explicit RequestValidator(const SessionSettings& settings);
+  // For a session with these settings and limits.
+  RequestValidator(const SessionSettings& settings, const SessionLimits& limits);
 
   // Validates `request` and fills `item` for SessionTracker::Process. Returns OK, or the status
   // that ends the session: FAILED_PRECONDITION for a second SessionStart, INVALID_ARGUMENT for
   // anything else that is wrong (malformed or out-of-order packet, event outside the sensor, time
   // going back, a Frame in an event session or events in a frame session, a bad pose, an empty
-  // request). The session cannot continue after an error.
+  // request, a packet end or hint time more than limits.max_packet_span_ns after the session
+  // time). The session cannot continue after an error.
   grpc::Status Accept(const api::TrackRequest& request, SessionItem* item);
 
   // The packet decoder (packet count and last end time).
@@ -179,8 +199,14 @@ class RequestValidator {
   std::optional<int64_t> latest_t_ns() const { return latest_t_ns_; }
 
  private:
+  // Throws InvalidArgumentError when `t_ns` lies more than the span limit after the session time.
+  void CheckSpan(int64_t t_ns, const char* what) const;
+
   Camera camera_;
   bool takes_frames_ = false;
+  int64_t max_packet_span_ns_;
+  // The latest of the initial time, the packet ends and the hint times, ns.
+  int64_t session_t_ns_;
   PacketDecoder decoder_;
   std::optional<int64_t> last_frame_t_ns_;
   std::optional<int64_t> latest_t_ns_;

@@ -118,9 +118,16 @@ TEST(PacketDecoder, RawTimesGoingBackSlightlyAreRaisedAndLargerStepsRefused) {
   decoder.Decode(packet, &decoded);
   EXPECT_EQ(decoded.t_ns, (std::vector<int64_t>{100'001, 101'000}));
   EXPECT_EQ(decoder.raw_time_adjustments(), 2u);
+  // A packet refused after a raise (its last event lies after its end) adds no adjustment
+  // (found by evloc_session_packets_fuzzer).
+  packet.set_data(evt2({{101, 8}, {5'000, 9}}));
+  packet.set_end_t_ns(4'000'000);
+  EXPECT_THROW(decoder.Decode(packet, &decoded), InvalidArgumentError);
+  EXPECT_EQ(decoder.raw_time_adjustments(), 2u);
+  PacketDecoder fresh({320, 240}, 0);
   packet.set_data(evt2({{2'150, 6}, {101, 7}}));  // 2 ms back: refused.
   packet.set_end_t_ns(2'200'000);
-  EXPECT_THROW(decoder.Decode(packet, &decoded), InvalidArgumentError);
+  EXPECT_THROW(fresh.Decode(packet, &decoded), InvalidArgumentError);
 }
 
 TEST(PacketDecoder, RawEvt3ReservedWordIsInvalid) {
@@ -192,7 +199,7 @@ TEST(SessionTracker, PacketsGiveTheOfflinePosesWithoutWaitingForTheNextPacket) {
   const api::TrackRequest start = testing::TestSessionStart();
   const SessionSettings settings = SessionSettingsFromProto(start.start(), SessionLimits{});
   SessionTracker tracker(map, settings);
-  RequestValidator validator(settings);
+  RequestValidator validator(settings, SessionLimits{});
   std::vector<tracking::PoseEstimate> served;
   SessionItem item;
   for (const api::TrackRequest& packet : testing::PackedPackets(events, 1'000'000)) {
@@ -250,6 +257,9 @@ TEST(SessionSettings, RejectsInvalidCamerasAndOptions) {
   EXPECT_THROW(SessionSettingsFromProto(bad, defaults), InvalidArgumentError);
   bad = start;
   bad.mutable_options()->set_step_rate_hz(-5);
+  EXPECT_THROW(SessionSettingsFromProto(bad, defaults), InvalidArgumentError);
+  bad = start;
+  bad.mutable_options()->set_step_rate_hz(defaults.max_step_rate_hz * 2);
   EXPECT_THROW(SessionSettingsFromProto(bad, defaults), InvalidArgumentError);
   bad = start;
   bad.set_initial_t_ns(int64_t{1} << 62 | 1);

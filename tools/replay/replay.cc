@@ -22,6 +22,7 @@
 #include "core/trajectory/tum_io.h"
 #include "evloc/localizer.grpc.pb.h"
 #include "localizer/offline/track_command.h"
+#include "localizer/service/percentile.h"
 #include "localizer/service/session.h"
 #include "tools/replay/evt3_encoder.h"
 #include "tools/sim/dataset.h"
@@ -31,14 +32,7 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-double Percentile(std::vector<double> values, double fraction) {
-  if (values.empty()) return 0.0;
-  const size_t index = std::min(values.size() - 1,
-                                static_cast<size_t>(fraction * static_cast<double>(values.size())));
-  std::nth_element(values.begin(), values.begin() + static_cast<std::ptrdiff_t>(index),
-                   values.end());
-  return values[index];
-}
+using service::Percentile;
 
 // Floor division for possibly negative numerators.
 int64_t FloorDiv(int64_t numerator, int64_t denominator) {

@@ -102,25 +102,12 @@ api::TrackRequest TestSessionStart() {
 }
 
 std::vector<api::TrackRequest> PackedPackets(const EventBuffer& events, int64_t packet_ns) {
-  std::vector<api::TrackRequest> packets;
-  if (events.empty()) return packets;
-  size_t begin = 0;
-  int64_t window_start = events.t_ns.front() - 1;
-  while (begin < events.size()) {
-    const int64_t window_end = window_start + packet_ns;
-    size_t end = begin;
-    while (end < events.size() && events.t_ns[end] <= window_end) ++end;
-    api::TrackRequest request;
-    api::EventPacket* packet = request.mutable_events();
-    packet->set_encoding(api::EVENT_ENCODING_PACKED);
-    packet->set_time_base_ns(window_start);
-    packet->set_end_t_ns(window_end);
-    packet->set_data(EncodePackedEvents(events, begin, end, window_start));
-    packets.push_back(std::move(request));
-    begin = end;
-    window_start = window_end;
+  std::vector<api::TrackRequest> requests;
+  if (events.empty()) return requests;
+  for (api::EventPacket& packet : PackEventWindows(events, events.t_ns.front() - 1, packet_ns)) {
+    *requests.emplace_back().mutable_events() = std::move(packet);
   }
-  return packets;
+  return requests;
 }
 
 }  // namespace evloc::service::testing
