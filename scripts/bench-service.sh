@@ -1,0 +1,106 @@
+#!/usr/bin/env bash
+# Latency and capacity of the localizer service on loopback (docs/benchmarks.md §4).
+#
+#   scripts/bench-service.sh [--build DIR] [--dataset DIR] [--out DIR] [--latency-s S]
+#                            [--capacity "1 2 3 4"] [--capacity-s S]
+#
+# Starts evloc-localizer on 127.0.0.1 (any free port) with the dataset's ground-truth map, then
+#  (a) latency: one evloc-replay session at real time (300 Hz, PACKED 1 ms packets) for
+#      --latency-s seconds: server latency (packet received -> pose handed to gRPC) and client
+#      latency (packet sent -> pose received), p50 / p99;
+#  (b) capacity: for each N of --capacity, N concurrent real-time sessions (evloc-load) of
+#      --capacity-s seconds each. A run keeps up when every session ends OK with no Backpressure
+#      notice and the server latency p99 stays below 100 ms (the queue does not grow).
+# Every figure also goes to OUT (JSON per run, server log, summary.txt). Wall-clock figures need
+# an otherwise idle machine; the script prints the load average before each run.
+set -euo pipefail
+
+BUILD=build
+DATASET=/work/data/sim/mid10
+OUT=/tmp/evloc-bench-service
+LATENCY_S=10
+CAPACITY="1 2 3 4 6"
+CAPACITY_S=10
+RATE=300
+
+usage() { sed -n '2,16p' "$0" | sed 's/^# \{0,1\}//'; }
+while [[ $# -gt 0 ]]; do
+  case "$1" in
+    --build) BUILD="$2"; shift 2 ;;
+    --dataset) DATASET="$2"; shift 2 ;;
+    --out) OUT="$2"; shift 2 ;;
+    --latency-s) LATENCY_S="$2"; shift 2 ;;
+    --capacity) CAPACITY="$2"; shift 2 ;;
+    --capacity-s) CAPACITY_S="$2"; shift 2 ;;
+    -h|--help) usage; exit 0 ;;
+    *) echo "bench-service: unknown argument '$1' (see --help)" >&2; exit 2 ;;
+  esac
+done
+
+SERVER_BIN="$BUILD/localizer/service/evloc-localizer"
+REPLAY_BIN="$BUILD/tools/replay/evloc-replay"
+LOAD_BIN="$BUILD/tools/load/evloc-load"
+for bin in "$SERVER_BIN" "$REPLAY_BIN" "$LOAD_BIN"; do
+  [[ -x "$bin" ]] || { echo "bench-service: $bin is missing: cmake --build $BUILD --target evloc-localizer evloc-replay evloc-load" >&2; exit 1; }
+done
+[[ -f "$DATASET/gt_map/map.evmap" ]] || { echo "bench-service: $DATASET has no gt_map/map.evmap (render one with evloc-sim render)" >&2; exit 1; }
+
+mkdir -p "$OUT/maps"
+ln -sfn "$(realpath "$DATASET/gt_map")" "$OUT/maps/bench"
+SUMMARY="$OUT/summary.txt"
+: > "$SUMMARY"
+say() { echo "$*" | tee -a "$SUMMARY"; }
+
+SERVER_LOG="$OUT/server.log"
+# shellcheck source=scripts/service-lib.sh
+source "$(dirname "${BASH_SOURCE[0]}")/service-lib.sh"
+start_localizer "$SERVER_LOG" "$SERVER_BIN" --maps "$OUT/maps" --max-sessions 64 --rate "$RATE"
+trap 'kill "$SERVER_PID" 2>/dev/null || true; wait "$SERVER_PID" 2>/dev/null || true' EXIT
+ADDRESS="127.0.0.1:$PORT"
+
+# CPU seconds (user + system) the server has used so far.
+server_cpu() { awk -v hz="$(getconf CLK_TCK)" '{print ($14 + $15) / hz}' "/proc/$SERVER_PID/stat"; }
+minus() { awk -v a="$1" -v b="$2" 'BEGIN { print a - b }'; }
+
+say "bench-service: $(date -u +%FT%TZ) on $(nproc) cores, server $ADDRESS, dataset $DATASET, $RATE Hz"
+
+# Warm-up: loads the map (a first session pays it) so that it does not count in the figures.
+"$LOAD_BIN" --server "$ADDRESS" --map bench --dataset "$DATASET" --sessions 1 --session-s 0.2 \
+  --speed max --rate "$RATE" > "$OUT/warmup.txt"
+
+say "(a) latency: one real-time session, ${LATENCY_S} s; load average: $(cut -d' ' -f1-3 /proc/loadavg)"
+cpu_before=$(server_cpu)
+"$REPLAY_BIN" --server "$ADDRESS" --map bench --dataset "$DATASET" --out "$OUT/latency_traj.txt" \
+  --speed 1 --rate "$RATE" --packet-us 1000 --duration "$LATENCY_S" --report "$OUT/latency.json" \
+  > "$OUT/latency.txt" 2>&1 || say "  the session did not keep up (a figure too): $(tail -1 "$OUT/latency.txt")"
+cpu_after=$(server_cpu)
+grep -E "latency|sent" "$OUT/latency.txt" | tee -a "$SUMMARY" || true
+grep "session 2 end" "$SERVER_LOG" | sed 's/^evloc-localizer: /  server: /' | tee -a "$SUMMARY" || true
+say "  server CPU: $(minus "$cpu_after" "$cpu_before") s for ${LATENCY_S} s of events"
+
+say "(b) capacity: N concurrent real-time sessions of ${CAPACITY_S} s"
+for sessions in $CAPACITY; do
+  load=$(cut -d' ' -f1-3 /proc/loadavg)
+  cpu_before=$(server_cpu)
+  status=0
+  "$LOAD_BIN" --server "$ADDRESS" --map bench --dataset "$DATASET" --sessions "$sessions" \
+    --session-s "$CAPACITY_S" --speed 1 --rate "$RATE" --report "$OUT/capacity_$sessions.json" \
+    > "$OUT/capacity_$sessions.txt" 2>&1 || status=$?
+  cpu_after=$(server_cpu)
+  python3 - "$OUT/capacity_$sessions.json" "$sessions" "$load" \
+    "$(minus "$cpu_after" "$cpu_before")" <<'EOF' | tee -a "$SUMMARY"
+import json, sys
+r = json.load(open(sys.argv[1]))
+keeps = (r["sessions_as_planned"] == r["sessions_opened"] and r["backpressure_notices"] == 0
+         and r["server_latency_us"]["p99"] < 100e3)
+unplanned = ", ".join(f"{v} {k}" for k, v in r["unplanned"].items()) or "none"
+print(f"  N={sys.argv[2]}: {'keeps up' if keeps else 'falls behind'}; ok {r['sessions_as_planned']}/"
+      f"{r['sessions_opened']}, unplanned: {unplanned}, backpressure {r['backpressure_notices']}, "
+      f"server latency p50/p99/max {r['server_latency_us']['p50']:.0f}/"
+      f"{r['server_latency_us']['p99']:.0f}/{r['server_latency_us']['max']:.0f} us, client p99 "
+      f"{r['client_latency_us']['p99']:.0f} us, step p50/p99 {r['step_ms']['p50']:.2f}/"
+      f"{r['step_ms']['p99']:.2f} ms, server CPU {float(sys.argv[4]):.1f} s in {r['wall_s']:.1f} s "
+      f"(load {sys.argv[3]})")
+EOF
+done
+say "bench-service: figures in $OUT"

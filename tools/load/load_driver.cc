@@ -1,0 +1,423 @@
+#include "tools/load/load_driver.h"
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <limits>
+#include <mutex>
+#include <random>
+#include <thread>
+
+#include <grpcpp/grpcpp.h>
+#include <nlohmann/json.hpp>
+
+#include "core/common/cli.h"
+#include "core/common/error.h"
+#include "core/common/file_util.h"
+#include "core/events/event_reader.h"
+#include "evloc/localizer.grpc.pb.h"
+#include "localizer/offline/track_command.h"
+#include "localizer/service/percentile.h"
+#include "localizer/service/session.h"
+#include "tools/sim/dataset.h"
+
+namespace evloc::load {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+using service::Percentile;
+
+// How a session ends.
+enum class Ending { kNormal, kCancel, kBadPacket };
+
+// What every session sends: built once, shared read-only by the slots.
+struct Workload {
+  api::TrackRequest start;
+  std::vector<api::TrackRequest> packets;
+  // Start of the first packet's window, ns.
+  int64_t origin_ns = 0;
+  int64_t packet_ns = 0;
+  // Index of the first packet whose window reaches past the initial time (earlier ones prime).
+  size_t first_tracked_packet = 0;
+  int sensor_width = 0;
+  int64_t events = 0;
+};
+
+Workload MakeWorkload(const LoadOptions& options) {
+  const sim::Dataset dataset = sim::ReadDataset(options.dataset);
+  if (!dataset.events_path) {
+    throw InvalidArgumentError("dataset '" + options.dataset.string() +
+                               "' has no events.evb or events.txt");
+  }
+  const auto reader = OpenEventFile(*dataset.events_path);
+  EventBuffer events;
+  if (reader->Read(1, &events) == 0) {
+    throw InvalidArgumentError("dataset '" + options.dataset.string() + "' has no events");
+  }
+  const TimedPose initial = tracking::ResolveInitialPose(dataset, std::nullopt, events.t_ns[0]);
+  const int64_t stop_ns = initial.t_ns + static_cast<int64_t>(options.session_s * 1e9);
+  while (events.t_ns.back() <= stop_ns && reader->Read(1 << 20, &events) > 0) {
+  }
+  const size_t keep = static_cast<size_t>(
+      std::upper_bound(events.t_ns.begin(), events.t_ns.end(), stop_ns) - events.t_ns.begin());
+  events.t_ns.resize(keep);
+  events.x.resize(keep);
+  events.y.resize(keep);
+  events.polarity.resize(keep);
+
+  Workload workload;
+  workload.packet_ns = options.packet_us * 1000;
+  workload.origin_ns = events.t_ns.front() - 1;
+  workload.sensor_width = dataset.camera.width;
+  workload.events = static_cast<int64_t>(events.size());
+  for (api::EventPacket& packet :
+       service::PackEventWindows(events, workload.origin_ns, workload.packet_ns)) {
+    *workload.packets.emplace_back().mutable_events() = std::move(packet);
+  }
+  workload.first_tracked_packet = static_cast<size_t>(
+      std::max<int64_t>(0, (initial.t_ns - workload.origin_ns) / workload.packet_ns));
+  api::SessionStart* start = workload.start.mutable_start();
+  start->set_map_name(options.map_name);
+  *start->mutable_camera() = service::CameraToProto(dataset.camera);
+  *start->mutable_initial_world_from_cam() = service::RigidToProto(initial.world_from_cam);
+  start->set_initial_t_ns(initial.t_ns);
+  if (options.step_rate_hz) start->mutable_options()->set_step_rate_hz(*options.step_rate_hz);
+  start->set_client_name("evloc-load " + options.dataset.filename().string());
+  return workload;
+}
+
+// What one session measured.
+struct SessionOutcome {
+  grpc::Status status;
+  bool as_planned = false;
+  int64_t packets = 0;
+  int64_t events = 0;
+  int64_t backpressure = 0;
+  std::vector<double> server_latency_us;
+  std::vector<double> client_latency_us;
+  std::vector<double> step_ms;
+};
+
+// A packet with one event outside the sensor (x = width) after the window's start.
+api::TrackRequest BadPacket(const api::TrackRequest& packet, int width) {
+  api::TrackRequest bad = packet;
+  EventBuffer outside;
+  outside.push_back({packet.events().time_base_ns() + 1, static_cast<uint16_t>(width), 0, 1});
+  bad.mutable_events()->set_data(
+      service::EncodePackedEvents(outside, 0, 1, packet.events().time_base_ns()));
+  return bad;
+}
+
+SessionOutcome RunSession(api::Localizer::Stub& stub, const Workload& workload,
+                          const LoadOptions& options, Ending ending, size_t cut) {
+  SessionOutcome outcome;
+  grpc::ClientContext context;
+  auto stream = stub.Track(&context);
+  api::TrackResponse response;
+  if (!stream->Write(workload.start) || !stream->Read(&response) || !response.has_started()) {
+    outcome.status = stream->Finish();
+    return outcome;
+  }
+  const size_t count = workload.packets.size();
+  // With --speed max: at most a quarter of the server's queue unconfirmed, below the
+  // Backpressure threshold (half, by default).
+  const size_t max_in_flight = std::max<size_t>(1, response.started().queue_capacity() / 4);
+  std::vector<std::atomic<int64_t>> sent_ns(count);
+  for (auto& sent : sent_ns) sent = -1;
+  std::mutex mutex;
+  std::condition_variable confirmed_cv;
+  // Packets [0, confirmed) are tracked: a pose reached their end (priming packets count).
+  size_t confirmed = workload.first_tracked_packet;
+  bool ended = false;
+  std::thread reader([&] {
+    api::TrackResponse message;
+    while (stream->Read(&message)) {
+      const int64_t now_ns = Clock::now().time_since_epoch().count();
+      if (message.has_pose()) {
+        const api::PoseUpdate& pose = message.pose();
+        // The packet whose window holds the pose's time completed its step.
+        const int64_t offset = pose.t_ns() - workload.origin_ns;
+        const size_t index = static_cast<size_t>(
+            std::clamp<int64_t>((offset + workload.packet_ns - 1) / workload.packet_ns - 1, 0,
+                                static_cast<int64_t>(count) - 1));
+        const int64_t sent = sent_ns[index].load(std::memory_order_acquire);
+        std::lock_guard<std::mutex> lock(mutex);
+        if (sent >= 0) outcome.client_latency_us.push_back((now_ns - sent) * 1e-3);
+        outcome.server_latency_us.push_back(pose.latency_us());
+        outcome.step_ms.push_back(pose.step_ms());
+        confirmed = std::max(confirmed, index + 1);
+        confirmed_cv.notify_all();
+      } else if (message.has_backpressure()) {
+        std::lock_guard<std::mutex> lock(mutex);
+        ++outcome.backpressure;
+      }
+    }
+    std::lock_guard<std::mutex> lock(mutex);
+    ended = true;
+    confirmed_cv.notify_all();
+  });
+
+  const auto wall_start = Clock::now();
+  bool cancelled = false;
+  for (size_t i = 0; i < count; ++i) {
+    if (ending == Ending::kCancel && i == cut) {
+      context.TryCancel();
+      cancelled = true;
+      break;
+    }
+    if (options.speed) {
+      const double session_s =
+          static_cast<double>(workload.packets[i].events().end_t_ns() - workload.origin_ns) * 1e-9;
+      std::this_thread::sleep_until(wall_start +
+                                    std::chrono::duration_cast<Clock::duration>(
+                                        std::chrono::duration<double>(session_s / *options.speed)));
+    } else {
+      std::unique_lock<std::mutex> lock(mutex);
+      confirmed_cv.wait(lock, [&] { return ended || i < confirmed + max_in_flight; });
+      if (ended) break;
+    }
+    api::TrackRequest bad_packet;
+    if (ending == Ending::kBadPacket && i == cut) {
+      bad_packet = BadPacket(workload.packets[i], workload.sensor_width);
+    }
+    const api::TrackRequest& request = bad_packet.has_events() ? bad_packet : workload.packets[i];
+    sent_ns[i].store(Clock::now().time_since_epoch().count(), std::memory_order_release);
+    if (!stream->Write(request)) break;
+    ++outcome.packets;
+    outcome.events +=
+        static_cast<int64_t>(request.events().data().size() / service::kPackedEventBytes);
+  }
+  if (!cancelled) stream->WritesDone();
+  reader.join();
+  outcome.status = stream->Finish();
+  const grpc::StatusCode planned = ending == Ending::kNormal   ? grpc::StatusCode::OK
+                                   : ending == Ending::kCancel ? grpc::StatusCode::CANCELLED
+                                                               : grpc::StatusCode::INVALID_ARGUMENT;
+  outcome.as_planned = outcome.status.error_code() == planned;
+  return outcome;
+}
+
+nlohmann::json ResultJson(const LoadOptions& options, const LoadResult& result) {
+  nlohmann::json json;
+  json["server"] = options.server;
+  json["dataset"] = options.dataset.string();
+  json["sessions"] = options.sessions;
+  json["session_s"] = options.session_s;
+  json["duration_s"] = options.duration_s;
+  json["speed"] = options.speed ? nlohmann::json(*options.speed) : nlohmann::json("max");
+  json["packet_us"] = options.packet_us;
+  json["sessions_opened"] = result.sessions;
+  json["sessions_as_planned"] = result.sessions_as_planned;
+  json["normal_sessions"] = result.normal_sessions;
+  json["cancelled_sessions"] = result.cancelled_sessions;
+  json["bad_packet_sessions"] = result.bad_packet_sessions;
+  json["unplanned"] = result.unplanned;
+  json["unplanned_messages"] = result.unplanned_messages;
+  json["packets"] = result.packets;
+  json["events"] = result.events;
+  json["poses"] = result.poses;
+  json["backpressure_notices"] = result.backpressure_notices;
+  json["server_latency_us"] = {{"p50", result.server_latency_p50_us},
+                               {"p99", result.server_latency_p99_us},
+                               {"max", result.server_latency_max_us}};
+  json["client_latency_us"] = {{"p50", result.client_latency_p50_us},
+                               {"p99", result.client_latency_p99_us},
+                               {"max", result.client_latency_max_us}};
+  json["step_ms"] = {{"p50", result.step_p50_ms}, {"p99", result.step_p99_ms}};
+  json["wall_s"] = result.wall_s;
+  return json;
+}
+
+}  // namespace
+
+void LoadOptions::Check() const {
+  if (server.empty()) throw InvalidArgumentError("--server is required: the localizer's host:port");
+  if (map_name.empty()) throw InvalidArgumentError("--map is required: a map name (ListMaps)");
+  if (dataset.empty()) throw InvalidArgumentError("--dataset is required: a dataset folder");
+  if (sessions < 1 || sessions > 1024) throw InvalidArgumentError("--sessions must be 1..1024");
+  if (!(session_s > 0)) throw InvalidArgumentError("--session-s must be positive");
+  if (!(duration_s >= 0)) throw InvalidArgumentError("--duration must be 0 or positive");
+  if (speed && !(*speed > 0)) throw InvalidArgumentError("--speed must be positive or 'max'");
+  if (packet_us < 1 || packet_us > 1'000'000) {
+    throw InvalidArgumentError("--packet-us must be in 1..1000000");
+  }
+  if (step_rate_hz && !(*step_rate_hz > 0)) throw InvalidArgumentError("--rate must be positive");
+  if (!(cancel_fraction >= 0 && bad_fraction >= 0 && cancel_fraction + bad_fraction <= 1)) {
+    throw InvalidArgumentError(
+        "--cancel-fraction and --bad-fraction must be >= 0 with a sum of at most 1");
+  }
+}
+
+LoadResult RunLoad(const LoadOptions& options, std::ostream& log) {
+  options.Check();
+  const Workload workload = MakeWorkload(options);
+  log << "evloc-load: " << options.sessions << " session slots, " << workload.packets.size()
+      << " packets (" << workload.events << " events) per session, speed "
+      << (options.speed ? std::to_string(*options.speed) : std::string("max")) << ", run "
+      << options.duration_s << " s\n";
+  grpc::ChannelArguments arguments;
+  arguments.SetMaxReceiveMessageSize(64 << 20);
+  // One connection per slot, as separate clients would have.
+  arguments.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);
+
+  LoadResult result;
+  std::mutex mutex;
+  std::vector<double> server_latency_us;
+  std::vector<double> client_latency_us;
+  std::vector<double> step_ms;
+  const auto wall_start = Clock::now();
+  const auto deadline = wall_start + std::chrono::duration_cast<Clock::duration>(
+                                         std::chrono::duration<double>(options.duration_s));
+  std::vector<std::thread> slots;
+  for (int slot = 0; slot < options.sessions; ++slot) {
+    slots.emplace_back([&, slot] {
+      auto stub = api::Localizer::NewStub(
+          grpc::CreateCustomChannel(options.server, grpc::InsecureChannelCredentials(), arguments));
+      std::mt19937 random(options.seed * 7919u + static_cast<uint32_t>(slot));
+      std::uniform_real_distribution<double> unit(0.0, 1.0);
+      std::uniform_int_distribution<size_t> packet_index(workload.first_tracked_packet,
+                                                         workload.packets.size() - 1);
+      do {
+        const double draw = unit(random);
+        const Ending ending = draw < options.cancel_fraction ? Ending::kCancel
+                              : draw < options.cancel_fraction + options.bad_fraction
+                                  ? Ending::kBadPacket
+                                  : Ending::kNormal;
+        const SessionOutcome outcome =
+            RunSession(*stub, workload, options, ending, packet_index(random));
+        std::lock_guard<std::mutex> lock(mutex);
+        ++result.sessions;
+        result.normal_sessions += ending == Ending::kNormal;
+        result.cancelled_sessions += ending == Ending::kCancel;
+        result.bad_packet_sessions += ending == Ending::kBadPacket;
+        if (outcome.as_planned) {
+          ++result.sessions_as_planned;
+        } else {
+          ++result.unplanned[service::StatusCodeName(outcome.status.error_code())];
+          if (result.unplanned_messages.size() < 5) {
+            result.unplanned_messages.push_back(outcome.status.error_message());
+          }
+        }
+        result.packets += outcome.packets;
+        result.events += outcome.events;
+        result.poses += static_cast<int64_t>(outcome.server_latency_us.size());
+        result.backpressure_notices += outcome.backpressure;
+        server_latency_us.insert(server_latency_us.end(), outcome.server_latency_us.begin(),
+                                 outcome.server_latency_us.end());
+        client_latency_us.insert(client_latency_us.end(), outcome.client_latency_us.begin(),
+                                 outcome.client_latency_us.end());
+        step_ms.insert(step_ms.end(), outcome.step_ms.begin(), outcome.step_ms.end());
+      } while (Clock::now() < deadline);
+    });
+  }
+  for (std::thread& slot : slots) slot.join();
+  result.wall_s = std::chrono::duration<double>(Clock::now() - wall_start).count();
+  result.server_latency_p50_us = Percentile(server_latency_us, 0.5);
+  result.server_latency_p99_us = Percentile(server_latency_us, 0.99);
+  result.server_latency_max_us = Percentile(server_latency_us, 1.0);
+  result.client_latency_p50_us = Percentile(client_latency_us, 0.5);
+  result.client_latency_p99_us = Percentile(client_latency_us, 0.99);
+  result.client_latency_max_us = Percentile(client_latency_us, 1.0);
+  result.step_p50_ms = Percentile(step_ms, 0.5);
+  result.step_p99_ms = Percentile(step_ms, 0.99);
+
+  log << "evloc-load: " << result.sessions << " sessions (" << result.normal_sessions << " normal, "
+      << result.cancelled_sessions << " cancelled, " << result.bad_packet_sessions
+      << " with a bad packet), " << result.sessions_as_planned << " ended as planned";
+  for (const auto& [name, count] : result.unplanned) log << ", " << count << " " << name;
+  log << "; " << result.poses << " poses, " << result.backpressure_notices
+      << " backpressure notices, " << result.wall_s << " s\n"
+      << "evloc-load: server latency p50 " << result.server_latency_p50_us << " us p99 "
+      << result.server_latency_p99_us << " us max " << result.server_latency_max_us
+      << " us; client latency p50 " << result.client_latency_p50_us << " us p99 "
+      << result.client_latency_p99_us << " us max " << result.client_latency_max_us
+      << " us; step p50 " << result.step_p50_ms << " ms p99 " << result.step_p99_ms << " ms\n";
+  for (const std::string& message : result.unplanned_messages) {
+    log << "evloc-load: unplanned: " << message << "\n";
+  }
+  if (options.report) WriteFileAtomically(*options.report, ResultJson(options, result).dump(2));
+  return result;
+}
+
+std::string LoadUsage() {
+  return R"(Usage: evloc-load --server HOST:PORT --map NAME --dataset DIR [options]
+
+Runs many Track sessions at once against an evloc localizer (docs/benchmarks.md §4,
+docs/reliability.md §4): each session slot opens a session, streams the dataset's events as
+PACKED 1 ms packets, ends it and opens the next until --duration has elapsed. Prints sessions,
+how they ended, poses, backpressure notices and the latency percentiles.
+
+Options:
+  --server HOST:PORT     localizer address (required)
+  --map NAME             map name on the server (required)
+  --dataset DIR          dataset folder with ground truth for the initial pose (required)
+  --sessions N           concurrent session slots (default 1)
+  --session-s S          session time streamed per session after the initial pose (default 1)
+  --duration S           keep opening sessions for S seconds of wall time (default 0: one
+                         session per slot)
+  --speed S|max          playback speed relative to real time (default 1), or max: as fast as
+                         the server confirms packets (at most a quarter of its queue in flight)
+  --packet-us N          time window per packet, microseconds (default 1000)
+  --rate HZ              tracking steps per second (default: the server's)
+  --cancel-fraction F    fraction of sessions the client cancels at a random packet (default 0)
+  --bad-fraction F       fraction of sessions that send an event outside the sensor at a random
+                         packet, expecting INVALID_ARGUMENT (default 0)
+  --seed N               seed of those random choices (default 1)
+  --report PATH          write the figures as JSON
+  --help                 print this help
+
+Exit codes: 0 every session ended as planned, 1 some did not (or failure), 2 bad command line.
+)";
+}
+
+LoadOptions ParseLoadCommandLine(const std::vector<std::string>& arguments, bool* help) {
+  LoadOptions options;
+  *help = false;
+  for (size_t i = 0; i < arguments.size(); ++i) {
+    const std::string& flag = arguments[i];
+    if (flag == "--help" || flag == "-h") {
+      *help = true;
+      return options;
+    }
+    if (i + 1 >= arguments.size()) {
+      throw InvalidArgumentError(flag.rfind("--", 0) == 0 ? flag + " needs a value"
+                                                          : "unexpected argument '" + flag + "'");
+    }
+    const std::string& value = arguments[++i];
+    if (flag == "--server") {
+      options.server = value;
+    } else if (flag == "--map") {
+      options.map_name = value;
+    } else if (flag == "--dataset") {
+      options.dataset = value;
+    } else if (flag == "--sessions") {
+      options.sessions = ParseIntFlag(flag, value);
+    } else if (flag == "--session-s") {
+      options.session_s = ParseDoubleFlag(flag, value);
+    } else if (flag == "--duration") {
+      options.duration_s = ParseDoubleFlag(flag, value);
+    } else if (flag == "--speed") {
+      options.speed =
+          value == "max" ? std::nullopt : std::optional<double>(ParseDoubleFlag(flag, value));
+    } else if (flag == "--packet-us") {
+      options.packet_us = ParseIntegerFlag(flag, value);
+    } else if (flag == "--rate") {
+      options.step_rate_hz = ParseDoubleFlag(flag, value);
+    } else if (flag == "--cancel-fraction") {
+      options.cancel_fraction = ParseDoubleFlag(flag, value);
+    } else if (flag == "--bad-fraction") {
+      options.bad_fraction = ParseDoubleFlag(flag, value);
+    } else if (flag == "--seed") {
+      options.seed = static_cast<uint32_t>(ParseIntegerFlag(flag, value));
+    } else if (flag == "--report") {
+      options.report = value;
+    } else {
+      throw InvalidArgumentError("unknown flag '" + flag + "' (see --help)");
+    }
+  }
+  options.Check();
+  return options;
+}
+
+}  // namespace evloc::load
