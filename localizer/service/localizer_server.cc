@@ -351,6 +351,7 @@ class TrackStream {
       ~ActiveSlot() { --counters.sessions_active; }
     } slot{counters};
 
+    const auto open_start = Clock::now();
     OpenedSession opened;
     if (grpc::Status status =
             OpenSession(start, service_.registry(), service_.session_limits(), &opened);
@@ -370,7 +371,8 @@ class TrackStream {
         context_->peer() + ", camera " + std::to_string(settings.camera.width) + "x" +
         std::to_string(settings.camera.height) + ", " +
         (tracker_->takes_frames() ? "frames" : "events") + ", " + settings.tracker.VariantName() +
-        " at " + std::to_string(settings.tracker.step_rate_hz) + " Hz");
+        " at " + std::to_string(settings.tracker.step_rate_hz) + " Hz, opened in " +
+        std::to_string(static_cast<int64_t>(MicrosecondsSince(open_start) / 1000)) + " ms");
 
     api::TrackResponse started;
     started.mutable_started()->set_session_id(id_);

@@ -248,6 +248,10 @@ class Replayer {
   SharedState shared_;
   ReplayResult result_;
   Clock::time_point wall_start_;
+  // Origin of the real-time schedule (--speed S): when the first session had started, so that
+  // connecting and the server's session set-up do not count as lateness (a burst of packets
+  // "due" during the set-up would start the session behind, with a full queue).
+  std::optional<Clock::time_point> schedule_start_;
   // Track calls opened so far.
   int sessions_ = 0;
   // The stream failure being recovered from, with the wall times of the failure and of the
@@ -342,6 +346,7 @@ grpc::Status Replayer::RunSession(const TimedPose& start, bool resumed, bool* st
     return stream->Finish();
   }
   *started = true;
+  if (!schedule_start_) schedule_start_ = Clock::now();
   log_ << "evloc-replay: session " << response.started().session_id() << " on map "
        << response.started().map().name() << " version " << response.started().map().version()
        << ", " << response.started().variant() << " at " << response.started().step_rate_hz()
@@ -457,7 +462,7 @@ grpc::Status Replayer::RunSession(const TimedPose& start, bool resumed, bool* st
     // overflow the new server's queue.
     if (options_.speed) {
       const auto due =
-          wall_start_ +
+          *schedule_start_ +
           std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(
               static_cast<double>(packet_end_ns - dataset_start_ns_) * 1e-9 / *options_.speed));
       if (catching_up && due < Clock::now()) {
