@@ -70,7 +70,12 @@ Inputs:
   --known-poses FILE       world_from_cam per image: TUM `t tx ty tz qx qy qz qw` (needs
                            --images-list) or `IMAGE_NAME tx ty tz qx qy qz qw`; COLMAP only
                            triangulates (needs --camera or --calib)
-  --align-to FILE          reference poses (same layouts): Sim(3) alignment of the model
+  --align-to FILE          reference poses (same layouts): Sim(3) alignment of the model;
+                           refused when the residuals show a wrong model (limits below)
+  --max-alignment-residual F  largest camera-centre RMS after --align-to, as a fraction of the
+                           reference camera path's RMS spread (default 0.1)
+  --max-alignment-rotation DEG  largest camera-orientation RMS after --align-to (default 5)
+  --accept-bad-alignment   build the map anyway beyond those limits, with a warning
 COLMAP:
   --matcher M              sequential | exhaustive | auto (default auto: sequential for a timed
                            --images-list (video), else exhaustive up to 50 images)
@@ -102,6 +107,10 @@ BuildCommandLine ParseBuildCommandLine(const std::vector<std::string>& arguments
       command_line.quiet = true;
       continue;
     }
+    if (flag == "--accept-bad-alignment") {
+      options.accept_bad_alignment = true;
+      continue;
+    }
     if (flag == "--help" || flag == "-h") {
       command_line.help = true;
       continue;
@@ -126,6 +135,10 @@ BuildCommandLine ParseBuildCommandLine(const std::vector<std::string>& arguments
       options.known_poses = value;
     } else if (flag == "--align-to") {
       options.align_to = value;
+    } else if (flag == "--max-alignment-residual") {
+      options.alignment_limits.max_centre_rms_fraction = ParseDoubleFlag(flag, value);
+    } else if (flag == "--max-alignment-rotation") {
+      options.alignment_limits.max_rotation_rms_deg = ParseDoubleFlag(flag, value);
     } else if (flag == "--matcher") {
       options.colmap.matcher = ParseMatcherType(value);
     } else if (flag == "--colmap") {
@@ -194,6 +207,12 @@ int RunBuildCommand(int argc, char** argv) {
                 << *report.alignment_scale << ")";
     }
     std::cout << "\n";
+    if (!report.alignment_warning.empty()) {
+      // Printed even with --quiet: the map was built from a model that does not fit --align-to.
+      std::cerr << "evloc-mapper build: WARNING: --accept-bad-alignment: "
+                << report.alignment_warning
+                << "; the map is probably wrong (report.json: alignment.warning)\n";
+    }
     return 0;
   } catch (const Error& error) {
     std::cerr << "evloc-mapper build: error: " << error.what() << "\n";

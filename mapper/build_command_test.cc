@@ -60,6 +60,16 @@ TEST(BuildCommand, ParsesFlagsIntoOptions) {
   EXPECT_EQ(options.keyframes.min_keyframes, 5);
   EXPECT_EQ(options.semidense.num_threads, 1);
   EXPECT_EQ(options.merge.voxel_size, 0.002);
+  EXPECT_EQ(options.alignment_limits.max_centre_rms_fraction, 0.1);
+  EXPECT_EQ(options.alignment_limits.max_rotation_rms_deg, 5.0);
+  EXPECT_FALSE(options.accept_bad_alignment);
+  const MapBuilderOptions alignment =
+      ParseBuildCommandLine({"build", "--images", "x", "--out", "y", "--max-alignment-residual",
+                             "0.2", "--max-alignment-rotation", "3", "--accept-bad-alignment"})
+          .options;
+  EXPECT_EQ(alignment.alignment_limits.max_centre_rms_fraction, 0.2);
+  EXPECT_EQ(alignment.alignment_limits.max_rotation_rms_deg, 3.0);
+  EXPECT_TRUE(alignment.accept_bad_alignment);
   EXPECT_NE(options.command_line.find("--max-keyframes 7"), std::string::npos);
   EXPECT_THROW(ParseCameraFlag("pinhole:1,2,3", 10, 10), InvalidArgumentError);
   EXPECT_THROW(ParseCameraFlag("radtan1,2,3,4", 10, 10), InvalidArgumentError);

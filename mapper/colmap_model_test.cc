@@ -187,19 +187,36 @@ TEST(ColmapRunner, FixedIntrinsicsAreNotRefinedAndTheModelIsFiltered) {
   std::ifstream stream(directory / "arguments.txt");
   std::vector<std::string> lines;
   for (std::string line; std::getline(stream, line);) lines.push_back(line);
-  ASSERT_EQ(lines.size(), 4u);
+  ASSERT_EQ(lines.size(), 6u);
   EXPECT_NE(lines[0].find("mapper "), std::string::npos) << lines[0];
   EXPECT_NE(lines[0].find("--Mapper.ba_refine_focal_length 0"), std::string::npos) << lines[0];
   EXPECT_EQ(lines[0].find("filter_max_reproj_error"), std::string::npos) << lines[0];
-  EXPECT_NE(lines[1].find("point_filtering"), std::string::npos) << lines[1];
-  EXPECT_NE(lines[1].find("--max_reproj_error 1.0"), std::string::npos) << lines[1];
-  EXPECT_NE(lines[2].find("bundle_adjuster"), std::string::npos) << lines[2];
+  // Two passes (0.5 px, then 0.3 px), each filtering the previous pass's adjusted model; the last
+  // one adjusts into the output model.
+  const std::string refined = (directory / "refined").string();
+  EXPECT_NE(lines[1].find("point_filtering --input_path " + (directory / "sparse" / "0").string() +
+                          " --output_path " + refined + ".filtered1 --max_reproj_error 0.5"),
+            std::string::npos)
+      << lines[1];
+  EXPECT_NE(lines[2].find("bundle_adjuster --input_path " + refined + ".filtered1 --output_path " +
+                          refined + ".adjusted1"),
+            std::string::npos)
+      << lines[2];
   EXPECT_NE(lines[2].find("--BundleAdjustment.refine_focal_length 0"), std::string::npos);
-  EXPECT_EQ(lines[3].find("ba_refine_focal_length"), std::string::npos) << lines[3];
+  EXPECT_NE(lines[3].find("point_filtering --input_path " + refined + ".adjusted1 --output_path " +
+                          refined + ".filtered2 --max_reproj_error 0.3"),
+            std::string::npos)
+      << lines[3];
+  EXPECT_NE(lines[4].find("--input_path " + refined + ".filtered2 --output_path " + refined + " "),
+            std::string::npos)
+      << lines[4];
+  EXPECT_EQ(lines[5].find("ba_refine_focal_length"), std::string::npos) << lines[5];
   std::filesystem::remove_all(directory);
 
   ColmapOptions bad;
-  bad.fixed_camera_max_reprojection_error_px = 0.0;
+  bad.fixed_camera_refinement_px = {0.0};
+  EXPECT_THROW(bad.Check(), InvalidArgumentError);
+  bad.fixed_camera_refinement_px = {0.3, 0.5};
   EXPECT_THROW(bad.Check(), InvalidArgumentError);
 }
 

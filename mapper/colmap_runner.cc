@@ -130,10 +130,14 @@ void ColmapOptions::Check() const {
     throw InvalidArgumentError("COLMAP abs_pose_min_inlier_ratio must be in (0, 1]");
   }
   if (min_num_matches < 4) throw InvalidArgumentError("COLMAP min_num_matches must be at least 4");
-  if (!(fixed_camera_max_reprojection_error_px >= 0.1 &&
-        fixed_camera_max_reprojection_error_px <= 100.0)) {
-    throw InvalidArgumentError(
-        "COLMAP fixed_camera_max_reprojection_error_px must be in [0.1, 100] pixels");
+  for (size_t i = 0; i < fixed_camera_refinement_px.size(); ++i) {
+    const double bound = fixed_camera_refinement_px[i];
+    if (!(bound >= 0.1 && bound <= 100.0)) {
+      throw InvalidArgumentError("COLMAP fixed_camera_refinement_px must be in [0.1, 100] pixels");
+    }
+    if (i > 0 && !(bound < fixed_camera_refinement_px[i - 1])) {
+      throw InvalidArgumentError("COLMAP fixed_camera_refinement_px must be decreasing");
+    }
   }
   if (camera) camera->Check();
 }
@@ -323,16 +327,25 @@ void ColmapRunner::Map(const std::filesystem::path& output_dir) const {
 
 void ColmapRunner::RefineModel(const std::filesystem::path& input_model,
                                const std::filesystem::path& output_model) const {
-  const std::filesystem::path filtered = output_model.string() + ".filtered";
-  CreateDirectories(filtered);
-  CreateDirectories(output_model);
-  Run("point_filtering",
-      {"--input_path", input_model.string(), "--output_path", filtered.string(),
-       "--max_reproj_error", std::to_string(options_.fixed_camera_max_reprojection_error_px)});
-  Run("bundle_adjuster",
-      {"--input_path", filtered.string(), "--output_path", output_model.string(),
-       "--BundleAdjustment.refine_focal_length", "0", "--BundleAdjustment.refine_principal_point",
-       "0", "--BundleAdjustment.refine_extra_params", "0"});
+  std::filesystem::path current = input_model;
+  const size_t passes = options_.fixed_camera_refinement_px.size();
+  for (size_t pass = 0; pass < passes; ++pass) {
+    const std::string suffix = std::to_string(pass + 1);
+    const std::filesystem::path filtered = output_model.string() + ".filtered" + suffix;
+    const std::filesystem::path adjusted =
+        pass + 1 == passes ? output_model
+                           : std::filesystem::path(output_model.string() + ".adjusted" + suffix);
+    CreateDirectories(filtered);
+    CreateDirectories(adjusted);
+    Run("point_filtering",
+        {"--input_path", current.string(), "--output_path", filtered.string(), "--max_reproj_error",
+         std::to_string(options_.fixed_camera_refinement_px[pass])});
+    Run("bundle_adjuster",
+        {"--input_path", filtered.string(), "--output_path", adjusted.string(),
+         "--BundleAdjustment.refine_focal_length", "0", "--BundleAdjustment.refine_principal_point",
+         "0", "--BundleAdjustment.refine_extra_params", "0"});
+    current = adjusted;
+  }
 }
 
 void ColmapRunner::Triangulate(const std::filesystem::path& input_model,

@@ -179,10 +179,13 @@ std::string ModelFingerprint(const MapBuilderOptions& options,
                              const std::string& workspace_fingerprint) {
   std::ostringstream text;
   text << workspace_fingerprint;
-  // v2: the estimated model with fixed intrinsics is filtered and adjusted after mapping.
-  text << "model v2 mapper " << options.colmap.abs_pose_min_num_inliers << " "
-       << options.colmap.abs_pose_min_inlier_ratio << " " << options.colmap.min_num_matches << " "
-       << options.colmap.fixed_camera_max_reprojection_error_px << "\n";
+  // v3: the estimated model with fixed intrinsics is filtered and adjusted after mapping, once
+  // per bound.
+  text << "model v3 mapper " << options.colmap.abs_pose_min_num_inliers << " "
+       << options.colmap.abs_pose_min_inlier_ratio << " " << options.colmap.min_num_matches
+       << " refinement";
+  for (const double bound : options.colmap.fixed_camera_refinement_px) text << " " << bound;
+  text << "\n";
   if (options.known_poses) {
     text << "known poses\n" << ReadFileToString(*options.known_poses) << "\n";
   }
@@ -391,6 +394,7 @@ void MapBuilderOptions::Check() const {
   keyframes.Check();
   semidense.Check();
   merge.Check();
+  alignment_limits.Check();
 }
 
 double MapBuildReport::TotalSeconds(const std::string& prefix) const {
@@ -742,10 +746,16 @@ MapBuildReport BuildMap(const MapBuilderOptions& options_in, ProgressListener* p
             (runner.LogDir() / "mapper.log").string());
       }
       if (camera) {
-        // Calibrated intrinsics: drop the observations COLMAP's 4 px kept, adjust again.
+        // Calibrated intrinsics: drop the observations COLMAP's 4 px kept, adjust again, per
+        // bound. The previous run's refined* folders go first.
         const fs::path refined = workspace / "refined";
-        fs::remove_all(refined, error);
-        fs::remove_all(refined.string() + ".filtered", error);
+        std::vector<fs::path> previous;
+        for (const fs::directory_entry& entry : fs::directory_iterator(workspace, error)) {
+          if (entry.path().filename().string().rfind("refined", 0) == 0) {
+            previous.push_back(entry.path());
+          }
+        }
+        for (const fs::path& path : previous) fs::remove_all(path, error);
         runner.RefineModel(best, refined);
         best = refined;
       }
@@ -791,7 +801,21 @@ MapBuildReport BuildMap(const MapBuilderOptions& options_in, ProgressListener* p
     report.alignment_rotation_rms_deg = alignment.rotation_rms_deg;
     report.alignment_rotation_max_deg = alignment.rotation_max_deg;
     report.alignment_scale = world_from_model.scale;
+    report.alignment_reference_spread_m = alignment.reference_spread;
     report.world_from_model = world_from_model;
+    if (const std::optional<std::string> violation =
+            AlignmentLimitViolation(alignment, options.alignment_limits)) {
+      if (!options.accept_bad_alignment) {
+        throw InvalidArgumentError(
+            "--align-to " + options.align_to->string() + ": " + *violation +
+            ". The COLMAP reconstruction is probably wrong (see the COLMAP logs in " +
+            runner.LogDir().string() +
+            ") or the reference poses belong to other images; no map was written. To build it "
+            "anyway pass --accept-bad-alignment, or raise --max-alignment-residual / "
+            "--max-alignment-rotation");
+      }
+      report.alignment_warning = *violation;
+    }
     for (auto& [id, image] : model.images) {
       image.cam_from_world =
           world_from_model.TransformPose(image.cam_from_world.Inverse()).Inverse();
@@ -1007,6 +1031,13 @@ std::string MapBuildReportToJson(const MapBuildReport& report) {
     alignment["rotation_rms_deg"] = *report.alignment_rotation_rms_deg;
     alignment["rotation_max_deg"] = *report.alignment_rotation_max_deg;
     alignment["scale"] = *report.alignment_scale;
+    alignment["reference_spread_m"] = *report.alignment_reference_spread_m;
+    alignment["rms_fraction_of_spread"] =
+        *report.alignment_reference_spread_m > 0.0
+            ? nlohmann::json(*report.alignment_rms_m / *report.alignment_reference_spread_m)
+            : nlohmann::json(nullptr);
+    alignment["within_limits"] = report.alignment_warning.empty();
+    alignment["warning"] = report.alignment_warning;
     const Eigen::Quaterniond& q = report.world_from_model.rotation;
     alignment["world_from_model"] = {
         {"scale", report.world_from_model.scale},

@@ -18,6 +18,7 @@
 #include "mapper/colmap_runner.h"
 #include "mapper/keyframe_selection.h"
 #include "mapper/map_merge.h"
+#include "mapper/pose_alignment.h"
 #include "mapper/semidense_depth.h"
 
 namespace evloc::mapper {
@@ -63,6 +64,12 @@ struct MapBuilderOptions {
   // Reference world_from_cam poses (same layouts) the model is aligned to by a Sim(3) fit of the
   // camera centres and orientations (AlignPoses), giving metric scale and the user's frame.
   std::optional<std::filesystem::path> align_to;
+  // With align_to: residuals beyond these mean a wrong model (or reference); the build is
+  // refused (InvalidArgumentError, nothing written) unless accept_bad_alignment.
+  AlignmentLimits alignment_limits;
+  // Build the map anyway when the alignment exceeds alignment_limits; the report then carries
+  // alignment_warning.
+  bool accept_bad_alignment = false;
   // COLMAP workspace, kept between runs and reused when the inputs match; std::nullopt:
   // `<output_dir>.colmap-workspace` beside the output.
   std::optional<std::filesystem::path> colmap_workspace;
@@ -139,6 +146,11 @@ struct MapBuildReport {
   std::optional<double> alignment_rotation_max_deg;
   // Scale of the alignment.
   std::optional<double> alignment_scale;
+  // RMS distance of the reference camera centres from their mean, metres.
+  std::optional<double> alignment_reference_spread_m;
+  // The AlignmentLimitViolation text when the alignment exceeded the limits and the map was
+  // built anyway (accept_bad_alignment); empty otherwise.
+  std::string alignment_warning;
   // The model-to-world similarity applied (identity without --align-to).
   Sim3d world_from_model;
   // Per-stage timings, in pipeline order.

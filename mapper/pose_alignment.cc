@@ -2,7 +2,10 @@
 
 #include <algorithm>
 #include <cmath>
+#include <iomanip>
+#include <limits>
 #include <numbers>
+#include <sstream>
 
 #include <Eigen/SVD>
 
@@ -62,12 +65,14 @@ PoseAlignment AlignPoses(const std::vector<Rigid3d>& model, const std::vector<Ri
   Eigen::Matrix3d centre_covariance = Eigen::Matrix3d::Zero();
   Eigen::Matrix3d orientation_sum = Eigen::Matrix3d::Zero();
   double model_spread = 0.0;
+  double reference_spread = 0.0;
   for (size_t i = 0; i < count; ++i) {
     const Eigen::Vector3d a = model[i].translation - model_mean;
     const Eigen::Vector3d b = reference[i].translation - reference_mean;
     centre_covariance += b * a.transpose();
     orientation_sum += reference_rotations[i] * model_rotations[i].transpose();
     model_spread += a.squaredNorm();
+    reference_spread += b.squaredNorm();
   }
   if (model_spread <= 1e-18) {
     throw InvalidArgumentError(
@@ -89,6 +94,7 @@ PoseAlignment AlignPoses(const std::vector<Rigid3d>& model, const std::vector<Ri
   }
   PoseAlignment result;
   result.num_poses = count;
+  result.reference_spread = std::sqrt(reference_spread / static_cast<double>(count));
   const auto residuals = [&](double* centre_sum, double* chordal_sum) {
     *centre_sum = 0.0;
     *chordal_sum = 0.0;
@@ -145,6 +151,36 @@ PoseAlignment AlignPoses(const std::vector<Rigid3d>& model, const std::vector<Ri
   result.centre_rms = std::sqrt(centre_squares / static_cast<double>(count));
   result.rotation_rms_deg = std::sqrt(angle_squares / static_cast<double>(count));
   return result;
+}
+
+void AlignmentLimits::Check() const {
+  if (!(max_centre_rms_fraction > 0.0)) {
+    throw InvalidArgumentError("the alignment's max_centre_rms_fraction must be positive");
+  }
+  if (!(max_rotation_rms_deg > 0.0)) {
+    throw InvalidArgumentError("the alignment's max_rotation_rms_deg must be positive");
+  }
+}
+
+std::optional<std::string> AlignmentLimitViolation(const PoseAlignment& alignment,
+                                                   const AlignmentLimits& limits) {
+  limits.Check();
+  const double fraction = alignment.reference_spread > 0.0
+                              ? alignment.centre_rms / alignment.reference_spread
+                              : std::numeric_limits<double>::infinity();
+  const bool centres_off = !(fraction <= limits.max_centre_rms_fraction);
+  const bool orientations_off = !(alignment.rotation_rms_deg <= limits.max_rotation_rms_deg);
+  if (!centres_off && !orientations_off) return std::nullopt;
+  std::ostringstream text;
+  text << std::setprecision(3) << "the model does not fit the reference poses: after the Sim(3) "
+       << "alignment of " << alignment.num_poses << " cameras the centres are "
+       << alignment.centre_rms << " RMS (max " << alignment.centre_max << ") from the reference, "
+       << 100.0 * fraction << " % of the reference camera path's spread "
+       << alignment.reference_spread << " (limit " << 100.0 * limits.max_centre_rms_fraction
+       << " %), and the orientations " << alignment.rotation_rms_deg << " deg RMS (max "
+       << alignment.rotation_max_deg << " deg; limit " << limits.max_rotation_rms_deg
+       << " deg RMS)";
+  return text.str();
 }
 
 }  // namespace evloc::mapper

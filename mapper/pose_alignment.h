@@ -15,6 +15,8 @@
 #pragma once
 
 #include <cstddef>
+#include <optional>
+#include <string>
 #include <vector>
 
 #include "core/geometry/rigid3.h"
@@ -50,7 +52,32 @@ struct PoseAlignment {
   double rotation_max_deg = 0.0;
   // The final weight w (reference units squared).
   double orientation_weight = 0.0;
+  // RMS distance of the reference camera centres from their mean (the size of the reference
+  // camera path), reference units: the scale of AlignmentLimits::max_centre_rms_fraction.
+  double reference_spread = 0.0;
 };
+
+// Residuals beyond which an alignment means that the model and the reference disagree (a wrong
+// COLMAP model, or reference poses of other images): `evloc-mapper build --align-to` refuses the
+// map (docs/mapper.md "Alignment check"). A correct model leaves its COLMAP pose noise, a few
+// percent of the camera path at most (centre RMS / spread: the circling room 0.5 %,
+// templeSparseRing 0.15 %, 12 frames of a 2 s room path 3.3 %); a model that cannot be brought
+// onto the reference leaves residuals comparable to the path itself (a Sim(3) shrunk to a point
+// leaves exactly the spread, ratio 1).
+struct AlignmentLimits {
+  // Largest RMS camera-centre residual as a fraction of PoseAlignment::reference_spread.
+  double max_centre_rms_fraction = 0.1;
+  // Largest RMS camera-orientation residual, degrees.
+  double max_rotation_rms_deg = 5.0;
+
+  // Throws InvalidArgumentError on a bad value (not positive, or NaN).
+  void Check() const;
+};
+
+// What is wrong with `alignment` under `limits` (the residuals, the limits and the likely
+// causes), or std::nullopt when it is within them.
+std::optional<std::string> AlignmentLimitViolation(const PoseAlignment& alignment,
+                                                   const AlignmentLimits& limits);
 
 // Aligns `model` world_from_cam poses to the `reference` ones (same order and size). Throws
 // InvalidArgumentError when the sizes differ, fewer than 3 poses are given, a value is not finite,

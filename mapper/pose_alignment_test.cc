@@ -5,7 +5,9 @@
 #include <cmath>
 #include <iostream>
 #include <numbers>
+#include <optional>
 #include <random>
+#include <string>
 
 #include "core/common/error.h"
 
@@ -91,6 +93,77 @@ TEST(PoseAlignment, OrientationsFixTheRollOfAShortPath) {
   EXPECT_LT(alignment.centre_rms, 0.01);
   EXPECT_LT(alignment.rotation_rms_deg, 0.2);
   EXPECT_GT(alignment.orientation_weight, 0.0);
+}
+
+// A circle of cameras looking at its middle (radius 1, 40 cameras), the model frame.
+std::vector<Rigid3d> Circle(int count) {
+  std::vector<Rigid3d> poses;
+  for (int i = 0; i < count; ++i) {
+    const double angle = 2.0 * std::numbers::pi * i / count;
+    const Eigen::Vector3d centre(std::cos(angle), std::sin(angle), 0.1 * std::sin(3.0 * angle));
+    // Optical axis (z) towards the middle, x along the path.
+    Eigen::Matrix3d rotation;
+    rotation.col(2) = -centre.normalized();
+    rotation.col(0) = Eigen::Vector3d(-std::sin(angle), std::cos(angle), 0.0);
+    rotation.col(1) = rotation.col(2).cross(rotation.col(0));
+    poses.emplace_back(Eigen::Quaterniond(rotation).normalized(), centre);
+  }
+  return poses;
+}
+
+// The noise of a correct model (1 % of the path, 0.3 deg) is within the limits; a model folded
+// onto itself (the second half of the circle traced back over the first) or with scrambled
+// orientations is not, and the message says by how much.
+TEST(PoseAlignment, LimitsSeparateNoiseFromAWrongModel) {
+  const Sim3d truth = TrueReferenceFromModel();
+  const std::vector<Rigid3d> model = Circle(40);
+  std::mt19937 random(3);
+  std::normal_distribution<double> centre_noise(0.0, 0.01 / std::sqrt(3.0));
+  std::normal_distribution<double> angle_noise(0.0, 0.3 * kDegree / std::sqrt(3.0));
+  std::vector<Rigid3d> noisy;
+  std::vector<Rigid3d> folded;
+  std::vector<Rigid3d> turned;
+  for (size_t i = 0; i < model.size(); ++i) {
+    Rigid3d pose = model[i];
+    pose.translation +=
+        Eigen::Vector3d(centre_noise(random), centre_noise(random), centre_noise(random));
+    pose.rotation =
+        ExpSO3(Eigen::Vector3d(angle_noise(random), angle_noise(random), angle_noise(random))) *
+        pose.rotation;
+    noisy.push_back(truth.TransformPose(pose));
+    Rigid3d fold = model[i];
+    if (i >= model.size() / 2) fold.translation = model[model.size() - 1 - i].translation;
+    folded.push_back(truth.TransformPose(fold));
+    Rigid3d turn = model[i];
+    turn.rotation =
+        ExpSO3(Eigen::Vector3d(0.0, (i % 2 == 0 ? 25.0 : -25.0) * kDegree, 0.0)) * turn.rotation;
+    turned.push_back(truth.TransformPose(turn));
+  }
+  const AlignmentLimits limits;
+  const PoseAlignment good = AlignPoses(model, noisy);
+  EXPECT_NEAR(good.reference_spread, truth.scale * 1.0025, 0.001);
+  EXPECT_LT(good.centre_rms / good.reference_spread, 0.02);
+  EXPECT_FALSE(AlignmentLimitViolation(good, limits).has_value());
+
+  const PoseAlignment fold = AlignPoses(model, folded);
+  std::cout << "folded model: centres " << fold.centre_rms / fold.reference_spread
+            << " of the spread, orientations " << fold.rotation_rms_deg << " deg RMS\n";
+  const std::optional<std::string> fold_violation = AlignmentLimitViolation(fold, limits);
+  ASSERT_TRUE(fold_violation.has_value());
+  EXPECT_NE(fold_violation->find("limit 10 %"), std::string::npos) << *fold_violation;
+
+  const PoseAlignment turn = AlignPoses(model, turned);
+  EXPECT_LT(turn.centre_rms / turn.reference_spread, 0.1);
+  EXPECT_GT(turn.rotation_rms_deg, 20.0);
+  ASSERT_TRUE(AlignmentLimitViolation(turn, limits).has_value());
+  // Raised limits accept both.
+  AlignmentLimits loose;
+  loose.max_centre_rms_fraction = 2.0;
+  loose.max_rotation_rms_deg = 90.0;
+  EXPECT_FALSE(AlignmentLimitViolation(fold, loose).has_value());
+  EXPECT_FALSE(AlignmentLimitViolation(turn, loose).has_value());
+  loose.max_rotation_rms_deg = 0.0;
+  EXPECT_THROW(loose.Check(), InvalidArgumentError);
 }
 
 TEST(PoseAlignment, RejectsBadInput) {
