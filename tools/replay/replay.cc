@@ -142,9 +142,11 @@ struct Window {
   EventBuffer events;
 };
 
-// A packet as sent: its last event's time and when it was sent.
+// A packet as sent: the end of its time window and when it was sent. The server runs the step
+// at time t once it has the packet whose window end reaches t (docs/api.md), so that packet is
+// the one a pose's client latency is measured from.
 struct SentPacket {
-  std::optional<int64_t> last_event_t_ns;
+  int64_t end_t_ns = 0;
   Clock::time_point sent;
 };
 
@@ -370,8 +372,7 @@ grpc::Status Replayer::RunSession(const TimedPose& start, bool resumed, bool* st
       std::lock_guard<std::mutex> lock(shared_.mutex);
       if (message.has_pose()) {
         const api::PoseUpdate& pose = message.pose();
-        while (!shared_.sent.empty() && (!shared_.sent.front().last_event_t_ns ||
-                                         *shared_.sent.front().last_event_t_ns <= pose.t_ns())) {
+        while (!shared_.sent.empty() && shared_.sent.front().end_t_ns < pose.t_ns()) {
           shared_.sent.pop_front();
         }
         if (!shared_.sent.empty()) {
@@ -475,9 +476,7 @@ grpc::Status Replayer::RunSession(const TimedPose& start, bool resumed, bool* st
     }
     {
       std::lock_guard<std::mutex> lock(shared_.mutex);
-      shared_.sent.push_back(
-          {events->empty() ? std::nullopt : std::optional<int64_t>(events->t_ns.back()),
-           Clock::now()});
+      shared_.sent.push_back({packet_end_ns, Clock::now()});
       shared_.unconfirmed_window_ends.push_back(packet_end_ns);
     }
     stream_open = stream->Write(request);
