@@ -509,8 +509,12 @@ PoseEstimate Tracker::Step(int64_t t_ns) {
     last_good_world_from_cam_ = estimate.world_from_cam;
     status_ = TrackingStatus::kTracking;
   } else {
+    // The best failed attempt is no estimate: a LOST step reports the last good pose, with a
+    // covariance that says it carries no information.
     status_ = TrackingStatus::kLost;
     motion_.Reset(last_good_world_from_cam_, t_ns);
+    estimate.world_from_cam = last_good_world_from_cam_;
+    estimate.covariance = Matrix6d::Identity() * 1e6;
   }
   estimate.status = status_;
   last_step_t_ns_ = t_ns;

@@ -210,6 +210,7 @@ TEST(Tracker, DeclaresLostWhenEventsStopMatchingAndRecoversAfterReset) {
     first.push_back(events[i]);
   const std::vector<PoseEstimate> estimates = tracker.AddEvents(first);
   int64_t first_lost_ns = -1;
+  Rigid3d last_good;
   for (const PoseEstimate& estimate : estimates) {
     if (estimate.t_ns < jump_ns) {
       EXPECT_EQ(estimate.status, TrackingStatus::kTracking) << estimate.t_ns;
@@ -219,6 +220,11 @@ TEST(Tracker, DeclaresLostWhenEventsStopMatchingAndRecoversAfterReset) {
     if (first_lost_ns >= 0) {
       EXPECT_EQ(estimate.status, TrackingStatus::kLost) << estimate.t_ns;
       EXPECT_GT(estimate.quality.recovery_attempts, 0);
+      // A LOST step reports the last good pose and a covariance that carries no information.
+      EXPECT_EQ(estimate.world_from_cam.translation, last_good.translation) << estimate.t_ns;
+      EXPECT_GE(estimate.covariance(0, 0), 1e5) << estimate.t_ns;
+    } else {
+      last_good = estimate.world_from_cam;
     }
   }
   ASSERT_GE(first_lost_ns, jump_ns);
