@@ -58,6 +58,7 @@ void BM_TrackingStep(benchmark::State& state) {
   options.use_polarity = state.range(1) != 0;
   options.use_occlusion_culling = state.range(2) != 0;
   options.smooth_field = state.range(3) != 0;
+  options.polarity_after_unsigned_solve = state.range(4) != 0;
   std::unique_ptr<Tracker> tracker;
   size_t next_packet = 0;
   auto restart = [&] {
@@ -103,18 +104,23 @@ void BM_TrackingStep(benchmark::State& state) {
   state.counters["points_used"] = mean(points);
   state.counters["lm_iterations"] = mean(iterations);
   state.counters["lost_steps"] = static_cast<double>(lost);
-  state.SetLabel(std::string(state.range(0) == 0 ? "lazy" : "dense") + " " + options.VariantName() +
-                 (options.smooth_field ? " smoothed" : ""));
+  state.SetLabel(
+      std::string(state.range(0) == 0 ? "lazy" : "dense") + " " + options.VariantName() +
+      (options.smooth_field ? " smoothed" : "") +
+      (options.use_polarity && !options.polarity_after_unsigned_solve ? " one-stage" : ""));
 }
-// Args: dense field, polarity, occlusion, smoothing.
+// Args: dense field, polarity, occlusion, smoothing, two-stage polarity (an unsigned solve
+// before the signed one; the default). The last row is the paper's one-stage EVT, to show what
+// the two-stage polarity costs.
 BENCHMARK(BM_TrackingStep)
-    ->Args({0, 1, 1, 0})
-    ->Args({0, 0, 0, 0})
-    ->Args({0, 1, 0, 0})
-    ->Args({0, 0, 1, 0})
-    ->Args({1, 1, 1, 0})
-    ->Args({0, 1, 1, 1})
-    ->Args({1, 1, 1, 1})
+    ->Args({0, 1, 1, 0, 1})
+    ->Args({0, 0, 0, 0, 1})
+    ->Args({0, 1, 0, 0, 1})
+    ->Args({0, 0, 1, 0, 1})
+    ->Args({1, 1, 1, 0, 1})
+    ->Args({0, 1, 1, 1, 1})
+    ->Args({1, 1, 1, 1, 1})
+    ->Args({0, 1, 1, 0, 0})
     ->Unit(benchmark::kMicrosecond);
 
 // The whole 400 ms sequence (120 steps) per iteration, from a fresh tracker: a fixed amount of
