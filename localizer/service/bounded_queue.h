@@ -1,6 +1,6 @@
 // A bounded, closable multi-producer multi-consumer queue: the hand-over between a session's
-// stream reader, its tracking worker and its stream writer (a slow stage never blocks the
-// others beyond the queue's capacity).
+// stream reader and its tracking worker (the reader never waits: a full queue is the session's
+// overflow).
 #pragma once
 
 #include <chrono>
@@ -16,7 +16,7 @@ namespace evloc::service {
 enum class PushResult {
   // The item was queued.
   kQueued,
-  // The queue is full (TryPush only); the item was not queued.
+  // The queue is full; the item was not queued.
   kFull,
   // The queue was closed or aborted; the item was not queued.
   kClosed,
@@ -40,25 +40,6 @@ class BoundedQueue {
     return PushResult::kQueued;
   }
 
-  // Queues `item`, waiting while the queue is full; kClosed when it is (or gets) closed.
-  PushResult Push(T item) {
-    std::unique_lock<std::mutex> lock(mutex_);
-    not_full_.wait(lock, [&] { return closed_ || items_.size() < capacity_; });
-    if (closed_) return PushResult::kClosed;
-    items_.push_back(std::move(item));
-    not_empty_.notify_one();
-    return PushResult::kQueued;
-  }
-
-  // Queues `item` at the front, ignoring the capacity (urgent notices); kClosed when closed.
-  PushResult PushFront(T item) {
-    std::lock_guard<std::mutex> lock(mutex_);
-    if (closed_) return PushResult::kClosed;
-    items_.push_front(std::move(item));
-    not_empty_.notify_one();
-    return PushResult::kQueued;
-  }
-
   // The next item, waiting up to `timeout`; nullopt on timeout or when closed and drained.
   // `timed_out` (optional) tells the two apart.
   std::optional<T> Pop(std::chrono::steady_clock::duration timeout, bool* timed_out = nullptr) {
@@ -69,7 +50,6 @@ class BoundedQueue {
     if (!ready || items_.empty()) return std::nullopt;
     T item = std::move(items_.front());
     items_.pop_front();
-    not_full_.notify_one();
     return item;
   }
 
@@ -78,7 +58,6 @@ class BoundedQueue {
     std::lock_guard<std::mutex> lock(mutex_);
     closed_ = true;
     not_empty_.notify_all();
-    not_full_.notify_all();
   }
 
   // No more pushes, and what is queued is dropped.
@@ -87,7 +66,6 @@ class BoundedQueue {
     closed_ = true;
     items_.clear();
     not_empty_.notify_all();
-    not_full_.notify_all();
   }
 
   // Items queued now.
@@ -102,7 +80,6 @@ class BoundedQueue {
   const size_t capacity_;
   mutable std::mutex mutex_;
   std::condition_variable not_empty_;
-  std::condition_variable not_full_;
   std::deque<T> items_;
   bool closed_ = false;
 };
