@@ -36,6 +36,7 @@ nlohmann::json StepsToJson(const OfflineTrackingResult& result) {
                      {"polarity_matches", step.quality.polarity_matches},
                      {"mean_residual", step.quality.mean_residual},
                      {"iterations", step.quality.iterations},
+                     {"decay_time_ms", step.quality.decay_time_ms},
                      {"recovery_attempts", step.quality.recovery_attempts},
                      {"surface_ms", step.timings.surface_ms},
                      {"selection_ms", step.timings.selection_ms},
@@ -90,7 +91,10 @@ Options:
   --polarity on|off      polarity-aware registration (default on)
   --occlusion on|off     ANNF occlusion culling (default on)
   --max-points N         map points registered per step (default 2500)
-  --tau SECONDS          time-surface decay time (default 0.03)
+  --tau SECONDS          time-surface decay time (default 0.03); with --decay-trail the longest
+  --decay-trail PX       adaptive decay: tau = PX / the median image speed of the map points,
+                         within [--min-tau, --tau] (default 1; 0: a fixed tau; docs/tracking.md)
+  --min-tau SECONDS      the shortest adaptive decay time (default 0.005)
   --polarity-band DEG    neutral band around 90 degrees between gradient and flow (default 30)
   --min-flow PX          predicted flows per step shorter than this give no polarity (default 0.05)
   --two-stage on|off     with polarity: an unsigned solve first, then the signed one from its
@@ -190,6 +194,10 @@ TrackCommandOptions ParseTrackCommandLine(const std::vector<std::string>& argume
       tracker.max_points = static_cast<int>(ParseIntegerFlag(flag, value));
     } else if (flag == "--tau") {
       tracker.decay_time_s = ParseDoubleFlag(flag, value);
+    } else if (flag == "--decay-trail") {
+      tracker.decay_trail_px = ParseDoubleFlag(flag, value);
+    } else if (flag == "--min-tau") {
+      tracker.min_decay_time_s = ParseDoubleFlag(flag, value);
     } else if (flag == "--velocity-window") {
       tracker.velocity_window_s = ParseDoubleFlag(flag, value);
     } else if (flag == "--polarity-band") {

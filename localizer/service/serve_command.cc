@@ -36,6 +36,8 @@ Options:
   --variant NAME             default variant: EVT, EVT-PR, EVT-OH or EVT-- (default EVT)
   --max-points N             default map points per step (default 2500)
   --tau SECONDS              default time-surface decay time (default 0.03)
+  --decay-trail PX           default adaptive decay trail, pixels (default 1; 0: a fixed decay time;
+                             docs/tracking.md)
   --help                     print this help
 
 Stop with Ctrl-C (SIGINT) or SIGTERM. Exit codes: 0 stopped, 1 failure, 2 bad command line.
@@ -99,6 +101,8 @@ ServeCommand ParseServeCommandLine(const std::vector<std::string>& arguments) {
       server.tracker.max_points = static_cast<int>(ParseIntegerFlag(flag, value));
     } else if (flag == "--tau") {
       server.tracker.decay_time_s = ParseDoubleFlag(flag, value);
+    } else if (flag == "--decay-trail") {
+      server.tracker.decay_trail_px = ParseDoubleFlag(flag, value);
     } else {
       throw InvalidArgumentError("unknown flag '" + flag + "' (see --help)");
     }

@@ -41,6 +41,8 @@ TEST(ServeCommand, EveryFlagReachesItsOption) {
                                               "1000",
                                               "--tau",
                                               "0.02",
+                                              "--decay-trail",
+                                              "2",
                                               "--metrics",
                                               "127.0.0.1:9464",
                                               "--tls-cert",
@@ -66,6 +68,7 @@ TEST(ServeCommand, EveryFlagReachesItsOption) {
   EXPECT_EQ(server.tracker.VariantName(), "EVT-PR");
   EXPECT_EQ(server.tracker.max_points, 1000);
   EXPECT_EQ(server.tracker.decay_time_s, 0.02);
+  EXPECT_EQ(server.tracker.decay_trail_px, 2);
   EXPECT_EQ(server.metrics_address, "127.0.0.1:9464");
   EXPECT_EQ(server.tls_cert_file, "c.pem");
   EXPECT_EQ(server.tls_key_file, "k.pem");

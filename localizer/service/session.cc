@@ -317,6 +317,7 @@ SessionSettings SessionSettingsFromProto(const api::SessionStart& start,
       settings.tracker.max_points = static_cast<int>(options.max_points());
     }
     if (options.decay_time_s() != 0) settings.tracker.decay_time_s = options.decay_time_s();
+    if (options.has_decay_trail_px()) settings.tracker.decay_trail_px = options.decay_trail_px();
     settings.tracker.input =
         options.frames() ? tracking::TrackerInput::kFrames : tracking::TrackerInput::kEvents;
     settings.tracker.Check();

@@ -252,6 +252,12 @@ TEST(SessionSettings, RejectsInvalidCamerasAndOptions) {
   bad = start;
   bad.mutable_initial_world_from_cam()->mutable_rotation()->set_w(2);
   EXPECT_THROW(SessionSettingsFromProto(bad, defaults), InvalidArgumentError);
+  api::SessionStart adaptive = start;
+  adaptive.mutable_options()->set_decay_trail_px(2);
+  EXPECT_EQ(SessionSettingsFromProto(adaptive, defaults).tracker.decay_trail_px, 2);
+  bad = start;
+  bad.mutable_options()->set_decay_trail_px(-1);
+  EXPECT_THROW(SessionSettingsFromProto(bad, defaults), InvalidArgumentError);
   bad = start;
   bad.mutable_options()->set_variant("EVT-XY");
   EXPECT_THROW(SessionSettingsFromProto(bad, defaults), InvalidArgumentError);

@@ -125,6 +125,15 @@ TimeSurfaceField::TimeSurfaceField(const TimeSurface& surface, SurfaceChannel ch
   if (smooth_) smoothed_.assign(num_pixels, Memo{});
 }
 
+void TimeSurfaceField::SetDecay(const SurfaceDecay& decay) {
+  if (decay.decay_time_ns == decay_.decay_time_ns &&
+      decay.empty_threshold == decay_.empty_threshold) {
+    return;
+  }
+  decay_ = decay;
+  exponential_ = DecayExponential(decay);
+}
+
 void TimeSurfaceField::SetTime(int64_t t_ns) {
   t_ns_ = t_ns;
   num_evaluated_ = 0;

@@ -147,6 +147,10 @@ class TimeSurfaceField final : public PotentialField {
 
   // Sets the evaluation time and forgets memoised values.
   void SetTime(int64_t t_ns);
+  // Changes the decay for the values computed after the next SetTime.
+  void SetDecay(const SurfaceDecay& decay);
+  // The decay in use.
+  const SurfaceDecay& decay() const { return decay_; }
   // The evaluation time.
   int64_t time_ns() const { return t_ns_; }
 

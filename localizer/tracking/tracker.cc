@@ -180,10 +180,45 @@ std::optional<PoseEstimate> Tracker::AddFrame(int64_t t_ns, const cv::Mat& gray)
   return Step(t_ns);
 }
 
+double Tracker::StepDecayTimeNs() const {
+  const double longest_ns = options_.decay_time_s * 1e9;
+  if (options_.decay_trail_px <= 0 || status_ != TrackingStatus::kTracking || !has_selection_ ||
+      motion_.velocity_span_ns() == 0) {
+    return longest_ns;
+  }
+  // The median image speed of (up to 256 of) the selected points at the last pose, from the
+  // displacement over 1 ms of the constant-velocity motion.
+  constexpr double kProbeS = 1e-3;
+  const Rigid3d cam_from_world = motion_.last_world_from_cam().Inverse();
+  const Rigid3d moved_cam_from_world =
+      (motion_.last_world_from_cam() * ExpSE3(motion_.velocity() * kProbeS)).Inverse();
+  const size_t stride = std::max<size_t>(1, selected_.size() / 256);
+  std::vector<double> speeds;
+  speeds.reserve(selected_.size() / stride + 1);
+  for (size_t i = 0; i < selected_.size(); i += stride) {
+    const Eigen::Vector3d world = map_.positions[selected_[i]].cast<double>();
+    Eigen::Vector2d before;
+    Eigen::Vector2d after;
+    if (!intrinsics_.Project(cam_from_world * world, &before) ||
+        !intrinsics_.Project(moved_cam_from_world * world, &after)) {
+      continue;
+    }
+    speeds.push_back((after - before).norm() / kProbeS);
+  }
+  if (speeds.empty()) return longest_ns;
+  std::nth_element(speeds.begin(), speeds.begin() + speeds.size() / 2, speeds.end());
+  const double speed_px_s = speeds[speeds.size() / 2];
+  if (speed_px_s <= 0) return longest_ns;
+  return std::clamp(options_.decay_trail_px / speed_px_s * 1e9, options_.min_decay_time_s * 1e9,
+                    longest_ns);
+}
+
 void Tracker::UpdateSurfaces(int64_t t_ns) {
   if (options_.input == TrackerInput::kFrames) return;  // Built by AddFrame.
+  decay_.decay_time_ns = StepDecayTimeNs();
   const int num_channels = options_.use_polarity ? 3 : 1;
   for (int channel = 0; channel < num_channels; ++channel) {
+    lazy_fields_[channel]->SetDecay(decay_);
     lazy_fields_[channel]->SetTime(t_ns);
     if (options_.field_evaluation == FieldEvaluation::kDense) {
       dense_fields_[channel] = DenseField(lazy_fields_[channel]->RenderDense());
@@ -455,11 +490,12 @@ PoseEstimate Tracker::Step(int64_t t_ns) {
   // are whole at once: no warm-up.
   const bool warming_up =
       was_tracking && options_.input == TrackerInput::kEvents &&
-      (!first_event_t_ns_ || t_ns - *first_event_t_ns_ < decay_.decay_time_ns);
+      (!first_event_t_ns_ || t_ns - *first_event_t_ns_ < options_.decay_time_s * 1e9);
   if (!best.good && warming_up) {
     estimate.world_from_cam = predicted;
     estimate.covariance = Matrix6d::Identity() * 1e6;
     estimate.quality = best.quality;
+    estimate.quality.decay_time_ms = decay_.decay_time_ns * 1e-6;
     estimate.status = TrackingStatus::kTracking;
     estimate.timings.solve_ms = MillisecondsSince(solve_start);
     last_step_t_ns_ = t_ns;
@@ -499,6 +535,7 @@ PoseEstimate Tracker::Step(int64_t t_ns) {
   estimate.world_from_cam = best.registration.cam_from_world.Inverse();
   estimate.covariance = best.registration.covariance;
   estimate.quality = best.quality;
+  estimate.quality.decay_time_ms = decay_.decay_time_ns * 1e-6;
   estimate.quality.recovery_attempts = recovery_attempts;
   if (best.good) {
     if (was_tracking) {

@@ -65,6 +65,8 @@ struct TrackingQuality {
   int polarity_predictions = 0;
   // Of those, the points whose pixel fired last with the predicted polarity.
   int polarity_matches = 0;
+  // The time-surface decay time of the step, milliseconds (adaptive with decay_trail_px).
+  double decay_time_ms = 0;
 };
 
 // Wall-clock time spent in each stage of a step, milliseconds.
@@ -148,6 +150,7 @@ class Tracker {
 
   PoseEstimate Step(int64_t t_ns);
   void UpdateSurfaces(int64_t t_ns);
+  double StepDecayTimeNs() const;
   void SelectPoints(const Rigid3d& predicted_world_from_cam);
   // Predicts polarities (when `previous_world_from_cam` is given), culls, registers from the
   // start pose and, when `assess`, judges the result (Assess); otherwise only the quality fields
@@ -168,6 +171,7 @@ class Tracker {
   TrackerOptions options_;
   UndistortionTable table_;
   PinholeIntrinsics intrinsics_;
+  // The decay of the current step (options_.decay_time_s unless the decay is adaptive).
   SurfaceDecay decay_;
   PolarityPredictionOptions polarity_options_;
   TimeSurface surface_;

@@ -31,6 +31,10 @@ void RegistrationOptions::Check() const {
 
 void TrackerOptions::Check() const {
   Require(Positive(step_rate_hz) && step_rate_hz <= 1e6, "step_rate_hz must be in (0, 1e6].");
+  Require(std::isfinite(decay_trail_px) && decay_trail_px >= 0,
+          "decay_trail_px must be finite and >= 0 (0 = a fixed decay time).");
+  Require(Positive(min_decay_time_s) && min_decay_time_s <= decay_time_s,
+          "min_decay_time_s must be positive and at most decay_time_s.");
   Require(!events_per_step || *events_per_step >= 1, "events_per_step must be at least 1.");
   Require(Positive(decay_time_s), "decay_time_s must be positive.");
   Require(std::isfinite(empty_threshold) && empty_threshold > 0 && empty_threshold < 1,

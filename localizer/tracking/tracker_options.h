@@ -66,8 +66,16 @@ struct TrackerOptions {
   std::optional<int64_t> events_per_step;
 
   // --- Time surfaces ---
-  // Decay time tau of T = exp(-(t - t_last) / tau), seconds.
+  // Decay time tau of T = exp(-(t - t_last) / tau), seconds. With decay_trail_px > 0, the
+  // longest decay time.
   double decay_time_s = 0.03;
+  // Adaptive decay: when > 0, each step's tau is this trail length (pixels) divided by the
+  // median image speed of the selected points under the constant-velocity model, clamped to
+  // [min_decay_time_s, decay_time_s]: short when the image moves fast (the whole image would
+  // fire within a long tau), the full decay_time_s when it rests. 0 = a fixed tau.
+  double decay_trail_px = 1.0;
+  // The shortest adaptive decay time, seconds.
+  double min_decay_time_s = 0.005;
   // Pixels with T <= this count as empty (field value 1) and as inactive for the ANNF.
   double empty_threshold = 0.1;
   // Smooth the field 1 - T with the 5x5 binomial (Gaussian) kernel.

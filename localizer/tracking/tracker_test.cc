@@ -351,6 +351,44 @@ TEST(TrackerOptions, CheckAndVariants) {
   options = TrackerOptions{};
   options.registration.robust_scale = -1;
   EXPECT_THROW(options.Check(), InvalidArgumentError);
+  options = TrackerOptions{};
+  options.decay_trail_px = -1;
+  EXPECT_THROW(options.Check(), InvalidArgumentError);
+  options = TrackerOptions{};
+  options.min_decay_time_s = 0.05;  // Longer than decay_time_s.
+  EXPECT_THROW(options.Check(), InvalidArgumentError);
+}
+
+TEST(Tracker, AdaptiveDecayFollowsTheImageSpeed) {
+  // tau = trail / median image speed, within [min_decay_time_s, decay_time_s]: with a trail of
+  // 0.05 px the smooth motion (50-100 px/s) gives about 1 ms, clamped at 5 ms; a trail
+  // long enough for the longest tau gives it back. Tracking stays as accurate as with a fixed tau.
+  const Sequence& sequence = SmoothSequence();
+  for (const double trail_px : {0.05, 1000.0}) {
+    TrackerOptions options;
+    options.decay_trail_px = trail_px;
+    Tracker tracker(sequence.map, nullptr, sequence.camera, options);
+    tracker.Reset(testing::SmoothMotion(kStartNs), kStartNs);
+    const std::vector<PoseEstimate> estimates = tracker.AddEvents(sequence.events);
+    ASSERT_GE(estimates.size(), 100u);
+    double min_tau_ms = 1e9;
+    double max_tau_ms = 0;
+    double max_position_error = 0;
+    for (const PoseEstimate& estimate : estimates) {
+      EXPECT_EQ(estimate.status, TrackingStatus::kTracking) << estimate.t_ns;
+      min_tau_ms = std::min(min_tau_ms, estimate.quality.decay_time_ms);
+      max_tau_ms = std::max(max_tau_ms, estimate.quality.decay_time_ms);
+      max_position_error = std::max(max_position_error, PositionError(estimate));
+    }
+    // The first steps have no velocity yet: the longest tau.
+    EXPECT_DOUBLE_EQ(max_tau_ms, 30.0) << trail_px;
+    if (trail_px < 1) {
+      EXPECT_DOUBLE_EQ(min_tau_ms, 5.0);
+    } else {
+      EXPECT_DOUBLE_EQ(min_tau_ms, 30.0);
+    }
+    EXPECT_LT(max_position_error, 0.04) << trail_px;
+  }
 }
 
 }  // namespace
