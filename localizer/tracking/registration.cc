@@ -12,9 +12,6 @@
 namespace evloc::tracking {
 namespace {
 
-// The variance reported along directions the points do not constrain.
-constexpr double kUnconstrainedVariance = 1e6;
-
 // With the early stop on (min_relative_decrease > 0), a trial whose increment moves the points by
 // less than this in the image ends the solve: the bilinear field of edges rounded to pixels has
 // no meaningful minimum below that scale, and the trials after such a step only chase its

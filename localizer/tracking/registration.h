@@ -55,6 +55,10 @@ struct PinholeIntrinsics {
   }
 };
 
+// The variance reported along directions the points do not constrain (and, by the tracker, for
+// every direction of a pose that is no estimate).
+inline constexpr double kUnconstrainedVariance = 1e6;
+
 // One point to register: its world position and the field it is registered against.
 struct RegistrationPoint {
   // Position in the world, metres.

@@ -491,18 +491,8 @@ PoseEstimate Tracker::Step(int64_t t_ns) {
   const bool warming_up =
       was_tracking && options_.input == TrackerInput::kEvents &&
       (!first_event_t_ns_ || t_ns - *first_event_t_ns_ < options_.decay_time_s * 1e9);
-  if (!best.good && warming_up) {
-    estimate.world_from_cam = predicted;
-    estimate.covariance = Matrix6d::Identity() * 1e6;
-    estimate.quality = best.quality;
-    estimate.quality.decay_time_ms = decay_.decay_time_ns * 1e-6;
-    estimate.status = TrackingStatus::kTracking;
-    estimate.timings.solve_ms = MillisecondsSince(solve_start);
-    last_step_t_ns_ = t_ns;
-    estimate.timings.total_ms = MillisecondsSince(step_start);
-    return estimate;
-  }
-  if (!best.good && options_.enable_recovery) {
+  const bool hold_prediction = !best.good && warming_up;
+  if (!best.good && !hold_prediction && options_.enable_recovery) {
     // Retry with the unsigned surface (the motion, hence the polarity prediction, is what
     // failed): from the prediction itself unless that was done (a motion that turns within a
     // step makes the constant-velocity flow, and every polarity, point the wrong way), then from
@@ -537,7 +527,11 @@ PoseEstimate Tracker::Step(int64_t t_ns) {
   estimate.quality = best.quality;
   estimate.quality.decay_time_ms = decay_.decay_time_ns * 1e-6;
   estimate.quality.recovery_attempts = recovery_attempts;
-  if (best.good) {
+  if (hold_prediction) {
+    // Still TRACKING; the motion model keeps its state.
+    estimate.world_from_cam = predicted;
+    estimate.covariance = Matrix6d::Identity() * kUnconstrainedVariance;
+  } else if (best.good) {
     if (was_tracking) {
       motion_.Update(estimate.world_from_cam, t_ns);
     } else {
@@ -551,7 +545,7 @@ PoseEstimate Tracker::Step(int64_t t_ns) {
     status_ = TrackingStatus::kLost;
     motion_.Reset(last_good_world_from_cam_, t_ns);
     estimate.world_from_cam = last_good_world_from_cam_;
-    estimate.covariance = Matrix6d::Identity() * 1e6;
+    estimate.covariance = Matrix6d::Identity() * kUnconstrainedVariance;
   }
   estimate.status = status_;
   last_step_t_ns_ = t_ns;
