@@ -8,6 +8,15 @@
 
 namespace evloc {
 
+const std::string& TakeFlagValue(const std::vector<std::string>& arguments, size_t* index) {
+  const std::string& flag = arguments[*index];
+  if (*index + 1 >= arguments.size()) {
+    throw InvalidArgumentError(flag.rfind("--", 0) == 0 ? flag + " needs a value"
+                                                        : "unexpected argument '" + flag + "'");
+  }
+  return arguments[++*index];
+}
+
 double ParseDoubleFlag(std::string_view flag, std::string_view text) {
   double value = 0.0;
   const auto [end, error] = std::from_chars(text.data(), text.data() + text.size(), value);

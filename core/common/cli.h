@@ -5,8 +5,14 @@
 #include <cstdint>
 #include <string>
 #include <string_view>
+#include <vector>
 
 namespace evloc {
+
+// The value of the flag arguments[*index], i.e. the next argument, with *index moved onto it.
+// Throws InvalidArgumentError "FLAG needs a value" when a "--" flag is the last argument, and
+// "unexpected argument 'TEXT'" for a last argument that is no flag.
+const std::string& TakeFlagValue(const std::vector<std::string>& arguments, size_t* index);
 
 // Parses a finite floating-point number; the whole text must be consumed. Throws
 // InvalidArgumentError "FLAG expects a number, got 'TEXT'".

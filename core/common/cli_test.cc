@@ -1,11 +1,36 @@
 #include "core/common/cli.h"
 
+#include <string>
+#include <vector>
+
 #include <gtest/gtest.h>
 
 #include "core/common/error.h"
 
 namespace evloc {
 namespace {
+
+TEST(TakeFlagValue, ReturnsTheNextArgumentOrSaysWhatIsMissing) {
+  const std::vector<std::string> arguments = {"--rate", "300", "--map"};
+  size_t index = 0;
+  EXPECT_EQ(TakeFlagValue(arguments, &index), "300");
+  EXPECT_EQ(index, 1u);
+  index = 2;
+  try {
+    TakeFlagValue(arguments, &index);
+    FAIL() << "expected an error";
+  } catch (const InvalidArgumentError& error) {
+    EXPECT_STREQ(error.what(), "--map needs a value");
+  }
+  const std::vector<std::string> stray = {"extra"};
+  index = 0;
+  try {
+    TakeFlagValue(stray, &index);
+    FAIL() << "expected an error";
+  } catch (const InvalidArgumentError& error) {
+    EXPECT_STREQ(error.what(), "unexpected argument 'extra'");
+  }
+}
 
 TEST(ParseDoubleFlag, AcceptsWholeNumbersOnly) {
   EXPECT_DOUBLE_EQ(ParseDoubleFlag("--rate", "300"), 300.0);

@@ -159,11 +159,7 @@ TrackCommandOptions ParseTrackCommandLine(const std::vector<std::string>& argume
       options.quiet = true;
       continue;
     }
-    if (i + 1 >= arguments.size()) {
-      throw InvalidArgumentError(flag.rfind("--", 0) == 0 ? flag + " needs a value"
-                                                          : "unexpected argument '" + flag + "'");
-    }
-    const std::string& value = arguments[++i];
+    const std::string& value = TakeFlagValue(arguments, &i);
     if (flag == "--map") {
       options.map_path = value;
     } else if (flag == "--dataset") {

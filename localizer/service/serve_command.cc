@@ -57,11 +57,7 @@ ServeCommand ParseServeCommandLine(const std::vector<std::string>& arguments) {
     if (first == 0) {
       throw InvalidArgumentError("the first argument must be the command 'serve' (see --help)");
     }
-    if (i + 1 >= arguments.size()) {
-      throw InvalidArgumentError(flag.rfind("--", 0) == 0 ? flag + " needs a value"
-                                                          : "unexpected argument '" + flag + "'");
-    }
-    const std::string& value = arguments[++i];
+    const std::string& value = TakeFlagValue(arguments, &i);
     LocalizerServerOptions& server = command.server;
     if (flag == "--maps") {
       server.maps_dir = value;

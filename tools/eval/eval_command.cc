@@ -53,11 +53,7 @@ EvalCommandOptions ParseEvalCommandLine(const std::vector<std::string>& argument
       options.help = true;
       continue;
     }
-    if (i + 1 >= arguments.size()) {
-      throw InvalidArgumentError(flag.rfind("--", 0) == 0 ? flag + " needs a value"
-                                                          : "unexpected argument '" + flag + "'");
-    }
-    const std::string& value = arguments[++i];
+    const std::string& value = TakeFlagValue(arguments, &i);
     if (flag == "--gt") {
       options.ground_truth_path = value;
     } else if (flag == "--est") {

@@ -380,11 +380,7 @@ LoadOptions ParseLoadCommandLine(const std::vector<std::string>& arguments, bool
       *help = true;
       return options;
     }
-    if (i + 1 >= arguments.size()) {
-      throw InvalidArgumentError(flag.rfind("--", 0) == 0 ? flag + " needs a value"
-                                                          : "unexpected argument '" + flag + "'");
-    }
-    const std::string& value = arguments[++i];
+    const std::string& value = TakeFlagValue(arguments, &i);
     if (flag == "--server") {
       options.server = value;
     } else if (flag == "--map") {
