@@ -19,12 +19,12 @@
 #include "core/common/error.h"
 #include "core/common/file_util.h"
 #include "core/events/event_reader.h"
+#include "core/events/evt3_encoder.h"
 #include "core/trajectory/tum_io.h"
 #include "evloc/localizer.grpc.pb.h"
 #include "localizer/offline/track_command.h"
 #include "localizer/service/percentile.h"
 #include "localizer/service/session.h"
-#include "tools/replay/evt3_encoder.h"
 #include "tools/sim/dataset.h"
 
 namespace evloc::replay {

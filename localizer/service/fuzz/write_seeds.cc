@@ -8,10 +8,10 @@
 #include <iostream>
 
 #include "core/common/error.h"
+#include "core/events/evt3_encoder.h"
 #include "localizer/service/fuzz/session_fuzz_common.h"
 #include "localizer/service/testing/service_fixture.h"
 #include "localizer/tracking/testing/synthetic_scene.h"
-#include "tools/replay/evt3_encoder.h"
 
 namespace evloc::service::fuzz {
 namespace {
@@ -57,7 +57,7 @@ std::string EncodeEvt2(const EventBuffer& events, std::optional<int64_t>* time_h
 std::vector<std::string> EncodeWindows(const std::vector<EventBuffer>& windows, int64_t start_ns,
                                        api::EventEncoding encoding) {
   std::vector<std::string> packets;
-  replay::Evt3Encoder evt3;
+  Evt3Encoder evt3;
   std::optional<int64_t> evt2_time_high;
   for (size_t i = 0; i < windows.size(); ++i) {
     std::string data;
