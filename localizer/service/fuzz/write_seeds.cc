@@ -12,6 +12,8 @@
 #include "localizer/service/fuzz/session_fuzz_common.h"
 #include "localizer/service/testing/service_fixture.h"
 #include "localizer/tracking/testing/synthetic_scene.h"
+#include "localizer/wire/packed_events.h"
+#include "proto/convert/proto_convert.h"
 
 namespace evloc::service::fuzz {
 namespace {
@@ -62,8 +64,8 @@ std::vector<std::string> EncodeWindows(const std::vector<EventBuffer>& windows, 
   for (size_t i = 0; i < windows.size(); ++i) {
     std::string data;
     if (encoding == api::EVENT_ENCODING_PACKED) {
-      data = EncodePackedEvents(windows[i], 0, windows[i].size(),
-                                start_ns + static_cast<int64_t>(i) * kWindowNs);
+      data = wire::EncodePackedEvents(windows[i], 0, windows[i].size(),
+                                      start_ns + static_cast<int64_t>(i) * kWindowNs);
     } else if (encoding == api::EVENT_ENCODING_EVT3) {
       evt3.Encode(windows[i], &data);
     } else {
