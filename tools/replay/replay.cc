@@ -19,12 +19,14 @@
 #include "core/common/error.h"
 #include "core/common/file_util.h"
 #include "core/events/event_reader.h"
+#include "core/events/evt3_encoder.h"
 #include "core/trajectory/tum_io.h"
 #include "evloc/localizer.grpc.pb.h"
+// ResolveInitialPose and ParsePoseText only (to move to core/dataset with the dataset reader).
 #include "localizer/offline/track_command.h"
-#include "localizer/service/percentile.h"
-#include "localizer/service/session.h"
-#include "tools/replay/evt3_encoder.h"
+#include "localizer/wire/packed_events.h"
+#include "localizer/wire/percentile.h"
+#include "proto/convert/proto_convert.h"
 #include "tools/sim/dataset.h"
 
 namespace evloc::replay {
@@ -32,7 +34,7 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-using service::Percentile;
+using wire::Percentile;
 
 // Floor division for possibly negative numerators.
 int64_t FloorDiv(int64_t numerator, int64_t denominator) {
@@ -334,8 +336,8 @@ grpc::Status Replayer::RunSession(const TimedPose& start, bool resumed, bool* st
   api::TrackRequest start_request;
   api::SessionStart* session_start = start_request.mutable_start();
   session_start->set_map_name(options_.map_name);
-  *session_start->mutable_camera() = service::CameraToProto(dataset_.camera);
-  *session_start->mutable_initial_world_from_cam() = service::RigidToProto(start.world_from_cam);
+  *session_start->mutable_camera() = CameraToProto(dataset_.camera);
+  *session_start->mutable_initial_world_from_cam() = RigidToProto(start.world_from_cam);
   session_start->set_initial_t_ns(start.t_ns);
   if (options_.step_rate_hz) {
     session_start->mutable_options()->set_step_rate_hz(*options_.step_rate_hz);
@@ -382,8 +384,7 @@ grpc::Status Replayer::RunSession(const TimedPose& start, bool resumed, bool* st
         shared_.server_latency_us.push_back(pose.latency_us());
         shared_.server_overhead_us.push_back(pose.latency_us() - pose.step_ms() * 1e3);
         shared_.step_ms.push_back(pose.step_ms());
-        const TimedPose timed{pose.t_ns(),
-                              service::RigidFromProto(pose.world_from_cam(), "PoseUpdate")};
+        const TimedPose timed{pose.t_ns(), RigidFromProto(pose.world_from_cam(), "PoseUpdate")};
         shared_.poses.push_back(timed);
         shared_.tracking.push_back(pose.status() == api::TRACKING);
         if (pose.status() == api::LOST) ++shared_.lost;
@@ -456,7 +457,7 @@ grpc::Status Replayer::RunSession(const TimedPose& start, bool resumed, bool* st
     } else {
       packet->set_encoding(api::EVENT_ENCODING_PACKED);
       packet->set_time_base_ns(packet_start_ns);
-      packet->set_data(service::EncodePackedEvents(*events, 0, events->size(), packet_start_ns));
+      packet->set_data(wire::EncodePackedEvents(*events, 0, events->size(), packet_start_ns));
     }
     // Pacing: real time from the replay's start, or by the poses. A later session that is
     // behind the real-time schedule catches up paced by the poses, so that it does not

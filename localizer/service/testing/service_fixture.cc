@@ -10,7 +10,9 @@
 #include "core/trajectory/trajectory.h"
 #include "localizer/service/session.h"
 #include "localizer/tracking/testing/synthetic_scene.h"
+#include "localizer/wire/packed_events.h"
 #include "maps/map_directory.h"
+#include "proto/convert/proto_convert.h"
 #include "tools/sim/dataset.h"
 
 namespace evloc::service::testing {
@@ -104,7 +106,8 @@ api::TrackRequest TestSessionStart() {
 std::vector<api::TrackRequest> PackedPackets(const EventBuffer& events, int64_t packet_ns) {
   std::vector<api::TrackRequest> requests;
   if (events.empty()) return requests;
-  for (api::EventPacket& packet : PackEventWindows(events, events.t_ns.front() - 1, packet_ns)) {
+  for (api::EventPacket& packet :
+       wire::PackEventWindows(events, events.t_ns.front() - 1, packet_ns)) {
     *requests.emplace_back().mutable_events() = std::move(packet);
   }
   return requests;
