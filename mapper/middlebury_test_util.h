@@ -1,5 +1,5 @@
 // Test helpers for the Middlebury templeSparseRing data: calibrated poses (the edge-distance
-// measure of docs/mapper.md is KeyframeEdgeDistances in mapper/map_accuracy.h).
+// measure of docs/mapper.md is KeyframeEdgeDistances in tools/map_accuracy/map_accuracy.h).
 #pragma once
 
 #include <filesystem>

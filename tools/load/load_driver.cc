@@ -15,15 +15,13 @@
 #include "core/common/cli.h"
 #include "core/common/error.h"
 #include "core/common/file_util.h"
+#include "core/dataset/dataset.h"
 #include "core/events/event_reader.h"
 #include "evloc/localizer.grpc.pb.h"
-// ResolveInitialPose only (to move to core/dataset with the dataset reader).
-#include "localizer/offline/track_command.h"
 #include "localizer/wire/packed_events.h"
 #include "localizer/wire/percentile.h"
 #include "localizer/wire/status_name.h"
 #include "proto/convert/proto_convert.h"
-#include "tools/sim/dataset.h"
 
 namespace evloc::load {
 namespace {
@@ -48,7 +46,7 @@ struct Workload {
 };
 
 Workload MakeWorkload(const LoadOptions& options) {
-  const sim::Dataset dataset = sim::ReadDataset(options.dataset);
+  const Dataset dataset = ReadDataset(options.dataset);
   if (!dataset.events_path) {
     throw InvalidArgumentError("dataset '" + options.dataset.string() +
                                "' has no events.evb or events.txt");
@@ -58,7 +56,7 @@ Workload MakeWorkload(const LoadOptions& options) {
   if (reader->Read(1, &events) == 0) {
     throw InvalidArgumentError("dataset '" + options.dataset.string() + "' has no events");
   }
-  const TimedPose initial = tracking::ResolveInitialPose(dataset, std::nullopt, events.t_ns[0]);
+  const TimedPose initial = ResolveInitialPose(dataset, std::nullopt, events.t_ns[0]);
   const int64_t stop_ns = initial.t_ns + static_cast<int64_t>(options.session_s * 1e9);
   while (events.t_ns.back() <= stop_ns && reader->Read(1 << 20, &events) > 0) {
   }

@@ -18,16 +18,15 @@
 #include "core/common/cli.h"
 #include "core/common/error.h"
 #include "core/common/file_util.h"
+#include "core/dataset/dataset.h"
+#include "core/dataset/pose_text.h"
 #include "core/events/event_reader.h"
 #include "core/events/evt3_encoder.h"
 #include "core/trajectory/tum_io.h"
 #include "evloc/localizer.grpc.pb.h"
-// ResolveInitialPose and ParsePoseText only (to move to core/dataset with the dataset reader).
-#include "localizer/offline/track_command.h"
 #include "localizer/wire/packed_events.h"
 #include "localizer/wire/percentile.h"
 #include "proto/convert/proto_convert.h"
-#include "tools/sim/dataset.h"
 
 namespace evloc::replay {
 namespace {
@@ -183,10 +182,10 @@ struct SharedState {
 class Replayer {
  public:
   Replayer(const ReplayOptions& options, std::ostream& log) : options_(options), log_(log) {
-    sim::DatasetReaderOptions reader_options;
+    DatasetReaderOptions reader_options;
     reader_options.ecd_width = options.ecd_width;
     reader_options.ecd_height = options.ecd_height;
-    dataset_ = sim::ReadDataset(options.dataset, reader_options);
+    dataset_ = ReadDataset(options.dataset, reader_options);
     if (!dataset_.events_path) {
       throw InvalidArgumentError("dataset '" + options.dataset.string() +
                                  "' has no events.evb or events.txt");
@@ -198,7 +197,7 @@ class Replayer {
     }
     evt3_ = options.encoding == WireEncoding::kEvt3;
     const int64_t first_t_ns = source_->event().t_ns;
-    initial_ = tracking::ResolveInitialPose(dataset_, options.initial_world_from_cam, first_t_ns);
+    initial_ = ResolveInitialPose(dataset_, options.initial_world_from_cam, first_t_ns);
     next_window_start_ns_ = SessionTime(first_t_ns) - 1;
     dataset_start_ns_ = next_window_start_ns_;
     packet_ns_ = options.packet_us * 1000;
@@ -234,7 +233,7 @@ class Replayer {
 
   const ReplayOptions& options_;
   std::ostream& log_;
-  sim::Dataset dataset_;
+  Dataset dataset_;
   std::unique_ptr<EventReader> reader_;
   std::unique_ptr<EventSource> source_;
   bool evt3_ = false;
@@ -813,7 +812,7 @@ ReplayCommand ParseReplayCommandLine(const std::vector<std::string>& arguments) 
     } else if (flag == "--tls-server-name") {
       options.tls_server_name = value;
     } else if (flag == "--init-pose") {
-      options.initial_world_from_cam = tracking::ParsePoseText(flag, value);
+      options.initial_world_from_cam = ParsePoseText(flag, value);
     } else if (flag == "--rate") {
       options.step_rate_hz = ParseDoubleFlag(flag, value);
     } else if (flag == "--max-lead-ms") {

@@ -11,8 +11,8 @@
 
 #include "core/common/file_util.h"
 #include "core/common/test_data.h"
+#include "core/dataset/dataset.h"
 #include "core/events/event_reader.h"
-#include "tools/sim/dataset.h"
 
 namespace {
 
@@ -83,7 +83,7 @@ TEST(EvlocSimCli, SameSeedSameBytesAndTheDatasetLoads) {
     EXPECT_EQ(evloc::ReadFileToString(dir / "a" / name), evloc::ReadFileToString(dir / "b" / name))
         << name;
   }
-  const evloc::sim::Dataset dataset = evloc::sim::ReadDataset(dir / "a");
+  const evloc::Dataset dataset = evloc::ReadDataset(dir / "a");
   EXPECT_EQ(dataset.camera.width, 240);
   EXPECT_EQ(dataset.images.size(), 5u);  // exposures [k/30, k/30 + 10 ms] inside 0.15 s: k = 0..4
   EXPECT_EQ(dataset.depth.size(), 5u);

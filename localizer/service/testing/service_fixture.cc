@@ -6,6 +6,7 @@
 
 #include <grpcpp/grpcpp.h>
 
+#include "core/dataset/dataset.h"
 #include "core/events/evb.h"
 #include "core/trajectory/trajectory.h"
 #include "localizer/service/session.h"
@@ -13,7 +14,6 @@
 #include "localizer/wire/packed_events.h"
 #include "maps/map_directory.h"
 #include "proto/convert/proto_convert.h"
-#include "tools/sim/dataset.h"
 
 namespace evloc::service::testing {
 
@@ -59,14 +59,14 @@ void WriteTestMap(const std::filesystem::path& maps_dir, const std::string& name
 
 std::filesystem::path WriteTestDataset(const std::filesystem::path& root, int64_t duration_ns) {
   const std::filesystem::path out = root / "dataset";
-  sim::DatasetWriter writer(out, {});
+  DatasetWriter writer(out, {});
   writer.WriteCamera(TestCamera());
   std::vector<TimedPose> poses;
   for (int64_t t = kInitialTimeNs; t <= duration_ns; t += 5'000'000) {
     poses.push_back({t, tracking::testing::SmoothMotion(t)});
   }
   writer.WriteGroundTruth(Trajectory(poses));
-  EvbWriter events(writer.staging_dir() / sim::dataset_files::kEventsEvb, SensorSize{320, 240});
+  EvbWriter events(writer.staging_dir() / dataset_files::kEventsEvb, SensorSize{320, 240});
   events.Write(TestEvents(duration_ns));
   events.Close();
   writer.Commit();
