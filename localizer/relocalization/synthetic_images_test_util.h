@@ -1,12 +1,12 @@
-// Test helpers of the relocalization tests: synthetic textured images (reproducible from a
-// seed), a small homography, and reading images of the shared real data.
+// Helpers of the relocalization tests and benchmark: synthetic textured images (reproducible from
+// a seed), a small homography, and reading images of the shared real data.
 #pragma once
 
 #include <cstdint>
 #include <filesystem>
+#include <stdexcept>
 #include <string>
 
-#include <gtest/gtest.h>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -72,11 +72,12 @@ inline cv::Mat Warp(const cv::Mat& image, const cv::Mat& homography, double nois
   return warped;
 }
 
-// Reads an image as grey; fails the calling test when it cannot be read.
+// Reads an image as grey, shrunk to at most `max_width` columns when that is positive; throws
+// std::runtime_error when it cannot be read.
 inline cv::Mat ReadGrey(const std::filesystem::path& path, int max_width = 0) {
   cv::Mat image = cv::imread(path.string(), cv::IMREAD_GRAYSCALE);
-  EXPECT_FALSE(image.empty()) << "cannot read " << path;
-  if (!image.empty() && max_width > 0 && image.cols > max_width) {
+  if (image.empty()) throw std::runtime_error("cannot read " + path.string());
+  if (max_width > 0 && image.cols > max_width) {
     const double factor = static_cast<double>(max_width) / image.cols;
     cv::resize(image, image, cv::Size(), factor, factor, cv::INTER_AREA);
   }
