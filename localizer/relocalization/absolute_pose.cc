@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <memory>
+#include <sstream>
 #include <string>
 
 #include <ceres/ceres.h>
@@ -102,6 +103,13 @@ class ReprojectionCost : public ceres::SizedCostFunction<2, kPoseParameters> {
   const Eigen::Vector3d point_in_world_;
   const Eigen::Vector2d pixel_;
 };
+
+// A number in the shortest form that reads back the same ("3", "2.5").
+std::string FormatNumber(double value) {
+  std::ostringstream stream;
+  stream << value;
+  return stream.str();
+}
 
 AbsolutePoseResult Failure(AbsolutePoseFailure failure, std::string reason) {
   AbsolutePoseResult result;
@@ -320,7 +328,7 @@ AbsolutePoseResult EstimateAbsolutePose(const Camera& camera,
     return Failure(AbsolutePoseFailure::kTooFewInliers,
                    std::to_string(count) + " inliers of " + std::to_string(total) +
                        " correspondences within " +
-                       std::to_string(options.reprojection_threshold_px) + " px, at least " +
+                       FormatNumber(options.reprojection_threshold_px) + " px, at least " +
                        std::to_string(std::max<int>(
                            options.min_inliers,
                            static_cast<int>(std::ceil(options.min_inlier_ratio * total)))) +

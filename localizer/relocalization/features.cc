@@ -1,8 +1,8 @@
 #include "localizer/relocalization/features.h"
 
 #include <algorithm>
+#include <cassert>
 #include <cmath>
-#include <numeric>
 #include <string>
 #include <tuple>
 
@@ -136,6 +136,7 @@ Features ExtractFeatures(const cv::Mat& image, const FeatureOptions& options) {
   }
   cv::Mat sift_descriptors;
   sift->compute(grey, selected, sift_descriptors);  // Keeps the keypoints and their order.
+  assert(sift_descriptors.rows == static_cast<int>(selected.size()));
 
   Features features;
   const int count = static_cast<int>(selected.size());
