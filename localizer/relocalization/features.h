@@ -42,7 +42,8 @@ struct Features {
   std::vector<Eigen::Vector2f> keypoints;
   // Keypoint scales: the diameter of the SIFT neighbourhood, pixels.
   std::vector<float> sizes;
-  // Keypoint orientations, radians in [0, 2 pi), measured from +x towards +y (image down).
+  // Keypoint orientations, radians in [0, 2 pi): OpenCV's KeyPoint::angle in radians, which
+  // OpenCV measures clockwise on screen, i.e. from +x towards +y (image down).
   std::vector<float> orientations;
   // Descriptors, row-major, kDescriptorSize bytes per keypoint. For root-SIFT each row is the
   // square-rooted L1-normalised descriptor (unit L2 norm) scaled by 255 and rounded.
