@@ -12,7 +12,7 @@
 #include "core/common/file_util.h"
 #include "core/common/test_data.h"
 #include "mapper/map_builder.h"
-#include "mapper/middlebury_test_util.h"
+#include "core/dataset/testing/middlebury.h"
 #include "maps/map.h"
 #include "tools/map_accuracy/map_accuracy.h"
 

@@ -12,12 +12,12 @@
 #include "localizer/relocalization/absolute_pose.h"
 #include "localizer/relocalization/features.h"
 #include "localizer/relocalization/synthetic_images_test_util.h"
-#include "mapper/middlebury_test_util.h"
+#include "core/dataset/testing/middlebury.h"
 
 namespace evloc::relocalization {
 namespace {
 
-using mapper::testing::MiddleburyView;
+using evloc::testing::MiddleburyView;
 
 // The 3x4 projection matrix K [R | t] of a view.
 cv::Mat ProjectionMatrix(const MiddleburyView& view) {
@@ -105,7 +105,7 @@ AbsolutePoseResult Locate(const Camera& camera, const cv::Mat& query_image,
 
 TEST(RelocEndToEnd, TempleQueryIsLocatedAndAnotherSceneIsNotFound) {
   EVLOC_REQUIRE_SHARED_DATA(parameters, "middlebury/templeSparseRing/templeSR_par.txt");
-  const auto views = mapper::testing::ReadMiddleburyParameters(parameters);
+  const auto views = evloc::testing::ReadMiddleburyParameters(parameters);
   ASSERT_EQ(views.size(), 16u);
   const auto image = [&](int i) {
     return testing::ReadGrey(parameters.parent_path() / views[i].name);
@@ -113,7 +113,7 @@ TEST(RelocEndToEnd, TempleQueryIsLocatedAndAnotherSceneIsNotFound) {
   // Map: templeSR0007 and 0008 (23 degrees apart); queries: 0009 and 0006, 23 degrees beyond.
   const Keyframe keyframe = BuildKeyframe(views[6], image(6), views[7], image(7));
   ASSERT_GE(keyframe.points.size(), 100u);
-  const Camera camera = mapper::testing::MiddleburyCamera(views[7], 640, 480);
+  const Camera camera = evloc::testing::MiddleburyCamera(views[7], 640, 480);
   for (const int query : {8, 5}) {
     int correspondences = 0;
     const AbsolutePoseResult result = Locate(camera, image(query), keyframe, &correspondences);

@@ -12,7 +12,7 @@
 #include "core/common/error.h"
 #include "core/common/test_data.h"
 #include "localizer/relocalization/synthetic_images_test_util.h"
-#include "mapper/middlebury_test_util.h"
+#include "core/dataset/testing/middlebury.h"
 
 namespace evloc::relocalization {
 namespace {
@@ -189,8 +189,8 @@ TEST(RelocFeatures, ThrowsOnProgrammerErrors) {
 }
 
 // The fundamental matrix of view b relative to view a from their calibrations.
-Eigen::Matrix3d TrueFundamental(const mapper::testing::MiddleburyView& a,
-                                const mapper::testing::MiddleburyView& b) {
+Eigen::Matrix3d TrueFundamental(const evloc::testing::MiddleburyView& a,
+                                const evloc::testing::MiddleburyView& b) {
   const Rigid3d b_from_a = b.cam_from_world * a.cam_from_world.Inverse();
   const Eigen::Matrix3d essential = Hat(b_from_a.translation) * b_from_a.RotationMatrix();
   return b.calibration.inverse().transpose() * essential * a.calibration.inverse();
@@ -205,7 +205,7 @@ double EpipolarDistance(const Eigen::Matrix3d& fundamental, const Eigen::Vector2
 
 TEST(RelocFeatures, NeighbouringTempleViewsMatchOnTheirEpipolarGeometry) {
   EVLOC_REQUIRE_SHARED_DATA(parameters, "middlebury/templeSparseRing/templeSR_par.txt");
-  const auto views = mapper::testing::ReadMiddleburyParameters(parameters);
+  const auto views = evloc::testing::ReadMiddleburyParameters(parameters);
   ASSERT_EQ(views.size(), 16u);
   // Pairs of views 23 degrees apart on the ring.
   for (const auto& [first, second] : {std::pair{0, 1}, std::pair{3, 4}, std::pair{6, 7}}) {

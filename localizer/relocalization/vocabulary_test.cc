@@ -12,7 +12,7 @@
 #include "core/common/error.h"
 #include "core/common/test_data.h"
 #include "localizer/relocalization/synthetic_images_test_util.h"
-#include "mapper/middlebury_test_util.h"
+#include "core/dataset/testing/middlebury.h"
 
 namespace evloc::relocalization {
 namespace {
@@ -146,13 +146,13 @@ float Mean(const std::vector<float>& values) {
 }
 
 // Camera centre of a Middlebury view, world coordinates.
-Eigen::Vector3d Centre(const mapper::testing::MiddleburyView& view) {
+Eigen::Vector3d Centre(const evloc::testing::MiddleburyView& view) {
   return view.cam_from_world.Inverse().translation;
 }
 
 TEST(RelocVocabulary, HeldOutTempleViewsRetrieveANeighbourAndOutscoreAnotherScene) {
   EVLOC_REQUIRE_SHARED_DATA(parameters, "middlebury/templeSparseRing/templeSR_par.txt");
-  const auto views = mapper::testing::ReadMiddleburyParameters(parameters);
+  const auto views = evloc::testing::ReadMiddleburyParameters(parameters);
   ASSERT_EQ(views.size(), 16u);
   // The map: every second view; the queries: the views in between.
   std::vector<int> database_views, query_views;
