@@ -81,7 +81,10 @@ COLMAP:
                            --images-list (video), else exhaustive up to 50 images)
   --colmap PATH            COLMAP executable (default: colmap in PATH)
   --colmap-workspace DIR   workspace kept for re-runs (default: MAPDIR.colmap-workspace)
-  --threads N              threads for COLMAP and the semi-dense stage (default 2)
+  --threads N              threads for COLMAP and the semi-dense stage (default 2); the map
+                           is the same for any N
+  --fast-nondeterministic  COLMAP feature extraction and mapping on --threads threads too
+                           (default: one thread and a fixed seed, docs/mapper.md)
   --max-features N         SIFT features per image (default 8192)
 Map:
   --max-keyframes N        at most N keyframes (default: no limit)
@@ -109,6 +112,10 @@ BuildCommandLine ParseBuildCommandLine(const std::vector<std::string>& arguments
     }
     if (flag == "--accept-bad-alignment") {
       options.accept_bad_alignment = true;
+      continue;
+    }
+    if (flag == "--fast-nondeterministic") {
+      options.colmap.deterministic = false;
       continue;
     }
     if (flag == "--help" || flag == "-h") {

@@ -63,10 +63,15 @@ TEST(BuildCommand, ParsesFlagsIntoOptions) {
   EXPECT_EQ(options.alignment_limits.max_centre_rms_fraction, 0.1);
   EXPECT_EQ(options.alignment_limits.max_rotation_rms_deg, 5.0);
   EXPECT_FALSE(options.accept_bad_alignment);
+  EXPECT_TRUE(options.colmap.deterministic);
+  EXPECT_EQ(options.colmap.OrderedStageThreads(), 1);
   const MapBuilderOptions alignment =
       ParseBuildCommandLine({"build", "--images", "x", "--out", "y", "--max-alignment-residual",
-                             "0.2", "--max-alignment-rotation", "3", "--accept-bad-alignment"})
+                             "0.2", "--max-alignment-rotation", "3", "--accept-bad-alignment",
+                             "--fast-nondeterministic", "--threads", "3"})
           .options;
+  EXPECT_FALSE(alignment.colmap.deterministic);
+  EXPECT_EQ(alignment.colmap.OrderedStageThreads(), 3);
   EXPECT_EQ(alignment.alignment_limits.max_centre_rms_fraction, 0.2);
   EXPECT_EQ(alignment.alignment_limits.max_rotation_rms_deg, 3.0);
   EXPECT_TRUE(alignment.accept_bad_alignment);
@@ -158,8 +163,9 @@ TEST(BuildCommand, TimeKeyedPosesMayLeaveOutImagesAtTheEnds) {
 }
 
 // The short end-to-end run of the default suite: 8 consecutive real templeSparseRing photos (a
-// 157.5 degree arc) with their calibrated poses (COLMAP triangulates only), then a re-run that
-// reuses the COLMAP workspace. The 16-image figures are in map_builder_accuracy_test.cc (long).
+// 157.5 degree arc) with their calibrated poses (COLMAP triangulates only), then re-runs that
+// reuse the COLMAP workspace: the same map content (content_crc32c) with 2 and with 1 thread.
+// The 16-image figures are in map_builder_accuracy_test.cc (long).
 TEST(BuildCommand, TempleWithKnownPosesEndToEnd) {
   EVLOC_REQUIRE_SHARED_DATA(parameters, "middlebury/templeSparseRing/templeSR_par.txt");
   const fs::path image_dir = parameters.parent_path();
@@ -218,7 +224,16 @@ TEST(BuildCommand, TempleWithKnownPosesEndToEnd) {
   ASSERT_EQ(RunBuild(arguments), 0);
   const std::string report = ReadFileToString(second / "report.json");
   EXPECT_NE(report.find("\"reused\": true"), std::string::npos) << report;
-  EXPECT_EQ(LoadMap(second / "map.evmap").size(), map.size());
+  const uint32_t content = ComputeMapContentChecksum(map);
+  EXPECT_EQ(ComputeMapContentChecksum(LoadMap(second / "map.evmap")), content);
+  // One thread instead of two (COLMAP reused): the same content.
+  const fs::path third = directory / "map3";
+  arguments = inputs;
+  arguments.insert(arguments.end(), {"--out", third.string(), "--threads", "1"});
+  ASSERT_EQ(RunBuild(arguments), 0);
+  EXPECT_EQ(ComputeMapContentChecksum(LoadMap(third / "map.evmap")), content);
+  std::cout << "templeSparseRing 8 images, known poses: content_crc32c " << std::hex << content
+            << std::dec << " (2 threads, again, 1 thread)\n";
   fs::remove_all(directory);
 }
 

@@ -114,6 +114,7 @@ std::string MatcherTypeName(MatcherType type) {
 void ColmapOptions::Check() const {
   if (executable.empty()) throw InvalidArgumentError("COLMAP executable must not be empty");
   if (num_threads < 1) throw InvalidArgumentError("COLMAP num_threads must be at least 1");
+  if (random_seed < 0) throw InvalidArgumentError("COLMAP random_seed must be >= 0");
   if (exhaustive_max_images < 2) {
     throw InvalidArgumentError("COLMAP exhaustive_max_images must be at least 2");
   }
@@ -242,6 +243,7 @@ void ColmapRunner::Run(const std::string& command,
   CreateDirectories(LogDir());
   std::vector<std::string> full = {executable_.string(), command};
   full.insert(full.end(), arguments.begin(), arguments.end());
+  full.insert(full.end(), {"--random_seed", std::to_string(options_.random_seed)});
   RunLoggedCommand(full, LogDir() / (command + ".log"));
 }
 
@@ -262,7 +264,7 @@ void ColmapRunner::ExtractFeatures(const std::vector<std::string>& image_names) 
                                         "--SiftExtraction.use_gpu",
                                         "0",
                                         "--SiftExtraction.num_threads",
-                                        std::to_string(options_.num_threads),
+                                        std::to_string(options_.OrderedStageThreads()),
                                         "--SiftExtraction.max_num_features",
                                         std::to_string(options_.max_num_features)};
   if (options_.camera) {
@@ -310,7 +312,7 @@ void ColmapRunner::Map(const std::filesystem::path& output_dir) const {
                                         "--output_path",
                                         output_dir.string(),
                                         "--Mapper.num_threads",
-                                        std::to_string(options_.num_threads),
+                                        std::to_string(options_.OrderedStageThreads()),
                                         "--Mapper.abs_pose_min_num_inliers",
                                         std::to_string(options_.abs_pose_min_num_inliers),
                                         "--Mapper.abs_pose_min_inlier_ratio",
@@ -356,7 +358,7 @@ void ColmapRunner::Triangulate(const std::filesystem::path& input_model,
        "--input_path", input_model.string(), "--output_path", output_model.string(),
        "--Mapper.ba_refine_focal_length", "0", "--Mapper.ba_refine_principal_point", "0",
        "--Mapper.ba_refine_extra_params", "0", "--Mapper.num_threads",
-       std::to_string(options_.num_threads)});
+       std::to_string(options_.OrderedStageThreads())});
 }
 
 void ColmapRunner::ConvertToText(const std::filesystem::path& input_model,

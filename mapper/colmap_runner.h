@@ -36,8 +36,15 @@ std::string MatcherTypeName(MatcherType type);
 struct ColmapOptions {
   // The COLMAP executable: a path, or a name looked up in PATH.
   std::string executable = "colmap";
-  // Threads for extraction, matching and mapping.
+  // Threads for extraction, matching and mapping (with `deterministic`: matching only).
   int num_threads = 2;
+  // Reproducible runs (the default, docs/mapper.md "Reproducible maps"): every command gets
+  // --random_seed, and feature extraction (whose threads number the images in the order they
+  // finish), mapping and triangulation run on one thread (COLMAP 3.8's bundle_adjuster has no
+  // thread option). false: num_threads everywhere (--fast-nondeterministic).
+  bool deterministic = true;
+  // The seed passed as --random_seed to every COLMAP command.
+  int random_seed = 0;
   // Pair selection for matching.
   MatcherType matcher = MatcherType::kAuto;
   // With kAuto, exhaustive matching up to this many images, sequential above.
@@ -71,6 +78,8 @@ struct ColmapOptions {
 
   // Throws InvalidArgumentError on a bad value.
   void Check() const;
+  // Threads of the stages whose results depend on their thread count: 1 when deterministic.
+  int OrderedStageThreads() const { return deterministic ? 1 : num_threads; }
 };
 
 // The absolute path of `executable` (kept as given when it contains a '/', else looked up in

@@ -11,6 +11,12 @@ add_library(evloc_mapper_pipeline
   ${CMAKE_CURRENT_LIST_DIR}/semidense_depth.cc
   ${CMAKE_CURRENT_LIST_DIR}/map_merge.cc
   ${CMAKE_CURRENT_LIST_DIR}/pose_alignment.cc
+  ${CMAKE_CURRENT_LIST_DIR}/build_inputs.cc
+  ${CMAKE_CURRENT_LIST_DIR}/build_workspace.cc
+  ${CMAKE_CURRENT_LIST_DIR}/build_sparse.cc
+  ${CMAKE_CURRENT_LIST_DIR}/build_stages.cc
+  ${CMAKE_CURRENT_LIST_DIR}/build_report.cc
+  ${CMAKE_CURRENT_LIST_DIR}/map_preview.cc
   ${CMAKE_CURRENT_LIST_DIR}/map_builder.cc
   ${CMAKE_CURRENT_LIST_DIR}/build_command.cc)
 target_include_directories(evloc_mapper_pipeline PUBLIC ${PROJECT_SOURCE_DIR})
@@ -43,6 +49,7 @@ evloc_add_test(NAME evloc_mapper_pipeline_test
           ${CMAKE_CURRENT_LIST_DIR}/map_merge_test.cc
           ${CMAKE_CURRENT_LIST_DIR}/pose_alignment_test.cc
           ${CMAKE_CURRENT_LIST_DIR}/build_command_test.cc
+          ${CMAKE_CURRENT_LIST_DIR}/build_workspace_test.cc
           ${CMAKE_CURRENT_LIST_DIR}/map_accuracy_test.cc
   LIBS evloc_mapper_pipeline evloc_mapper_accuracy evloc_trajectory)
 
