@@ -34,8 +34,9 @@ std::string WorkspaceFingerprint(const MapBuilderOptions& options,
                                  const std::optional<Camera>& camera, MatcherType matcher,
                                  const std::string& colmap_version) {
   std::ostringstream text;
-  // v3: content hashes instead of file sizes alone, and the COLMAP version.
-  text << "evloc-mapper colmap workspace v3\n";
+  // v3: content hashes instead of file sizes alone, and the COLMAP version; v4: the matcher
+  // implementation (evloc's deterministic one or COLMAP's).
+  text << "evloc-mapper colmap workspace v4\n";
   text << "colmap " << colmap_version << "\n";
   text << "images " << fs::absolute(options.image_dir).lexically_normal().string() << "\n";
   for (const InputImage& image : images) {
@@ -53,6 +54,8 @@ std::string WorkspaceFingerprint(const MapBuilderOptions& options,
   }
   text << "matcher " << MatcherTypeName(matcher) << " overlap " << options.colmap.sequential_overlap
        << " features " << options.colmap.max_num_features << "\n";
+  text << (options.colmap.deterministic ? "matching evloc deterministic v1\n"
+                                        : "matching colmap\n");
   return text.str();
 }
 

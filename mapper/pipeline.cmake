@@ -6,7 +6,9 @@ find_package(SQLite3 REQUIRED)
 
 add_library(evloc_mapper_pipeline
   ${CMAKE_CURRENT_LIST_DIR}/colmap_model.cc
+  ${CMAKE_CURRENT_LIST_DIR}/colmap_database.cc
   ${CMAKE_CURRENT_LIST_DIR}/colmap_runner.cc
+  ${CMAKE_CURRENT_LIST_DIR}/feature_matching.cc
   ${CMAKE_CURRENT_LIST_DIR}/keyframe_selection.cc
   ${CMAKE_CURRENT_LIST_DIR}/semidense_depth.cc
   ${CMAKE_CURRENT_LIST_DIR}/map_merge.cc
@@ -23,7 +25,7 @@ target_include_directories(evloc_mapper_pipeline PUBLIC ${PROJECT_SOURCE_DIR})
 target_link_libraries(evloc_mapper_pipeline
   PUBLIC evloc_maps evloc_camera evloc_geometry evloc_common opencv_core opencv_imgproc opencv_imgcodecs
   PRIVATE evloc_trajectory nlohmann_json::nlohmann_json SQLite::SQLite3 Threads::Threads
-          ${PCL_LIBRARIES})
+          opencv_calib3d ${PCL_LIBRARIES})
 target_compile_definitions(evloc_mapper_pipeline PRIVATE EVLOC_VERSION="${PROJECT_VERSION}")
 # PCL headers are included by map_merge.cc only; SYSTEM keeps their warnings out.
 target_include_directories(evloc_mapper_pipeline SYSTEM PRIVATE ${PCL_INCLUDE_DIRS})
@@ -50,8 +52,9 @@ evloc_add_test(NAME evloc_mapper_pipeline_test
           ${CMAKE_CURRENT_LIST_DIR}/pose_alignment_test.cc
           ${CMAKE_CURRENT_LIST_DIR}/build_command_test.cc
           ${CMAKE_CURRENT_LIST_DIR}/build_workspace_test.cc
+          ${CMAKE_CURRENT_LIST_DIR}/feature_matching_test.cc
           ${CMAKE_CURRENT_LIST_DIR}/map_accuracy_test.cc
-  LIBS evloc_mapper_pipeline evloc_mapper_accuracy evloc_trajectory)
+  LIBS evloc_mapper_pipeline evloc_mapper_accuracy evloc_trajectory SQLite::SQLite3)
 
 evloc_add_test(NAME evloc_mapper_accuracy_test
   SOURCES ${CMAKE_CURRENT_LIST_DIR}/map_builder_accuracy_test.cc

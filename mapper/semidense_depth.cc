@@ -12,6 +12,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "core/common/error.h"
+#include "mapper/parallel_for.h"
 
 namespace evloc::mapper {
 namespace {
@@ -37,34 +38,8 @@ bool Sample(const cv::Mat& image, double x, double y, double* value) {
   return true;
 }
 
-// Runs body(begin, end) over [0, count) split into `num_threads` contiguous chunks.
-template <typename Body>
-void ParallelFor(size_t count, int num_threads, const Body& body) {
-  const size_t threads = std::max<size_t>(1, std::min<size_t>(num_threads, count));
-  if (threads <= 1) {
-    body(size_t{0}, count);
-    return;
-  }
-  // Interleaved blocks balance the load when work is unevenly spread over the image.
-  constexpr size_t kBlock = 64;
-  std::vector<std::thread> workers;
-  std::vector<std::exception_ptr> errors(threads);
-  for (size_t worker = 0; worker < threads; ++worker) {
-    workers.emplace_back([&, worker] {
-      try {
-        for (size_t begin = worker * kBlock; begin < count; begin += threads * kBlock) {
-          body(begin, std::min(count, begin + kBlock));
-        }
-      } catch (...) {
-        errors[worker] = std::current_exception();
-      }
-    });
-  }
-  for (std::thread& worker : workers) worker.join();
-  for (const std::exception_ptr& error : errors) {
-    if (error) std::rethrow_exception(error);
-  }
-}
+// Interleaved blocks of pixels balance the load when work is unevenly spread over the image.
+constexpr size_t kParallelBlock = 64;
 
 // One stereo hypothesis for a pixel.
 struct Hypothesis {
@@ -483,37 +458,40 @@ KeyframeDepth EstimateKeyframeDepth(const DepthFrame& keyframe,
   const double max_inverse_depth = 1.0 / min_depth;
 
   std::vector<std::optional<DepthPixel>> estimates(candidates.size());
-  ParallelFor(candidates.size(), options.num_threads, [&](size_t begin, size_t end) {
-    std::vector<Hypothesis> hypotheses;
-    for (size_t c = begin; c < end; ++c) {
-      const Eigen::Vector2d pixel = candidates[c].cast<double>();
-      Eigen::Vector3d ray;
-      if (!keyframe.camera.Unproject(pixel, &ray)) continue;
-      const double gradient_x = keyframe.gradient_x.at<float>(candidates[c].y(), candidates[c].x());
-      const double gradient_y = keyframe.gradient_y.at<float>(candidates[c].y(), candidates[c].x());
-      const double magnitude = std::hypot(gradient_x, gradient_y);
-      const Eigen::Vector2d direction = Eigen::Vector2d(gradient_x, gradient_y) / magnitude;
-      hypotheses.clear();
-      for (const StereoPair& pair : pairs) {
-        Hypothesis hypothesis;
-        if (SearchEpipolar(keyframe, pair, pixel, ray, direction, magnitude, min_inverse_depth,
-                           max_inverse_depth, options, &hypothesis)) {
-          hypotheses.push_back(hypothesis);
+  ParallelFor(
+      candidates.size(), options.num_threads, kParallelBlock, [&](size_t begin, size_t end) {
+        std::vector<Hypothesis> hypotheses;
+        for (size_t c = begin; c < end; ++c) {
+          const Eigen::Vector2d pixel = candidates[c].cast<double>();
+          Eigen::Vector3d ray;
+          if (!keyframe.camera.Unproject(pixel, &ray)) continue;
+          const double gradient_x =
+              keyframe.gradient_x.at<float>(candidates[c].y(), candidates[c].x());
+          const double gradient_y =
+              keyframe.gradient_y.at<float>(candidates[c].y(), candidates[c].x());
+          const double magnitude = std::hypot(gradient_x, gradient_y);
+          const Eigen::Vector2d direction = Eigen::Vector2d(gradient_x, gradient_y) / magnitude;
+          hypotheses.clear();
+          for (const StereoPair& pair : pairs) {
+            Hypothesis hypothesis;
+            if (SearchEpipolar(keyframe, pair, pixel, ray, direction, magnitude, min_inverse_depth,
+                               max_inverse_depth, options, &hypothesis)) {
+              hypotheses.push_back(hypothesis);
+            }
+          }
+          Hypothesis fused;
+          int count = 0;
+          if (!FuseHypotheses(hypotheses, options, &fused, &count)) continue;
+          DepthPixel estimate;
+          estimate.pixel = candidates[c];
+          estimate.inverse_depth = fused.inverse_depth;
+          estimate.inverse_depth_variance = fused.variance;
+          estimate.gradient_direction = direction;
+          estimate.gradient_magnitude = magnitude;
+          estimate.num_hypotheses = count;
+          estimates[c] = estimate;
         }
-      }
-      Hypothesis fused;
-      int count = 0;
-      if (!FuseHypotheses(hypotheses, options, &fused, &count)) continue;
-      DepthPixel estimate;
-      estimate.pixel = candidates[c];
-      estimate.inverse_depth = fused.inverse_depth;
-      estimate.inverse_depth_variance = fused.variance;
-      estimate.gradient_direction = direction;
-      estimate.gradient_magnitude = magnitude;
-      estimate.num_hypotheses = count;
-      estimates[c] = estimate;
-    }
-  });
+      });
   KeyframeDepth depth;
   depth.num_candidates = candidates.size();
   std::vector<DepthPixel> fused;
@@ -565,7 +543,7 @@ void EnforceInterKeyframeConsistency(
     }
     const std::vector<DepthPixel>& pixels = (*depths)[k].pixels;
     std::vector<std::optional<DepthPixel>> kept(pixels.size());
-    ParallelFor(pixels.size(), options.num_threads, [&](size_t begin, size_t end) {
+    ParallelFor(pixels.size(), options.num_threads, kParallelBlock, [&](size_t begin, size_t end) {
       for (size_t i = begin; i < end; ++i) {
         const DepthPixel& pixel = pixels[i];
         Eigen::Vector3d ray;
