@@ -163,9 +163,10 @@ TEST(BuildCommand, TimeKeyedPosesMayLeaveOutImagesAtTheEnds) {
 }
 
 // The short end-to-end run of the default suite: 8 consecutive real templeSparseRing photos (a
-// 157.5 degree arc) with their calibrated poses (COLMAP triangulates only), then re-runs that
-// reuse the COLMAP workspace: the same map content (content_crc32c) with 2 and with 1 thread.
-// The 16-image figures are in map_builder_accuracy_test.cc (long).
+// 157.5 degree arc) with their calibrated poses (COLMAP triangulates only), a re-run that reuses
+// the COLMAP workspace, and builds in fresh workspaces with 2 and with 1 thread: the same map
+// content (content_crc32c) every time (evloc's deterministic matcher, docs/mapper.md
+// "Reproducible maps"). The 16-image figures are in map_builder_accuracy_test.cc (long).
 TEST(BuildCommand, TempleWithKnownPosesEndToEnd) {
   EVLOC_REQUIRE_SHARED_DATA(parameters, "middlebury/templeSparseRing/templeSR_par.txt");
   const fs::path image_dir = parameters.parent_path();
@@ -198,7 +199,9 @@ TEST(BuildCommand, TempleWithKnownPosesEndToEnd) {
   }
   const Map map = LoadMap(out / "map.evmap");
   EXPECT_EQ(map.keyframes.size(), 8u);
-  EXPECT_GT(map.size(), 150u);  // 8 images: 236 points measured (16 images: 2779)
+  // 8 images: 394 points measured with evloc's matcher (236 and 240 with COLMAP 3.8's matcher,
+  // which varies from run to run; docs/mapper.md "Reproducible maps").
+  EXPECT_GT(map.size(), 150u);
   // Keyframe poses are the calibrated ones.
   for (const Keyframe& keyframe : map.keyframes) {
     const auto view = std::find_if(views.begin(), views.end(), [&](const auto& candidate) {
@@ -226,14 +229,31 @@ TEST(BuildCommand, TempleWithKnownPosesEndToEnd) {
   EXPECT_NE(report.find("\"reused\": true"), std::string::npos) << report;
   const uint32_t content = ComputeMapContentChecksum(map);
   EXPECT_EQ(ComputeMapContentChecksum(LoadMap(second / "map.evmap")), content);
-  // One thread instead of two (COLMAP reused): the same content.
-  const fs::path third = directory / "map3";
-  arguments = inputs;
-  arguments.insert(arguments.end(), {"--out", third.string(), "--threads", "1"});
-  ASSERT_EQ(RunBuild(arguments), 0);
-  EXPECT_EQ(ComputeMapContentChecksum(LoadMap(third / "map.evmap")), content);
+  // Fresh workspaces (features and matches computed again) with two and with one thread: the
+  // same content.
+  for (const char* threads : {"2", "1"}) {
+    const fs::path fresh = directory / (std::string("map_fresh") + threads);
+    arguments = {"--images",
+                 image_dir.string(),
+                 "--images-list",
+                 (directory / "images.txt").string(),
+                 "--camera",
+                 camera,
+                 "--known-poses",
+                 (directory / "poses.txt").string(),
+                 "--colmap-workspace",
+                 (directory / (std::string("workspace") + threads)).string(),
+                 "--out",
+                 fresh.string(),
+                 "--threads",
+                 threads};
+    ASSERT_EQ(RunBuild(arguments), 0);
+    EXPECT_EQ(ReadFileToString(fresh / "report.json").find("\"reused\": true"), std::string::npos);
+    EXPECT_EQ(ComputeMapContentChecksum(LoadMap(fresh / "map.evmap")), content)
+        << "fresh workspace, " << threads << " threads";
+  }
   std::cout << "templeSparseRing 8 images, known poses: content_crc32c " << std::hex << content
-            << std::dec << " (2 threads, again, 1 thread)\n";
+            << std::dec << " (2 threads, reused workspace, fresh with 2 and 1 threads)\n";
   fs::remove_all(directory);
 }
 
