@@ -257,5 +257,35 @@ TEST(BuildCommand, TempleWithKnownPosesEndToEnd) {
   fs::remove_all(directory);
 }
 
+// COLMAP estimates the poses of the 16 templeSparseRing photos (calibrated camera): two builds
+// in fresh workspaces, with 2 and with 1 thread, give the same map content (about 25 s of CPU
+// each).
+TEST(BuildCommand, TempleWithEstimatedPosesIsReproducibleInFreshWorkspaces) {
+  EVLOC_REQUIRE_SHARED_DATA(parameters, "middlebury/templeSparseRing/templeSR_par.txt");
+  const fs::path image_dir = parameters.parent_path();
+  const std::vector<testing::MiddleburyView> views = testing::ReadMiddleburyParameters(parameters);
+  ASSERT_EQ(views.size(), 16u);
+  const fs::path directory = evloc::testing::MakeTempDir("build_temple_estimated");
+  const Eigen::Matrix3d& k = views[0].calibration;
+  const std::string camera = "pinhole:" + std::to_string(k(0, 0)) + "," + std::to_string(k(1, 1)) +
+                             "," + std::to_string(k(0, 2)) + "," + std::to_string(k(1, 2));
+  std::vector<uint32_t> contents;
+  for (const char* threads : {"2", "1"}) {
+    const fs::path out = directory / (std::string("map") + threads);
+    ASSERT_EQ(RunBuild({"--images", image_dir.string(), "--camera", camera, "--colmap-workspace",
+                        (directory / (std::string("workspace") + threads)).string(), "--out",
+                        out.string(), "--threads", threads}),
+              0);
+    const Map map = LoadMap(out / "map.evmap");
+    EXPECT_EQ(map.keyframes.size(), 16u);
+    EXPECT_GT(map.size(), 2000u);  // 3382 points measured
+    contents.push_back(ComputeMapContentChecksum(map));
+  }
+  EXPECT_EQ(contents[1], contents[0]);
+  std::cout << "templeSparseRing 16 images, estimated poses: content_crc32c " << std::hex
+            << contents[0] << " (2 threads), " << contents[1] << " (1 thread)" << std::dec << "\n";
+  fs::remove_all(directory);
+}
+
 }  // namespace
 }  // namespace evloc::mapper
