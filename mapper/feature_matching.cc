@@ -3,6 +3,7 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
+#include <numbers>
 #include <set>
 
 #include <opencv2/calib3d.hpp>
@@ -87,7 +88,7 @@ void FeatureMatchingOptions::Check() const {
   if (!(max_ratio > 0.0 && max_ratio <= 1.0)) {
     throw InvalidArgumentError("matching max_ratio must be in (0, 1]");
   }
-  if (!(max_distance > 0.0 && max_distance <= M_PI / 2)) {
+  if (!(max_distance > 0.0 && max_distance <= std::numbers::pi / 2)) {
     throw InvalidArgumentError("matching max_distance must be in (0, pi/2] radians");
   }
   if (!(max_error_px > 0.0 && max_error_px <= 100.0)) {
