@@ -253,17 +253,20 @@ std::vector<PairGeometry> MatchImagePairs(const std::vector<ImageFeatures>& imag
   std::vector<PairGeometry> results(pairs.size());
   // One pair per block, dealt round-robin: pair k always runs alone on worker k mod threads and
   // writes only results[k].
-  ParallelFor(pairs.size(), options.num_threads, 1, [&](size_t begin, size_t end) {
-    for (size_t k = begin; k < end; ++k) {
-      const ImageFeatures& image1 = images[pairs[k].first];
-      const ImageFeatures& image2 = images[pairs[k].second];
-      PairGeometry& result = results[k];
-      result.image_id1 = image1.image_id;
-      result.image_id2 = image2.image_id;
-      result.matches = MatchDescriptors(image1.descriptors, image2.descriptors, options);
-      VerifyPair(image1, image2, camera, options, &result);
-    }
-  });
+  ParallelFor(
+      pairs.size(), options.num_threads,
+      [&](size_t begin, size_t end) {
+        for (size_t k = begin; k < end; ++k) {
+          const ImageFeatures& image1 = images[pairs[k].first];
+          const ImageFeatures& image2 = images[pairs[k].second];
+          PairGeometry& result = results[k];
+          result.image_id1 = image1.image_id;
+          result.image_id2 = image2.image_id;
+          result.matches = MatchDescriptors(image1.descriptors, image2.descriptors, options);
+          VerifyPair(image1, image2, camera, options, &result);
+        }
+      },
+      /*block=*/1);
   return results;
 }
 

@@ -15,7 +15,7 @@ namespace evloc::mapper {
 // min(num_threads, count) threads (interleaved blocks balance unevenly spread work); rethrows the
 // first worker's exception after all have joined.
 template <typename Body>
-void ParallelFor(size_t count, int num_threads, size_t block, const Body& body) {
+void ParallelFor(size_t count, int num_threads, const Body& body, size_t block = 64) {
   const size_t threads = std::max<size_t>(1, std::min<size_t>(num_threads, count));
   if (threads <= 1) {
     body(size_t{0}, count);

@@ -38,9 +38,6 @@ bool Sample(const cv::Mat& image, double x, double y, double* value) {
   return true;
 }
 
-// Interleaved blocks of pixels balance the load when work is unevenly spread over the image.
-constexpr size_t kParallelBlock = 64;
-
 // One stereo hypothesis for a pixel.
 struct Hypothesis {
   double inverse_depth = 0.0;
@@ -458,40 +455,37 @@ KeyframeDepth EstimateKeyframeDepth(const DepthFrame& keyframe,
   const double max_inverse_depth = 1.0 / min_depth;
 
   std::vector<std::optional<DepthPixel>> estimates(candidates.size());
-  ParallelFor(
-      candidates.size(), options.num_threads, kParallelBlock, [&](size_t begin, size_t end) {
-        std::vector<Hypothesis> hypotheses;
-        for (size_t c = begin; c < end; ++c) {
-          const Eigen::Vector2d pixel = candidates[c].cast<double>();
-          Eigen::Vector3d ray;
-          if (!keyframe.camera.Unproject(pixel, &ray)) continue;
-          const double gradient_x =
-              keyframe.gradient_x.at<float>(candidates[c].y(), candidates[c].x());
-          const double gradient_y =
-              keyframe.gradient_y.at<float>(candidates[c].y(), candidates[c].x());
-          const double magnitude = std::hypot(gradient_x, gradient_y);
-          const Eigen::Vector2d direction = Eigen::Vector2d(gradient_x, gradient_y) / magnitude;
-          hypotheses.clear();
-          for (const StereoPair& pair : pairs) {
-            Hypothesis hypothesis;
-            if (SearchEpipolar(keyframe, pair, pixel, ray, direction, magnitude, min_inverse_depth,
-                               max_inverse_depth, options, &hypothesis)) {
-              hypotheses.push_back(hypothesis);
-            }
-          }
-          Hypothesis fused;
-          int count = 0;
-          if (!FuseHypotheses(hypotheses, options, &fused, &count)) continue;
-          DepthPixel estimate;
-          estimate.pixel = candidates[c];
-          estimate.inverse_depth = fused.inverse_depth;
-          estimate.inverse_depth_variance = fused.variance;
-          estimate.gradient_direction = direction;
-          estimate.gradient_magnitude = magnitude;
-          estimate.num_hypotheses = count;
-          estimates[c] = estimate;
+  ParallelFor(candidates.size(), options.num_threads, [&](size_t begin, size_t end) {
+    std::vector<Hypothesis> hypotheses;
+    for (size_t c = begin; c < end; ++c) {
+      const Eigen::Vector2d pixel = candidates[c].cast<double>();
+      Eigen::Vector3d ray;
+      if (!keyframe.camera.Unproject(pixel, &ray)) continue;
+      const double gradient_x = keyframe.gradient_x.at<float>(candidates[c].y(), candidates[c].x());
+      const double gradient_y = keyframe.gradient_y.at<float>(candidates[c].y(), candidates[c].x());
+      const double magnitude = std::hypot(gradient_x, gradient_y);
+      const Eigen::Vector2d direction = Eigen::Vector2d(gradient_x, gradient_y) / magnitude;
+      hypotheses.clear();
+      for (const StereoPair& pair : pairs) {
+        Hypothesis hypothesis;
+        if (SearchEpipolar(keyframe, pair, pixel, ray, direction, magnitude, min_inverse_depth,
+                           max_inverse_depth, options, &hypothesis)) {
+          hypotheses.push_back(hypothesis);
         }
-      });
+      }
+      Hypothesis fused;
+      int count = 0;
+      if (!FuseHypotheses(hypotheses, options, &fused, &count)) continue;
+      DepthPixel estimate;
+      estimate.pixel = candidates[c];
+      estimate.inverse_depth = fused.inverse_depth;
+      estimate.inverse_depth_variance = fused.variance;
+      estimate.gradient_direction = direction;
+      estimate.gradient_magnitude = magnitude;
+      estimate.num_hypotheses = count;
+      estimates[c] = estimate;
+    }
+  });
   KeyframeDepth depth;
   depth.num_candidates = candidates.size();
   std::vector<DepthPixel> fused;
@@ -543,7 +537,7 @@ void EnforceInterKeyframeConsistency(
     }
     const std::vector<DepthPixel>& pixels = (*depths)[k].pixels;
     std::vector<std::optional<DepthPixel>> kept(pixels.size());
-    ParallelFor(pixels.size(), options.num_threads, kParallelBlock, [&](size_t begin, size_t end) {
+    ParallelFor(pixels.size(), options.num_threads, [&](size_t begin, size_t end) {
       for (size_t i = begin; i < end; ++i) {
         const DepthPixel& pixel = pixels[i];
         Eigen::Vector3d ray;
