@@ -81,7 +81,11 @@ COLMAP:
                            --images-list (video), else exhaustive up to 50 images)
   --colmap PATH            COLMAP executable (default: colmap in PATH)
   --colmap-workspace DIR   workspace kept for re-runs (default: MAPDIR.colmap-workspace)
-  --threads N              threads for COLMAP and the semi-dense stage (default 2)
+  --threads N              threads for matching, COLMAP and the semi-dense stage (default 2);
+                           the map is the same for any N
+  --fast-nondeterministic  COLMAP's matcher, and COLMAP feature extraction and mapping on
+                           --threads threads (default: evloc's deterministic matcher, one
+                           thread and a fixed seed for COLMAP, docs/mapper.md)
   --max-features N         SIFT features per image (default 8192)
 Map:
   --max-keyframes N        at most N keyframes (default: no limit)
@@ -109,6 +113,10 @@ BuildCommandLine ParseBuildCommandLine(const std::vector<std::string>& arguments
     }
     if (flag == "--accept-bad-alignment") {
       options.accept_bad_alignment = true;
+      continue;
+    }
+    if (flag == "--fast-nondeterministic") {
+      options.colmap.deterministic = false;
       continue;
     }
     if (flag == "--help" || flag == "-h") {

@@ -11,9 +11,6 @@
 namespace evloc::mapper {
 namespace {
 
-// COLMAP's pixel convention minus evloc's: COLMAP places the top-left pixel centre at 0.5.
-constexpr double kColmapPixelOffset = 0.5;
-
 // Splits a line into whitespace-separated tokens.
 std::vector<std::string> Tokenize(const std::string& line) {
   std::istringstream stream(line);

@@ -19,6 +19,9 @@
 
 namespace evloc::mapper {
 
+// COLMAP's pixel convention minus evloc's: COLMAP places the top-left pixel centre at 0.5.
+inline constexpr double kColmapPixelOffset = 0.5;
+
 // Marks a 2D observation of images.txt that is not part of any 3D point (COLMAP writes -1).
 inline constexpr uint64_t kNoPoint3D = ~uint64_t{0};
 

@@ -2,7 +2,6 @@
 
 #include <fcntl.h>
 #include <spawn.h>
-#include <sqlite3.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -18,6 +17,7 @@
 #include "core/common/error.h"
 #include "core/common/file_util.h"
 #include "mapper/colmap_model.h"
+#include "mapper/feature_matching.h"
 
 extern char** environ;
 
@@ -50,45 +50,6 @@ void CreateDirectories(const std::filesystem::path& path) {
   if (error) throw IoError("cannot create directory " + path.string() + ": " + error.message());
 }
 
-// Opens a COLMAP database read-only; closes it on destruction.
-class Database {
- public:
-  explicit Database(const std::filesystem::path& path) : path_(path) {
-    if (!std::filesystem::exists(path)) {
-      throw IoError("COLMAP database " + path.string() + " does not exist");
-    }
-    if (sqlite3_open_v2(path.c_str(), &handle_, SQLITE_OPEN_READONLY, nullptr) != SQLITE_OK) {
-      const std::string message = handle_ ? sqlite3_errmsg(handle_) : "out of memory";
-      sqlite3_close(handle_);
-      throw IoError("cannot open COLMAP database " + path.string() + ": " + message);
-    }
-  }
-  ~Database() { sqlite3_close(handle_); }
-  Database(const Database&) = delete;
-  Database& operator=(const Database&) = delete;
-
-  // Runs `sql`, calling `row` for each result row.
-  template <typename RowFunction>
-  void Query(const std::string& sql, RowFunction row) const {
-    sqlite3_stmt* statement = nullptr;
-    if (sqlite3_prepare_v2(handle_, sql.c_str(), -1, &statement, nullptr) != SQLITE_OK) {
-      throw IoError("cannot read COLMAP database " + path_.string() + ": " +
-                    sqlite3_errmsg(handle_));
-    }
-    int status = SQLITE_ROW;
-    while ((status = sqlite3_step(statement)) == SQLITE_ROW) row(statement);
-    sqlite3_finalize(statement);
-    if (status != SQLITE_DONE) {
-      throw IoError("cannot read COLMAP database " + path_.string() + ": " +
-                    sqlite3_errmsg(handle_));
-    }
-  }
-
- private:
-  std::filesystem::path path_;
-  sqlite3* handle_ = nullptr;
-};
-
 }  // namespace
 
 MatcherType ParseMatcherType(const std::string& name) {
@@ -114,6 +75,7 @@ std::string MatcherTypeName(MatcherType type) {
 void ColmapOptions::Check() const {
   if (executable.empty()) throw InvalidArgumentError("COLMAP executable must not be empty");
   if (num_threads < 1) throw InvalidArgumentError("COLMAP num_threads must be at least 1");
+  if (random_seed < 0) throw InvalidArgumentError("COLMAP random_seed must be >= 0");
   if (exhaustive_max_images < 2) {
     throw InvalidArgumentError("COLMAP exhaustive_max_images must be at least 2");
   }
@@ -242,6 +204,7 @@ void ColmapRunner::Run(const std::string& command,
   CreateDirectories(LogDir());
   std::vector<std::string> full = {executable_.string(), command};
   full.insert(full.end(), arguments.begin(), arguments.end());
+  full.insert(full.end(), {"--random_seed", std::to_string(options_.random_seed)});
   RunLoggedCommand(full, LogDir() / (command + ".log"));
 }
 
@@ -262,7 +225,7 @@ void ColmapRunner::ExtractFeatures(const std::vector<std::string>& image_names) 
                                         "--SiftExtraction.use_gpu",
                                         "0",
                                         "--SiftExtraction.num_threads",
-                                        std::to_string(options_.num_threads),
+                                        std::to_string(options_.OrderedStageThreads()),
                                         "--SiftExtraction.max_num_features",
                                         std::to_string(options_.max_num_features)};
   if (options_.camera) {
@@ -284,13 +247,29 @@ MatcherType ColmapRunner::EffectiveMatcher(size_t num_images) const {
 }
 
 void ColmapRunner::MatchFeatures(size_t num_images) const {
+  const bool exhaustive = EffectiveMatcher(num_images) == MatcherType::kExhaustive;
+  if (options_.deterministic) {
+    CreateDirectories(LogDir());
+    FeatureMatchingOptions matching;
+    matching.num_threads = options_.num_threads;
+    const DatabaseMatchingSummary summary = MatchDatabase(
+        DatabasePath(), exhaustive ? 0 : options_.sequential_overlap, options_.camera, matching);
+    std::ofstream log(LogDir() / "evloc_matcher.log", std::ios::app);
+    log << "evloc matcher (" << (exhaustive ? "exhaustive" : "sequential") << ", "
+        << (options_.camera ? "essential" : "fundamental") << " matrix): " << summary.num_images
+        << " images, " << summary.num_pairs << " pairs, " << summary.num_matches << " matches, "
+        << summary.num_verified_pairs << " verified pairs, " << summary.num_inlier_matches
+        << " inlier matches\n";
+    if (!log) throw IoError("cannot write " + (LogDir() / "evloc_matcher.log").string());
+    return;
+  }
   const std::vector<std::string> common = {"--database_path",
                                            DatabasePath().string(),
                                            "--SiftMatching.use_gpu",
                                            "0",
                                            "--SiftMatching.num_threads",
                                            std::to_string(options_.num_threads)};
-  if (EffectiveMatcher(num_images) == MatcherType::kExhaustive) {
+  if (exhaustive) {
     Run("exhaustive_matcher", common);
   } else {
     std::vector<std::string> arguments = common;
@@ -310,7 +289,7 @@ void ColmapRunner::Map(const std::filesystem::path& output_dir) const {
                                         "--output_path",
                                         output_dir.string(),
                                         "--Mapper.num_threads",
-                                        std::to_string(options_.num_threads),
+                                        std::to_string(options_.OrderedStageThreads()),
                                         "--Mapper.abs_pose_min_num_inliers",
                                         std::to_string(options_.abs_pose_min_num_inliers),
                                         "--Mapper.abs_pose_min_inlier_ratio",
@@ -356,7 +335,7 @@ void ColmapRunner::Triangulate(const std::filesystem::path& input_model,
        "--input_path", input_model.string(), "--output_path", output_model.string(),
        "--Mapper.ba_refine_focal_length", "0", "--Mapper.ba_refine_principal_point", "0",
        "--Mapper.ba_refine_extra_params", "0", "--Mapper.num_threads",
-       std::to_string(options_.num_threads)});
+       std::to_string(options_.OrderedStageThreads())});
 }
 
 void ColmapRunner::ConvertToText(const std::filesystem::path& input_model,
@@ -364,26 +343,6 @@ void ColmapRunner::ConvertToText(const std::filesystem::path& input_model,
   CreateDirectories(output_dir);
   Run("model_converter", {"--input_path", input_model.string(), "--output_path",
                           output_dir.string(), "--output_type", "TXT"});
-}
-
-std::map<std::string, uint32_t> ReadDatabaseImageIds(const std::filesystem::path& database_path) {
-  const Database database(database_path);
-  std::map<std::string, uint32_t> ids;
-  database.Query("SELECT image_id, name FROM images", [&](sqlite3_stmt* row) {
-    const uint32_t id = static_cast<uint32_t>(sqlite3_column_int64(row, 0));
-    const unsigned char* name = sqlite3_column_text(row, 1);
-    ids[name ? reinterpret_cast<const char*>(name) : ""] = id;
-  });
-  return ids;
-}
-
-std::vector<uint32_t> ReadDatabaseCameraIds(const std::filesystem::path& database_path) {
-  const Database database(database_path);
-  std::vector<uint32_t> ids;
-  database.Query("SELECT camera_id FROM cameras ORDER BY camera_id", [&](sqlite3_stmt* row) {
-    ids.push_back(static_cast<uint32_t>(sqlite3_column_int64(row, 0)));
-  });
-  return ids;
 }
 
 }  // namespace evloc::mapper

@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "core/camera/camera.h"
+#include "mapper/colmap_database.h"
 
 namespace evloc::mapper {
 
@@ -36,8 +37,17 @@ std::string MatcherTypeName(MatcherType type);
 struct ColmapOptions {
   // The COLMAP executable: a path, or a name looked up in PATH.
   std::string executable = "colmap";
-  // Threads for extraction, matching and mapping.
+  // Threads for extraction, matching and mapping (with `deterministic`: evloc's matching only).
   int num_threads = 2;
+  // Reproducible runs (the default, docs/mapper.md "Reproducible maps"): evloc's matcher
+  // (mapper/feature_matching.h) replaces COLMAP's, every command gets --random_seed, and
+  // feature extraction (whose threads number the images in the order they
+  // finish), mapping and triangulation run on one thread (COLMAP 3.8's bundle_adjuster has no
+  // thread option). false: COLMAP's matcher and num_threads everywhere
+  // (--fast-nondeterministic).
+  bool deterministic = true;
+  // The seed passed as --random_seed to every COLMAP command.
+  int random_seed = 0;
   // Pair selection for matching.
   MatcherType matcher = MatcherType::kAuto;
   // With kAuto, exhaustive matching up to this many images, sequential above.
@@ -71,6 +81,8 @@ struct ColmapOptions {
 
   // Throws InvalidArgumentError on a bad value.
   void Check() const;
+  // Threads of the stages whose results depend on their thread count: 1 when deterministic.
+  int OrderedStageThreads() const { return deterministic ? 1 : num_threads; }
 };
 
 // The absolute path of `executable` (kept as given when it contains a '/', else looked up in
@@ -104,7 +116,9 @@ class ColmapRunner {
   // feature_extractor on `image_names` (relative to the image folder): one camera for all
   // images, fixed to options.camera when given.
   void ExtractFeatures(const std::vector<std::string>& image_names) const;
-  // sequential_matcher or exhaustive_matcher, by the options and the number of images.
+  // Matches the features of the database, pairs chosen by EffectiveMatcher: deterministic,
+  // evloc's matcher (MatchDatabase, options.num_threads threads, a summary appended to
+  // logs/evloc_matcher.log); otherwise COLMAP's sequential_matcher or exhaustive_matcher.
   void MatchFeatures(size_t num_images) const;
   // The effective matcher for `num_images` images (kAuto resolved).
   MatcherType EffectiveMatcher(size_t num_images) const;
@@ -132,12 +146,5 @@ class ColmapRunner {
   std::filesystem::path workspace_;
   std::filesystem::path image_dir_;
 };
-
-// Image ids of a COLMAP database by image name (table `images`). Throws IoError when the database
-// cannot be opened or read.
-std::map<std::string, uint32_t> ReadDatabaseImageIds(const std::filesystem::path& database_path);
-
-// Camera ids of a COLMAP database, in increasing order.
-std::vector<uint32_t> ReadDatabaseCameraIds(const std::filesystem::path& database_path);
 
 }  // namespace evloc::mapper

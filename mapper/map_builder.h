@@ -15,6 +15,8 @@
 
 #include "core/camera/camera.h"
 #include "core/geometry/rigid3.h"
+#include "mapper/build_inputs.h"
+#include "mapper/build_report.h"
 #include "mapper/colmap_runner.h"
 #include "mapper/keyframe_selection.h"
 #include "mapper/map_merge.h"
@@ -22,26 +24,6 @@
 #include "mapper/semidense_depth.h"
 
 namespace evloc::mapper {
-
-// Progress of one pipeline stage.
-struct ProgressUpdate {
-  // Stage name, e.g. "colmap_features" or "semidense_depth".
-  std::string stage;
-  // Work items done in this stage.
-  size_t done = 0;
-  // Work items of this stage (1 for stages that are a single step).
-  size_t total = 1;
-  // Seconds since the build started.
-  double elapsed_seconds = 0.0;
-};
-
-// Receives progress from BuildMap; the CLI renders it.
-class ProgressListener {
- public:
-  virtual ~ProgressListener() = default;
-  // Called at the start of each stage (done = 0) and after each work item.
-  virtual void OnProgress(const ProgressUpdate& update) = 0;
-};
 
 // Options of the whole pipeline.
 struct MapBuilderOptions {
@@ -92,126 +74,11 @@ struct MapBuilderOptions {
   void Check() const;
 };
 
-// Wall and CPU time of one stage.
-struct StageTiming {
-  // Stage name.
-  std::string stage;
-  // Wall seconds.
-  double seconds = 0.0;
-  // CPU seconds (user + system) of the mapper's threads and of the child processes (COLMAP) that
-  // ended during the stage: unlike wall time, not inflated by other programs' load.
-  double cpu_seconds = 0.0;
-  // True when the stage's result was reused from the COLMAP workspace.
-  bool reused = false;
-};
-
-// What BuildMap did, written to report.json.
-struct MapBuildReport {
-  // Input images.
-  size_t num_images = 0;
-  // Images with a pose (registered by COLMAP, or given).
-  size_t num_registered = 0;
-  // Images left out because a time-keyed --known-poses trajectory does not cover their times.
-  std::vector<std::string> images_without_pose;
-  // Keyframes of the map.
-  size_t num_keyframes = 0;
-  // Sparse COLMAP points.
-  size_t num_sparse_points = 0;
-  // Semi-dense points before merging.
-  size_t num_keyframe_points = 0;
-  // Semi-dense points whose 3D gradient lies in a fitted surface plane (SurfaceGradients3d);
-  // the others keep the §3.4 gradient of their keyframe.
-  size_t num_surface_gradients = 0;
-  // Map points.
-  size_t num_points = 0;
-  // Voxel edge used for merging, metres (model units when not aligned).
-  double voxel_size = 0.0;
-  // Mean reprojection error of the COLMAP points, pixels.
-  double colmap_mean_reprojection_error_px = 0.0;
-  // "estimated" or "known".
-  std::string pose_source;
-  // The matcher COLMAP used.
-  std::string matcher;
-  // COLMAP version line.
-  std::string colmap_version;
-  // Images used for the alignment (0 without --align-to).
-  size_t alignment_num_images = 0;
-  // RMS of the aligned camera-centre residuals, metres.
-  std::optional<double> alignment_rms_m;
-  // Largest aligned camera-centre residual, metres.
-  std::optional<double> alignment_max_m;
-  // RMS of the aligned camera-orientation residuals, degrees.
-  std::optional<double> alignment_rotation_rms_deg;
-  // Largest aligned camera-orientation residual, degrees.
-  std::optional<double> alignment_rotation_max_deg;
-  // Scale of the alignment.
-  std::optional<double> alignment_scale;
-  // RMS distance of the reference camera centres from their mean, metres.
-  std::optional<double> alignment_reference_spread_m;
-  // The AlignmentLimitViolation text when the alignment exceeded the limits and the map was
-  // built anyway (accept_bad_alignment); empty otherwise.
-  std::string alignment_warning;
-  // The model-to-world similarity applied (identity without --align-to).
-  Sim3d world_from_model;
-  // Per-stage timings, in pipeline order.
-  std::vector<StageTiming> timings;
-  // Registered image poses in the output frame (world_from_cam), by image name.
-  std::map<std::string, Rigid3d> world_from_cams;
-
-  // Sum of the wall timings of stages whose name starts with `prefix`, seconds.
-  double TotalSeconds(const std::string& prefix) const;
-  // Sum of the CPU timings of stages whose name starts with `prefix`, seconds.
-  double TotalCpuSeconds(const std::string& prefix) const;
-};
-
 // Runs the pipeline and writes the map directory. Throws InvalidArgumentError for bad options or
 // inputs (missing or empty image folder, unreadable or mixed-size images, poses that do not match
 // the images, too few registered images, an output directory that holds a map or other files),
 // IoError when COLMAP is missing or fails or a file cannot be read or written. On any error the
 // output directory is left as it was.
 MapBuildReport BuildMap(const MapBuilderOptions& options, ProgressListener* progress = nullptr);
-
-// The report as the JSON text of report.json.
-std::string MapBuildReportToJson(const MapBuildReport& report);
-
-// One input image.
-struct InputImage {
-  // Name relative to the image folder (COLMAP's image name).
-  std::string name;
-  // Capture time, nanoseconds (0 without an image list).
-  int64_t t_ns = 0;
-  // Whether t_ns came from an image list.
-  bool has_time = false;
-};
-
-// The input images: from the list (`t_s path` lines, read by core/dataset's ReadTimedFileList;
-// a path relative to the folder or to the list's folder) or all image files of the folder, sorted
-// by name. Throws InvalidArgumentError when the folder is missing or holds no images, or a listed
-// file is outside the folder; IoError when a listed file is missing; ParseError naming the line
-// for a malformed list or a time that does not increase.
-std::vector<InputImage> ListInputImages(const std::filesystem::path& image_dir,
-                                        const std::optional<std::filesystem::path>& image_list);
-
-// world_from_cam poses for the images from a pose file (TUM lines interpolated at the image
-// times, or `IMAGE_NAME tx ty tz qx qy qz qw` lines); images without a pose are absent from the
-// result. Throws IoError / ParseError for unreadable or malformed files, InvalidArgumentError for
-// TUM files when the images have no times.
-std::map<std::string, Rigid3d> ReadPosesForImages(const std::filesystem::path& path,
-                                                  const std::vector<InputImage>& images);
-
-// True when the pose file's first data line starts with a time (TUM layout `t tx ty tz qx qy qz
-// qw`) rather than an image name. Throws IoError when it cannot be read.
-bool IsTimeKeyedPoseFile(const std::filesystem::path& path);
-
-// The images that have a pose in `poses`, in input order. Images without one are an error
-// (InvalidArgumentError naming them and `source`), except when the poses come from a time-keyed
-// trajectory (`time_keyed`) that starts after or ends before some images: those are left out and
-// named in `*left_out` (may be null), provided at least `min_fraction` of the images (and at
-// least one) keep a pose.
-std::vector<InputImage> ImagesWithKnownPoses(const std::vector<InputImage>& images,
-                                             const std::map<std::string, Rigid3d>& poses,
-                                             bool time_keyed, double min_fraction,
-                                             const std::string& source,
-                                             std::vector<std::string>* left_out);
 
 }  // namespace evloc::mapper

@@ -6,19 +6,26 @@ find_package(SQLite3 REQUIRED)
 
 add_library(evloc_mapper_pipeline
   ${CMAKE_CURRENT_LIST_DIR}/colmap_model.cc
+  ${CMAKE_CURRENT_LIST_DIR}/colmap_database.cc
   ${CMAKE_CURRENT_LIST_DIR}/colmap_runner.cc
+  ${CMAKE_CURRENT_LIST_DIR}/feature_matching.cc
   ${CMAKE_CURRENT_LIST_DIR}/keyframe_selection.cc
   ${CMAKE_CURRENT_LIST_DIR}/semidense_depth.cc
   ${CMAKE_CURRENT_LIST_DIR}/map_merge.cc
   ${CMAKE_CURRENT_LIST_DIR}/pose_alignment.cc
+  ${CMAKE_CURRENT_LIST_DIR}/build_inputs.cc
+  ${CMAKE_CURRENT_LIST_DIR}/build_workspace.cc
+  ${CMAKE_CURRENT_LIST_DIR}/build_sparse.cc
+  ${CMAKE_CURRENT_LIST_DIR}/build_stages.cc
+  ${CMAKE_CURRENT_LIST_DIR}/build_report.cc
+  ${CMAKE_CURRENT_LIST_DIR}/map_preview.cc
   ${CMAKE_CURRENT_LIST_DIR}/map_builder.cc
   ${CMAKE_CURRENT_LIST_DIR}/build_command.cc)
 target_include_directories(evloc_mapper_pipeline PUBLIC ${PROJECT_SOURCE_DIR})
 target_link_libraries(evloc_mapper_pipeline
   PUBLIC evloc_maps evloc_camera evloc_geometry evloc_common opencv_core opencv_imgproc opencv_imgcodecs
-  PRIVATE evloc_dataset evloc_trajectory nlohmann_json::nlohmann_json SQLite::SQLite3 Threads::Threads
-          ${PCL_LIBRARIES})
-target_compile_definitions(evloc_mapper_pipeline PRIVATE EVLOC_VERSION="${PROJECT_VERSION}")
+  PRIVATE evloc_dataset evloc_trajectory nlohmann_json::nlohmann_json SQLite::SQLite3
+          Threads::Threads opencv_calib3d ${PCL_LIBRARIES})
 # PCL headers are included by map_merge.cc only; SYSTEM keeps their warnings out.
 target_include_directories(evloc_mapper_pipeline SYSTEM PRIVATE ${PCL_INCLUDE_DIRS})
 target_compile_definitions(evloc_mapper_pipeline PRIVATE ${PCL_DEFINITIONS})
@@ -30,7 +37,9 @@ evloc_add_test(NAME evloc_mapper_pipeline_test
           ${CMAKE_CURRENT_LIST_DIR}/map_merge_test.cc
           ${CMAKE_CURRENT_LIST_DIR}/pose_alignment_test.cc
           ${CMAKE_CURRENT_LIST_DIR}/build_command_test.cc
-  LIBS evloc_mapper_pipeline evloc_map_accuracy evloc_trajectory)
+          ${CMAKE_CURRENT_LIST_DIR}/build_workspace_test.cc
+          ${CMAKE_CURRENT_LIST_DIR}/feature_matching_test.cc
+  LIBS evloc_mapper_pipeline evloc_map_accuracy evloc_trajectory SQLite::SQLite3)
 
 evloc_add_test(NAME evloc_mapper_accuracy_test
   SOURCES ${CMAKE_CURRENT_LIST_DIR}/map_builder_accuracy_test.cc

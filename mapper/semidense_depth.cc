@@ -9,10 +9,10 @@
 #include <optional>
 #include <thread>
 
-#include <Eigen/Eigenvalues>
 #include <opencv2/imgproc.hpp>
 
 #include "core/common/error.h"
+#include "mapper/parallel_for.h"
 
 namespace evloc::mapper {
 namespace {
@@ -36,35 +36,6 @@ bool Sample(const cv::Mat& image, double x, double y, double* value) {
   *value = (1.0 - ay) * ((1.0 - ax) * row0[x0] + ax * row0[x0 + 1]) +
            ay * ((1.0 - ax) * row1[x0] + ax * row1[x0 + 1]);
   return true;
-}
-
-// Runs body(begin, end) over [0, count) split into `num_threads` contiguous chunks.
-template <typename Body>
-void ParallelFor(size_t count, int num_threads, const Body& body) {
-  const size_t threads = std::max<size_t>(1, std::min<size_t>(num_threads, count));
-  if (threads <= 1) {
-    body(size_t{0}, count);
-    return;
-  }
-  // Interleaved blocks balance the load when work is unevenly spread over the image.
-  constexpr size_t kBlock = 64;
-  std::vector<std::thread> workers;
-  std::vector<std::exception_ptr> errors(threads);
-  for (size_t worker = 0; worker < threads; ++worker) {
-    workers.emplace_back([&, worker] {
-      try {
-        for (size_t begin = worker * kBlock; begin < count; begin += threads * kBlock) {
-          body(begin, std::min(count, begin + kBlock));
-        }
-      } catch (...) {
-        errors[worker] = std::current_exception();
-      }
-    });
-  }
-  for (std::thread& worker : workers) worker.join();
-  for (const std::exception_ptr& error : errors) {
-    if (error) std::rethrow_exception(error);
-  }
 }
 
 // One stereo hypothesis for a pixel.
@@ -414,17 +385,7 @@ void SemiDenseOptions::Check() const {
           "min_neighbours_to_grow must be in 0..8");
   require(min_keyframe_confirmations >= 0, "min_keyframe_confirmations must be >= 0");
   require(refinement_iterations >= 0, "refinement_iterations must be >= 0");
-  require(surface_window_px >= 0, "surface_window_px must be >= 0");
-  require(surface_window_doublings >= 0 && surface_window_doublings <= 4,
-          "surface_window_doublings must be in [0, 4]");
-  require(surface_max_slope >= 0.0, "surface_max_slope must be >= 0");
-  require(surface_edge_band_px >= 0.0, "surface_edge_band_px must be >= 0");
-  require(min_surface_points >= 3, "min_surface_points must be at least 3");
-  require(surface_max_depth_difference > 0.0, "surface_max_depth_difference must be > 0");
-  require(max_surface_thickness_ratio > 0.0 && max_surface_thickness_ratio < 1.0,
-          "max_surface_thickness_ratio must be in (0, 1)");
-  require(min_surface_width_ratio >= 0.0 && min_surface_width_ratio < 1.0,
-          "min_surface_width_ratio must be in [0, 1)");
+  surface.Check();
   require(num_threads >= 1, "num_threads must be >= 1");
 }
 
@@ -664,133 +625,13 @@ void EnforceInterKeyframeConsistency(
   *depths = std::move(result);
 }
 
-bool ComputeGradient3d(const Camera& camera, const Eigen::Vector2d& pixel,
-                       const Eigen::Vector2d& gradient_direction,
-                       const Eigen::Vector3d& point_in_cam, Eigen::Vector3d* gradient_in_cam) {
-  Eigen::Vector3d shifted_ray;
-  if (!camera.Unproject(pixel + gradient_direction.normalized(), &shifted_ray)) return false;
-  const double distance = point_in_cam.norm();
-  if (!(distance > 0.0)) return false;
-  const Eigen::Vector3d normal = point_in_cam / distance;
-  const double along = normal.dot(shifted_ray);
-  if (std::abs(along) < 1e-12) return false;
-  const Eigen::Vector3d intersection = shifted_ray * (normal.dot(point_in_cam) / along);
-  const Eigen::Vector3d offset = intersection - point_in_cam;
-  if (!(offset.norm() > 0.0)) return false;
-  *gradient_in_cam = offset.normalized();
-  return true;
-}
-
-std::vector<std::optional<Eigen::Vector3d>> SurfaceGradients3d(const Camera& camera,
-                                                               const KeyframeDepth& depth,
-                                                               const SemiDenseOptions& options) {
-  std::vector<std::optional<Eigen::Vector3d>> gradients(depth.pixels.size());
-  const int window = options.surface_window_px;
-  if (window == 0 || depth.pixels.empty()) return gradients;
-  // Points in the camera, bucketed in square cells of the base window's size.
-  std::vector<Eigen::Vector3d> points(depth.pixels.size(), Eigen::Vector3d::Zero());
-  std::vector<bool> valid(depth.pixels.size(), false);
-  const int cell = window;
-  const int cells_x = (camera.width + cell - 1) / cell;
-  const int cells_y = (camera.height + cell - 1) / cell;
-  std::vector<std::vector<uint32_t>> buckets(static_cast<size_t>(cells_x * cells_y));
-  for (size_t i = 0; i < depth.pixels.size(); ++i) {
-    const DepthPixel& pixel = depth.pixels[i];
-    Eigen::Vector3d ray;
-    if (!(pixel.inverse_depth > 0.0) || !camera.Unproject(pixel.pixel.cast<double>(), &ray)) {
-      continue;
-    }
-    if (pixel.pixel.x() < 0 || pixel.pixel.y() < 0 || pixel.pixel.x() >= camera.width ||
-        pixel.pixel.y() >= camera.height) {
-      continue;
-    }
-    points[i] = ray / pixel.inverse_depth;
-    valid[i] = true;
-    buckets[static_cast<size_t>((pixel.pixel.y() / cell) * cells_x + pixel.pixel.x() / cell)]
-        .push_back(static_cast<uint32_t>(i));
+std::vector<EdgeDepthPixel> EdgeDepthPixels(const KeyframeDepth& depth) {
+  std::vector<EdgeDepthPixel> pixels;
+  pixels.reserve(depth.pixels.size());
+  for (const DepthPixel& pixel : depth.pixels) {
+    pixels.push_back({pixel.pixel, pixel.inverse_depth, pixel.gradient_direction});
   }
-  const double max_thickness_squared =
-      options.max_surface_thickness_ratio * options.max_surface_thickness_ratio;
-  const double min_width_squared =
-      options.min_surface_width_ratio * options.min_surface_width_ratio;
-  std::vector<Eigen::Vector3d> neighbourhood;
-  // The points within `half_size` pixels of `center` on the same surface (similar depth).
-  const auto gather = [&](size_t i, int half_size) {
-    const Eigen::Vector2i& center = depth.pixels[i].pixel;
-    const Eigen::Vector2d& bright = depth.pixels[i].gradient_direction;
-    const double max_difference =
-        points[i].z() * std::max(options.surface_max_depth_difference,
-                                 options.surface_max_slope * half_size / camera.fx);
-    neighbourhood.clear();
-    const int x_begin = std::max(0, (center.x() - half_size) / cell);
-    const int x_end = std::min(cells_x - 1, (center.x() + half_size) / cell);
-    const int y_begin = std::max(0, (center.y() - half_size) / cell);
-    const int y_end = std::min(cells_y - 1, (center.y() + half_size) / cell);
-    for (int cy = y_begin; cy <= y_end; ++cy) {
-      for (int cx = x_begin; cx <= x_end; ++cx) {
-        for (const uint32_t other : buckets[static_cast<size_t>(cy * cells_x + cx)]) {
-          const Eigen::Vector2i& at = depth.pixels[other].pixel;
-          if (std::abs(at.x() - center.x()) > half_size ||
-              std::abs(at.y() - center.y()) > half_size ||
-              std::abs(points[other].z() - points[i].z()) > max_difference ||
-              (at - center).cast<double>().dot(bright) < -options.surface_edge_band_px) {
-            continue;
-          }
-          neighbourhood.push_back(points[other]);
-        }
-      }
-    }
-  };
-  for (size_t i = 0; i < depth.pixels.size(); ++i) {
-    if (!valid[i]) continue;
-    const Eigen::Vector2i& center = depth.pixels[i].pixel;
-    // The smallest window whose points form a plane (planar, and not one line).
-    std::optional<Eigen::Vector3d> plane_normal;
-    for (int doubling = 0; doubling <= options.surface_window_doublings && !plane_normal;
-         ++doubling) {
-      gather(i, window << doubling);
-      if (neighbourhood.size() < static_cast<size_t>(options.min_surface_points)) continue;
-      Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-      for (const Eigen::Vector3d& point : neighbourhood) mean += point;
-      mean /= static_cast<double>(neighbourhood.size());
-      Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();
-      for (const Eigen::Vector3d& point : neighbourhood) {
-        covariance += (point - mean) * (point - mean).transpose();
-      }
-      const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver(covariance);
-      if (solver.info() != Eigen::Success) continue;
-      const Eigen::Vector3d& eigenvalues = solver.eigenvalues();  // increasing
-      if (!(eigenvalues(2) > 0.0) || eigenvalues(0) > max_thickness_squared * eigenvalues(1) ||
-          eigenvalues(1) < min_width_squared * eigenvalues(2)) {
-        continue;
-      }
-      plane_normal = solver.eigenvectors().col(0);
-    }
-    if (!plane_normal) continue;
-    const Eigen::Vector3d& normal = *plane_normal;
-    Eigen::Vector3d view_gradient;
-    if (!ComputeGradient3d(camera, center.cast<double>(), depth.pixels[i].gradient_direction,
-                           points[i], &view_gradient)) {
-      continue;
-    }
-    // The plane through the camera centre and the image edge (perpendicular to the image
-    // gradient) cuts the surface along the 3D edge; the gradient is the in-surface direction
-    // perpendicular to that edge: the edge plane's normal projected onto the surface.
-    const Eigen::Vector2d& direction = depth.pixels[i].gradient_direction;
-    Eigen::Vector3d edge_in_view;
-    if (!ComputeGradient3d(camera, center.cast<double>(),
-                           Eigen::Vector2d(-direction.y(), direction.x()), points[i],
-                           &edge_in_view)) {
-      continue;
-    }
-    const Eigen::Vector3d edge_plane_normal = points[i].normalized().cross(edge_in_view);
-    Eigen::Vector3d surface_gradient = edge_plane_normal - edge_plane_normal.dot(normal) * normal;
-    if (surface_gradient.norm() < 0.3) continue;  // Surface seen nearly edge-on.
-    surface_gradient.normalize();
-    if (surface_gradient.dot(view_gradient) < 0.0) surface_gradient = -surface_gradient;
-    gradients[i] = surface_gradient;
-  }
-  return gradients;
+  return pixels;
 }
 
 bool SparseDepthRange(const Rigid3d& cam_from_world, const std::vector<Eigen::Vector3d>& points,

@@ -2,8 +2,8 @@
 // Mur-Artal & Tardós 2015 and Engel et al. 2013; details and defaults in docs/mapper.md):
 // candidate edge pixels, a depth range from the sparse points, an epipolar search in each stereo
 // neighbour, fusion of the hypotheses by the largest chi-square-compatible set, intra-keyframe
-// regularisation, inter-keyframe consistency and a final Gauss-Newton refinement, and the 3D
-// gradient vectors of §3.4.
+// regularisation, inter-keyframe consistency and a final Gauss-Newton refinement. The points are
+// lifted into 3D with their gradients by maps/edge_lifting.h.
 #pragma once
 
 #include <cstddef>
@@ -17,6 +17,7 @@
 
 #include "core/camera/camera.h"
 #include "core/geometry/rigid3.h"
+#include "maps/edge_lifting.h"
 
 namespace evloc::mapper {
 
@@ -88,32 +89,8 @@ struct SemiDenseOptions {
   int min_keyframe_confirmations = 2;
   // Gauss-Newton iterations of the final refinement.
   int refinement_iterations = 3;
-  // Surface gradients (SurfaceGradients3d): half-size of the pixel window whose estimated points
-  // give the local surface plane, pixels; 0 keeps the §3.4 gradients.
-  int surface_window_px = 20;
-  // Surface gradients: when the window's points are too few, or lie on one line (a single edge:
-  // under a sideways motion only the edges across it get depth), the window is doubled up to
-  // this many times (20 -> 40 -> 80 px).
-  int surface_window_doublings = 2;
-  // Surface gradients: the window needs at least this many points within
-  // surface_max_depth_difference of the pixel's depth.
-  int min_surface_points = 15;
-  // Surface gradients: points of the window whose depth differs from the pixel's by more than
-  // this fraction of it, and by more than surface_max_slope times the window's half-width at the
-  // pixel's depth, belong to another surface and are left out (the second bound keeps floors and
-  // walls seen at a grazing angle, whose depth changes fast across the window).
-  double surface_max_depth_difference = 0.05;
-  double surface_max_slope = 3.0;
-  // Surface gradients: only the points on the brighter side of the edge (and on the edge line,
-  // within this many pixels of it) are fitted. The gradient points into the brighter side, so on
-  // a crease it lies in the brighter face, as defined by the ground-truth map of
-  // docs/sim-scene.md; on a texture edge both sides are the same plane.
-  double surface_edge_band_px = 1.0;
-  // Surface gradients: the points are planar when their smallest principal standard deviation is
-  // below this fraction of the middle one...
-  double max_surface_thickness_ratio = 0.1;
-  // ... and not on one line when the middle one is above this fraction of the largest.
-  double min_surface_width_ratio = 0.15;
+  // Surface gradients of the lifted points (maps/edge_lifting.h, SurfaceGradients3d).
+  SurfaceGradientOptions surface;
   // Worker threads.
   int num_threads = 2;
 
@@ -170,25 +147,8 @@ void EnforceInterKeyframeConsistency(
     const std::vector<std::vector<uint32_t>>& consistency_neighbours,
     const SemiDenseOptions& options, std::vector<KeyframeDepth>* depths);
 
-// The 3D gradient direction of method.md §3.4, in the camera frame: the ray through
-// pixel + gradient_direction meets the plane through point_in_cam whose normal is the viewing
-// direction; the result is the unit vector from the point to that intersection. Returns false
-// when the ray cannot be formed or is parallel to the plane.
-bool ComputeGradient3d(const Camera& camera, const Eigen::Vector2d& pixel,
-                       const Eigen::Vector2d& gradient_direction,
-                       const Eigen::Vector3d& point_in_cam, Eigen::Vector3d* gradient_in_cam);
-
-// Per pixel of `depth` (same order), in the camera frame: the 3D gradient in the surface, the
-// in-surface direction perpendicular to the 3D edge, where the surface is the plane fitted to the
-// keyframe's points within options.surface_window_px of the pixel (same surface: similar depth)
-// and the 3D edge is its intersection with the plane through the camera centre and the image
-// edge; signed like the §3.4 gradient (ComputeGradient3d). Unlike the §3.4 gradient, which lies
-// in the plane facing this keyframe, it is the scene's own gradient (docs/sim-scene.md), the same
-// from every view. std::nullopt where the points are too few, not planar, on one line, or the
-// surface is seen edge-on; every entry is std::nullopt when surface_window_px is 0.
-std::vector<std::optional<Eigen::Vector3d>> SurfaceGradients3d(const Camera& camera,
-                                                               const KeyframeDepth& depth,
-                                                               const SemiDenseOptions& options);
+// The pixels of `depth` (same order) as the input of edge lifting (maps/edge_lifting.h).
+std::vector<EdgeDepthPixel> EdgeDepthPixels(const KeyframeDepth& depth);
 
 // Depth range [min, max] of the sparse points in front of a camera, from the 2nd and 98th
 // percentiles widened by `margin` (min / margin, max * margin). Returns false with fewer than 3

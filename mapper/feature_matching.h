@@ -1,0 +1,100 @@
+// evloc's deterministic replacement of COLMAP 3.8's exhaustive_matcher / sequential_matcher
+// (docs/mapper.md, "Reproducible maps"): the SIFT features COLMAP's feature_extractor wrote into
+// the database are matched by brute force (exact integer dot products, Lowe ratio test, maximum
+// distance, mutual cross-check, COLMAP's default thresholds), each pair is verified with a fixed-
+// seed RANSAC (OpenCV's essential matrix on undistorted normalised coordinates for a calibrated
+// camera, fundamental matrix otherwise), and the matches and two-view geometries are written back
+// for COLMAP's mapper and point_triangulator. The result depends only on the features: the same
+// bytes for any run and any thread count.
+#pragma once
+
+#include <cstddef>
+#include <filesystem>
+#include <optional>
+#include <utility>
+#include <vector>
+
+#include "core/camera/camera.h"
+#include "mapper/colmap_database.h"
+
+namespace evloc::mapper {
+
+// Options of evloc's matcher; the defaults are COLMAP 3.8's SiftMatchingOptions and
+// TwoViewGeometry::Options.
+struct FeatureMatchingOptions {
+  // Lowe ratio test: best / second-best descriptor angle must be below this.
+  double max_ratio = 0.8;
+  // Maximum angle (radians) between two unit-normalised descriptors of a match.
+  double max_distance = 0.7;
+  // Keep only mutual best matches.
+  bool cross_check = true;
+  // RANSAC inlier threshold (pixels; Sampson distance for the essential and fundamental matrix).
+  double max_error_px = 4.0;
+  // RANSAC confidence.
+  double confidence = 0.999;
+  // Maximum RANSAC iterations.
+  int max_num_trials = 10000;
+  // Minimum raw matches to verify a pair and minimum inliers to keep its geometry.
+  int min_num_inliers = 15;
+  // Worker threads over pairs (the result does not depend on it).
+  int num_threads = 1;
+
+  // Throws InvalidArgumentError on a bad value.
+  void Check() const;
+};
+
+// Indices (into an image list sorted by name) of the pairs COLMAP 3.8's exhaustive_matcher
+// matches: every pair (i, j), i < j.
+std::vector<std::pair<size_t, size_t>> ExhaustivePairs(size_t num_images);
+
+// Indices of the pairs COLMAP 3.8's sequential_matcher matches without loop detection: each image
+// i with i + 1 ... i + overlap - 1 and, with quadratic overlap (its default), i + 2^k for
+// k < overlap while i + k is in range; duplicates removed, sorted.
+std::vector<std::pair<size_t, size_t>> SequentialPairs(size_t num_images, int overlap);
+
+// Brute-force descriptor matching of two images (rows x 128 SIFT bytes, COLMAP's normalisation
+// to a norm of about 512): the angle of the best match below max_distance and below max_ratio
+// times the second best, mutual with cross_check. Dot products are exact integers, ties go to
+// the lower index: the result does not depend on how it is computed. Sorted by first index.
+FeatureMatches MatchDescriptors(const std::vector<uint8_t>& descriptors1,
+                                const std::vector<uint8_t>& descriptors2,
+                                const FeatureMatchingOptions& options);
+
+// Geometric verification of `pair.matches` between two images' keypoints (COLMAP pixels): fills
+// inlier_matches, config and the matrices. With `camera` (both images) the essential matrix on
+// undistorted normalised coordinates (threshold max_error_px / mean focal length), F from it;
+// without, the fundamental matrix on the pixels. Fewer raw matches than min_num_inliers: left
+// kUndefined; fewer inliers: kDegenerate without inliers.
+void VerifyPair(const ImageFeatures& image1, const ImageFeatures& image2,
+                const std::optional<Camera>& camera, const FeatureMatchingOptions& options,
+                PairGeometry* pair);
+
+// Matches and verifies `pairs` (indices into `images`; each pair's ids are sorted) on
+// options.num_threads threads with a fixed partition; results in the order of `pairs`.
+std::vector<PairGeometry> MatchImagePairs(const std::vector<ImageFeatures>& images,
+                                          const std::vector<std::pair<size_t, size_t>>& pairs,
+                                          const std::optional<Camera>& camera,
+                                          const FeatureMatchingOptions& options);
+
+// Counts of one database matching run.
+struct DatabaseMatchingSummary {
+  // Images read from the database.
+  size_t num_images = 0;
+  // Pairs matched.
+  size_t num_pairs = 0;
+  // Raw matches over all pairs.
+  size_t num_matches = 0;
+  // Pairs with a verified geometry.
+  size_t num_verified_pairs = 0;
+  // Inlier matches over all pairs.
+  size_t num_inlier_matches = 0;
+};
+
+// Reads the features of `database_path`, matches the pairs chosen by `sequential_overlap` (0:
+// exhaustive, else SequentialPairs with that overlap) and replaces its matches and two-view
+// geometries, ordered by pair id. Throws like ReadImageFeatures and WritePairGeometries.
+DatabaseMatchingSummary MatchDatabase(const std::filesystem::path& database_path,
+                                      int sequential_overlap, const std::optional<Camera>& camera,
+                                      const FeatureMatchingOptions& options);
+
+}  // namespace evloc::mapper
