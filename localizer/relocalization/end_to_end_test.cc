@@ -9,10 +9,10 @@
 #include <opencv2/core.hpp>
 
 #include "core/common/test_data.h"
-#include "localizer/relocalization/absolute_pose.h"
-#include "localizer/relocalization/features.h"
-#include "localizer/relocalization/synthetic_images_test_util.h"
 #include "core/dataset/testing/middlebury.h"
+#include "core/features/features.h"
+#include "core/features/testing/synthetic_images.h"
+#include "localizer/relocalization/absolute_pose.h"
 
 namespace evloc::relocalization {
 namespace {
@@ -42,7 +42,7 @@ bool ProjectInView(const MiddleburyView& view, const Eigen::Vector3d& point,
 
 // A map keyframe: features of one view, and the world point of those that were triangulated.
 struct Keyframe {
-  Features features;
+  features::Features features;
   std::vector<int> point_of_feature;  // -1: no point.
   std::vector<Eigen::Vector3d> points;
 };
@@ -51,12 +51,13 @@ struct Keyframe {
 // poses, keeping points that reproject within 1 px in both views.
 Keyframe BuildKeyframe(const MiddleburyView& a, const cv::Mat& image_a, const MiddleburyView& b,
                        const cv::Mat& image_b) {
-  const Features features_a = ExtractFeatures(image_a, FeatureOptions());
+  const features::Features features_a =
+      features::ExtractFeatures(image_a, features::FeatureOptions());
   Keyframe keyframe;
-  keyframe.features = ExtractFeatures(image_b, FeatureOptions());
+  keyframe.features = features::ExtractFeatures(image_b, features::FeatureOptions());
   keyframe.point_of_feature.assign(keyframe.features.size(), -1);
-  const std::vector<FeatureMatch> matches =
-      MatchFeatures(features_a, keyframe.features, MatchOptions());
+  const std::vector<features::FeatureMatch> matches =
+      features::MatchFeatures(features_a, keyframe.features, features::MatchOptions());
   if (matches.empty()) return keyframe;
   cv::Mat pixels_a(2, static_cast<int>(matches.size()), CV_64F);
   cv::Mat pixels_b(2, static_cast<int>(matches.size()), CV_64F);
@@ -90,10 +91,12 @@ Keyframe BuildKeyframe(const MiddleburyView& a, const cv::Mat& image_a, const Mi
 // Matches a query image against the keyframe and solves for its pose.
 AbsolutePoseResult Locate(const Camera& camera, const cv::Mat& query_image,
                           const Keyframe& keyframe, int* correspondences) {
-  const Features query = ExtractFeatures(query_image, FeatureOptions());
+  const features::Features query =
+      features::ExtractFeatures(query_image, features::FeatureOptions());
   std::vector<Eigen::Vector2d> pixels;
   std::vector<Eigen::Vector3d> points;
-  for (const FeatureMatch& match : MatchFeatures(query, keyframe.features, MatchOptions())) {
+  for (const features::FeatureMatch& match :
+       features::MatchFeatures(query, keyframe.features, features::MatchOptions())) {
     const int point = keyframe.point_of_feature[match.index_b];
     if (point < 0) continue;
     pixels.push_back(query.keypoints[match.index_a].cast<double>());
@@ -108,7 +111,7 @@ TEST(RelocEndToEnd, TempleQueryIsLocatedAndAnotherSceneIsNotFound) {
   const auto views = evloc::testing::ReadMiddleburyParameters(parameters);
   ASSERT_EQ(views.size(), 16u);
   const auto image = [&](int i) {
-    return testing::ReadGrey(parameters.parent_path() / views[i].name);
+    return features::testing::ReadGrey(parameters.parent_path() / views[i].name);
   };
   // Map: templeSR0007 and 0008 (23 degrees apart); queries: 0009 and 0006, 23 degrees beyond.
   const Keyframe keyframe = BuildKeyframe(views[6], image(6), views[7], image(7));
@@ -137,8 +140,9 @@ TEST(RelocEndToEnd, TempleQueryIsLocatedAndAnotherSceneIsNotFound) {
   if (!fountain) GTEST_SKIP() << evloc::testing::MissingDataReason("strecha/fountain-P11/images");
   for (const char* name : {"0000.jpg", "0005.jpg", "0010.jpg"}) {
     int correspondences = 0;
-    const AbsolutePoseResult result = Locate(
-        camera, testing::ReadGrey(fountain->parent_path() / name, 640), keyframe, &correspondences);
+    const AbsolutePoseResult result =
+        Locate(camera, features::testing::ReadGrey(fountain->parent_path() / name, 640), keyframe,
+               &correspondences);
     // Measured: 4-9 correspondences, fewer than the 15 a pose needs: NOT_FOUND, not a guess.
     EXPECT_FALSE(result.success) << name << ": " << correspondences << " correspondences";
     EXPECT_NE(result.failure, AbsolutePoseFailure::kNone);

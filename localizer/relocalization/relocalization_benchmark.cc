@@ -7,11 +7,11 @@
 
 #include <opencv2/core.hpp>
 
+#include "core/features/features.h"
+#include "core/features/testing/synthetic_images.h"
+#include "core/features/vocabulary.h"
 #include "localizer/relocalization/absolute_pose.h"
-#include "localizer/relocalization/features.h"
-#include "localizer/relocalization/synthetic_images_test_util.h"
 #include "localizer/relocalization/synthetic_scene_test_util.h"
-#include "localizer/relocalization/vocabulary.h"
 
 namespace evloc::relocalization {
 namespace {
@@ -39,24 +39,26 @@ BENCHMARK(BM_EstimateAbsolutePose)
 
 // SIFT on a 640 x 480 synthetic texture, 2000 keypoints kept.
 void BM_ExtractFeatures(benchmark::State& state) {
-  const cv::Mat image = testing::SyntheticTexture(640, 480, 1, 600);
+  const cv::Mat image = features::testing::SyntheticTexture(640, 480, 1, 600);
   for (auto _ : state) {
-    Features features = ExtractFeatures(image, FeatureOptions());
+    features::Features features = features::ExtractFeatures(image, features::FeatureOptions());
     benchmark::DoNotOptimize(features);
   }
-  state.counters["keypoints"] = ExtractFeatures(image, FeatureOptions()).size();
+  state.counters["keypoints"] = features::ExtractFeatures(image, features::FeatureOptions()).size();
 }
 BENCHMARK(BM_ExtractFeatures)->Unit(benchmark::kMillisecond);
 
 // Mutual ratio-test matching of two such images' features.
 void BM_MatchFeatures(benchmark::State& state) {
-  const cv::Mat image = testing::SyntheticTexture(640, 480, 1, 600);
-  const Features a = ExtractFeatures(image, FeatureOptions());
-  const Features b = ExtractFeatures(
-      testing::Warp(image, testing::SmallHomography(image.size(), 5, 1.05, 3, 2), 2.0, 1),
-      FeatureOptions());
+  const cv::Mat image = features::testing::SyntheticTexture(640, 480, 1, 600);
+  const features::Features a = features::ExtractFeatures(image, features::FeatureOptions());
+  const features::Features b = features::ExtractFeatures(
+      features::testing::Warp(
+          image, features::testing::SmallHomography(image.size(), 5, 1.05, 3, 2), 2.0, 1),
+      features::FeatureOptions());
   for (auto _ : state) {
-    std::vector<FeatureMatch> matches = MatchFeatures(a, b, MatchOptions());
+    std::vector<features::FeatureMatch> matches =
+        features::MatchFeatures(a, b, features::MatchOptions());
     benchmark::DoNotOptimize(matches);
   }
 }
@@ -64,7 +66,7 @@ BENCHMARK(BM_MatchFeatures)->Unit(benchmark::kMillisecond);
 
 // Random descriptors in the value range of root-SIFT rows.
 cv::Mat RandomDescriptors(int count) {
-  cv::Mat descriptors(count, kDescriptorSize, CV_32F);
+  cv::Mat descriptors(count, features::kDescriptorSize, CV_32F);
   cv::RNG rng(3);
   rng.fill(descriptors, cv::RNG::UNIFORM, 0, 60);
   return descriptors;
@@ -74,7 +76,8 @@ cv::Mat RandomDescriptors(int count) {
 void BM_TrainVocabulary(benchmark::State& state) {
   const cv::Mat descriptors = RandomDescriptors(static_cast<int>(state.range(0)));
   for (auto _ : state) {
-    Vocabulary vocabulary = Vocabulary::Train(descriptors, VocabularyOptions());
+    features::Vocabulary vocabulary =
+        features::Vocabulary::Train(descriptors, features::VocabularyOptions());
     benchmark::DoNotOptimize(vocabulary);
   }
 }
@@ -82,7 +85,8 @@ BENCHMARK(BM_TrainVocabulary)->Arg(50000)->Unit(benchmark::kMillisecond)->Iterat
 
 // VLAD of one image's 2000 descriptors.
 void BM_EncodeVlad(benchmark::State& state) {
-  const Vocabulary vocabulary = Vocabulary::Train(RandomDescriptors(5000), VocabularyOptions());
+  const features::Vocabulary vocabulary =
+      features::Vocabulary::Train(RandomDescriptors(5000), features::VocabularyOptions());
   const cv::Mat descriptors = RandomDescriptors(2000);
   for (auto _ : state) {
     std::vector<float> vlad = vocabulary.EncodeVlad(descriptors);
@@ -94,17 +98,18 @@ BENCHMARK(BM_EncodeVlad)->Unit(benchmark::kMillisecond);
 
 // Top-5 retrieval among state.range(0) keyframes' VLAD vectors.
 void BM_Retrieve(benchmark::State& state) {
-  const Vocabulary vocabulary = Vocabulary::Train(RandomDescriptors(5000), VocabularyOptions());
+  const features::Vocabulary vocabulary =
+      features::Vocabulary::Train(RandomDescriptors(5000), features::VocabularyOptions());
   std::vector<std::vector<float>> database;
   cv::RNG rng(4);
   for (int i = 0; i < state.range(0); ++i) {
-    cv::Mat descriptors(200, kDescriptorSize, CV_32F);
+    cv::Mat descriptors(200, features::kDescriptorSize, CV_32F);
     rng.fill(descriptors, cv::RNG::UNIFORM, 0, 60);
     database.push_back(vocabulary.EncodeVlad(descriptors));
   }
   const std::vector<float> query = database.front();
   for (auto _ : state) {
-    std::vector<RetrievalHit> hits = Retrieve(query, database, 5);
+    std::vector<features::RetrievalHit> hits = features::Retrieve(query, database, 5);
     benchmark::DoNotOptimize(hits);
   }
 }

@@ -9,9 +9,9 @@
 
 #include <opencv2/core/mat.hpp>
 
-#include "localizer/relocalization/features.h"
+#include "core/features/features.h"
 
-namespace evloc::relocalization {
+namespace evloc::features {
 
 // Options of Vocabulary::Train.
 struct VocabularyOptions {
@@ -89,4 +89,4 @@ float CosineSimilarity(const std::vector<float>& a, const std::vector<float>& b)
 std::vector<RetrievalHit> Retrieve(const std::vector<float>& query,
                                    const std::vector<std::vector<float>>& database, int k);
 
-}  // namespace evloc::relocalization
+}  // namespace evloc::features

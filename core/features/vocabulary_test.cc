@@ -1,4 +1,4 @@
-#include "localizer/relocalization/vocabulary.h"
+#include "core/features/vocabulary.h"
 
 #include <algorithm>
 #include <cmath>
@@ -11,10 +11,10 @@
 
 #include "core/common/error.h"
 #include "core/common/test_data.h"
-#include "localizer/relocalization/synthetic_images_test_util.h"
 #include "core/dataset/testing/middlebury.h"
+#include "core/features/testing/synthetic_images.h"
 
-namespace evloc::relocalization {
+namespace evloc::features {
 namespace {
 
 using testing::SmallHomography;
@@ -224,4 +224,4 @@ TEST(RelocVocabulary, HeldOutFountainViewsRetrieveANeighbour) {
 }
 
 }  // namespace
-}  // namespace evloc::relocalization
+}  // namespace evloc::features

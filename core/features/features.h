@@ -10,7 +10,7 @@
 #include <Eigen/Core>
 #include <opencv2/core/mat.hpp>
 
-namespace evloc::relocalization {
+namespace evloc::features {
 
 // Length of one SIFT descriptor.
 inline constexpr int kDescriptorSize = 128;
@@ -86,4 +86,4 @@ struct FeatureMatch {
 std::vector<FeatureMatch> MatchFeatures(const Features& a, const Features& b,
                                         const MatchOptions& options);
 
-}  // namespace evloc::relocalization
+}  // namespace evloc::features

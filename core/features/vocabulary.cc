@@ -1,4 +1,4 @@
-#include "localizer/relocalization/vocabulary.h"
+#include "core/features/vocabulary.h"
 
 #include <algorithm>
 #include <cmath>
@@ -8,7 +8,7 @@
 
 #include "core/common/error.h"
 
-namespace evloc::relocalization {
+namespace evloc::features {
 namespace {
 
 // Scales v to unit L2 norm; leaves a zero vector unchanged.
@@ -195,4 +195,4 @@ std::vector<RetrievalHit> Retrieve(const std::vector<float>& query,
   return hits;
 }
 
-}  // namespace evloc::relocalization
+}  // namespace evloc::features

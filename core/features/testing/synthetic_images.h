@@ -11,7 +11,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
-namespace evloc::relocalization::testing {
+namespace evloc::features::testing {
 
 // A grey image of random overlapping discs, rectangles and lines on a random background, slightly
 // blurred: rich in SIFT keypoints, the same for the same seed.
@@ -84,4 +84,4 @@ inline cv::Mat ReadGrey(const std::filesystem::path& path, int max_width = 0) {
   return image;
 }
 
-}  // namespace evloc::relocalization::testing
+}  // namespace evloc::features::testing

@@ -1,4 +1,4 @@
-#include "localizer/relocalization/features.h"
+#include "core/features/features.h"
 
 #include <algorithm>
 #include <cassert>
@@ -12,7 +12,7 @@
 
 #include "core/common/error.h"
 
-namespace evloc::relocalization {
+namespace evloc::features {
 namespace {
 
 // OpenCV's SIFT detector always starts from the image upsampled twice (octave -1) and reports
@@ -184,4 +184,4 @@ std::vector<FeatureMatch> MatchFeatures(const Features& a, const Features& b,
   return matches;
 }
 
-}  // namespace evloc::relocalization
+}  // namespace evloc::features

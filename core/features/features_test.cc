@@ -1,4 +1,4 @@
-#include "localizer/relocalization/features.h"
+#include "core/features/features.h"
 
 #include <algorithm>
 #include <cmath>
@@ -11,10 +11,10 @@
 
 #include "core/common/error.h"
 #include "core/common/test_data.h"
-#include "localizer/relocalization/synthetic_images_test_util.h"
 #include "core/dataset/testing/middlebury.h"
+#include "core/features/testing/synthetic_images.h"
 
-namespace evloc::relocalization {
+namespace evloc::features {
 namespace {
 
 using testing::SmallHomography;
@@ -241,4 +241,4 @@ TEST(RelocFeatures, NeighbouringTempleViewsMatchOnTheirEpipolarGeometry) {
 }
 
 }  // namespace
-}  // namespace evloc::relocalization
+}  // namespace evloc::features
