@@ -192,18 +192,12 @@ BuildCommandLine ParseBuildCommandLine(const std::vector<std::string>& arguments
 
 int RunBuildCommand(int argc, char** argv) {
   const std::vector<std::string> arguments(argv, argv + argc);
-  BuildCommandLine command_line;
-  try {
-    command_line = ParseBuildCommandLine(arguments);
-  } catch (const Error& error) {
-    std::cerr << "evloc-mapper build: " << error.what() << "\n\n" << BuildCommandUsage();
-    return 2;
-  }
-  if (command_line.help) {
-    std::cout << BuildCommandUsage();
-    return 0;
-  }
-  try {
+  return RunGuarded("evloc-mapper build", std::cerr, [&] {
+    const BuildCommandLine command_line = ParseCommandLine(ParseBuildCommandLine, arguments);
+    if (command_line.help) {
+      std::cout << BuildCommandUsage();
+      return kExitSuccess;
+    }
     StderrProgress progress;
     const MapBuildReport report =
         BuildMap(command_line.options, command_line.quiet ? nullptr : &progress);
@@ -221,14 +215,8 @@ int RunBuildCommand(int argc, char** argv) {
                 << report.alignment_warning
                 << "; the map is probably wrong (report.json: alignment.warning)\n";
     }
-    return 0;
-  } catch (const Error& error) {
-    std::cerr << "evloc-mapper build: error: " << error.what() << "\n";
-    return 1;
-  } catch (const std::exception& error) {
-    std::cerr << "evloc-mapper build: internal error: " << error.what() << "\n";
-    return 1;
-  }
+    return kExitSuccess;
+  });
 }
 
 }  // namespace evloc::mapper

@@ -62,7 +62,7 @@ struct MapBuildReport {
   // Semi-dense points before merging.
   size_t num_keyframe_points = 0;
   // Semi-dense points whose 3D gradient lies in a fitted surface plane (SurfaceGradients3d);
-  // the others keep the §3.4 gradient of their keyframe.
+  // the others keep the ray–plane gradient of their keyframe.
   size_t num_surface_gradients = 0;
   // Map points.
   size_t num_points = 0;

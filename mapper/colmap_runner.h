@@ -1,6 +1,6 @@
 // Runs the COLMAP 3.8 command line (CPU only) for the mapper: feature extraction, matching,
 // incremental mapping, triangulation with known poses and conversion to the TXT layout
-// (docs/method.md §3.1, docs/mapper.md). Every command's output goes to a log file; nothing is
+// (docs/mapper.md, "COLMAP"). Every command's output goes to a log file; nothing is
 // printed.
 #pragma once
 

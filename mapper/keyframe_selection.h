@@ -47,7 +47,7 @@ struct KeyframeSelectionOptions {
   // A view becomes a keyframe when its orientation differs from the last keyframe's by more
   // than this, degrees.
   double max_rotation_deg = 15.0;
-  // Stereo neighbours per keyframe (method.md §3.2 suggests 6-10).
+  // Stereo neighbours per keyframe (6-10 is the usual range, docs/mapper.md).
   int num_neighbours = 6;
   // A neighbour must share at least this many sparse points with the keyframe.
   int min_shared_points = 15;

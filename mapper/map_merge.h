@@ -1,6 +1,7 @@
-// Merging the keyframes' semi-dense points into one map (docs/method.md §3.3): duplicates within
-// a voxel that agree in gradient direction become one point, statistical outliers are removed
-// (PCL), and each keyframe's visibility index lists exactly the surviving points it observed.
+// Merging the keyframes' semi-dense points into one map (docs/mapper.md, "Merge"): duplicates
+// within a voxel that agree in gradient direction become one point, statistical outliers are
+// removed (PCL), and each keyframe's visibility index lists exactly the surviving points it
+// observed.
 #pragma once
 
 #include <cstddef>

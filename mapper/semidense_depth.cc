@@ -54,7 +54,8 @@ struct StereoPair {
   Eigen::Vector3d neighbour_center_in_keyframe;
 };
 
-// Epipolar search of one keyframe pixel in one neighbour (method.md §3.2 step 3).
+// Epipolar search of one keyframe pixel in one neighbour (docs/mapper.md, "Semi-dense depth per
+// keyframe").
 bool SearchEpipolar(const DepthFrame& keyframe, const StereoPair& pair,
                     const Eigen::Vector2d& pixel, const Eigen::Vector3d& ray,
                     const Eigen::Vector2d& gradient_direction, double gradient_magnitude,

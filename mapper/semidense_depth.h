@@ -1,9 +1,9 @@
-// Semi-dense probabilistic inverse depth on image edges per keyframe (docs/method.md §3.2, after
-// Mur-Artal & Tardós 2015 and Engel et al. 2013; details and defaults in docs/mapper.md):
-// candidate edge pixels, a depth range from the sparse points, an epipolar search in each stereo
-// neighbour, fusion of the hypotheses by the largest chi-square-compatible set, intra-keyframe
-// regularisation, inter-keyframe consistency and a final Gauss-Newton refinement. The points are
-// lifted into 3D with their gradients by maps/edge_lifting.h.
+// Semi-dense probabilistic inverse depth on image edges per keyframe (docs/mapper.md, "Semi-dense
+// depth per keyframe", after Mur-Artal & Tardós 2015 and Engel et al. 2013; details and defaults in
+// docs/mapper.md): candidate edge pixels, a depth range from the sparse points, an epipolar search
+// in each stereo neighbour, fusion of the hypotheses by the largest chi-square-compatible set,
+// intra-keyframe regularisation, inter-keyframe consistency and a final Gauss-Newton refinement.
+// The points are lifted into 3D with their gradients by maps/edge_lifting.h.
 #pragma once
 
 #include <cstddef>
@@ -131,8 +131,9 @@ struct KeyframeDepth {
 DepthFrame MakeDepthFrame(const cv::Mat& image, const Camera& camera, const Rigid3d& cam_from_world,
                           const SemiDenseOptions& options);
 
-// Steps 1-5 of method.md §3.2 for one keyframe: candidates, epipolar search in each neighbour
-// within [min_depth, max_depth] (already widened), fusion and intra-keyframe regularisation.
+// Steps 1-5 of docs/mapper.md's semi-dense depth for one keyframe: candidates, epipolar search in
+// each neighbour within [min_depth, max_depth] (already widened), fusion and intra-keyframe
+// regularisation.
 KeyframeDepth EstimateKeyframeDepth(const DepthFrame& keyframe,
                                     const std::vector<const DepthFrame*>& neighbours,
                                     double min_depth, double max_depth,

@@ -1,5 +1,5 @@
 // Lifting semi-dense edge pixels with depth into 3D edge points with 3D gradient directions
-// (method.md §3.4, docs/mapper.md "Semi-dense depth"): the point on the pixel's ray at its depth,
+// (docs/mapper.md, "3D gradients"): the point on the pixel's ray at its depth,
 // the gradient facing the view (ComputeGradient3d) and, where the neighbouring points form a plane,
 // the in-surface gradient (SurfaceGradients3d). Shared by the mapper and by any tracker that
 // builds edge points from its own keyframe depth; it depends on the camera model only.
@@ -54,10 +54,10 @@ struct SurfaceGradientOptions {
   void Check() const;
 };
 
-// The 3D gradient direction of method.md §3.4, in the camera frame: the ray through
-// pixel + gradient_direction meets the plane through point_in_cam whose normal is the viewing
-// direction; the result is the unit vector from the point to that intersection. Returns false
-// when the ray cannot be formed or is parallel to the plane.
+// The ray–plane 3D gradient direction (docs/mapper.md, "3D gradients"), in the camera frame: the
+// ray through pixel + gradient_direction meets the plane through point_in_cam whose normal is the
+// viewing direction; the result is the unit vector from the point to that intersection. Returns
+// false when the ray cannot be formed or is parallel to the plane.
 bool ComputeGradient3d(const Camera& camera, const Eigen::Vector2d& pixel,
                        const Eigen::Vector2d& gradient_direction,
                        const Eigen::Vector3d& point_in_cam, Eigen::Vector3d* gradient_in_cam);
@@ -66,9 +66,9 @@ bool ComputeGradient3d(const Camera& camera, const Eigen::Vector2d& pixel,
 // direction perpendicular to the 3D edge, where the surface is the plane fitted to the pixels'
 // points within options.window_px of the pixel (same surface: similar depth) and the 3D edge is
 // its intersection with the plane through the camera centre and the image edge; signed like
-// ComputeGradient3d. Unlike the §3.4 gradient, which lies in the plane facing this view, it is the
-// scene's own gradient, the same from every view. std::nullopt where the points are too few, not
-// planar, on one line, or the surface is seen edge-on; every entry when window_px is 0.
+// ComputeGradient3d. Unlike the ray–plane gradient, which lies in the plane facing this view, it is
+// the scene's own gradient, the same from every view. std::nullopt where the points are too few,
+// not planar, on one line, or the surface is seen edge-on; every entry when window_px is 0.
 std::vector<std::optional<Eigen::Vector3d>> SurfaceGradients3d(
     const Camera& camera, const std::vector<EdgeDepthPixel>& pixels,
     const SurfaceGradientOptions& options);
@@ -79,13 +79,13 @@ struct LiftedEdgePoint {
   Eigen::Vector3d ray = Eigen::Vector3d::UnitZ();
   // The point: ray / inverse_depth.
   Eigen::Vector3d point_in_cam = Eigen::Vector3d::Zero();
-  // Unit 3D gradient: the surface gradient where there is one, else the §3.4 gradient.
+  // Unit 3D gradient: the surface gradient where there is one, else the ray–plane gradient.
   Eigen::Vector3d gradient_in_cam = Eigen::Vector3d::UnitX();
   // True when gradient_in_cam is the surface gradient (SurfaceGradients3d).
   bool surface_gradient = false;
 };
 
-// Lifts every pixel (same order): std::nullopt where its ray or its §3.4 gradient cannot be
+// Lifts every pixel (same order): std::nullopt where its ray or its ray–plane gradient cannot be
 // formed. Throws InvalidArgumentError on bad options.
 std::vector<std::optional<LiftedEdgePoint>> LiftEdgePixels(
     const Camera& camera, const std::vector<EdgeDepthPixel>& pixels,

@@ -99,7 +99,7 @@ TEST(EdgeLifting, RecoversTheInSurfaceGradientOfATiltedPlane) {
   EXPECT_GT(found, depth.size() / 2);
 
   EXPECT_LT(worst_deg * 180.0 / std::numbers::pi, 2.0);
-  // The §3.4 gradient faces the camera and misses the tilt.
+  // The ray–plane gradient faces the camera and misses the tilt.
   EXPECT_GT(worst_view_deg * 180.0 / std::numbers::pi, 20.0);
   // Disabled: no surface gradients.
   SurfaceGradientOptions disabled;
@@ -185,7 +185,7 @@ TEST(EdgeLifting, ACreaseGradientLiesInTheBrighterFace) {
 }
 
 // Lifting puts each point on its pixel's ray at its depth with the surface gradient where there is
-// one and the §3.4 gradient elsewhere; pixels without depth are left out.
+// one and the ray–plane gradient elsewhere; pixels without depth are left out.
 TEST(EdgeLifting, LiftsPixelsOntoTheirRaysWithTheirGradients) {
   const Camera camera = Camera::Pinhole(160, 120, 100.0, 100.0, 79.5, 59.5);
   // A fronto-parallel plane at 2 m with vertical lines every 10 cm (gradient along +x).
@@ -212,13 +212,13 @@ TEST(EdgeLifting, LiftsPixelsOntoTheirRaysWithTheirGradients) {
       EXPECT_GT(point.gradient_in_cam.x(), 1.0 - 1e-9);
       ++surface;
     } else {
-      // Near the right border no points lie on the brighter side: the §3.4 gradient, which is
+      // Near the right border no points lie on the brighter side: the ray–plane gradient, which is
       // perpendicular to the viewing ray.
       EXPECT_NEAR(point.gradient_in_cam.dot(point.point_in_cam.normalized()), 0.0, 1e-9);
     }
   }
   EXPECT_GT(surface, pixels.size() / 2);
-  // Without surface windows every gradient is the §3.4 one.
+  // Without surface windows every gradient is the ray–plane one.
   SurfaceGradientOptions disabled;
   disabled.window_px = 0;
   const std::vector<std::optional<LiftedEdgePoint>> view = LiftEdgePixels(camera, pixels, disabled);

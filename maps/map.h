@@ -1,4 +1,4 @@
-// The evloc map (docs/method.md §2, docs/map-format.md): semi-dense, gradient-augmented points
+// The evloc map (docs/map-format.md, docs/map-format.md): semi-dense, gradient-augmented points
 // of appearance edges, the keyframes they were built from, and the cameras of those keyframes.
 // This is the contract between the mapper and the localizer.
 #pragma once

@@ -1,4 +1,4 @@
-// Import of Canny-EVT semi-dense maps stored as PCD (docs/method.md §2, docs/map-format.md):
+// Import of Canny-EVT semi-dense maps stored as PCD (docs/map-format.md, docs/map-format.md):
 // `FIELDS x y z normal_x normal_y normal_z` (other fields are skipped), where normal_* is not a
 // unit normal but a point 2-3 cm from xyz along the 3D gradient, in world coordinates. The
 // gradient is g = normalize(normal - xyz). DATA ascii and DATA binary are read.

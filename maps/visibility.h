@@ -1,4 +1,4 @@
-// Which map points a camera sees from a predicted pose (docs/method.md §2, docs/map-format.md
+// Which map points a camera sees from a predicted pose (docs/map-format.md, docs/map-format.md
 // "Visibility"). Maps with keyframes: the keyframes nearest the pose (by position and viewing
 // direction) give the candidates. Maps without (imported PCD): a voxel grid of the points, culled
 // with the camera frustum, gives them. Either way every candidate then passes a per-point depth

@@ -89,7 +89,7 @@ Options:
   --mode events|frames   events (Canny-EVT, default) or frames (Canny-VT on images.txt)
   --rate HZ              tracking steps per second of event time (default 300)
   --events-per-step N    a step every N events instead of a fixed rate
-  --variant NAME         EVT (default), EVT-PR, EVT-OH or EVT-- (method.md 4.6)
+  --variant NAME         EVT (default), EVT-PR, EVT-OH or EVT-- (docs/tracking.md, "Variants")
   --polarity on|off      polarity-aware registration (default on)
   --occlusion on|off     ANNF occlusion culling (default on)
   --max-points N         map points registered per step (default 2500)

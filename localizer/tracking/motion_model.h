@@ -1,5 +1,5 @@
-// The constant-velocity motion prior on SE(3) (method.md §4.2): the body-frame twist over the
-// recent estimates, extrapolated to the next step time.
+// The constant-velocity motion prior on SE(3) (docs/tracking.md, "Registration"): the body-frame
+// twist over the recent estimates, extrapolated to the next step time.
 #pragma once
 
 #include <cstdint>

@@ -1,7 +1,7 @@
-// Occlusion culling with an approximate nearest-neighbour field (ANNF, method.md §4.4): each
-// projected map point looks for its nearest active edge pixel within a radius in its own window;
-// map points claiming the same edge pixel are resolved by a z-buffer keyed by that edge pixel (the
-// nearest point wins), and points with no edge pixel within the radius drop out.
+// Occlusion culling with an approximate nearest-neighbour field (ANNF, docs/tracking.md, "Occlusion
+// culling"): each projected map point looks for its nearest active edge pixel within a radius in
+// its own window; map points claiming the same edge pixel are resolved by a z-buffer keyed by that
+// edge pixel (the nearest point wins), and points with no edge pixel within the radius drop out.
 #pragma once
 
 #include <cmath>

@@ -1,5 +1,6 @@
-// Point selection (method.md §4.2): the map points visible from the predicted pose, within a
-// depth range and the image, subsampled to a budget with even image coverage (buckets).
+// Point selection (docs/tracking.md, "Registration"): the map points visible from the predicted
+// pose, within a depth range and the image, subsampled to a budget with even image coverage
+// (buckets).
 #pragma once
 
 #include <Eigen/Core>

@@ -1,7 +1,7 @@
-// Polarity prediction for signed time surfaces (method.md §4.3). Brightness constancy gives
-// dI/dt = -grad I . f, so a point whose image gradient d (towards brighter) and flow f satisfy
-// -d . f > 0 fires ON events, and OFF events when -d . f < 0. Near 90 degrees the prediction is
-// not trusted.
+// Polarity prediction for signed time surfaces (docs/tracking.md, "Polarity-aware registration").
+// Brightness constancy gives dI/dt = -grad I . f, so a point whose image gradient d (towards
+// brighter) and flow f satisfy -d . f > 0 fires ON events, and OFF events when -d . f < 0. Near 90
+// degrees the prediction is not trusted.
 #pragma once
 
 #include <Eigen/Core>

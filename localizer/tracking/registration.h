@@ -1,6 +1,6 @@
-// 3D-2D registration of map points to a potential field (method.md §4.2): residual
-// r_k = F(pi(W(p_k; theta))), robust loss, forward-compositional Levenberg-Marquardt on SE(3)
-// with analytic Jacobians, and the covariance from the Gauss-Newton information matrix.
+// 3D-2D registration of map points to a potential field (docs/tracking.md, "Registration"):
+// residual r_k = F(pi(W(p_k; theta))), robust loss, forward-compositional Levenberg-Marquardt on
+// SE(3) with analytic Jacobians, and the covariance from the Gauss-Newton information matrix.
 //
 // Increments are left perturbations of cam_from_world in the camera frame:
 // cam_from_world <- ExpSE3(delta) * cam_from_world, delta = (v, omega). The equivalent

@@ -1,6 +1,7 @@
-// Time surfaces (method.md §4.1): per pixel of the ideal pinhole image, the time stamp of the last
-// event, for all events and separately for ON and OFF events. Events are undistorted one by one
-// through a pixel look-up table built once per session; no image is remapped per step.
+// Time surfaces (docs/tracking.md, "Time surfaces"): per pixel of the ideal pinhole image, the time
+// stamp of the last event, for all events and separately for ON and OFF events. Events are
+// undistorted one by one through a pixel look-up table built once per session; no image is remapped
+// per step.
 #pragma once
 
 #include <algorithm>

@@ -1,5 +1,5 @@
-// The map-based 6-DoF tracker of an event camera (Canny-EVT, method.md §4) and its frame-based
-// twin (Canny-VT, §4.5). Feed it event packets of any size; it runs tracking steps at a fixed
+// The map-based 6-DoF tracker of an event camera (Canny-EVT, docs/tracking.md) and its frame-based
+// twin (Canny-VT). Feed it event packets of any size; it runs tracking steps at a fixed
 // rate in event time (or every N events) and returns one PoseEstimate per step. The output is
 // deterministic: the same events give the same poses however they are split into packets (only
 // the measured timings differ). Not thread-safe: one Tracker per session.

@@ -167,9 +167,9 @@ struct TrackerOptions {
   // Throws InvalidArgumentError naming the first field out of range.
   void Check() const;
 
-  // Sets the ablation switches from a variant name of method.md §4.6: "EVT" (polarity and
-  // occlusion), "EVT-PR" (polarity only), "EVT-OH" (occlusion only), "EVT--" (neither). Throws
-  // InvalidArgumentError for any other name.
+  // Sets the ablation switches from a variant name of docs/tracking.md ("Variants"): "EVT"
+  // (polarity and occlusion), "EVT-PR" (polarity only), "EVT-OH" (occlusion only), "EVT--"
+  // (neither). Throws InvalidArgumentError for any other name.
   void SetVariant(const std::string& name);
   // The variant name of the current switches.
   std::string VariantName() const;

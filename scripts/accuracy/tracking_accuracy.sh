@@ -10,8 +10,9 @@
 #               the whole 30 s); default: mid fr1_xyz. The dataset folder is OUT_DIR/NAME-SECONDSs.
 #   TRACK_FLAGS extra evloc-track flags for every run (e.g. --tau 0.005)
 # Env: VARIANTS (default "EVT") and RATES (default "300") run every combination. Variants:
-#   EVT, EVT-PR, EVT-OH, EVT-- (method.md 4.6); EVT1 = EVT with --two-stage off (one signed solve,
-#   as the paper); VT = Canny-VT on the dataset's frames (--mode frames; the rate does not apply).
+#   EVT, EVT-PR, EVT-OH, EVT-- (docs/tracking.md, "Variants"); EVT1 = EVT with --two-stage off
+#   (one signed solve, as the paper); VT = Canny-VT on the dataset's frames (--mode frames; the
+#   rate does not apply).
 #   MAP=built uses OUT_DIR/maps/NAME-SECONDSs (an evloc-mapper map of the sequence's frames, built
 #   beforehand) instead of the dataset's gt_map.
 # A dataset already in OUT_DIR is reused (rendering 10 s of mid at 640x480 takes 10-30 min).

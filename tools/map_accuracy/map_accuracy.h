@@ -81,8 +81,8 @@ struct MapAccuracy {
   // Fraction of the points whose 3D gradient is more than 90 degrees off (opposite sign).
   double gradient_opposite_fraction = 0.0;
   // Median angle between the two gradients projected into the nearest depth view, degrees
-  // (what tracking uses: the 3D gradient of method.md §3.4 is only defined up to the viewing
-  // direction).
+  // (what tracking uses: the ray–plane 3D gradient (docs/mapper.md, "3D gradients") is only defined
+  // up to the viewing direction).
   double median_image_gradient_angle_deg = 0.0;
   // The gradient measures restricted to points whose nearest ground-truth point has a defined
   // gradient (reference_gradient_defined; all points without it).

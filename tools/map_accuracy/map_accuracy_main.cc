@@ -43,126 +43,141 @@ the nearest Canny edge (40/100) of its image (real data without a ground-truth s
                        edge_distance_m gradient_angle_deg image_gradient_angle_deg reference_index
 )";
 
+// What the command line asks for.
+struct AccuracyCommand {
+  // The map directory or .evmap file (--map).
+  fs::path map_path;
+  // The evloc-sim dataset (--dataset).
+  fs::path dataset;
+  // The image folder of the build (--images).
+  fs::path image_dir;
+  // Per-point CSV output (--points-csv), empty for none.
+  fs::path points_csv;
+  // Every N-th depth map (--depth-stride).
+  int stride = 1;
+  // Measure options (--within).
+  evloc::mapper::MapAccuracyOptions options;
+  // Print the usage (--help).
+  bool help = false;
+};
+
+// Parses the arguments after the program name; throws evloc::Error for a bad command line.
+AccuracyCommand ParseAccuracyCommandLine(const std::vector<std::string>& arguments) {
+  AccuracyCommand command;
+  for (size_t i = 0; i < arguments.size(); ++i) {
+    const std::string& flag = arguments[i];
+    if (flag == "--help" || flag == "-h") {
+      command.help = true;
+      return command;
+    }
+    const std::string& value = evloc::TakeFlagValue(arguments, &i);
+    if (flag == "--map") {
+      command.map_path = value;
+    } else if (flag == "--dataset") {
+      command.dataset = value;
+    } else if (flag == "--images") {
+      command.image_dir = value;
+    } else if (flag == "--points-csv") {
+      command.points_csv = value;
+    } else if (flag == "--within") {
+      command.options.within_m = evloc::ParseDoubleFlag(flag, value);
+    } else if (flag == "--depth-stride") {
+      command.stride = evloc::ParseIntFlag(flag, value);
+    } else {
+      throw evloc::InvalidArgumentError("unknown flag '" + flag + "' (see --help)");
+    }
+  }
+  if (command.map_path.empty() || command.dataset.empty() == command.image_dir.empty()) {
+    throw evloc::InvalidArgumentError("--map and one of --dataset or --images are required");
+  }
+  if (command.stride < 1) throw evloc::InvalidArgumentError("--depth-stride must be at least 1");
+  command.options.Check();
+  return command;
+}
+
+// Runs the measurement and prints its JSON; returns the exit code.
+int RunAccuracyCommand(const AccuracyCommand& command) {
+  const evloc::Map map = evloc::LoadMap(evloc::ResolveMapFile(command.map_path));
+  if (!command.image_dir.empty()) {
+    const std::vector<double> distances =
+        evloc::mapper::KeyframeEdgeDistances(map, command.image_dir);
+    if (distances.empty())
+      throw evloc::InvalidArgumentError("no map point projects into a keyframe");
+    const auto quantile = [&](double q) {
+      return distances[static_cast<size_t>(q * static_cast<double>(distances.size() - 1))];
+    };
+    const size_t within_1px = static_cast<size_t>(
+        std::upper_bound(distances.begin(), distances.end(), 1.0) - distances.begin());
+    nlohmann::json json;
+    json["points"] = map.size();
+    json["keyframes"] = map.keyframes.size();
+    json["edge_projections"] = distances.size();
+    json["median_edge_distance_px"] = quantile(0.5);
+    json["p75_edge_distance_px"] = quantile(0.75);
+    json["p90_edge_distance_px"] = quantile(0.9);
+    json["within_1px_fraction"] = static_cast<double>(within_1px) / distances.size();
+    std::cout << json.dump(2) << "\n";
+    return 0;
+  }
+  const evloc::Map reference = evloc::LoadMap(command.dataset / "gt_map" / evloc::kMapFileName);
+  const std::vector<DepthView> views =
+      evloc::mapper::ReadDatasetDepthViews(command.dataset, command.stride);
+  // Convex creases have no image-defined gradient; without the scene, every point counts.
+  std::vector<bool> gradient_defined;
+  std::string gradient_defined_note = "convex creases excluded";
+  try {
+    gradient_defined = evloc::mapper::ReferenceGradientDefined(command.dataset, reference);
+  } catch (const evloc::Error& error) {
+    gradient_defined_note = std::string("no edge kinds (") + error.what() + "): all points";
+  }
+  std::vector<evloc::mapper::PointAccuracy> per_point;
+  const evloc::mapper::MapAccuracy accuracy = evloc::mapper::MeasureMapAccuracy(
+      map, reference, views, command.options, command.points_csv.empty() ? nullptr : &per_point,
+      gradient_defined);
+  if (!command.points_csv.empty()) {
+    std::ostringstream csv;
+    csv.precision(7);
+    csv << "x y z gx gy gz depth_error_m edge_distance_m gradient_angle_deg "
+           "image_gradient_angle_deg reference_index\n";
+    for (size_t i = 0; i < per_point.size(); ++i) {
+      const Eigen::Vector3f& p = map.positions[i];
+      const Eigen::Vector3f& g = map.gradients[i];
+      const evloc::mapper::PointAccuracy& a = per_point[i];
+      csv << p.x() << ' ' << p.y() << ' ' << p.z() << ' ' << g.x() << ' ' << g.y() << ' ' << g.z()
+          << ' ' << a.depth_error_m << ' ' << a.edge_distance_m << ' ' << a.gradient_angle_deg
+          << ' ' << a.image_gradient_angle_deg << ' ' << a.reference_index << '\n';
+    }
+    evloc::WriteFileAtomically(command.points_csv, csv.str());
+  }
+  nlohmann::json json;
+  json["points"] = accuracy.num_points;
+  json["reference_points"] = reference.size();
+  json["depth_views"] = views.size();
+  json["depth_compared_points"] = accuracy.num_depth_compared;
+  json["depth_compared_in_source_view"] = accuracy.num_depth_in_source_view;
+  json["median_depth_error_m"] = accuracy.median_depth_error_m;
+  json["median_signed_depth_error_m"] = accuracy.median_signed_depth_error_m;
+  json["depth_within_fraction"] = accuracy.depth_within_fraction;
+  json["median_edge_distance_m"] = accuracy.median_edge_distance_m;
+  json["edge_within_fraction"] = accuracy.edge_within_fraction;
+  json["median_gradient_angle_deg"] = accuracy.median_gradient_angle_deg;
+  json["gradient_within_10deg_fraction"] = accuracy.gradient_within_10deg_fraction;
+  json["gradient_opposite_fraction"] = accuracy.gradient_opposite_fraction;
+  json["median_image_gradient_angle_deg"] = accuracy.median_image_gradient_angle_deg;
+  json["gradient_defined_points"] = accuracy.num_gradient_defined;
+  json["gradient_defined_note"] = gradient_defined_note;
+  json["median_gradient_angle_defined_deg"] = accuracy.median_gradient_angle_defined_deg;
+  json["gradient_within_10deg_defined_fraction"] = accuracy.gradient_within_10deg_defined_fraction;
+  json["gradient_opposite_defined_fraction"] = accuracy.gradient_opposite_defined_fraction;
+  json["within_m"] = command.options.within_m;
+  std::cout << json.dump(2) << "\n";
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
-  fs::path map_path;
-  fs::path dataset;
-  fs::path image_dir;
-  fs::path points_csv;
-  int stride = 1;
-  evloc::mapper::MapAccuracyOptions options;
-  try {
-    const std::vector<std::string> arguments(argv + 1, argv + argc);
-    for (size_t i = 0; i < arguments.size(); ++i) {
-      const std::string& flag = arguments[i];
-      if (flag == "--help" || flag == "-h") {
-        std::cout << kUsage;
-        return 0;
-      }
-      const std::string& value = evloc::TakeFlagValue(arguments, &i);
-      if (flag == "--map") {
-        map_path = value;
-      } else if (flag == "--dataset") {
-        dataset = value;
-      } else if (flag == "--images") {
-        image_dir = value;
-      } else if (flag == "--points-csv") {
-        points_csv = value;
-      } else if (flag == "--within") {
-        options.within_m = evloc::ParseDoubleFlag(flag, value);
-      } else if (flag == "--depth-stride") {
-        stride = evloc::ParseIntFlag(flag, value);
-      } else {
-        throw evloc::InvalidArgumentError("unknown flag '" + flag + "' (see --help)");
-      }
-    }
-    if (map_path.empty() || dataset.empty() == image_dir.empty()) {
-      throw evloc::InvalidArgumentError("--map and one of --dataset or --images are required");
-    }
-    if (stride < 1) throw evloc::InvalidArgumentError("--depth-stride must be at least 1");
-    options.Check();
-  } catch (const evloc::Error& error) {
-    std::cerr << "evloc-mapper-accuracy: " << error.what() << "\n\n" << kUsage;
-    return 2;
-  }
-  try {
-    const evloc::Map map = evloc::LoadMap(evloc::ResolveMapFile(map_path));
-    if (!image_dir.empty()) {
-      const std::vector<double> distances = evloc::mapper::KeyframeEdgeDistances(map, image_dir);
-      if (distances.empty())
-        throw evloc::InvalidArgumentError("no map point projects into a keyframe");
-      const auto quantile = [&](double q) {
-        return distances[static_cast<size_t>(q * static_cast<double>(distances.size() - 1))];
-      };
-      const size_t within_1px = static_cast<size_t>(
-          std::upper_bound(distances.begin(), distances.end(), 1.0) - distances.begin());
-      nlohmann::json json;
-      json["points"] = map.size();
-      json["keyframes"] = map.keyframes.size();
-      json["edge_projections"] = distances.size();
-      json["median_edge_distance_px"] = quantile(0.5);
-      json["p75_edge_distance_px"] = quantile(0.75);
-      json["p90_edge_distance_px"] = quantile(0.9);
-      json["within_1px_fraction"] = static_cast<double>(within_1px) / distances.size();
-      std::cout << json.dump(2) << "\n";
-      return 0;
-    }
-    const evloc::Map reference = evloc::LoadMap(dataset / "gt_map" / evloc::kMapFileName);
-    const std::vector<DepthView> views = evloc::mapper::ReadDatasetDepthViews(dataset, stride);
-    // Convex creases have no image-defined gradient; without the scene, every point counts.
-    std::vector<bool> gradient_defined;
-    std::string gradient_defined_note = "convex creases excluded";
-    try {
-      gradient_defined = evloc::mapper::ReferenceGradientDefined(dataset, reference);
-    } catch (const evloc::Error& error) {
-      gradient_defined_note = std::string("no edge kinds (") + error.what() + "): all points";
-    }
-    std::vector<evloc::mapper::PointAccuracy> per_point;
-    const evloc::mapper::MapAccuracy accuracy = evloc::mapper::MeasureMapAccuracy(
-        map, reference, views, options, points_csv.empty() ? nullptr : &per_point,
-        gradient_defined);
-    if (!points_csv.empty()) {
-      std::ostringstream csv;
-      csv.precision(7);
-      csv << "x y z gx gy gz depth_error_m edge_distance_m gradient_angle_deg "
-             "image_gradient_angle_deg reference_index\n";
-      for (size_t i = 0; i < per_point.size(); ++i) {
-        const Eigen::Vector3f& p = map.positions[i];
-        const Eigen::Vector3f& g = map.gradients[i];
-        const evloc::mapper::PointAccuracy& a = per_point[i];
-        csv << p.x() << ' ' << p.y() << ' ' << p.z() << ' ' << g.x() << ' ' << g.y() << ' ' << g.z()
-            << ' ' << a.depth_error_m << ' ' << a.edge_distance_m << ' ' << a.gradient_angle_deg
-            << ' ' << a.image_gradient_angle_deg << ' ' << a.reference_index << '\n';
-      }
-      evloc::WriteFileAtomically(points_csv, csv.str());
-    }
-    nlohmann::json json;
-    json["points"] = accuracy.num_points;
-    json["reference_points"] = reference.size();
-    json["depth_views"] = views.size();
-    json["depth_compared_points"] = accuracy.num_depth_compared;
-    json["depth_compared_in_source_view"] = accuracy.num_depth_in_source_view;
-    json["median_depth_error_m"] = accuracy.median_depth_error_m;
-    json["median_signed_depth_error_m"] = accuracy.median_signed_depth_error_m;
-    json["depth_within_fraction"] = accuracy.depth_within_fraction;
-    json["median_edge_distance_m"] = accuracy.median_edge_distance_m;
-    json["edge_within_fraction"] = accuracy.edge_within_fraction;
-    json["median_gradient_angle_deg"] = accuracy.median_gradient_angle_deg;
-    json["gradient_within_10deg_fraction"] = accuracy.gradient_within_10deg_fraction;
-    json["gradient_opposite_fraction"] = accuracy.gradient_opposite_fraction;
-    json["median_image_gradient_angle_deg"] = accuracy.median_image_gradient_angle_deg;
-    json["gradient_defined_points"] = accuracy.num_gradient_defined;
-    json["gradient_defined_note"] = gradient_defined_note;
-    json["median_gradient_angle_defined_deg"] = accuracy.median_gradient_angle_defined_deg;
-    json["gradient_within_10deg_defined_fraction"] =
-        accuracy.gradient_within_10deg_defined_fraction;
-    json["gradient_opposite_defined_fraction"] = accuracy.gradient_opposite_defined_fraction;
-    json["within_m"] = options.within_m;
-    std::cout << json.dump(2) << "\n";
-    return 0;
-  } catch (const std::exception& error) {
-    std::cerr << "evloc-mapper-accuracy: error: " << error.what() << "\n";
-    return 1;
-  }
+  return evloc::RunCommandTool(
+      "evloc-mapper-accuracy", argc, argv, ParseAccuracyCommandLine,
+      [] { return std::string(kUsage); }, RunAccuracyCommand);
 }

@@ -1,5 +1,5 @@
 // ESIM: an event camera simulated from a sequence of linear intensity images (docs/simulator.md,
-// method.md section 6). Each pixel keeps a reference log intensity; when the log intensity
+// docs/simulator.md). Each pixel keeps a reference log intensity; when the log intensity
 // crosses reference +- contrast threshold between two images, an event is emitted at the
 // linearly interpolated crossing time and the reference moves by one threshold.
 #pragma once
