@@ -13,6 +13,7 @@
 #include "maps/crc32c.h"
 #include "maps/map.h"
 #include "maps/synthetic_map.h"
+#include "maps/testing/map_file_editing.h"
 
 namespace evloc {
 namespace {
@@ -102,18 +103,7 @@ class MapIoTest : public ::testing::Test {
   std::filesystem::path WriteEditedPayload(Edit edit, const std::string& name,
                                            const Map& map = MakeMap()) {
     SaveMap(path_, map);
-    std::string bytes = ReadFileToString(path_);
-    map_format::MapFile file;
-    EXPECT_TRUE(file.ParseFromString(bytes.substr(kMapFileHeaderSize)));
-    edit(file);
-    const std::string payload = file.SerializeAsString();
-    const uint32_t payload_crc = Crc32c(payload);
-    const uint64_t length = payload.size();
-    std::memcpy(bytes.data() + 12, &payload_crc, 4);
-    std::memcpy(bytes.data() + 16, &length, 8);
-    const uint32_t header_crc = Crc32c(std::string_view(bytes).substr(0, 24));
-    std::memcpy(bytes.data() + 24, &header_crc, 4);
-    return WriteVariant(bytes.substr(0, kMapFileHeaderSize) + payload, name);
+    return WriteVariant(testing::EditMapPayload(ReadFileToString(path_), edit), name);
   }
 
   std::filesystem::path directory_;
@@ -302,16 +292,11 @@ TEST_F(MapIoTest, CorruptedRelocalizationFieldsAreRefused) {
       });
   ExpectParseError([&] { LoadMap(path); }, {"the vocabulary has 100 values"});
   // A version 1 header with the version 2 field.
-  path = edit("v1_with_field.evmap", no_change,
-              [](map_format::MapFile& file) { file.set_format_version(1); });
-  {
-    std::string bytes = ReadFileToString(path);
-    const uint32_t version = 1;
-    std::memcpy(bytes.data() + 8, &version, 4);
-    const uint32_t header_crc = Crc32c(std::string_view(bytes).substr(0, 24));
-    std::memcpy(bytes.data() + 24, &header_crc, 4);
-    path = WriteVariant(bytes, "v1_with_field2.evmap");
-  }
+  SaveMap(path_, MakeRelocalizationMap());
+  path = WriteVariant(testing::EditMapPayload(
+                          ReadFileToString(path_),
+                          [](map_format::MapFile& file) { file.set_format_version(1); }, 1),
+                      "v1_with_field.evmap");
   ExpectParseError([&] { LoadMap(path); }, {"a format version 1 map carries the version 2"});
   // SaveMap refuses what LoadMap would refuse.
   Map bad = MakeRelocalizationMap();
