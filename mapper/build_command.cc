@@ -93,6 +93,9 @@ Map:
   --neighbours N           stereo neighbours per keyframe (default 6)
   --min-confirmations K    keyframes that must confirm a point (default 2)
   --voxel-size METRES      duplicate-merge voxel (default: 1 pixel at the median depth)
+  --no-relocalization      skip the relocalization data (landmarks, keyframe features,
+                           vocabulary; format v2): a smaller map that cannot relocalize until
+                           `evloc-mapper upgrade` adds it
 Output:
   --quiet                  no progress output
   --help                   this text
@@ -113,6 +116,10 @@ BuildCommandLine ParseBuildCommandLine(const std::vector<std::string>& arguments
     }
     if (flag == "--accept-bad-alignment") {
       options.accept_bad_alignment = true;
+      continue;
+    }
+    if (flag == "--no-relocalization") {
+      options.relocalization = false;
       continue;
     }
     if (flag == "--fast-nondeterministic") {
@@ -208,7 +215,17 @@ int RunBuildCommand(int argc, char** argv) {
       std::cout << ", alignment RMS " << *report.alignment_rms_m << " m (scale "
                 << *report.alignment_scale << ")";
     }
+    if (report.relocalization) {
+      std::cout << ", relocalization: " << report.relocalization->num_landmarks << " landmarks, "
+                << report.relocalization->num_features_kept << " keyframe features, "
+                << report.relocalization->bytes_added << " bytes";
+    }
     std::cout << "\n";
+    if (!report.relocalization_warning.empty()) {
+      // Printed even with --quiet: the map cannot relocalize.
+      std::cerr << "evloc-mapper build: WARNING: the map has no relocalization data: "
+                << report.relocalization_warning << " (report.json: relocalization_warning)\n";
+    }
     if (!report.alignment_warning.empty()) {
       // Printed even with --quiet: the map was built from a model that does not fit --align-to.
       std::cerr << "evloc-mapper build: WARNING: --accept-bad-alignment: "

@@ -101,6 +101,18 @@ std::string MapBuildReportToJson(const MapBuildReport& report) {
   } else {
     json["alignment"] = nullptr;
   }
+  if (report.relocalization) {
+    const RelocalizationDataStatistics& relocalization = *report.relocalization;
+    json["relocalization"] = {{"landmarks", relocalization.num_landmarks},
+                              {"features_kept", relocalization.num_features_kept},
+                              {"features_extracted", relocalization.num_features_extracted},
+                              {"matched_pairs", relocalization.num_matched_pairs},
+                              {"verified_matches", relocalization.num_verified_matches},
+                              {"bytes_added", relocalization.bytes_added}};
+  } else {
+    json["relocalization"] = nullptr;
+  }
+  json["relocalization_warning"] = report.relocalization_warning;
   nlohmann::json timings = nlohmann::json::array();
   for (const StageTiming& timing : report.timings) {
     timings.push_back({{"stage", timing.stage},

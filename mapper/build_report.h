@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "core/geometry/rigid3.h"
+#include "mapper/relocalization_data.h"
 
 namespace evloc::mapper {
 
@@ -95,6 +96,10 @@ struct MapBuildReport {
   std::string alignment_warning;
   // The model-to-world similarity applied (identity without --align-to).
   Sim3d world_from_model;
+  // Figures of the relocalization data; nullopt when it was not computed.
+  std::optional<RelocalizationDataStatistics> relocalization;
+  // Why the map has no relocalization data although it was asked for; empty otherwise.
+  std::string relocalization_warning;
   // Per-stage timings, in pipeline order.
   std::vector<StageTiming> timings;
   // Registered image poses in the output frame (world_from_cam), by image name.

@@ -20,7 +20,6 @@
 #include "maps/edge_lifting.h"
 #include "maps/map_directory.h"
 
-
 namespace evloc::mapper {
 namespace {
 
@@ -234,6 +233,25 @@ Map MergeKeyframePoints(const MapBuilderOptions& options, const RegisteredViews&
     if (input) map.provenance.inputs.push_back(fs::absolute(*input).string());
   }
   return map;
+}
+
+void AddRelocalizationData(const MapBuilderOptions& options, const StageClock& clock, Map* map,
+                           MapBuildReport* report) {
+  if (!options.relocalization) return;
+  clock.Run("relocalization", [&] {
+    RelocalizationDataStatistics statistics;
+    RelocalizationDataOptions relocalization = options.relocalization_data;
+    relocalization.num_threads = options.semidense.num_threads;
+    try {
+      map->relocalization =
+          ComputeRelocalizationData(*map, options.image_dir, relocalization, &statistics);
+    } catch (const InvalidArgumentError& error) {
+      report->relocalization_warning = error.what();
+      return false;
+    }
+    report->relocalization = statistics;
+    return false;
+  });
 }
 
 void WriteOutputs(const MapBuilderOptions& options, const BuildInputs& inputs, const Map& map,

@@ -1,7 +1,8 @@
 // The stages of BuildMap (docs/mapper.md, "Stages and algorithms"), each a function from typed
 // inputs to a typed result: inputs -> sparse reconstruction (COLMAP, cached in its workspace) ->
 // alignment -> registered views -> keyframes and semi-dense depth -> edge lifting -> merge ->
-// outputs. Stages that report figures or timings take the build's report and clock.
+// relocalization data -> outputs. Stages that report figures or timings take the build's report and
+// clock.
 #pragma once
 
 #include <cstdint>
@@ -121,7 +122,13 @@ Map MergeKeyframePoints(const MapBuilderOptions& options, const RegisteredViews&
                         LiftedKeyframes lifted, const SparseReconstruction& sparse,
                         const StageClock& clock, MapBuildReport* report);
 
-// Stage 8: writes the map directory (map.evmap, map.ply, preview.png, colmap/, report.json) into
+// Stage 8: unless options.relocalization is false, computes the map's relocalization data from
+// the keyframe images in options.image_dir (ComputeRelocalizationData; report: its figures). When
+// too few features see a landmark the map is written without it and the report says why.
+void AddRelocalizationData(const MapBuilderOptions& options, const StageClock& clock, Map* map,
+                           MapBuildReport* report);
+
+// Stage 9: writes the map directory (map.evmap, map.ply, preview.png, colmap/, report.json) into
 // a staging sibling of inputs.output_dir and renames it into place.
 void WriteOutputs(const MapBuilderOptions& options, const BuildInputs& inputs, const Map& map,
                   const SparseReconstruction& sparse, const StageClock& clock,

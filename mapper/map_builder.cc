@@ -24,6 +24,7 @@ void MapBuilderOptions::Check() const {
   keyframes.Check();
   semidense.Check();
   merge.Check();
+  relocalization_data.Check();
   alignment_limits.Check();
 }
 
@@ -47,8 +48,10 @@ MapBuildReport BuildMap(const MapBuilderOptions& options, ProgressListener* prog
   // 6. 3D edge points with 3D gradients.
   LiftedKeyframes lifted = LiftKeyframes(options, views, depths, clock);
   // 7. The merged map.
-  const Map map = MergeKeyframePoints(options, views, std::move(lifted), sparse, clock, &report);
-  // 8. The map directory, staged and renamed into place.
+  Map map = MergeKeyframePoints(options, views, std::move(lifted), sparse, clock, &report);
+  // 8. Relocalization data: landmarks, keyframe features, vocabulary, global descriptors.
+  AddRelocalizationData(options, clock, &map, &report);
+  // 9. The map directory, staged and renamed into place.
   WriteOutputs(options, inputs, map, sparse, clock, &report);
   return report;
 }

@@ -21,6 +21,7 @@
 #include "mapper/keyframe_selection.h"
 #include "mapper/map_merge.h"
 #include "mapper/pose_alignment.h"
+#include "mapper/relocalization_data.h"
 #include "mapper/semidense_depth.h"
 
 namespace evloc::mapper {
@@ -63,6 +64,10 @@ struct MapBuilderOptions {
   SemiDenseOptions semidense;
   // Merging.
   MapMergeOptions merge;
+  // Compute the relocalization data (format v2) of the map (false: --no-relocalization).
+  bool relocalization = true;
+  // How the relocalization data is computed.
+  RelocalizationDataOptions relocalization_data;
   // Fail when fewer than this fraction of the images are registered by COLMAP.
   double min_registered_fraction = 0.5;
   // Keyframes drawn in preview.png.

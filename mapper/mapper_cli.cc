@@ -7,8 +7,10 @@
 
 #include "core/common/cli.h"
 #include "core/common/error.h"
+#include "core/common/file_util.h"
 #include "core/common/provenance.h"
 #include "mapper/build_command.h"
+#include "mapper/relocalization_data.h"
 #include "maps/map.h"
 #include "maps/map_directory.h"
 #include "maps/pcd_import.h"
@@ -38,6 +40,134 @@ const char kInfoHelp[] =
     "provenance. Exits with 1 and a message when the map is missing, truncated or corrupted.\n"
     "\n"
     "  --help   show this help\n";
+
+const char kUpgradeHelp[] =
+    "usage: evloc-mapper upgrade --map MAP --images DIR [--out OUT] [--force] [--threads N]\n"
+    "\n"
+    "Adds the relocalization data of map format v2 (landmarks, keyframe features, vocabulary,\n"
+    "global descriptors; docs/map-format.md) to a format v1 map, or to a v2 map without it: the\n"
+    "keyframe images are read from DIR by the names the map records, and the data is computed\n"
+    "as `evloc-mapper build` computes it. MAP is a map directory or a .evmap file.\n"
+    "\n"
+    "In place by default: the new map replaces MAP atomically and the old file is kept as\n"
+    "MAP.v1.bak (refused when that backup exists, unless --force). With --out the map is written\n"
+    "to OUT (a .evmap file, or a directory that gets map.evmap) and MAP is left alone.\n"
+    "\n"
+    "  --map MAP       the map to upgrade\n"
+    "  --images DIR    folder of the images the map was built from\n"
+    "  --out OUT       write the upgraded map here instead of in place\n"
+    "  --force         replace an existing OUT or backup, or recompute relocalization data the\n"
+    "                  map already has\n"
+    "  --threads N     threads for feature extraction and matching (default 2; same result)\n"
+    "  --help          show this help\n";
+
+// The options of `upgrade`, one field per flag.
+struct UpgradeCommandOptions {
+  // The map (directory or .evmap file).
+  std::filesystem::path map;
+  // Folder of the keyframe images.
+  std::filesystem::path images;
+  // Where to write; empty: in place.
+  std::filesystem::path out;
+  // Replace an existing output or backup; recompute existing relocalization data.
+  bool force = false;
+  // Threads for extraction and matching.
+  int threads = 2;
+  // --help was given.
+  bool help = false;
+
+  // Throws UsageError when --map or --images is missing or --threads < 1.
+  void Check() const {
+    if (map.empty()) throw UsageError("upgrade needs --map MAP");
+    if (images.empty()) throw UsageError("upgrade needs --images DIR");
+    if (threads < 1) throw UsageError("--threads must be at least 1");
+  }
+};
+
+UpgradeCommandOptions ParseUpgradeOptions(const std::vector<std::string>& arguments) {
+  UpgradeCommandOptions options;
+  for (size_t i = 0; i < arguments.size(); ++i) {
+    const std::string& argument = arguments[i];
+    const auto value = [&]() -> const std::string& { return TakeFlagValue(arguments, &i); };
+    if (argument == "--help" || argument == "-h") {
+      options.help = true;
+      return options;
+    } else if (argument == "--map") {
+      options.map = value();
+    } else if (argument == "--images") {
+      options.images = value();
+    } else if (argument == "--out") {
+      options.out = value();
+    } else if (argument == "--force") {
+      options.force = true;
+    } else if (argument == "--threads") {
+      options.threads = ParseIntFlag(argument, value());
+    } else if (argument.rfind("-", 0) == 0) {
+      throw UsageError("unknown option '" + argument + "'");
+    } else {
+      throw UsageError("unexpected argument '" + argument + "'");
+    }
+  }
+  options.Check();
+  return options;
+}
+
+int Upgrade(const std::vector<std::string>& arguments, const std::string& command_line,
+            std::ostream& out) {
+  const UpgradeCommandOptions options = ParseCommandLine(ParseUpgradeOptions, arguments);
+  if (options.help) {
+    out << kUpgradeHelp;
+    return 0;
+  }
+  namespace fs = std::filesystem;
+  const fs::path source = ResolveMapFile(options.map);
+  const MapFileHeader header = ReadMapFileHeader(source);
+  Map map = LoadMap(source);
+  if (map.relocalization && !options.force) {
+    throw InvalidArgumentError("'" + source.string() +
+                               "' already has relocalization data (format v2); pass --force to "
+                               "compute it again");
+  }
+  std::error_code error;
+  fs::path target = source;
+  if (!options.out.empty()) {
+    target = fs::is_directory(options.out, error) || options.out.extension() != ".evmap"
+                 ? options.out / kMapFileName
+                 : options.out;
+    if (fs::exists(target, error) && !options.force) {
+      throw InvalidArgumentError("'" + target.string() +
+                                 "' exists; choose another --out or pass "
+                                 "--force to replace it");
+    }
+  }
+  const fs::path backup = source.string() + ".v" + std::to_string(header.format_version) + ".bak";
+  if (options.out.empty() && fs::exists(backup, error) && !options.force) {
+    throw InvalidArgumentError("the backup '" + backup.string() +
+                               "' exists; move it away or pass --force to replace it");
+  }
+  mapper::RelocalizationDataOptions relocalization;
+  relocalization.num_threads = options.threads;
+  mapper::RelocalizationDataStatistics statistics;
+  map.relocalization =
+      mapper::ComputeRelocalizationData(map, options.images, relocalization, &statistics);
+  map.provenance.command_line += " ; " + command_line;
+  map.provenance.inputs.push_back(fs::absolute(options.images).lexically_normal().string());
+  if (options.out.empty()) {
+    // The old file stays readable under MAP.v1.bak; the new one replaces MAP atomically.
+    WriteFileAtomically(backup, ReadFileToString(source));
+  } else if (!target.parent_path().empty()) {
+    fs::create_directories(target.parent_path(), error);
+  }
+  SaveMap(target, map);
+  out << "upgraded " << source.string() << " (format " << header.format_version << ", "
+      << kMapFileHeaderSize + header.payload_length << " bytes) to " << target.string()
+      << " (format " << kMapFormatVersion << ", " << fs::file_size(target)
+      << " bytes): " << statistics.num_landmarks << " landmarks, " << statistics.num_features_kept
+      << " keyframe features of " << statistics.num_features_extracted << ", "
+      << statistics.bytes_added << " bytes of relocalization data\n";
+  if (options.out.empty()) out << "the previous map is kept as " << backup.string() << "\n";
+  return 0;
+}
 
 // The options of `import-pcd`, one field per flag.
 struct ImportPcdCommandOptions {
@@ -172,6 +302,12 @@ int RunImportPcdCommand(const std::vector<std::string>& arguments, const std::st
                     [&] { return ImportPcd(arguments, command_line, out); });
 }
 
+int RunUpgradeCommand(const std::vector<std::string>& arguments, const std::string& command_line,
+                      std::ostream& out, std::ostream& err) {
+  return RunGuarded("evloc-mapper upgrade", err,
+                    [&] { return Upgrade(arguments, command_line, out); });
+}
+
 int RunInfoCommand(const std::vector<std::string>& arguments, const std::string& /*command_line*/,
                    std::ostream& out, std::ostream& err) {
   return RunGuarded("evloc-mapper info", err, [&] { return Info(arguments, out); });
@@ -195,6 +331,8 @@ const std::vector<MapperSubcommand>& MapperSubcommands() {
        RunBuildSubcommand},
       {"import-pcd", "import a Canny-EVT PCD map into a map directory", RunImportPcdCommand},
       {"info", "verify and summarise a map", RunInfoCommand},
+      {"upgrade", "add relocalization data (format v2) to a v1 map from its images",
+       RunUpgradeCommand},
   };
   return subcommands;
 }

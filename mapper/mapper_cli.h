@@ -33,6 +33,11 @@ int RunMapperCli(int argc, const char* const* argv, std::ostream& out, std::ostr
 int RunImportPcdCommand(const std::vector<std::string>& arguments, const std::string& command_line,
                         std::ostream& out, std::ostream& err);
 
+// `evloc-mapper upgrade --map MAP --images DIR [--out OUT] [--force] [--threads N]`: adds the
+// relocalization data of format v2 to a map (in place, keeping MAP.v1.bak, or into OUT).
+int RunUpgradeCommand(const std::vector<std::string>& arguments, const std::string& command_line,
+                      std::ostream& out, std::ostream& err);
+
 // `evloc-mapper info MAP` (a map directory or a .evmap file).
 int RunInfoCommand(const std::vector<std::string>& arguments, const std::string& command_line,
                    std::ostream& out, std::ostream& err);

@@ -5,13 +5,18 @@
 #include <sys/wait.h>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <sstream>
 #include <string>
 #include <vector>
 
+#include "core/common/error.h"
 #include "core/common/file_util.h"
 #include "core/common/test_data.h"
+#include "mapper/relocalization_data.h"
+#include "mapper/testing/middlebury_map.h"
 #include "maps/map.h"
+#include "maps/testing/map_file_editing.h"
 
 namespace evloc {
 namespace {
@@ -187,6 +192,94 @@ TEST_F(MapperCliTest, TheBinaryExitsNonZeroOnAForeignFile) {
   ASSERT_TRUE(WIFEXITED(status));
   EXPECT_EQ(WEXITSTATUS(status), 1);
   EXPECT_TRUE(Contains(ReadFileToString(directory_ / "stderr.txt"), "not an evloc map"));
+}
+
+// Writes `map` as a format version 1 file: a v2 file without relocalization data, with the
+// version 1 in the header and the payload (what the v1 writer wrote).
+void SaveAsVersion1(const std::filesystem::path& path, const Map& map) {
+  ASSERT_FALSE(map.relocalization.has_value());
+  SaveMap(path, map);
+  const std::string bytes = testing::EditMapPayload(
+      ReadFileToString(path), [](map_format::MapFile& file) { file.set_format_version(1); }, 1);
+  ASSERT_FALSE(bytes.empty());
+  WriteFileAtomically(path, bytes);
+}
+
+// `upgrade` on a v1 map of the 8 first templeSparseRing photos at their calibrated poses: in place
+// with a backup, the data equal to the build stage's (one function), refusals, --out, a missing
+// image named.
+TEST_F(MapperCliTest, UpgradeAddsRelocalizationDataToAVersion1Map) {
+  EVLOC_REQUIRE_SHARED_DATA(parameters, "middlebury/templeSparseRing/templeSR_par.txt");
+  std::vector<testing::MiddleburyView> views = testing::ReadMiddleburyParameters(parameters);
+  ASSERT_EQ(views.size(), 16u);
+  views.resize(8);
+  Map map = testing::MiddleburyKeyframeMap(views);
+  map.AddPoint(Eigen::Vector3f(0.0f, 0.1f, 0.02f), Eigen::Vector3f::UnitX(), 0.1f, 0.2f, 0);
+  const std::filesystem::path map_dir = directory_ / "temple";
+  std::filesystem::create_directories(map_dir);
+  const std::filesystem::path file = map_dir / "map.evmap";
+  SaveAsVersion1(file, map);
+  const std::string v1_bytes = ReadFileToString(file);
+  ASSERT_EQ(ReadMapFileHeader(file).format_version, 1u);
+  const std::string images = parameters.parent_path().string();
+
+  // Relocalizing this map is refused with the shared message.
+  EXPECT_THROW(RequireRelocalizationData(LoadMap(file), file.string()), InvalidArgumentError);
+
+  CliResult result = RunCli({"upgrade", "--map", map_dir.string(), "--images", images});
+  ASSERT_EQ(result.exit_code, 0) << result.err;
+  EXPECT_TRUE(Contains(result.out, "landmarks")) << result.out;
+  EXPECT_EQ(ReadMapFileHeader(file).format_version, 2u);
+  EXPECT_EQ(ReadFileToString(map_dir / "map.evmap.v1.bak"), v1_bytes);
+  const Map upgraded = LoadMap(file);
+  ASSERT_TRUE(HasRelocalizationData(upgraded));
+  // The same data as the build stage computes (the same function), points and keyframes kept.
+  Map expected = map;
+  expected.relocalization = mapper::ComputeRelocalizationData(map, parameters.parent_path(), {});
+  EXPECT_EQ(ComputeMapContentChecksum(upgraded), ComputeMapContentChecksum(expected));
+  EXPECT_EQ(upgraded.size(), 1u);
+  std::cout << "temple 8 views upgrade: " << result.out;
+  result = RunCli({"info", file.string()});
+  EXPECT_TRUE(Contains(
+      result.out, "relocalization:   " + std::to_string(upgraded.relocalization->landmarks.size()) +
+                      " landmarks"))
+      << result.out;
+
+  // Already upgraded: refused without --force.
+  result = RunCli({"upgrade", "--map", file.string(), "--images", images});
+  EXPECT_EQ(result.exit_code, 1);
+  EXPECT_TRUE(Contains(result.err, "already has relocalization data")) << result.err;
+  // In place again from the backup: the backup exists, refused without --force.
+  const std::filesystem::path v1_copy = directory_ / "copy" / "map.evmap";
+  std::filesystem::create_directories(v1_copy.parent_path());
+  WriteFileAtomically(v1_copy, v1_bytes);
+  WriteFileAtomically(v1_copy.string() + ".v1.bak", std::string("older backup"));
+  result = RunCli({"upgrade", "--map", v1_copy.string(), "--images", images});
+  EXPECT_EQ(result.exit_code, 1);
+  EXPECT_TRUE(Contains(result.err, "map.evmap.v1.bak' exists")) << result.err;
+  EXPECT_EQ(ReadFileToString(v1_copy), v1_bytes);
+  // --out: the source is left alone.
+  const std::filesystem::path out_dir = directory_ / "out";
+  result = RunCli({"upgrade", "--map", v1_copy.string(), "--images", images, "--out",
+                   out_dir.string(), "--threads", "1"});
+  ASSERT_EQ(result.exit_code, 0) << result.err;
+  EXPECT_EQ(ReadFileToString(v1_copy), v1_bytes);
+  EXPECT_EQ(ComputeMapContentChecksum(LoadMap(out_dir / "map.evmap")),
+            ComputeMapContentChecksum(expected));
+  result =
+      RunCli({"upgrade", "--map", v1_copy.string(), "--images", images, "--out", out_dir.string()});
+  EXPECT_EQ(result.exit_code, 1);
+  EXPECT_TRUE(Contains(result.err, "exists; choose another --out")) << result.err;
+  // A folder without the keyframe images: the missing image is named, nothing written.
+  result = RunCli({"upgrade", "--map", v1_copy.string(), "--images", directory_.string(), "--out",
+                   (directory_ / "none.evmap").string()});
+  EXPECT_EQ(result.exit_code, 1);
+  EXPECT_TRUE(Contains(result.err, "keyframe 0 image 'templeSR0001.png' is not in")) << result.err;
+  EXPECT_FALSE(std::filesystem::exists(directory_ / "none.evmap"));
+  // Usage errors.
+  EXPECT_EQ(RunCli({"upgrade", "--map", v1_copy.string()}).exit_code, 2);
+  EXPECT_EQ(RunCli({"upgrade", "--images", images}).exit_code, 2);
+  EXPECT_EQ(RunCli({"upgrade", "--help"}).exit_code, 0);
 }
 
 TEST(MapperCliRealData, ImportsTheCannyEvtMap) {

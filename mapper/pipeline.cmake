@@ -19,11 +19,13 @@ add_library(evloc_mapper_pipeline
   ${CMAKE_CURRENT_LIST_DIR}/build_stages.cc
   ${CMAKE_CURRENT_LIST_DIR}/build_report.cc
   ${CMAKE_CURRENT_LIST_DIR}/map_preview.cc
+  ${CMAKE_CURRENT_LIST_DIR}/relocalization_data.cc
   ${CMAKE_CURRENT_LIST_DIR}/map_builder.cc
   ${CMAKE_CURRENT_LIST_DIR}/build_command.cc)
 target_include_directories(evloc_mapper_pipeline PUBLIC ${PROJECT_SOURCE_DIR})
 target_link_libraries(evloc_mapper_pipeline
-  PUBLIC evloc_maps evloc_camera evloc_geometry evloc_common opencv_core opencv_imgproc opencv_imgcodecs
+  PUBLIC evloc_maps evloc_camera evloc_geometry evloc_common evloc_features opencv_core opencv_imgproc
+         opencv_imgcodecs
   PRIVATE evloc_dataset evloc_trajectory nlohmann_json::nlohmann_json SQLite::SQLite3
           Threads::Threads opencv_calib3d ${PCL_LIBRARIES})
 # PCL headers are included by map_merge.cc only; SYSTEM keeps their warnings out.
@@ -39,6 +41,7 @@ evloc_add_test(NAME evloc_mapper_pipeline_test
           ${CMAKE_CURRENT_LIST_DIR}/build_command_test.cc
           ${CMAKE_CURRENT_LIST_DIR}/build_workspace_test.cc
           ${CMAKE_CURRENT_LIST_DIR}/feature_matching_test.cc
+          ${CMAKE_CURRENT_LIST_DIR}/relocalization_data_test.cc
   LIBS evloc_mapper_pipeline evloc_map_accuracy evloc_trajectory SQLite::SQLite3)
 
 evloc_add_test(NAME evloc_mapper_accuracy_test

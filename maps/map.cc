@@ -153,6 +153,100 @@ void Map::Check() const {
       }
     }
   }
+  CheckRelocalizationData(*this);
+}
+
+void CheckRelocalizationData(const Map& map) {
+  if (!map.relocalization) return;
+  const RelocalizationData& data = *map.relocalization;
+  const std::string prefix = "map relocalization data: ";
+  if (data.keyframes.size() != map.keyframes.size()) {
+    throw InvalidArgumentError(
+        prefix + "has feature sets for " + std::to_string(data.keyframes.size()) +
+        " keyframes but the map has " + std::to_string(map.keyframes.size()) + " keyframes");
+  }
+  if (data.landmarks.size() >= kNoKeyframe) {
+    throw InvalidArgumentError(prefix + "has " + std::to_string(data.landmarks.size()) +
+                               " landmarks; landmark indices are 32-bit");
+  }
+  for (size_t i = 0; i < data.landmarks.size(); ++i) {
+    if (!data.landmarks[i].allFinite()) {
+      throw InvalidArgumentError(prefix + "landmark " + std::to_string(i) +
+                                 " has a non-finite position " + FormatVector(data.landmarks[i]));
+    }
+  }
+  if (data.vocabulary.empty() || data.vocabulary.size() % kRelocalizationDescriptorBytes != 0) {
+    throw InvalidArgumentError(prefix + "the vocabulary has " +
+                               std::to_string(data.vocabulary.size()) +
+                               " values; expected words x " +
+                               std::to_string(kRelocalizationDescriptorBytes) + " with words >= 1");
+  }
+  for (size_t i = 0; i < data.vocabulary.size(); ++i) {
+    if (!std::isfinite(data.vocabulary[i])) {
+      throw InvalidArgumentError(prefix + "vocabulary value " + std::to_string(i) +
+                                 " is not finite");
+    }
+  }
+  for (size_t k = 0; k < data.keyframes.size(); ++k) {
+    const KeyframeFeatures& features = data.keyframes[k];
+    const std::string name = prefix + "keyframe " + std::to_string(k);
+    const size_t count = features.keypoints.size();
+    if (features.descriptors.size() != count * kRelocalizationDescriptorBytes) {
+      throw InvalidArgumentError(name + " has " + std::to_string(features.descriptors.size()) +
+                                 " descriptor bytes for " + std::to_string(count) +
+                                 " keypoints; expected keypoints x " +
+                                 std::to_string(kRelocalizationDescriptorBytes));
+    }
+    if (features.landmarks.size() != count) {
+      throw InvalidArgumentError(name + " has " + std::to_string(features.landmarks.size()) +
+                                 " landmark indices for " + std::to_string(count) +
+                                 " keypoints; expected one per keypoint");
+    }
+    for (size_t i = 0; i < count; ++i) {
+      if (!features.keypoints[i].allFinite()) {
+        throw InvalidArgumentError(name + " keypoint " + std::to_string(i) + " is not finite");
+      }
+      if (features.landmarks[i] >= data.landmarks.size()) {
+        throw InvalidArgumentError(name + " keypoint " + std::to_string(i) + " sees landmark " +
+                                   std::to_string(features.landmarks[i]) + " but there are " +
+                                   std::to_string(data.landmarks.size()) + " landmarks");
+      }
+    }
+    if (features.global_descriptor.size() != data.vocabulary.size()) {
+      throw InvalidArgumentError(name + " has a global descriptor of " +
+                                 std::to_string(features.global_descriptor.size()) +
+                                 " values; expected the vocabulary size " +
+                                 std::to_string(data.vocabulary.size()));
+    }
+    double squared_norm = 0.0;
+    for (const float value : features.global_descriptor) {
+      if (!std::isfinite(value)) {
+        throw InvalidArgumentError(name + " has a non-finite global descriptor value");
+      }
+      squared_norm += static_cast<double>(value) * value;
+    }
+    const double norm = std::sqrt(squared_norm);
+    if (norm != 0.0 && std::abs(norm - 1.0) > kGlobalDescriptorNormTolerance) {
+      throw InvalidArgumentError(name + " has a global descriptor of L2 norm " +
+                                 std::to_string(norm) + "; it must be 1 (or 0 without features)");
+    }
+  }
+}
+
+bool HasRelocalizationData(const Map& map) {
+  return map.relocalization.has_value() && !map.relocalization->landmarks.empty();
+}
+
+std::string MissingRelocalizationDataMessage(const std::string& map_path) {
+  return map_path +
+         " has no relocalization data (format v1 or imported); run `evloc-mapper upgrade --map " +
+         map_path + " --images DIR` or rebuild it with evloc-mapper build";
+}
+
+void RequireRelocalizationData(const Map& map, const std::string& map_path) {
+  if (!HasRelocalizationData(map)) {
+    throw InvalidArgumentError(MissingRelocalizationDataMessage(map_path));
+  }
 }
 
 uint32_t ComputeMapContentChecksum(const Map& map) {
@@ -193,6 +287,25 @@ uint32_t ComputeMapContentChecksum(const Map& map) {
     hasher.Add(static_cast<uint64_t>(keyframe.visible_points.size()));
     hasher.AddBytes(keyframe.visible_points.data(),
                     keyframe.visible_points.size() * sizeof(uint32_t));
+  }
+  // Relocalization data (v2) only when present: a map without it keeps its v1 checksum.
+  if (map.relocalization) {
+    const RelocalizationData& data = *map.relocalization;
+    const auto add_array = [&hasher](const auto& values) {
+      using Value = typename std::decay_t<decltype(values)>::value_type;
+      hasher.Add(static_cast<uint64_t>(values.size()));
+      hasher.AddBytes(values.data(), values.size() * sizeof(Value));
+    };
+    static_assert(sizeof(Eigen::Vector2f) == 2 * sizeof(float));
+    add_array(data.landmarks);
+    add_array(data.vocabulary);
+    hasher.Add(static_cast<uint64_t>(data.keyframes.size()));
+    for (const KeyframeFeatures& features : data.keyframes) {
+      add_array(features.keypoints);
+      add_array(features.descriptors);
+      add_array(features.landmarks);
+      add_array(features.global_descriptor);
+    }
   }
   return hasher.crc();
 }
@@ -236,6 +349,15 @@ MapInfo SummarizeMap(const Map& map) {
     info.last_keyframe_t_ns = latest->t_ns;
   }
   info.content_crc32c = ComputeMapContentChecksum(map);
+  if (map.relocalization) {
+    info.has_relocalization = true;
+    info.num_landmarks = map.relocalization->landmarks.size();
+    info.num_vocabulary_words =
+        map.relocalization->vocabulary.size() / kRelocalizationDescriptorBytes;
+    for (const KeyframeFeatures& features : map.relocalization->keyframes) {
+      info.num_relocalization_features += features.keypoints.size();
+    }
+  }
   info.provenance = map.provenance;
   for (const Camera& camera : map.cameras) {
     std::ostringstream text;
@@ -287,6 +409,13 @@ std::string FormatMapInfo(const MapInfo& info) {
          << info.num_visibility_entries << " visibility entries";
   } else {
     text << " (visibility from a voxel index of the points)";
+  }
+  text << "\nrelocalization:   ";
+  if (info.has_relocalization) {
+    text << info.num_landmarks << " landmarks, " << info.num_relocalization_features
+         << " keyframe features, " << info.num_vocabulary_words << " vocabulary words";
+  } else {
+    text << "none (format v1 or imported; evloc-mapper upgrade adds it)";
   }
   text << "\ncameras:          " << info.num_cameras << "\n";
   for (size_t i = 0; i < info.camera_descriptions.size(); ++i) {

@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "core/camera/camera.h"
@@ -19,8 +20,9 @@ namespace evloc {
 // Marks a point that was not triangulated in any keyframe (for example an imported PCD point).
 inline constexpr uint32_t kNoKeyframe = 0xffffffff;
 
-// The current (and only) format version of .evmap files written by SaveMap.
-inline constexpr uint32_t kMapFormatVersion = 1;
+// The format version of .evmap files written by SaveMap (2: optional relocalization data; LoadMap
+// also reads version 1, which has none).
+inline constexpr uint32_t kMapFormatVersion = 2;
 
 // A camera pose from which part of the map was built.
 struct Keyframe {
@@ -113,15 +115,38 @@ struct Map {
   // size() entries; positions are finite; gradients are unit vectors (|g| within 1e-3 of 1);
   // sigmas and magnitudes are finite and >= 0; source keyframes are valid indices or
   // kNoKeyframe; keyframe poses are finite with unit quaternions, camera indices valid, visible
-  // points valid and strictly increasing; every camera passes Camera::Check().
+  // points valid and strictly increasing; every camera passes Camera::Check(); and, with
+  // relocalization data, CheckRelocalizationData(*this).
   void Check() const;
 };
+
+// Throws InvalidArgumentError naming the first bad element unless map.relocalization is absent or
+// consistent: one feature set per keyframe; finite landmarks; a non-empty vocabulary of finite
+// values, a multiple of kRelocalizationDescriptorBytes long; per keyframe finite keypoints,
+// kRelocalizationDescriptorBytes descriptor bytes and one valid landmark index per keypoint, and
+// a finite global descriptor as long as the vocabulary with unit (or zero) L2 norm.
+void CheckRelocalizationData(const Map& map);
+
+// True when `map` carries relocalization data with at least one landmark.
+bool HasRelocalizationData(const Map& map);
+
+// The message for a relocalization request on a map without relocalization data (v1 or
+// imported), naming `map_path` and how to upgrade it; the CLI and the service use these words.
+std::string MissingRelocalizationDataMessage(const std::string& map_path);
+
+// Throws InvalidArgumentError with MissingRelocalizationDataMessage(map_path) unless
+// HasRelocalizationData(map).
+void RequireRelocalizationData(const Map& map, const std::string& map_path);
 
 // Allowed deviation of |gradient| from 1 in Map::Check().
 inline constexpr float kGradientNormTolerance = 1e-3f;
 
-// CRC32C (Castagnoli) of the map content (points, keyframes, cameras; not provenance) in the
-// canonical little-endian layout of docs/map-format.md. Equal content gives an equal value.
+// Allowed deviation of a keyframe's global descriptor L2 norm from 1 in CheckRelocalizationData.
+inline constexpr double kGlobalDescriptorNormTolerance = 1e-3;
+
+// CRC32C (Castagnoli) of the map content (points, cameras, keyframes, then the relocalization data
+// when present; not provenance) in the canonical little-endian layout of docs/map-format.md.
+// Equal content gives an equal value; a map without relocalization data has its v1 value.
 uint32_t ComputeMapContentChecksum(const Map& map);
 
 // Writes `map` to a .evmap file (header + protobuf payload, docs/map-format.md), atomically: a
@@ -129,10 +154,23 @@ uint32_t ComputeMapContentChecksum(const Map& map);
 // InvalidArgumentError) and throws IoError when the file cannot be written.
 void SaveMap(const std::filesystem::path& path, const Map& map);
 
-// Reads a .evmap file and verifies it: magic ("not an evloc map"), format version, payload length
-// (truncated files), payload checksum, content checksum, and Map::Check(). Throws IoError when the
-// file cannot be read and ParseError naming the file and byte offset when it is not a valid map.
+// Bytes the relocalization data adds to a .evmap file (its encoded protobuf field).
+uint64_t EncodedRelocalizationBytes(const RelocalizationData& data);
+
+// Reads a .evmap file (format version 1 or 2) and verifies it: magic ("not an evloc map"), format
+// version, payload length (truncated files), payload checksum, content checksum, and Map::Check().
+// Throws IoError when the file cannot be read and ParseError naming the file and byte offset when
+// it is not a valid map.
 Map LoadMap(const std::filesystem::path& path);
+
+// Reads a whole .evmap file held in memory (`source` names it in errors), with LoadMap's checks
+// and errors (ParseError only): for maps received over the network and for the fuzzer.
+Map LoadMapFromBytes(std::string_view bytes, const std::string& source);
+
+// Decodes a MapFile protobuf payload (the bytes after the header) without the payload and
+// content checksums but with every other check of LoadMap (units, sizes, Map::Check()); throws
+// ParseError. For the fuzzer, whose mutations would otherwise stop at the checksums.
+Map DecodeMapPayloadUnchecked(std::string_view payload, const std::string& source);
 
 // The fixed-size header of a .evmap file.
 struct MapFileHeader {
@@ -179,6 +217,14 @@ struct MapInfo {
   int64_t last_keyframe_t_ns = 0;
   // ComputeMapContentChecksum of the map.
   uint32_t content_crc32c = 0;
+  // Whether the map carries relocalization data (format v2).
+  bool has_relocalization = false;
+  // Relocalization landmarks.
+  size_t num_landmarks = 0;
+  // Keyframe features that see a landmark, summed over keyframes.
+  size_t num_relocalization_features = 0;
+  // Words of the relocalization vocabulary.
+  size_t num_vocabulary_words = 0;
   // Format version the map is (or would be) stored with.
   uint32_t format_version = kMapFormatVersion;
   // Provenance of the map.

@@ -18,7 +18,7 @@ namespace {
 namespace pb = ::evloc::map_format;
 
 constexpr std::string_view kMagic = "EVLOCMAP";
-constexpr uint32_t kSupportedVersions[] = {1};
+constexpr uint32_t kSupportedVersions[] = {1, 2};
 constexpr const char* kLengthUnit = "m";
 constexpr const char* kTimeUnit = "ns";
 
@@ -68,28 +68,10 @@ std::string SupportedVersionsText() {
   return text;
 }
 
-// Opens `path` and validates its header against the file size. Leaves `stream` at the payload.
-MapFileHeader ReadAndCheckHeader(const std::filesystem::path& path, std::ifstream& stream) {
-  const std::string source = path.string();
-  std::error_code error;
-  if (std::filesystem::is_directory(path, error)) {
-    throw IoError("cannot read map '" + source + "': it is a directory (pass the .evmap file)");
-  }
-  stream.open(path, std::ios::binary);
-  if (!stream) {
-    throw IoError("cannot open map '" + source + "': " + std::strerror(errno));
-  }
-  const uint64_t file_size = std::filesystem::file_size(path, error);
-  if (error) throw IoError("cannot read the size of map '" + source + "': " + error.message());
-
-  HeaderBytes bytes{};
-  const size_t header_bytes_read =
-      static_cast<size_t>(std::min<uint64_t>(file_size, kMapFileHeaderSize));
-  stream.read(reinterpret_cast<char*>(bytes.data()),
-              static_cast<std::streamsize>(header_bytes_read));
-  if (static_cast<size_t>(stream.gcount()) != header_bytes_read) {
-    throw IoError("cannot read map '" + source + "': read error in the header");
-  }
+// Validates the first `header_bytes_read` bytes of a map of `file_size` bytes (the header, or
+// all of a shorter file) against the file size.
+MapFileHeader CheckHeader(const HeaderBytes& bytes, size_t header_bytes_read, uint64_t file_size,
+                          const std::string& source) {
   const size_t magic_bytes = std::min(header_bytes_read, kMagic.size());
   if (file_size == 0 || std::memcmp(bytes.data(), kMagic.data(), magic_bytes) != 0) {
     throw ParseError::AtByte(source, 0,
@@ -140,6 +122,30 @@ MapFileHeader ReadAndCheckHeader(const std::filesystem::path& path, std::ifstrea
   return header;
 }
 
+// Opens `path` and validates its header against the file size. Leaves `stream` at the payload.
+MapFileHeader ReadAndCheckHeader(const std::filesystem::path& path, std::ifstream& stream) {
+  const std::string source = path.string();
+  std::error_code error;
+  if (std::filesystem::is_directory(path, error)) {
+    throw IoError("cannot read map '" + source + "': it is a directory (pass the .evmap file)");
+  }
+  stream.open(path, std::ios::binary);
+  if (!stream) {
+    throw IoError("cannot open map '" + source + "': " + std::strerror(errno));
+  }
+  const uint64_t file_size = std::filesystem::file_size(path, error);
+  if (error) throw IoError("cannot read the size of map '" + source + "': " + error.message());
+  HeaderBytes bytes{};
+  const size_t header_bytes_read =
+      static_cast<size_t>(std::min<uint64_t>(file_size, kMapFileHeaderSize));
+  stream.read(reinterpret_cast<char*>(bytes.data()),
+              static_cast<std::streamsize>(header_bytes_read));
+  if (static_cast<size_t>(stream.gcount()) != header_bytes_read) {
+    throw IoError("cannot read map '" + source + "': read error in the header");
+  }
+  return CheckHeader(bytes, header_bytes_read, file_size, source);
+}
+
 template <typename Element, typename Value>
 void CopyToRepeated(const std::vector<Element>& values,
                     google::protobuf::RepeatedField<Value>* field) {
@@ -147,6 +153,22 @@ void CopyToRepeated(const std::vector<Element>& values,
   const size_t count = values.size() * (sizeof(Element) / sizeof(Value));
   field->Resize(static_cast<int>(count), Value{});
   if (count > 0) std::memcpy(field->mutable_data(), values.data(), count * sizeof(Value));
+}
+
+pb::Relocalization RelocalizationToProto(const RelocalizationData& data) {
+  pb::Relocalization out;
+  out.set_landmark_count(data.landmarks.size());
+  CopyToRepeated(data.landmarks, out.mutable_landmarks());
+  CopyToRepeated(data.vocabulary, out.mutable_vocabulary());
+  for (const KeyframeFeatures& features : data.keyframes) {
+    pb::KeyframeFeatures* keyframe = out.add_keyframes();
+    CopyToRepeated(features.keypoints, keyframe->mutable_keypoints());
+    keyframe->set_descriptors(
+        std::string(features.descriptors.begin(), features.descriptors.end()));
+    CopyToRepeated(features.landmarks, keyframe->mutable_landmarks());
+    CopyToRepeated(features.global_descriptor, keyframe->mutable_global_descriptor());
+  }
+  return out;
 }
 
 pb::MapFile ToProto(const Map& map) {
@@ -177,6 +199,8 @@ pb::MapFile ToProto(const Map& map) {
   CopyToRepeated(map.gradient_magnitude, points->mutable_gradient_magnitude());
   CopyToRepeated(map.source_keyframe, points->mutable_source_keyframe());
   file.set_content_crc32c(ComputeMapContentChecksum(map));
+  if (map.relocalization)
+    *file.mutable_relocalization() = RelocalizationToProto(*map.relocalization);
   return file;
 }
 
@@ -185,11 +209,58 @@ template <typename Element, typename Value>
 bool CopyFromRepeated(const google::protobuf::RepeatedField<Value>& field, uint64_t count,
                       std::vector<Element>* values) {
   constexpr size_t kValuesPerElement = sizeof(Element) / sizeof(Value);
-  if (static_cast<uint64_t>(field.size()) != count * kValuesPerElement) return false;
+  // The first test keeps count * kValuesPerElement from overflowing for a forged count.
+  if (count > static_cast<uint64_t>(field.size()) ||
+      static_cast<uint64_t>(field.size()) != count * kValuesPerElement) {
+    return false;
+  }
   values->resize(count);
   if (count > 0)
     std::memcpy(static_cast<void*>(values->data()), field.data(), count * sizeof(Element));
   return true;
+}
+
+// Reads the relocalization field; `payload_error` makes the ParseError naming the file. Sizes
+// that disagree name the field; the values are checked by CheckRelocalizationData.
+template <typename MakeError>
+RelocalizationData RelocalizationFromProto(const pb::Relocalization& in,
+                                           const MakeError& payload_error) {
+  RelocalizationData data;
+  const auto fail = [&](const std::string& field, size_t actual, const std::string& expected) {
+    throw payload_error("relocalization." + field + " has " + std::to_string(actual) +
+                        " values; expected " + expected);
+  };
+  if (!CopyFromRepeated(in.landmarks(), in.landmark_count(), &data.landmarks)) {
+    fail("landmarks", static_cast<size_t>(in.landmarks_size()),
+         "3 x " + std::to_string(in.landmark_count()) + " landmarks (landmark_count)");
+  }
+  data.vocabulary.assign(in.vocabulary().begin(), in.vocabulary().end());
+  data.keyframes.resize(static_cast<size_t>(in.keyframes_size()));
+  for (int k = 0; k < in.keyframes_size(); ++k) {
+    const pb::KeyframeFeatures& features = in.keyframes(k);
+    KeyframeFeatures& out = data.keyframes[static_cast<size_t>(k)];
+    const std::string name = "keyframes[" + std::to_string(k) + "].";
+    if (features.keypoints_size() % 2 != 0) {
+      fail(name + "keypoints", static_cast<size_t>(features.keypoints_size()),
+           "x y per keypoint (an even count)");
+    }
+    const uint64_t count = static_cast<uint64_t>(features.keypoints_size()) / 2;
+    CopyFromRepeated(features.keypoints(), count, &out.keypoints);
+    if (features.descriptors().size() != count * kRelocalizationDescriptorBytes) {
+      throw payload_error("relocalization." + name + "descriptors has " +
+                          std::to_string(features.descriptors().size()) + " bytes; expected " +
+                          std::to_string(kRelocalizationDescriptorBytes) + " x " +
+                          std::to_string(count) + " keypoints");
+    }
+    out.descriptors.assign(features.descriptors().begin(), features.descriptors().end());
+    if (!CopyFromRepeated(features.landmarks(), count, &out.landmarks)) {
+      fail(name + "landmarks", static_cast<size_t>(features.landmarks_size()),
+           "one per keypoint (" + std::to_string(count) + ")");
+    }
+    out.global_descriptor.assign(features.global_descriptor().begin(),
+                                 features.global_descriptor().end());
+  }
+  return data;
 }
 
 Map FromProto(const pb::MapFile& file, const std::string& source) {
@@ -248,6 +319,56 @@ Map FromProto(const pb::MapFile& file, const std::string& source) {
         "gradient_magnitude", points.gradient_magnitude_size(), 1);
   check(CopyFromRepeated(points.source_keyframe(), count, &map.source_keyframe), "source_keyframe",
         points.source_keyframe_size(), 1);
+  if (file.has_relocalization()) {
+    map.relocalization = RelocalizationFromProto(file.relocalization(), payload_error);
+  }
+  return map;
+}
+
+// Decodes a payload whose header was checked (the bytes after the header); with
+// `verify_checksums`, refuses it unless the payload and content checksums match.
+Map ParsePayload(MapFileHeader header, std::string_view payload, const std::string& source,
+                 bool verify_checksums = true) {
+  if (payload.size() != header.payload_length) {
+    throw ParseError::AtByte(source, kMapFileHeaderSize,
+                             "truncated evloc map: the payload has " +
+                                 std::to_string(payload.size()) + " bytes, the header says " +
+                                 std::to_string(header.payload_length));
+  }
+  if (verify_checksums && Crc32c(payload) != header.payload_crc32c) {
+    throw ParseError::AtByte(source, kMapFileHeaderSize,
+                             "corrupted evloc map: payload checksum mismatch (the file was "
+                             "damaged after it was written); re-copy or rebuild the map");
+  }
+  pb::MapFile file;
+  if (!file.ParseFromArray(payload.data(), static_cast<int>(payload.size()))) {
+    throw ParseError::AtByte(source, kMapFileHeaderSize,
+                             "invalid evloc map payload: not a valid MapFile protobuf");
+  }
+  if (!verify_checksums) header.format_version = file.format_version();
+  if (file.format_version() != header.format_version) {
+    throw ParseError::AtByte(
+        source, kMapFileHeaderSize,
+        "invalid evloc map payload: format version " + std::to_string(file.format_version()) +
+            " differs from the header's " + std::to_string(header.format_version));
+  }
+  if (header.format_version < 2 && file.has_relocalization()) {
+    throw ParseError::AtByte(source, kMapFileHeaderSize,
+                             "invalid evloc map payload: a format version 1 map carries the "
+                             "version 2 relocalization field");
+  }
+  Map map = FromProto(file, source);
+  if (verify_checksums && ComputeMapContentChecksum(map) != file.content_crc32c()) {
+    throw ParseError::AtByte(source, kMapFileHeaderSize,
+                             "invalid evloc map payload: content checksum mismatch (the writer "
+                             "or reader is broken; report it)");
+  }
+  try {
+    map.Check();
+  } catch (const InvalidArgumentError& error) {
+    throw ParseError::AtByte(source, kMapFileHeaderSize,
+                             std::string("invalid evloc map content: ") + error.what());
+  }
   return map;
 }
 
@@ -271,6 +392,12 @@ void SaveMap(const std::filesystem::path& path, const Map& map) {
   });
 }
 
+uint64_t EncodedRelocalizationBytes(const RelocalizationData& data) {
+  pb::MapFile file;
+  *file.mutable_relocalization() = RelocalizationToProto(data);
+  return file.ByteSizeLong();
+}
+
 MapFileHeader ReadMapFileHeader(const std::filesystem::path& path) {
   std::ifstream stream;
   return ReadAndCheckHeader(path, stream);
@@ -290,35 +417,26 @@ Map LoadMap(const std::filesystem::path& path) {
   if (static_cast<uint64_t>(stream.gcount()) != header.payload_length) {
     throw IoError("cannot read map '" + source + "': read error in the payload");
   }
-  if (Crc32c(payload) != header.payload_crc32c) {
-    throw ParseError::AtByte(source, kMapFileHeaderSize,
-                             "corrupted evloc map: payload checksum mismatch (the file was "
-                             "damaged after it was written); re-copy or rebuild the map");
+  return ParsePayload(header, payload, source);
+}
+
+Map DecodeMapPayloadUnchecked(std::string_view payload, const std::string& source) {
+  MapFileHeader header;
+  header.payload_length = payload.size();
+  return ParsePayload(header, payload, source, /*verify_checksums=*/false);
+}
+
+Map LoadMapFromBytes(std::string_view bytes, const std::string& source) {
+  HeaderBytes header_bytes{};
+  const size_t header_size = std::min(bytes.size(), kMapFileHeaderSize);
+  std::memcpy(header_bytes.data(), bytes.data(), header_size);
+  const MapFileHeader header = CheckHeader(header_bytes, header_size, bytes.size(), source);
+  if (header.payload_length > static_cast<uint64_t>(std::numeric_limits<int>::max())) {
+    throw ParseError::AtByte(source, kPayloadLengthOffset,
+                             "evloc map payload of " + std::to_string(header.payload_length) +
+                                 " bytes exceeds the protobuf limit of 2 GiB");
   }
-  pb::MapFile file;
-  if (!file.ParseFromString(payload)) {
-    throw ParseError::AtByte(source, kMapFileHeaderSize,
-                             "invalid evloc map payload: not a valid MapFile protobuf");
-  }
-  if (file.format_version() != header.format_version) {
-    throw ParseError::AtByte(
-        source, kMapFileHeaderSize,
-        "invalid evloc map payload: format version " + std::to_string(file.format_version()) +
-            " differs from the header's " + std::to_string(header.format_version));
-  }
-  Map map = FromProto(file, source);
-  if (ComputeMapContentChecksum(map) != file.content_crc32c()) {
-    throw ParseError::AtByte(source, kMapFileHeaderSize,
-                             "invalid evloc map payload: content checksum mismatch (the writer "
-                             "or reader is broken; report it)");
-  }
-  try {
-    map.Check();
-  } catch (const InvalidArgumentError& error) {
-    throw ParseError::AtByte(source, kMapFileHeaderSize,
-                             std::string("invalid evloc map content: ") + error.what());
-  }
-  return map;
+  return ParsePayload(header, bytes.substr(kMapFileHeaderSize), source);
 }
 
 }  // namespace evloc

@@ -2,6 +2,7 @@
 
 #include <cstring>
 #include <fstream>
+#include <functional>
 #include <limits>
 #include <string>
 
@@ -12,6 +13,7 @@
 #include "maps/crc32c.h"
 #include "maps/map.h"
 #include "maps/synthetic_map.h"
+#include "maps/testing/map_file_editing.h"
 
 namespace evloc {
 namespace {
@@ -26,6 +28,38 @@ Map MakeMap() {
   map.inverse_depth_sigma[5] = 0.0f;
   map.positions[7].x() = -0.0f;
   map.provenance = {"evloc-test", "0.1.0", "2024-05-01T12:00:00Z", "evloc-test --flag", {"a.pcd"}};
+  return map;
+}
+
+// MakeMap() with relocalization data: landmarks, per-keyframe features (keyframe 2 has none) and a
+// two-word vocabulary, from a fixed seed.
+Map MakeRelocalizationMap() {
+  Map map = MakeMap();
+  RelocalizationData& data = map.relocalization.emplace();
+  uint32_t state = 12345;
+  const auto next = [&state] {
+    state = state * 1664525u + 1013904223u;
+    return static_cast<float>(state >> 8) / static_cast<float>(1 << 24);
+  };
+  for (int i = 0; i < 40; ++i) data.landmarks.emplace_back(next() * 10, next() - 0.5f, next());
+  for (size_t i = 0; i < 2 * kRelocalizationDescriptorBytes; ++i) data.vocabulary.push_back(next());
+  data.keyframes.resize(map.keyframes.size());
+  for (size_t k = 0; k < map.keyframes.size(); ++k) {
+    KeyframeFeatures& features = data.keyframes[k];
+    const int count = k == 2 ? 0 : 10 + static_cast<int>(k);
+    for (int i = 0; i < count; ++i) {
+      features.keypoints.emplace_back(next() * 640, next() * 480);
+      features.landmarks.push_back(static_cast<uint32_t>((i * 7 + k) % data.landmarks.size()));
+      for (size_t b = 0; b < kRelocalizationDescriptorBytes; ++b) {
+        features.descriptors.push_back(static_cast<uint8_t>(next() * 255));
+      }
+    }
+    features.global_descriptor.assign(data.vocabulary.size(), 0.0f);
+    if (count > 0) {
+      features.global_descriptor[k] = 0.6f;
+      features.global_descriptor[k + 1] = -0.8f;
+    }
+  }
   return map;
 }
 
@@ -66,20 +100,10 @@ class MapIoTest : public ::testing::Test {
   // Saves MakeMap(), lets `edit` change its payload, and writes the result with valid header and
   // payload checksums (the content checksum left as saved) to a sibling file.
   template <typename Edit>
-  std::filesystem::path WriteEditedPayload(Edit edit, const std::string& name) {
-    SaveMap(path_, MakeMap());
-    std::string bytes = ReadFileToString(path_);
-    map_format::MapFile file;
-    EXPECT_TRUE(file.ParseFromString(bytes.substr(kMapFileHeaderSize)));
-    edit(file);
-    const std::string payload = file.SerializeAsString();
-    const uint32_t payload_crc = Crc32c(payload);
-    const uint64_t length = payload.size();
-    std::memcpy(bytes.data() + 12, &payload_crc, 4);
-    std::memcpy(bytes.data() + 16, &length, 8);
-    const uint32_t header_crc = Crc32c(std::string_view(bytes).substr(0, 24));
-    std::memcpy(bytes.data() + 24, &header_crc, 4);
-    return WriteVariant(bytes.substr(0, kMapFileHeaderSize) + payload, name);
+  std::filesystem::path WriteEditedPayload(Edit edit, const std::string& name,
+                                           const Map& map = MakeMap()) {
+    SaveMap(path_, map);
+    return WriteVariant(testing::EditMapPayload(ReadFileToString(path_), edit), name);
   }
 
   std::filesystem::path directory_;
@@ -119,6 +143,166 @@ TEST_F(MapIoTest, RoundTripIsBitExact) {
   const std::filesystem::path again = directory_ / "again.evmap";
   SaveMap(again, loaded);
   EXPECT_EQ(ReadFileToString(again), ReadFileToString(path_));
+}
+
+TEST_F(MapIoTest, RelocalizationDataRoundTripsBitExactly) {
+  const Map map = MakeRelocalizationMap();
+  SaveMap(path_, map);
+  EXPECT_EQ(ReadMapFileHeader(path_).format_version, 2u);
+  const Map loaded = LoadMap(path_);
+  ASSERT_TRUE(loaded.relocalization.has_value());
+  EXPECT_TRUE(HasRelocalizationData(loaded));
+  const RelocalizationData& a = *loaded.relocalization;
+  const RelocalizationData& b = *map.relocalization;
+  EXPECT_TRUE(SameBytes(a.landmarks, b.landmarks));
+  EXPECT_TRUE(SameBytes(a.vocabulary, b.vocabulary));
+  ASSERT_EQ(a.keyframes.size(), b.keyframes.size());
+  for (size_t k = 0; k < a.keyframes.size(); ++k) {
+    EXPECT_TRUE(SameBytes(a.keyframes[k].keypoints, b.keyframes[k].keypoints));
+    EXPECT_EQ(a.keyframes[k].descriptors, b.keyframes[k].descriptors);
+    EXPECT_EQ(a.keyframes[k].landmarks, b.keyframes[k].landmarks);
+    EXPECT_TRUE(SameBytes(a.keyframes[k].global_descriptor, b.keyframes[k].global_descriptor));
+  }
+  EXPECT_TRUE(a.keyframes[2].keypoints.empty());
+  EXPECT_EQ(ComputeMapContentChecksum(loaded), ComputeMapContentChecksum(map));
+  // The content checksum covers the relocalization data, and a map without it keeps its value.
+  Map without = map;
+  without.relocalization.reset();
+  EXPECT_NE(ComputeMapContentChecksum(without), ComputeMapContentChecksum(map));
+  EXPECT_EQ(ComputeMapContentChecksum(without), ComputeMapContentChecksum(MakeMap()));
+  Map changed = map;
+  changed.relocalization->keyframes[1].descriptors[5] ^= 1;
+  EXPECT_NE(ComputeMapContentChecksum(changed), ComputeMapContentChecksum(map));
+  const std::filesystem::path again = directory_ / "again.evmap";
+  SaveMap(again, loaded);
+  EXPECT_EQ(ReadFileToString(again), ReadFileToString(path_));
+  // What the data adds to the file: the difference in file size.
+  SaveMap(again, without);
+  EXPECT_EQ(std::filesystem::file_size(path_) - std::filesystem::file_size(again),
+            EncodedRelocalizationBytes(b));
+  // The same map, read from memory.
+  const std::string bytes = ReadFileToString(path_);
+  EXPECT_EQ(ComputeMapContentChecksum(LoadMapFromBytes(bytes, "memory")),
+            ComputeMapContentChecksum(map));
+  EXPECT_EQ(ComputeMapContentChecksum(DecodeMapPayloadUnchecked(
+                std::string_view(bytes).substr(kMapFileHeaderSize), "payload")),
+            ComputeMapContentChecksum(map));
+  ExpectParseError([&] { LoadMapFromBytes(bytes.substr(0, 100), "memory"); },
+                   {"memory", "truncated evloc map"});
+}
+
+// maps/testdata/v1_small.evmap was written by the format-1 writer (before relocalization data): a
+// 300-point corridor with 3 keyframes and a radial-tangential camera.
+TEST_F(MapIoTest, FormatVersion1FileStillLoads) {
+  const std::filesystem::path v1 = testing::SourceDir() / "maps/testdata/v1_small.evmap";
+  EXPECT_EQ(ReadMapFileHeader(v1).format_version, 1u);
+  const Map map = LoadMap(v1);
+  EXPECT_EQ(map.size(), 300u);
+  EXPECT_EQ(map.keyframes.size(), 3u);
+  EXPECT_EQ(map.keyframes[1].image_name, "frame_1.png");
+  EXPECT_FALSE(map.relocalization.has_value());
+  EXPECT_FALSE(HasRelocalizationData(map));
+  EXPECT_EQ(ComputeMapContentChecksum(map), 0x7a0bb2aeu);  // The value the v1 writer stored.
+  try {
+    RequireRelocalizationData(map, v1.string());
+    ADD_FAILURE() << "no error for a v1 map";
+  } catch (const InvalidArgumentError& error) {
+    EXPECT_EQ(std::string(error.what()), MissingRelocalizationDataMessage(v1.string()));
+    EXPECT_NE(std::string(error.what())
+                  .find("run `evloc-mapper upgrade --map " + v1.string() +
+                        " --images DIR` or rebuild it with evloc-mapper build"),
+              std::string::npos);
+  }
+  // Saved again it is a version 2 file with the same content.
+  SaveMap(path_, map);
+  EXPECT_EQ(ReadMapFileHeader(path_).format_version, 2u);
+  EXPECT_EQ(ComputeMapContentChecksum(LoadMap(path_)), 0x7a0bb2aeu);
+}
+
+TEST_F(MapIoTest, CorruptedRelocalizationFieldsAreRefused) {
+  // Edits the relocalization data of the saved map both in the payload and in a copy of the
+  // map, whose content checksum the payload then carries (so that the content checks are reached).
+  const auto edit = [&](const std::string& name, const std::function<void(Map&)>& change_map,
+                        const std::function<void(map_format::MapFile&)>& change_file) {
+    Map map = MakeRelocalizationMap();
+    change_map(map);
+    const uint32_t content_crc = ComputeMapContentChecksum(map);
+    return WriteEditedPayload(
+        [&](map_format::MapFile& file) {
+          change_file(file);
+          file.set_content_crc32c(content_crc);
+        },
+        name, MakeRelocalizationMap());
+  };
+  const auto no_change = [](Map&) {};
+  auto path = edit("descriptors.evmap", no_change, [](map_format::MapFile& file) {
+    file.mutable_relocalization()->mutable_keyframes(1)->mutable_descriptors()->pop_back();
+  });
+  ExpectParseError([&] { LoadMap(path); },
+                   {path.string(), "relocalization.keyframes[1].descriptors has 1407 bytes",
+                    "expected 128 x 11 keypoints"});
+  path = edit("landmark_count.evmap", no_change, [](map_format::MapFile& file) {
+    file.mutable_relocalization()->set_landmark_count(0xffffffffffffffffull);
+  });
+  ExpectParseError([&] { LoadMap(path); }, {path.string(), "relocalization.landmarks has 120"});
+  path = edit("odd_keypoints.evmap", no_change, [](map_format::MapFile& file) {
+    file.mutable_relocalization()->mutable_keyframes(0)->add_keypoints(1.0f);
+  });
+  ExpectParseError([&] { LoadMap(path); }, {"relocalization.keyframes[0].keypoints has 21"});
+  path = edit("landmark_indices.evmap", no_change, [](map_format::MapFile& file) {
+    file.mutable_relocalization()->mutable_keyframes(3)->mutable_landmarks()->RemoveLast();
+  });
+  ExpectParseError([&] { LoadMap(path); }, {"relocalization.keyframes[3].landmarks has 12"});
+  path = edit(
+      "landmark_index.evmap", [](Map& map) { map.relocalization->keyframes[1].landmarks[4] = 40; },
+      [](map_format::MapFile& file) {
+        file.mutable_relocalization()->mutable_keyframes(1)->set_landmarks(4, 40);
+      });
+  ExpectParseError([&] { LoadMap(path); },
+                   {path.string(), "invalid evloc map content",
+                    "keyframe 1 keypoint 4 sees landmark 40 but there are 40 landmarks"});
+  path = edit(
+      "nan_landmark.evmap", [](Map& map) { map.relocalization->landmarks[3].y() = std::nanf(""); },
+      [](map_format::MapFile& file) {
+        file.mutable_relocalization()->set_landmarks(10, std::nanf(""));
+      });
+  ExpectParseError([&] { LoadMap(path); }, {"landmark 3 has a non-finite position"});
+  path = edit(
+      "global.evmap",
+      [](Map& map) { map.relocalization->keyframes[0].global_descriptor.pop_back(); },
+      [](map_format::MapFile& file) {
+        file.mutable_relocalization()
+            ->mutable_keyframes(0)
+            ->mutable_global_descriptor()
+            ->RemoveLast();
+      });
+  ExpectParseError([&] { LoadMap(path); },
+                   {"keyframe 0 has a global descriptor of 255 values; expected the vocabulary "
+                    "size 256"});
+  path = edit(
+      "keyframes.evmap", [](Map& map) { map.relocalization->keyframes.pop_back(); },
+      [](map_format::MapFile& file) {
+        file.mutable_relocalization()->mutable_keyframes()->RemoveLast();
+      });
+  ExpectParseError([&] { LoadMap(path); }, {"has feature sets for 5 keyframes but the map has 6"});
+  path = edit(
+      "vocabulary.evmap", [](Map& map) { map.relocalization->vocabulary.resize(100); },
+      [](map_format::MapFile& file) {
+        file.mutable_relocalization()->mutable_vocabulary()->Truncate(100);
+      });
+  ExpectParseError([&] { LoadMap(path); }, {"the vocabulary has 100 values"});
+  // A version 1 header with the version 2 field.
+  SaveMap(path_, MakeRelocalizationMap());
+  path = WriteVariant(testing::EditMapPayload(
+                          ReadFileToString(path_),
+                          [](map_format::MapFile& file) { file.set_format_version(1); }, 1),
+                      "v1_with_field.evmap");
+  ExpectParseError([&] { LoadMap(path); }, {"a format version 1 map carries the version 2"});
+  // SaveMap refuses what LoadMap would refuse.
+  Map bad = MakeRelocalizationMap();
+  bad.relocalization->keyframes[0].global_descriptor[0] = 3.0f;
+  EXPECT_THROW(SaveMap(directory_ / "bad.evmap", bad), InvalidArgumentError);
+  EXPECT_FALSE(std::filesystem::exists(directory_ / "bad.evmap"));
 }
 
 TEST_F(MapIoTest, EmptyMapRoundTrips) {
@@ -207,14 +391,14 @@ TEST_F(MapIoTest, ForeignFilesAreNotEvlocMaps) {
 TEST_F(MapIoTest, UnsupportedVersionNamesTheSupportedOnes) {
   SaveMap(path_, MakeMap());
   std::string bytes = ReadFileToString(path_);
-  for (const uint32_t version : {0u, 2u, 77u}) {
+  for (const uint32_t version : {0u, 3u, 77u}) {
     std::memcpy(bytes.data() + 8, &version, 4);
     const uint32_t header_crc = Crc32c(std::string_view(bytes).substr(0, 24));
     std::memcpy(bytes.data() + 24, &header_crc, 4);
     const auto path = WriteVariant(bytes, "version.evmap");
-    ExpectParseError(
-        [&] { LoadMap(path); },
-        {"format version " + std::to_string(version) + " is not supported", "reads version(s) 1"});
+    ExpectParseError([&] { LoadMap(path); },
+                     {"format version " + std::to_string(version) + " is not supported",
+                      "reads version(s) 1, 2"});
   }
 }
 

@@ -63,6 +63,13 @@ TEST(SyntheticRoom, KnownPosesMapTheRoom) {
   const MapBuildReport report = BuildMap(options);
   EXPECT_EQ(report.num_registered, 30u);
   PrintCpuTimes(report, "known poses");
+  if (report.relocalization) {
+    std::cout << "relocalization data: " << report.relocalization->num_landmarks << " landmarks, "
+              << report.relocalization->num_features_kept << " keyframe features, "
+              << report.relocalization->bytes_added << " bytes of a "
+              << fs::file_size(options.output_dir / "map.evmap") << "-byte map.evmap, "
+              << report.TotalSeconds("relocalization") << " s\n";
+  }
   ExpectThresholds(Measure(options.output_dir, sequence, reference, "known poses"));
 
   // COLMAP's poses aligned to a reference that does not fit them (the second half of the path's
