@@ -17,29 +17,13 @@
 namespace evloc::relocalization {
 namespace {
 
-// The temple data and the map of its even views, built once for all tests.
-struct TempleFixture {
-  testing::TempleData temple;
-  Map map;
-};
+using testing::TempleFixture;
 
-const TempleFixture* Temple() {
-  static const TempleFixture* fixture = []() -> const TempleFixture* {
-    const auto parameters =
-        evloc::testing::SharedDataFile("middlebury/templeSparseRing/templeSR_par.txt");
-    if (!parameters) return nullptr;
-    auto* result = new TempleFixture;
-    result->temple = testing::ReadTemple(*parameters);
-    result->map = testing::BuildTempleMap(result->temple, {0, 2, 4, 6, 8, 10, 12, 14});
-    return result;
-  }();
-  return fixture;
-}
+const TempleFixture* Temple() { return testing::SharedTemple(); }
 
-#define REQUIRE_TEMPLE()                                                           \
-  if (Temple() == nullptr)                                                         \
-  GTEST_SKIP() << evloc::testing::MissingDataReason("middlebury/templeSparseRing/" \
-                                                    "templeSR_par.txt")
+#define REQUIRE_TEMPLE()   \
+  if (Temple() == nullptr) \
+  GTEST_SKIP() << evloc::testing::MissingDataReason(testing::kTempleParameters)
 
 TEST(LocateImage, HeldOutTempleViewsAreFoundNearTheirCalibratedPoses) {
   REQUIRE_TEMPLE();

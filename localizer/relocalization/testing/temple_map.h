@@ -14,6 +14,7 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "core/common/test_data.h"
 #include "core/dataset/testing/middlebury.h"
 #include "core/features/features.h"
 #include "core/features/testing/synthetic_images.h"
@@ -173,6 +174,31 @@ inline Map BuildTempleMap(const TempleData& temple, const std::vector<int>& keyf
   map.relocalization = std::move(data);
   map.Check();
   return map;
+}
+
+// The temple data and the map of its even views (the odd views held out as queries).
+struct TempleFixture {
+  // The 16 views and images.
+  TempleData temple;
+  // The map of views 0, 2, ..., 14.
+  Map map;
+};
+
+// The path of the temple's parameter file in the shared data (relative).
+inline constexpr const char* kTempleParameters = "middlebury/templeSparseRing/templeSR_par.txt";
+
+// The temple fixture, built once per process; nullptr when the shared data is absent (skip with
+// evloc::testing::MissingDataReason(kTempleParameters)).
+inline const TempleFixture* SharedTemple() {
+  static const TempleFixture* fixture = []() -> const TempleFixture* {
+    const auto parameters = evloc::testing::SharedDataFile(kTempleParameters);
+    if (!parameters) return nullptr;
+    auto* result = new TempleFixture;
+    result->temple = ReadTemple(*parameters);
+    result->map = BuildTempleMap(result->temple, {0, 2, 4, 6, 8, 10, 12, 14});
+    return result;
+  }();
+  return fixture;
 }
 
 }  // namespace evloc::relocalization::testing
