@@ -19,6 +19,7 @@
 #include "core/common/file_util.h"
 #include "evloc/localizer.grpc.pb.h"
 #include "localizer/service/bounded_queue.h"
+#include "localizer/service/locate_rpc.h"
 #include "localizer/service/metrics_http.h"
 #include "localizer/service/session.h"
 #include "localizer/wire/percentile.h"
@@ -242,6 +243,26 @@ class LocalizerServer::Service final : public api::Localizer::Service {
   }
 
   grpc::Status Track(grpc::ServerContext* context, TrackServerStream* stream) override;
+
+  // Runs on the gRPC handler thread; bounded by --max-camera-pixels (HandleLocate).
+  grpc::Status Locate(grpc::ServerContext* context, const api::LocateRequest* request,
+                      api::LocateResponse* response) override {
+    std::optional<std::string> token;
+    if (grpc::Status status = Authenticate(*context, &token); !status.ok()) return Reject(status);
+    if (grpc::Status status = Authorize(token, request->map_name()); !status.ok()) {
+      return Reject(status);
+    }
+    grpc::Status status = HandleLocate(*request, registry_, options_.max_camera_pixels,
+                                       relocalization::LocateOptions(), response);
+    if (!status.ok()) {
+      Log("Locate on map '" + request->map_name() + "' rejected: " + status.error_message());
+      return Reject(status);
+    }
+    Log("Locate on map '" + request->map_name() +
+        "': " + (response->status() == api::FOUND ? "FOUND" : "NOT_FOUND") + " in " +
+        std::to_string(response->locate_ms()) + " ms");
+    return status;
+  }
 
   // Counts a rejected request and passes its status through.
   grpc::Status Reject(grpc::Status status) {

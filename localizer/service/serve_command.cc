@@ -7,6 +7,7 @@ namespace evloc::service {
 
 std::string ServeUsage() {
   return R"(Usage: evloc-localizer serve --maps DIR [options]
+       evloc-localizer locate --map MAP --image IMAGE --calib CALIB [--json]  (locate --help)
 
 Serves map-based tracking of event cameras over gRPC (proto/evloc/localizer.proto, docs/api.md),
 with grpc.health.v1 health checking and server reflection.

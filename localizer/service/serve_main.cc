@@ -1,4 +1,4 @@
-// evloc-localizer: the localizer service's thin main (docs/api.md).
+// evloc-localizer: the localizer service's thin main (docs/api.md): `serve`, or `locate` one image.
 #include <csignal>
 #include <iostream>
 #include <mutex>
@@ -6,6 +6,7 @@
 #include <thread>
 
 #include "core/common/cli.h"
+#include "localizer/service/locate_command.h"
 #include "localizer/service/serve_command.h"
 
 namespace {
@@ -43,6 +44,9 @@ int Serve(const evloc::service::ServeCommand& command) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  if (argc > 1 && std::string(argv[1]) == "locate") {
+    return evloc::service::RunLocateTool(argc, argv);
+  }
   return evloc::RunCommandTool("evloc-localizer", argc, argv, evloc::service::ParseServeCommandLine,
                                evloc::service::ServeUsage, Serve);
 }

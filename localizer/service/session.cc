@@ -65,26 +65,32 @@ api::PoseUpdate PoseUpdateFromEstimate(const tracking::PoseEstimate& estimate) {
   return update;
 }
 
-cv::Mat FrameFromProto(const api::Frame& frame, const Camera& camera,
-                       std::optional<int64_t> previous_t_ns) {
-  if (frame.width() != static_cast<uint32_t>(camera.width) ||
-      frame.height() != static_cast<uint32_t>(camera.height)) {
-    throw InvalidArgumentError("Frame: size " + std::to_string(frame.width()) + "x" +
-                               std::to_string(frame.height()) + " differs from the camera's " +
+cv::Mat GrayFromProto(uint32_t width, uint32_t height, const std::string& pixels,
+                      const Camera& camera, const std::string& what) {
+  if (width != static_cast<uint32_t>(camera.width) ||
+      height != static_cast<uint32_t>(camera.height)) {
+    throw InvalidArgumentError(what + ": size " + std::to_string(width) + "x" +
+                               std::to_string(height) + " differs from the camera's " +
                                std::to_string(camera.width) + "x" + std::to_string(camera.height));
   }
   const size_t expected = static_cast<size_t>(camera.width) * static_cast<size_t>(camera.height);
-  if (frame.gray().size() != expected) {
-    throw InvalidArgumentError("Frame: gray holds " + std::to_string(frame.gray().size()) +
+  if (pixels.size() != expected) {
+    throw InvalidArgumentError(what + ": gray holds " + std::to_string(pixels.size()) +
                                " bytes, expected width * height = " + std::to_string(expected));
   }
+  cv::Mat gray(camera.height, camera.width, CV_8UC1);
+  std::memcpy(gray.data, pixels.data(), expected);
+  return gray;
+}
+
+cv::Mat FrameFromProto(const api::Frame& frame, const Camera& camera,
+                       std::optional<int64_t> previous_t_ns) {
+  cv::Mat gray = GrayFromProto(frame.width(), frame.height(), frame.gray(), camera, "Frame");
   if (previous_t_ns && frame.t_ns() <= *previous_t_ns) {
     throw InvalidArgumentError("Frame: time " + std::to_string(frame.t_ns()) +
                                " ns is not after the previous frame's " +
                                std::to_string(*previous_t_ns) + " ns");
   }
-  cv::Mat gray(camera.height, camera.width, CV_8UC1);
-  std::memcpy(gray.data, frame.gray().data(), expected);
   return gray;
 }
 
@@ -104,8 +110,8 @@ void SessionLimits::Check() const {
 SessionSettings SessionSettingsFromProto(const api::SessionStart& start,
                                          const SessionLimits& limits) {
   if (!start.has_camera()) throw InvalidArgumentError("SessionStart.camera is missing");
-  if (!start.has_initial_world_from_cam()) {
-    throw InvalidArgumentError("SessionStart.initial_world_from_cam is missing");
+  if (!start.has_initial_world_from_cam() && !kTrackerStartsWithoutPose) {
+    throw InvalidArgumentError(kNoPoseNeedsRelocalizationMessage);
   }
   SessionSettings settings;
   settings.camera = CameraFromProto(start.camera(), "SessionStart.camera");
@@ -117,8 +123,10 @@ SessionSettings SessionSettingsFromProto(const api::SessionStart& start,
                                std::to_string(limits.max_camera_pixels) +
                                " (evloc-localizer --max-camera-pixels)");
   }
-  settings.initial_world_from_cam =
-      RigidFromProto(start.initial_world_from_cam(), "SessionStart.initial_world_from_cam");
+  if (start.has_initial_world_from_cam()) {
+    settings.initial_world_from_cam =
+        RigidFromProto(start.initial_world_from_cam(), "SessionStart.initial_world_from_cam");
+  }
   CheckSessionTime(start.initial_t_ns(), "SessionStart.initial_t_ns");
   CheckSessionTime(start.sensor_time_offset_ns(), "SessionStart.sensor_time_offset_ns");
   settings.initial_t_ns = start.initial_t_ns();
@@ -343,10 +351,16 @@ SessionTracker::SessionTracker(std::shared_ptr<const LoadedMap> map,
       settings_(settings),
       tracker_(map_->map, map_->visibility.get(), settings.camera, settings.tracker),
       takes_frames_(settings.tracker.input == tracking::TrackerInput::kFrames) {
-  if (takes_frames_) {
-    tracker_.Reset(settings_.initial_world_from_cam, settings_.initial_t_ns);
-    started_ = true;
+  if (takes_frames_) StartTracker();
+}
+
+void SessionTracker::StartTracker() {
+  if (!settings_.initial_world_from_cam) {
+    // Wiring the relocalizing tracker: start it here without a pose at initial_t_ns.
+    throw InvalidArgumentError(kNoPoseNeedsRelocalizationMessage);
   }
+  tracker_.Reset(*settings_.initial_world_from_cam, settings_.initial_t_ns);
+  started_ = true;
 }
 
 std::vector<tracking::PoseEstimate> SessionTracker::Process(const SessionItem& item) {
@@ -396,8 +410,7 @@ std::vector<tracking::PoseEstimate> SessionTracker::AddEvents(const EventBuffer&
       tracker_.AdvanceTo(end_t_ns);
       return estimates;
     }
-    tracker_.Reset(settings_.initial_world_from_cam, settings_.initial_t_ns);
-    started_ = true;
+    StartTracker();
   }
   if (tracked && !tracked->empty()) estimates = tracker_.AddEvents(*tracked);
   for (tracking::PoseEstimate& estimate : tracker_.AdvanceTo(end_t_ns)) {

@@ -30,18 +30,35 @@ api::MapDescription DescribeMap(const LoadedMap& map);
 // A PoseUpdate for a tracker step (latency_us left at 0: set when handed to the transport).
 api::PoseUpdate PoseUpdateFromEstimate(const tracking::PoseEstimate& estimate);
 
+// Validates raw grey pixels (`what` names them in errors) against the camera's size and returns
+// them (CV_8UC1, a copy). Throws InvalidArgumentError for a size mismatch or a wrong byte count.
+cv::Mat GrayFromProto(uint32_t width, uint32_t height, const std::string& pixels,
+                      const Camera& camera, const std::string& what);
+
 // Validates a Frame against the camera and the previous frame time and returns its pixels
 // (CV_8UC1, a copy). Throws InvalidArgumentError for a size mismatch or a time not after
 // `previous_t_ns`.
 cv::Mat FrameFromProto(const api::Frame& frame, const Camera& camera,
                        std::optional<int64_t> previous_t_ns);
 
+// True once the tracker can start without a pose (it relocalizes: TrackingStatus INITIALIZING);
+// until then a SessionStart without initial_world_from_cam is INVALID_ARGUMENT. Wiring it:
+// SessionTracker::StartTracker and PoseUpdateFromEstimate (docs/api.md).
+inline constexpr bool kTrackerStartsWithoutPose = false;
+
+// The INVALID_ARGUMENT message of a SessionStart without a pose while the tracker cannot start
+// without one.
+inline constexpr const char* kNoPoseNeedsRelocalizationMessage =
+    "SessionStart.initial_world_from_cam is missing: starting without a pose needs the "
+    "tracker's relocalization (not in this build)";
+
 // What a session runs with, from its SessionStart.
 struct SessionSettings {
   // The event (or frame) camera.
   Camera camera;
-  // Pose at initial_t_ns.
-  Rigid3d initial_world_from_cam;
+  // Pose at initial_t_ns; nullopt: the session starts without a pose (it relocalizes first), only
+  // when kTrackerStartsWithoutPose.
+  std::optional<Rigid3d> initial_world_from_cam;
   // Session time of the initial pose, ns.
   int64_t initial_t_ns = 0;
   // Tracker options (server defaults with the client's overrides).
@@ -203,6 +220,9 @@ class SessionTracker {
 
  private:
   std::vector<tracking::PoseEstimate> AddEvents(const EventBuffer& events, int64_t end_t_ns);
+  // Starts the tracker at the initial pose and time (throws InvalidArgumentError without a pose
+  // until kTrackerStartsWithoutPose).
+  void StartTracker();
 
   std::shared_ptr<const LoadedMap> map_;
   SessionSettings settings_;

@@ -13,6 +13,7 @@
 #include "localizer/service/testing/service_fixture.h"
 #include "localizer/tracking/testing/synthetic_scene.h"
 #include "localizer/wire/packed_events.h"
+#include "proto/convert/proto_convert.h"
 
 namespace evloc::service {
 namespace {
@@ -218,7 +219,7 @@ TEST(SessionTracker, PacketsGiveTheOfflinePosesWithoutWaitingForTheNextPacket) {
   testing::BufferEventReader reader(events);
   const auto offline =
       tracking::TrackEventStream(reader, map->map, map->visibility.get(), settings.camera,
-                                 settings.initial_world_from_cam, settings.initial_t_ns, options);
+                                 *settings.initial_world_from_cam, settings.initial_t_ns, options);
   ASSERT_GE(offline.steps.size(), 15u);
   ASSERT_GE(served.size(), offline.steps.size());
   for (size_t i = 0; i < offline.steps.size(); ++i) {
@@ -279,6 +280,25 @@ TEST(SessionSettings, RejectsInvalidCamerasAndOptions) {
   } catch (const InvalidArgumentError& error) {
     EXPECT_NE(std::string(error.what()).find("--max-camera-pixels"), std::string::npos);
   }
+}
+
+// A SessionStart without a pose: INVALID_ARGUMENT naming what is missing until the tracker can
+// start without one (then the settings carry no pose and the session relocalizes).
+TEST(SessionSettings, StartWithoutAPoseNeedsTheTrackersRelocalization) {
+  api::SessionStart start;
+  *start.mutable_camera() = CameraToProto(testing::TestCamera());
+  if (kTrackerStartsWithoutPose) {
+    EXPECT_FALSE(SessionSettingsFromProto(start, SessionLimits()).initial_world_from_cam);
+    return;
+  }
+  try {
+    SessionSettingsFromProto(start, SessionLimits());
+    FAIL() << "expected an error";
+  } catch (const InvalidArgumentError& error) {
+    EXPECT_EQ(std::string(error.what()), kNoPoseNeedsRelocalizationMessage);
+  }
+  start.mutable_initial_world_from_cam()->mutable_rotation()->set_w(1);
+  EXPECT_TRUE(SessionSettingsFromProto(start, SessionLimits()).initial_world_from_cam);
 }
 
 }  // namespace

@@ -2,13 +2,15 @@
 // (docs/reliability.md §4) into OUT_DIR/packets and OUT_DIR/requests, in the input formats the
 // targets read (session_packets_fuzzer.cc, session_requests_fuzzer.cc), from the synthetic test
 // scene: PACKED, EVT 3.0 and EVT 2.0 packet streams; event sessions (PACKED and EVT 3.0, with a
-// pose hint and empty packets) and a frame session.
+// pose hint and empty packets) and a frame session; and OUT_DIR/locate, the Locate requests of
+// locate_request_fuzzer.cc (locate_fuzz_common.h).
 #include <filesystem>
 #include <fstream>
 #include <iostream>
 
 #include "core/common/error.h"
 #include "core/events/evt3_encoder.h"
+#include "localizer/service/fuzz/locate_fuzz_common.h"
 #include "localizer/service/fuzz/session_fuzz_common.h"
 #include "localizer/service/testing/service_fixture.h"
 #include "localizer/tracking/testing/synthetic_scene.h"
@@ -184,6 +186,11 @@ int Main(int argc, char** argv) {
   WriteFile(out / "requests" / "packed_hint", RequestsSeed(api::EVENT_ENCODING_PACKED, true));
   WriteFile(out / "requests" / "evt3", RequestsSeed(api::EVENT_ENCODING_EVT3, false));
   WriteFile(out / "requests" / "frames", FrameSeed());
+  fs::create_directories(out / "locate");
+  const std::vector<api::LocateRequest> locate = LocateSeedRequests();
+  for (size_t i = 0; i < locate.size(); ++i) {
+    WriteFile(out / "locate" / ("request" + std::to_string(i)), locate[i].SerializeAsString());
+  }
   for (const auto& entry : fs::recursive_directory_iterator(out)) {
     if (entry.is_regular_file()) {
       std::cout << entry.path().string() << ": " << entry.file_size() << " bytes\n";

@@ -1,0 +1,146 @@
+#include "localizer/service/locate_command.h"
+
+#include <cmath>
+#include <iomanip>
+#include <iostream>
+
+#include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+
+#include "core/common/cli.h"
+#include "core/common/error.h"
+
+namespace evloc::service {
+
+std::string LocateUsage() {
+  return R"(Usage: evloc-localizer locate --map MAP --image IMAGE --calib CALIB [options]
+
+Locates one image in a map from nothing (docs/relocalization.md): retrieval of the map's most
+similar keyframes, 2D-3D matches, PnP + RANSAC and refinement, then verification against the
+map's edges. The map needs relocalization data (map format v2).
+
+Options:
+  --map MAP       the map: a .evmap file or a folder holding map.evmap (required)
+  --image IMAGE   the query image, any format OpenCV reads (converted to grey) (required)
+  --calib CALIB   the camera: an evloc camera YAML (.yaml/.yml, its size must be the image's) or
+                  an ECD calib.txt ("fx fy cx cy k1 k2 p1 p2 k3") (required)
+  --size WxH      the image size of a calib.txt (default: the image's size)
+  --json          print one JSON object: status, world_from_cam [tx ty tz qx qy qz qw] and
+                  covariance (36, row-major) when FOUND, inliers, keyframe, score, reason
+  --help          print this help
+
+Exit codes: 0 FOUND, 3 NOT_FOUND, 2 bad command line, 1 any other error.
+)";
+}
+
+LocateCommand ParseLocateCommandLine(const std::vector<std::string>& arguments) {
+  LocateCommand command;
+  if (arguments.empty() || arguments[0] != "locate") {
+    throw InvalidArgumentError("the first argument must be the command 'locate' (see --help)");
+  }
+  for (size_t i = 1; i < arguments.size(); ++i) {
+    const std::string& flag = arguments[i];
+    if (flag == "--help" || flag == "-h") {
+      command.help = true;
+    } else if (flag == "--json") {
+      command.json = true;
+    } else if (flag == "--map") {
+      command.map = TakeFlagValue(arguments, &i);
+    } else if (flag == "--image") {
+      command.image = TakeFlagValue(arguments, &i);
+    } else if (flag == "--calib") {
+      command.calib = TakeFlagValue(arguments, &i);
+    } else if (flag == "--size") {
+      ParseSizeFlag(flag, TakeFlagValue(arguments, &i), &command.width, &command.height);
+    } else {
+      throw InvalidArgumentError("unknown flag '" + flag + "' (see --help)");
+    }
+  }
+  if (command.help) return command;
+  for (const auto& [flag, value] :
+       {std::pair{"--map", &command.map}, std::pair{"--image", &command.image},
+        std::pair{"--calib", &command.calib}}) {
+    if (value->empty()) throw InvalidArgumentError(std::string(flag) + " is required");
+  }
+  return command;
+}
+
+Camera ReadLocateCalibration(const LocateCommand& command, int image_width, int image_height) {
+  const std::string extension = command.calib.extension().string();
+  if (extension == ".yaml" || extension == ".yml") {
+    const Camera camera = ReadCameraYaml(command.calib);
+    if (camera.width != image_width || camera.height != image_height) {
+      throw InvalidArgumentError("the camera of '" + command.calib.string() + "' is " +
+                                 std::to_string(camera.width) + "x" +
+                                 std::to_string(camera.height) + ", the image " +
+                                 std::to_string(image_width) + "x" + std::to_string(image_height));
+    }
+    return camera;
+  }
+  const int width = command.width > 0 ? command.width : image_width;
+  const int height = command.height > 0 ? command.height : image_height;
+  return ReadEcdCalibration(command.calib, width, height);
+}
+
+std::string LocateResultJson(const relocalization::LocateResult& result) {
+  nlohmann::ordered_json json;
+  json["status"] = relocalization::LocateStatusName(result.status);
+  if (result.status == relocalization::LocateStatus::kFound) {
+    const Eigen::Vector3d& t = result.world_from_cam.translation;
+    const Eigen::Quaterniond& q = result.world_from_cam.rotation;
+    json["world_from_cam"] = {t.x(), t.y(), t.z(), q.x(), q.y(), q.z(), q.w()};
+    std::vector<double> covariance;
+    for (int r = 0; r < 6; ++r) {
+      for (int c = 0; c < 6; ++c) covariance.push_back(result.covariance(r, c));
+    }
+    json["covariance"] = covariance;
+  }
+  json["inliers"] = result.inliers;
+  json["keyframe"] = result.keyframe;
+  json["score"] = result.score;
+  json["reason"] = result.reason;
+  return json.dump();
+}
+
+int RunLocate(const LocateCommand& command, const Map& map, std::ostream& out) {
+  const cv::Mat gray = cv::imread(command.image.string(), cv::IMREAD_GRAYSCALE);
+  if (gray.empty()) {
+    throw IoError("cannot read the image '" + command.image.string() +
+                  "' (missing, or not an image OpenCV reads)");
+  }
+  const Camera camera = ReadLocateCalibration(command, gray.cols, gray.rows);
+  const relocalization::LocateResult result =
+      relocalization::LocateImage(map, camera, gray, relocalization::LocateOptions());
+  const bool found = result.status == relocalization::LocateStatus::kFound;
+  if (command.json) {
+    out << LocateResultJson(result) << "\n";
+  } else {
+    out << relocalization::LocateStatusName(result.status) << "\n";
+    if (found) {
+      const Eigen::Vector3d& t = result.world_from_cam.translation;
+      const Eigen::Quaterniond& q = result.world_from_cam.rotation;
+      out << std::setprecision(9) << "world_from_cam: t = (" << t.x() << ", " << t.y() << ", "
+          << t.z() << ") m, q = (" << q.x() << ", " << q.y() << ", " << q.z() << ", " << q.w()
+          << ") (x, y, z, w)\n"
+          << std::setprecision(3) << "translation sigma: "
+          << std::sqrt(result.covariance.topLeftCorner<3, 3>().trace()) * 1000 << " mm\n";
+    }
+    out << std::setprecision(6) << "inliers: " << result.inliers
+        << ", keyframe: " << result.keyframe << ", score: " << result.score << "\n"
+        << "reason: " << result.reason << "\n";
+  }
+  return found ? kExitSuccess : kExitNotFound;
+}
+
+int RunLocate(const LocateCommand& command, std::ostream& out) {
+  const std::filesystem::path path =
+      std::filesystem::is_directory(command.map) ? command.map / "map.evmap" : command.map;
+  return RunLocate(command, LoadMap(path), out);
+}
+
+int RunLocateTool(int argc, const char* const* argv) {
+  return RunCommandTool("evloc-localizer locate", argc, argv, ParseLocateCommandLine, LocateUsage,
+                        [](const LocateCommand& command) { return RunLocate(command, std::cout); });
+}
+
+}  // namespace evloc::service
