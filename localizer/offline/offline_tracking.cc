@@ -184,6 +184,18 @@ OfflineTrackingResult TrackEventStream(EventReader& reader, const Map& map,
   while (next_batch()) {
     const size_t count = batch.size();
     result.measurements += static_cast<int64_t>(count);
+    if (options.blackout_begin_ns < options.blackout_end_ns && count > 0 &&
+        batch.t_ns[count - 1] >= options.blackout_begin_ns &&
+        batch.t_ns[0] < options.blackout_end_ns) {
+      EventBuffer kept;
+      for (size_t i = 0; i < count; ++i) {
+        if (batch.t_ns[i] < options.blackout_begin_ns || batch.t_ns[i] >= options.blackout_end_ns) {
+          kept.push_back(batch[i]);
+        }
+      }
+      batch = std::move(kept);
+      if (batch.empty()) continue;
+    }
     if (!started) {
       // Split the batch at the initial time: events up to it are stored before the Reset so that
       // the surfaces are primed, the rest are tracked.

@@ -33,6 +33,11 @@ struct OfflineTrackingOptions {
   // Events before the start time are dropped instead of priming the time surfaces (evloc-track
   // --start: the run ignores what comes before it).
   bool discard_events_before_start = false;
+  // Events with begin <= t_ns < end of this range are dropped before the tracker sees them (a
+  // blackout of the sensor, for recovery tests; evloc-track --blackout); empty when begin >= end.
+  int64_t blackout_begin_ns = 0;
+  // End of the blackout, nanoseconds (exclusive).
+  int64_t blackout_end_ns = 0;
 
   // Throws InvalidArgumentError when a field is out of range.
   void Check() const;

@@ -83,6 +83,10 @@ void TrackCommandOptions::Check() const {
     throw InvalidArgumentError("--out is required: where to write the TUM trajectory");
   }
   if (debug_every_steps < 1) throw InvalidArgumentError("--debug-every must be at least 1");
+  if (blackout_begin_s && !(std::isfinite(*blackout_begin_s) && std::isfinite(*blackout_end_s) &&
+                            *blackout_begin_s >= 0 && *blackout_begin_s < *blackout_end_s)) {
+    throw InvalidArgumentError("--blackout T0:T1 needs 0 <= T0 < T1");
+  }
   if (start_s && (!std::isfinite(*start_s) || *start_s < 0)) {
     throw InvalidArgumentError("--start must be a number of seconds >= 0");
   }
@@ -112,6 +116,8 @@ Options:
                          map until a hypothesis is verified (docs/relocalization.md, "Events")
   --start S              start S seconds after the dataset's first event (or frame) and ignore
                          everything before it (the first step is at that time)
+  --blackout T0:T1       drop the events from T0 to T1 seconds after the first event (a sensor
+                         blackout, to measure the recovery)
   --relocalize-after N   LOST steps before a global search (RELOCALIZING; default 30, 0 never)
   --search-active-fraction F
                          while searching, the decay leaves this fraction of pixels active
@@ -186,6 +192,13 @@ TrackCommandOptions ParseTrackCommandLine(const std::vector<std::string>& argume
         options.no_initial_pose = false;
         options.initial_world_from_cam = ParsePoseText(flag, value);
       }
+    } else if (flag == "--blackout") {
+      const size_t colon = value.find(':');
+      if (colon == std::string::npos) {
+        throw InvalidArgumentError("--blackout expects T0:T1 (seconds after the first event)");
+      }
+      options.blackout_begin_s = ParseDoubleFlag(flag, value.substr(0, colon));
+      options.blackout_end_s = ParseDoubleFlag(flag, value.substr(colon + 1));
     } else if (flag == "--start") {
       options.start_s = ParseDoubleFlag(flag, value);
     } else if (flag == "--relocalize-after") {
@@ -277,6 +290,10 @@ OfflineTrackingResult RunTrackCommand(const TrackCommandOptions& options, std::o
   std::optional<Rigid3d> initial_world_from_cam;
   int64_t initial_t_ns = first_t_ns;
   OfflineTrackingOptions tracking = options.tracking;
+  if (options.blackout_begin_s) {
+    tracking.blackout_begin_ns = first_t_ns + std::llround(*options.blackout_begin_s * 1e9);
+    tracking.blackout_end_ns = first_t_ns + std::llround(*options.blackout_end_s * 1e9);
+  }
   if (options.start_s) {
     initial_t_ns = first_t_ns + std::llround(*options.start_s * 1e9);
     tracking.discard_events_before_start = true;

@@ -28,6 +28,10 @@ struct TrackCommandOptions {
   // Start this many seconds after the dataset's first event (or frame), ignoring everything
   // before (--start S).
   std::optional<double> start_s;
+  // Drop the events from this many seconds after the first event... (--blackout T0:T1)
+  std::optional<double> blackout_begin_s;
+  // ...to this many seconds after it.
+  std::optional<double> blackout_end_s;
   // Per-step statistics as JSON (--stats).
   std::optional<std::filesystem::path> stats_path;
   // Folder for debug pictures (--debug-dir).
