@@ -168,17 +168,18 @@ class Tracker {
   void ClearSearchPrior();
 
   // Ingests events (time-ordered, also across calls) and runs every step that became due; the
-  // step at time t uses every event with t_ns <= t. Before the first Reset events are stored but
-  // no step runs. Throws InvalidArgumentError (nothing ingested) when the events go back in time
-  // or the tracker takes frames; an event outside the sensor throws too.
+  // step at time t uses every event with t_ns <= t. Before the first Reset (or StartWithoutPose)
+  // events are stored but no step runs. Throws InvalidArgumentError (nothing ingested) when the
+  // events go back in time or the tracker takes frames; an event outside the sensor throws too.
   std::vector<PoseEstimate> AddEvents(const EventBuffer& events);
 
   // Declares that every event with t_ns <= `t_ns` has been given (a packet's end time, or a
   // quiet sensor): runs every fixed-rate step whose time is at most `t_ns` without waiting for a
   // later event, so a pose need not wait for the next packet. Events given afterwards must be
   // later than `t_ns`. Steps and poses are the same as when the next event triggers them. Does
-  // nothing in every-N-events mode, for frame trackers, or before the first Reset (except to
-  // record the bound). Throws InvalidArgumentError when `t_ns` is before the last event.
+  // nothing in every-N-events mode, for frame trackers, or before the first Reset or
+  // StartWithoutPose (except to record the bound). Throws InvalidArgumentError when `t_ns` is
+  // before the last event.
   std::vector<PoseEstimate> AdvanceTo(int64_t t_ns);
 
   // Runs one Canny-VT step on a grey frame (CV_8UC1, the camera's size) taken at t_ns. Returns
