@@ -5,13 +5,14 @@
 #   BUILD_DIR  a build with evloc-sim, evloc-mapper, evloc-track
 #   OUT_DIR    where the datasets, the map and the results go (gigabytes; outside the repository)
 # Env: STARTS (default "1 3 5"): --start times of the runs without a pose; BLACKOUT (default
-#   "4:4.5"): the blackout of the recovery run; CPU (default 1): the core the runs are pinned to.
+#   "4:4.5"): the blackout of the recovery run on the map's own path (from 1 s), BLACKOUT_OTHER
+#   (default "6.5:7") on the other path (from 5 s); CPU (default 1): the core runs are pinned to.
 #
 # The simulated hand-held room: the mapping frames (10 Hz) of one path, `--motion slow --seed 1`
 # (10 s), the events of another, `--motion mid --seed 7` (8 s): a different seed draws other
 # sinusoids through the camera region, 0.4-1.3 m from the first path. The map is built by
 # evloc-mapper --known-poses from the first; evloc-track --init-pose none runs on the second
-# from each start time, then once from the first start with a blackout of events. False
+# from each start time, then twice with a blackout of events. False
 # positives: 60 s of events of another room (scripts/accuracy/foreign_room.json, DAVIS240
 # camera) and the ECD snippets of /work/shared/data/ecd/snippets, with --give-up 1 (a search
 # episode ends "not_found" after 1 s and a new one starts). Each run prints one JSON line
@@ -25,6 +26,7 @@ TRACK=$BUILD/localizer/offline/evloc-track
 SNIPPETS=${SNIPPETS:-/work/shared/data/ecd/snippets}
 STARTS=${STARTS:-1 3 5}
 BLACKOUT=${BLACKOUT:-4:4.5}
+BLACKOUT_OTHER=${BLACKOUT_OTHER:-6.5:7}
 CPU=${CPU:-1}
 for tool in "$SIM" "$MAPPER" "$TRACK"; do
   [ -x "$tool" ] || { echo "relocalization: $tool is missing; build it first" >&2; exit 1; }
@@ -54,11 +56,15 @@ for start in $STARTS; do
   python3 "$HERE/relocalization_eval.py" "$OUT/start$start.json" "$OUT/start$start.txt" \
     "$OUT/evseq/groundtruth.txt" --label "start $start s"
 done
-first=${STARTS%% *}
-track blackout "$OUT/evseq" --start "$first" --blackout "$BLACKOUT"
+# Recovery: on the map's own path (viewpoints in reach) and on the other path from 5 s.
+track blackout_own "$OUT/mapseq" --start 1 --blackout "$BLACKOUT"
+python3 "$HERE/relocalization_eval.py" "$OUT/blackout_own.json" "$OUT/blackout_own.txt" \
+  "$OUT/mapseq/groundtruth.txt" --label "mapseq start 1 blackout $BLACKOUT" \
+  --blackout "${BLACKOUT%%:*}" "${BLACKOUT##*:}"
+track blackout "$OUT/evseq" --start 5 --blackout "$BLACKOUT_OTHER"
 python3 "$HERE/relocalization_eval.py" "$OUT/blackout.json" "$OUT/blackout.txt" \
-  "$OUT/evseq/groundtruth.txt" --label "blackout $BLACKOUT" --blackout "${BLACKOUT%%:*}" \
-  "${BLACKOUT##*:}"
+  "$OUT/evseq/groundtruth.txt" --label "evseq start 5 blackout $BLACKOUT_OTHER" \
+  --blackout "${BLACKOUT_OTHER%%:*}" "${BLACKOUT_OTHER##*:}"
 track foreign "$OUT/foreign" --give-up 1
 python3 "$HERE/relocalization_eval.py" "$OUT/foreign.json" "$OUT/foreign.txt" \
   "$OUT/foreign/groundtruth.txt" --label "foreign room (false positives)"
