@@ -123,8 +123,7 @@ cv::Mat RenderTrackingDebugImage(const Tracker& tracker, const Map& map,
 
   char caption[160];
   std::snprintf(caption, sizeof(caption), "t=%.4fs %s pts=%d on-edge=%.2f res=%.2f",
-                static_cast<double>(step.t_ns) * 1e-9,
-                step.status == TrackingStatus::kTracking ? "TRACKING" : "LOST",
+                static_cast<double>(step.t_ns) * 1e-9, TrackingStatusName(step.status),
                 step.quality.points_used, step.quality.on_edge_fraction,
                 step.quality.mean_residual);
   cv::putText(panel_map, caption, cv::Point(5, 15), cv::FONT_HERSHEY_SIMPLEX, 0.4,

@@ -1,5 +1,6 @@
 #include "localizer/offline/offline_tracking.h"
 
+#include <algorithm>
 #include <chrono>
 #include <condition_variable>
 #include <deque>
@@ -23,10 +24,44 @@ double SecondsSince(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
 
+bool Searching(TrackingStatus status) {
+  return status == TrackingStatus::kInitializing || status == TrackingStatus::kRelocalizing;
+}
+
+// Follows the search episodes through the steps: opens one at a searching step, closes it at the
+// first TRACKING step ("found") or at a step that gave up ("not_found").
+void RecordEpisode(const PoseEstimate& step, std::vector<RelocalizationEpisode>* episodes,
+                   bool* open) {
+  if (*open && step.status == TrackingStatus::kTracking) {
+    episodes->back().end_t_ns = step.t_ns;
+    episodes->back().outcome = "found";
+    *open = false;
+    return;
+  }
+  if (!Searching(step.status)) return;
+  if (!*open) {
+    episodes->push_back({step.t_ns, step.t_ns, "ended", 0, 0, 0, 0});
+    *open = true;
+  }
+  RelocalizationEpisode& episode = episodes->back();
+  episode.end_t_ns = step.t_ns;
+  ++episode.steps;
+  episode.rounds = std::max(episode.rounds, step.search.round);
+  episode.total_ms += step.timings.total_ms;
+  episode.max_step_ms = std::max(episode.max_step_ms, step.timings.total_ms);
+  if (step.search.gave_up) {
+    episode.outcome = "not_found";
+    *open = false;
+  }
+}
+
 void Record(const PoseEstimate& step, const Tracker& tracker, const StepCallback& on_step,
             OfflineTrackingResult* result) {
-  result->trajectory.Append(TimedPose{step.t_ns, step.world_from_cam});
+  if (!Searching(step.status)) result->trajectory.Append(TimedPose{step.t_ns, step.world_from_cam});
   if (step.status == TrackingStatus::kLost) ++result->lost_steps;
+  // An episode is open while its outcome is still "ended" (what it is when the run stops).
+  bool open = !result->relocalizations.empty() && result->relocalizations.back().outcome == "ended";
+  RecordEpisode(step, &result->relocalizations, &open);
   result->steps.push_back(step);
   if (on_step) on_step(step, tracker);
 }
@@ -124,8 +159,8 @@ void OfflineTrackingOptions::Check() const {
 
 OfflineTrackingResult TrackEventStream(EventReader& reader, const Map& map,
                                        const VisibilityIndex* visibility, const Camera& camera,
-                                       const Rigid3d& initial_world_from_cam, int64_t initial_t_ns,
-                                       const OfflineTrackingOptions& options,
+                                       const std::optional<Rigid3d>& initial_world_from_cam,
+                                       int64_t initial_t_ns, const OfflineTrackingOptions& options,
                                        const StepCallback& on_step) {
   options.Check();
   if (options.tracker.input != TrackerInput::kEvents) {
@@ -149,20 +184,36 @@ OfflineTrackingResult TrackEventStream(EventReader& reader, const Map& map,
   while (next_batch()) {
     const size_t count = batch.size();
     result.measurements += static_cast<int64_t>(count);
+    if (options.blackout_begin_ns < options.blackout_end_ns && count > 0 &&
+        batch.t_ns[count - 1] >= options.blackout_begin_ns &&
+        batch.t_ns[0] < options.blackout_end_ns) {
+      EventBuffer kept;
+      for (size_t i = 0; i < count; ++i) {
+        if (batch.t_ns[i] < options.blackout_begin_ns || batch.t_ns[i] >= options.blackout_end_ns) {
+          kept.push_back(batch[i]);
+        }
+      }
+      batch = std::move(kept);
+      if (batch.empty()) continue;
+    }
     if (!started) {
       // Split the batch at the initial time: events up to it are stored before the Reset so that
       // the surfaces are primed, the rest are tracked.
       size_t split = 0;
       while (split < batch.size() && batch.t_ns[split] <= initial_t_ns) ++split;
       if (split == batch.size()) {
-        tracker.AddEvents(batch);
+        if (!options.discard_events_before_start) tracker.AddEvents(batch);
         continue;
       }
       EventBuffer head;
       EventBuffer tail;
       for (size_t i = 0; i < batch.size(); ++i) (i < split ? head : tail).push_back(batch[i]);
-      if (!head.empty()) tracker.AddEvents(head);
-      tracker.Reset(initial_world_from_cam, initial_t_ns);
+      if (!head.empty() && !options.discard_events_before_start) tracker.AddEvents(head);
+      if (initial_world_from_cam) {
+        tracker.Reset(*initial_world_from_cam, initial_t_ns);
+      } else {
+        tracker.StartWithoutPose(initial_t_ns);
+      }
       started = true;
       batch = std::move(tail);
     }

@@ -7,6 +7,8 @@
 #include <cstdint>
 #include <filesystem>
 #include <functional>
+#include <optional>
+#include <string>
 #include <vector>
 
 #include "core/camera/camera.h"
@@ -28,14 +30,42 @@ struct OfflineTrackingOptions {
   // Batches a second thread reads (and decodes) ahead of the tracker, so that reading overlaps
   // tracking; 0 reads on the calling thread. The poses do not depend on it.
   int read_ahead_batches = 4;
+  // Events before the start time are dropped instead of priming the time surfaces (evloc-track
+  // --start: the run ignores what comes before it).
+  bool discard_events_before_start = false;
+  // Events with begin <= t_ns < end of this range are dropped before the tracker sees them (a
+  // blackout of the sensor, for recovery tests; evloc-track --blackout); empty when begin >= end.
+  int64_t blackout_begin_ns = 0;
+  // End of the blackout, nanoseconds (exclusive).
+  int64_t blackout_end_ns = 0;
 
   // Throws InvalidArgumentError when a field is out of range.
   void Check() const;
 };
 
+// One search episode of a run (INITIALIZING or RELOCALIZING until TRACKING).
+struct RelocalizationEpisode {
+  // Time of its first step, nanoseconds.
+  int64_t start_t_ns = 0;
+  // Time of the step that ended it: the first TRACKING step ("found"), the step that gave up
+  // ("not_found") or the last step of the run ("ended").
+  int64_t end_t_ns = 0;
+  // "found", "not_found" or "ended".
+  std::string outcome;
+  // Steps of the episode (the ending TRACKING step not included).
+  int64_t steps = 0;
+  // Search rounds judged or started.
+  int rounds = 0;
+  // Sum of the wall-clock step times of the episode, milliseconds.
+  double total_ms = 0;
+  // The longest step of the episode, milliseconds.
+  double max_step_ms = 0;
+};
+
 // What an offline run produced.
 struct OfflineTrackingResult {
-  // One pose per tracking step, world_from_cam.
+  // One pose per step that has one (TRACKING and LOST steps; INITIALIZING and RELOCALIZING steps
+  // carry no pose), world_from_cam.
   Trajectory trajectory;
   // Every step's estimate, in order (status, quality, covariance, timings).
   std::vector<PoseEstimate> steps;
@@ -43,6 +73,8 @@ struct OfflineTrackingResult {
   int64_t measurements = 0;
   // Steps whose status was LOST.
   int64_t lost_steps = 0;
+  // The search episodes, in order.
+  std::vector<RelocalizationEpisode> relocalizations;
   // Wall-clock time of the run (reading included), seconds.
   double wall_s = 0;
 };
@@ -50,15 +82,16 @@ struct OfflineTrackingResult {
 // Called after every step, for progress display and debug output; `tracker` is the live tracker.
 using StepCallback = std::function<void(const PoseEstimate& step, const Tracker& tracker)>;
 
-// Tracks the events of `reader` from `initial_world_from_cam` at `initial_t_ns`; events before
-// initial_t_ns only prime the time surfaces. With read_ahead_batches > 0 a second thread calls
-// `reader` (it must not be used elsewhere meanwhile); the steps run and `on_step` is called on the
-// calling thread. Throws what the reader and the tracker throw (a reader error after the events
-// read before it have been tracked, as without the thread).
+// Tracks the events of `reader` from `initial_world_from_cam` at `initial_t_ns`, or without a
+// pose (Tracker::StartWithoutPose) when it is nullopt; events before initial_t_ns only prime the
+// time surfaces (or are dropped with discard_events_before_start). With read_ahead_batches > 0 a
+// second thread calls `reader` (it must not be used elsewhere meanwhile); the steps run and
+// `on_step` is called on the calling thread. Throws what the reader and the tracker throw (a reader
+// error after the events read before it have been tracked, as without the thread).
 OfflineTrackingResult TrackEventStream(EventReader& reader, const Map& map,
                                        const VisibilityIndex* visibility, const Camera& camera,
-                                       const Rigid3d& initial_world_from_cam, int64_t initial_t_ns,
-                                       const OfflineTrackingOptions& options,
+                                       const std::optional<Rigid3d>& initial_world_from_cam,
+                                       int64_t initial_t_ns, const OfflineTrackingOptions& options,
                                        const StepCallback& on_step = {});
 
 // A frame of a sequence: its time and image file.

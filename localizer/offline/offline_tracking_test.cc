@@ -184,5 +184,27 @@ TEST(TrackCommandLine, ParsesFlagsAndRejectsBadValues) {
       InvalidArgumentError);
 }
 
+TEST(TrackCommandLine, ParsesStartingWithoutAPoseAndTheBlackout) {
+  const TrackCommandOptions options = ParseTrackCommandLine(
+      {"--map", "m", "--dataset", "d", "--out", "o", "--init-pose", "none", "--start", "0.5",
+       "--blackout", "1:1.5", "--relocalize-after", "12", "--give-up", "2"});
+  EXPECT_TRUE(options.no_initial_pose);
+  EXPECT_FALSE(options.initial_world_from_cam.has_value());
+  EXPECT_EQ(options.start_s, 0.5);
+  EXPECT_EQ(options.blackout_begin_s, 1.0);
+  EXPECT_EQ(options.blackout_end_s, 1.5);
+  EXPECT_EQ(options.tracking.tracker.lost_steps_before_relocalization, 12);
+  EXPECT_EQ(options.tracking.tracker.relocalization_give_up_s, 2.0);
+  const std::vector<std::vector<std::string>> bad = {{"--start", "-1"},
+                                                     {"--blackout", "2:1"},
+                                                     {"--blackout", "1"},
+                                                     {"--init-pose", "none", "--mode", "frames"}};
+  for (const std::vector<std::string>& flags : bad) {
+    std::vector<std::string> arguments = {"--map", "m", "--dataset", "d", "--out", "o"};
+    arguments.insert(arguments.end(), flags.begin(), flags.end());
+    EXPECT_THROW(ParseTrackCommandLine(arguments), InvalidArgumentError) << flags[0];
+  }
+}
+
 }  // namespace
 }  // namespace evloc::tracking

@@ -20,15 +20,11 @@
 namespace evloc::tracking {
 namespace {
 
-const char* StatusName(TrackingStatus status) {
-  return status == TrackingStatus::kTracking ? "TRACKING" : "LOST";
-}
-
 nlohmann::json StepsToJson(const OfflineTrackingResult& result) {
   nlohmann::json steps = nlohmann::json::array();
   for (const PoseEstimate& step : result.steps) {
     steps.push_back({{"t_s", static_cast<double>(step.t_ns) * 1e-9},
-                     {"status", StatusName(step.status)},
+                     {"status", TrackingStatusName(step.status)},
                      {"points_selected", step.quality.points_selected},
                      {"points_used", step.quality.points_used},
                      {"on_edge_fraction", step.quality.on_edge_fraction},
@@ -43,9 +39,29 @@ nlohmann::json StepsToJson(const OfflineTrackingResult& result) {
                      {"surface_ms", step.timings.surface_ms},
                      {"selection_ms", step.timings.selection_ms},
                      {"solve_ms", step.timings.solve_ms},
-                     {"total_ms", step.timings.total_ms}});
+                     {"total_ms", step.timings.total_ms},
+                     {"search_round", step.search.round},
+                     {"search_prescored", step.search.prescored},
+                     {"search_refined", step.search.refined},
+                     {"search_verified_steps", step.search.verified_steps},
+                     {"search_best_alignment", step.search.best_alignment},
+                     {"search_second_alignment", step.search.second_alignment}});
   }
   return steps;
+}
+
+nlohmann::json RelocalizationsToJson(const OfflineTrackingResult& result) {
+  nlohmann::json episodes = nlohmann::json::array();
+  for (const RelocalizationEpisode& episode : result.relocalizations) {
+    episodes.push_back({{"start_t_s", static_cast<double>(episode.start_t_ns) * 1e-9},
+                        {"end_t_s", static_cast<double>(episode.end_t_ns) * 1e-9},
+                        {"outcome", episode.outcome},
+                        {"steps", episode.steps},
+                        {"rounds", episode.rounds},
+                        {"total_ms", episode.total_ms},
+                        {"max_step_ms", episode.max_step_ms}});
+  }
+  return episodes;
 }
 
 double Median(std::vector<double> values) {
@@ -67,6 +83,16 @@ void TrackCommandOptions::Check() const {
     throw InvalidArgumentError("--out is required: where to write the TUM trajectory");
   }
   if (debug_every_steps < 1) throw InvalidArgumentError("--debug-every must be at least 1");
+  if (blackout_begin_s && !(std::isfinite(*blackout_begin_s) && std::isfinite(*blackout_end_s) &&
+                            *blackout_begin_s >= 0 && *blackout_begin_s < *blackout_end_s)) {
+    throw InvalidArgumentError("--blackout T0:T1 needs 0 <= T0 < T1");
+  }
+  if (start_s && (!std::isfinite(*start_s) || *start_s < 0)) {
+    throw InvalidArgumentError("--start must be a number of seconds >= 0");
+  }
+  if (no_initial_pose && tracking.tracker.input != TrackerInput::kEvents) {
+    throw InvalidArgumentError("--init-pose none needs --mode events (the search works on events)");
+  }
   if (ecd_width <= 0 || ecd_height <= 0) {
     throw InvalidArgumentError("--ecd-size must be WIDTHxHEIGHT with positive sizes");
   }
@@ -83,9 +109,25 @@ Options:
   --map PATH             map directory (holding map.evmap) or .evmap file (required)
   --dataset DIR          dataset folder, evloc or Event Camera Dataset layout (required)
   --out PATH             output TUM trajectory (required)
-  --init-pose "tx ty tz qx qy qz qw"
+  --init-pose "tx ty tz qx qy qz qw" | none
                          initial world_from_cam; default: the dataset's first ground-truth pose
-                         (required when the dataset has no ground truth)
+                         (at --start: the ground truth then; required when the dataset has no
+                         ground truth); none: start without a pose, INITIALIZING, and search the
+                         map until a hypothesis is verified (docs/relocalization.md, "Events")
+  --start S              start S seconds after the dataset's first event (or frame) and ignore
+                         everything before it (the first step is at that time)
+  --blackout T0:T1       drop the events from T0 to T1 seconds after the first event (a sensor
+                         blackout, to measure the recovery)
+  --relocalize-after N   LOST steps before a global search (RELOCALIZING; default 30, 0 never)
+  --search-active-fraction F
+                         while searching, the decay leaves this fraction of pixels active
+                         (default 0.1)
+  --search-grid R        hypotheses on a grid within R metres of each map viewpoint (default 0.2)
+  --search-grid-step S   spacing of that grid, metres (default 0.2)
+  --search-candidates N  hypotheses refined per search round (default 12)
+  --search-margin A      alignment margin over the best distinct hypothesis (default 0.15)
+  --give-up S            a search episode that found nothing in S seconds ends "not_found" and a
+                         new one starts (default 0: never)
   --mode events|frames   events (Canny-EVT, default) or frames (Canny-VT on images.txt)
   --rate HZ              tracking steps per second of event time (default 300)
   --events-per-step N    a step every N events instead of a fixed rate
@@ -107,7 +149,10 @@ Options:
   --velocity-window S    constant-velocity window, seconds (default 0.02)
   --min-alignment A      a step is bad below this chance-corrected alignment (docs/tracking.md)
   --max-mean-residual R  a step is bad above this mean field value at the points
-  --stats PATH           per-step statistics (status, points, quality, timings) as JSON
+  --stats PATH           per-step statistics (status: TRACKING, LOST, INITIALIZING or
+                         RELOCALIZING; points, quality, timings) and the search episodes
+                         ("relocalizations": start_t_s, end_t_s, outcome found / not_found /
+                         ended) as JSON
   --debug-dir DIR        write debug pictures (time surface with the map, ON/OFF surfaces,
                          predicted gradient and flow)
   --debug-every N        one debug picture every N steps (default 30)
@@ -140,7 +185,36 @@ TrackCommandOptions ParseTrackCommandLine(const std::vector<std::string>& argume
     } else if (flag == "--out") {
       options.output_path = value;
     } else if (flag == "--init-pose") {
-      options.initial_world_from_cam = ParsePoseText(flag, value);
+      if (value == "none") {
+        options.no_initial_pose = true;
+        options.initial_world_from_cam.reset();
+      } else {
+        options.no_initial_pose = false;
+        options.initial_world_from_cam = ParsePoseText(flag, value);
+      }
+    } else if (flag == "--blackout") {
+      const size_t colon = value.find(':');
+      if (colon == std::string::npos) {
+        throw InvalidArgumentError("--blackout expects T0:T1 (seconds after the first event)");
+      }
+      options.blackout_begin_s = ParseDoubleFlag(flag, value.substr(0, colon));
+      options.blackout_end_s = ParseDoubleFlag(flag, value.substr(colon + 1));
+    } else if (flag == "--start") {
+      options.start_s = ParseDoubleFlag(flag, value);
+    } else if (flag == "--relocalize-after") {
+      tracker.lost_steps_before_relocalization = static_cast<int>(ParseIntegerFlag(flag, value));
+    } else if (flag == "--give-up") {
+      tracker.relocalization_give_up_s = ParseDoubleFlag(flag, value);
+    } else if (flag == "--search-active-fraction") {
+      tracker.relocalization_active_fraction = ParseDoubleFlag(flag, value);
+    } else if (flag == "--search-grid") {
+      tracker.relocalization_grid_radius_m = ParseDoubleFlag(flag, value);
+    } else if (flag == "--search-grid-step") {
+      tracker.relocalization_grid_step_m = ParseDoubleFlag(flag, value);
+    } else if (flag == "--search-candidates") {
+      tracker.relocalization_candidates = static_cast<int>(ParseIntegerFlag(flag, value));
+    } else if (flag == "--search-margin") {
+      tracker.relocalization_min_alignment_margin = ParseDoubleFlag(flag, value);
     } else if (flag == "--mode") {
       if (value == "events") {
         tracker.input = TrackerInput::kEvents;
@@ -213,9 +287,32 @@ OfflineTrackingResult RunTrackCommand(const TrackCommandOptions& options, std::o
   } else if (!events_mode && !dataset.images.empty()) {
     first_t_ns = dataset.images.front().t_ns;
   }
-  const TimedPose initial = ResolveInitialPose(dataset, options.initial_world_from_cam, first_t_ns);
-  const Rigid3d& initial_world_from_cam = initial.world_from_cam;
-  const int64_t initial_t_ns = initial.t_ns;
+  std::optional<Rigid3d> initial_world_from_cam;
+  int64_t initial_t_ns = first_t_ns;
+  OfflineTrackingOptions tracking = options.tracking;
+  if (options.blackout_begin_s) {
+    tracking.blackout_begin_ns = first_t_ns + std::llround(*options.blackout_begin_s * 1e9);
+    tracking.blackout_end_ns = first_t_ns + std::llround(*options.blackout_end_s * 1e9);
+  }
+  if (options.start_s) {
+    initial_t_ns = first_t_ns + std::llround(*options.start_s * 1e9);
+    tracking.discard_events_before_start = true;
+    if (options.initial_world_from_cam) {
+      initial_world_from_cam = options.initial_world_from_cam;
+    } else if (!options.no_initial_pose) {
+      if (!dataset.ground_truth || !dataset.ground_truth->Lookup(initial_t_ns)) {
+        throw InvalidArgumentError(
+            "--start: the dataset has no ground truth at that time; give "
+            "--init-pose (a pose, or none)");
+      }
+      initial_world_from_cam = *dataset.ground_truth->Lookup(initial_t_ns);
+    }
+  } else if (!options.no_initial_pose) {
+    const TimedPose initial =
+        ResolveInitialPose(dataset, options.initial_world_from_cam, first_t_ns);
+    initial_world_from_cam = initial.world_from_cam;
+    initial_t_ns = initial.t_ns;
+  }
 
   const Map map = LoadMap(ResolveMapFile(options.map_path));
   const VisibilityIndex visibility(map);
@@ -229,7 +326,7 @@ OfflineTrackingResult RunTrackCommand(const TrackCommandOptions& options, std::o
   if (options.debug_dir) std::filesystem::create_directories(*options.debug_dir);
 
   int64_t step_index = 0;
-  Rigid3d previous_world_from_cam = initial_world_from_cam;
+  Rigid3d previous_world_from_cam = initial_world_from_cam.value_or(Rigid3d());
   const int64_t end_ns = dataset.ground_truth ? dataset.ground_truth->end_ns() : 0;
   const StepCallback on_step = [&](const PoseEstimate& step, const Tracker& tracker) {
     if (options.debug_dir && step_index % options.debug_every_steps == 0) {
@@ -247,7 +344,7 @@ OfflineTrackingResult RunTrackCommand(const TrackCommandOptions& options, std::o
       if (end_ns > initial_t_ns) {
         log << " of " << static_cast<double>(end_ns - initial_t_ns) * 1e-9 << " s";
       }
-      log << "  " << StatusName(step.status) << "  points " << step.quality.points_used
+      log << "  " << TrackingStatusName(step.status) << "  points " << step.quality.points_used
           << "  on-edge " << step.quality.on_edge_fraction << "\n";
     }
     previous_world_from_cam = step.world_from_cam;
@@ -263,7 +360,7 @@ OfflineTrackingResult RunTrackCommand(const TrackCommandOptions& options, std::o
     }
     const auto reader = OpenEventFile(*dataset.events_path);
     result = TrackEventStream(*reader, map, &visibility, dataset.camera, initial_world_from_cam,
-                              initial_t_ns, options.tracking, on_step);
+                              initial_t_ns, tracking, on_step);
   } else {
     if (dataset.images.empty()) {
       throw InvalidArgumentError("dataset '" + options.dataset_path.string() +
@@ -271,8 +368,8 @@ OfflineTrackingResult RunTrackCommand(const TrackCommandOptions& options, std::o
     }
     std::vector<FrameFile> frames;
     for (const auto& image : dataset.images) frames.push_back({image.t_ns, image.path});
-    result = TrackFrameSequence(frames, map, &visibility, dataset.camera, initial_world_from_cam,
-                                initial_t_ns, options.tracking, on_step);
+    result = TrackFrameSequence(frames, map, &visibility, dataset.camera, *initial_world_from_cam,
+                                initial_t_ns, tracking, on_step);
   }
   WriteTumTrajectory(options.output_path, result.trajectory);
 
@@ -285,6 +382,7 @@ OfflineTrackingResult RunTrackCommand(const TrackCommandOptions& options, std::o
                             {"measurements", result.measurements},
                             {"steps", result.steps.size()},
                             {"lost_steps", result.lost_steps},
+                            {"relocalizations", RelocalizationsToJson(result)},
                             {"wall_s", result.wall_s},
                             {"median_step_ms", Median(step_ms)},
                             {"per_step", StepsToJson(result)}};

@@ -20,8 +20,18 @@ struct TrackCommandOptions {
   std::filesystem::path dataset_path;
   // Output TUM trajectory, world_from_cam at every step (--out).
   std::filesystem::path output_path;
-  // Initial pose (--init-pose "tx ty tz qx qy qz qw"); defaults to the first ground-truth pose.
+  // Initial pose (--init-pose "tx ty tz qx qy qz qw"); defaults to the first ground-truth pose
+  // (at --start: the ground truth at that time).
   std::optional<Rigid3d> initial_world_from_cam;
+  // Start without a pose and search the map (--init-pose none).
+  bool no_initial_pose = false;
+  // Start this many seconds after the dataset's first event (or frame), ignoring everything
+  // before (--start S).
+  std::optional<double> start_s;
+  // Drop the events from this many seconds after the first event... (--blackout T0:T1)
+  std::optional<double> blackout_begin_s;
+  // ...to this many seconds after it.
+  std::optional<double> blackout_end_s;
   // Per-step statistics as JSON (--stats).
   std::optional<std::filesystem::path> stats_path;
   // Folder for debug pictures (--debug-dir).

@@ -614,7 +614,7 @@ class TrackStream {
         *response.mutable_pose() = PoseUpdateFromEstimate(estimate);
         ++poses_;
         ++counters.poses;
-        if (estimate.status == tracking::TrackingStatus::kLost) {
+        if (tracking::HasNoEstimate(estimate.status)) {
           ++lost_poses_;
           ++counters.lost_poses;
         }

@@ -52,6 +52,8 @@ api::PoseUpdate PoseUpdateFromEstimate(const tracking::PoseEstimate& estimate) {
   for (int row = 0; row < 6; ++row) {
     for (int col = 0; col < 6; ++col) update.add_covariance(estimate.covariance(row, col));
   }
+  // The proto has no INITIALIZING / RELOCALIZING yet: a searching step carries no estimate, as a
+  // LOST one, and is sent as LOST (the service's own change adds the statuses).
   update.set_status(estimate.status == tracking::TrackingStatus::kTracking ? api::TRACKING
                                                                            : api::LOST);
   auto* quality = update.mutable_quality();

@@ -9,6 +9,7 @@
 #include <Eigen/Core>
 #include <cstddef>
 #include <cstdint>
+#include <optional>
 #include <span>
 #include <vector>
 
@@ -28,6 +29,17 @@ struct MapPoints {
 
   // Number of points.
   size_t size() const { return positions.size(); }
+};
+
+// Where a global search (relocalization) asks for starting viewpoints.
+struct ViewpointQuery {
+  // Viewpoints sampled between two consecutive keyframes (in time order), besides the keyframes.
+  int samples_between_keyframes = 2;
+  // When set, only viewpoints whose camera centre lies within search_radius_m of this position
+  // (world frame, metres) are returned.
+  std::optional<Eigen::Vector3d> search_center;
+  // Radius around search_center, metres.
+  double search_radius_m = 0;
 };
 
 // The points a tracker registers against. Contract: the spans returned by points() and the
@@ -53,6 +65,12 @@ class MapSource {
   virtual void VisibleCandidates(const Camera& camera, const Rigid3d& world_from_cam,
                                  const VisibilityQueryOptions& options,
                                  std::vector<uint32_t>* candidates) const = 0;
+
+  // Replaces `world_from_cams` with the viewpoints a global search starts from (the tracker adds
+  // perturbations around each). The default returns none: a source without viewpoints cannot
+  // relocalize, and the tracker keeps searching without result.
+  virtual void CandidateViewpoints(const ViewpointQuery& query,
+                                   std::vector<Rigid3d>* world_from_cams) const;
 };
 
 // A fixed Map, with an optional VisibilityIndex built on it: generation 0 forever. Without an
@@ -71,6 +89,10 @@ class StaticMapSource final : public MapSource {
   void VisibleCandidates(const Camera& camera, const Rigid3d& world_from_cam,
                          const VisibilityQueryOptions& options,
                          std::vector<uint32_t>* candidates) const override;
+  // The map's keyframe poses and the poses interpolated between consecutive keyframes (ordered
+  // by time), filtered by the query's search region.
+  void CandidateViewpoints(const ViewpointQuery& query,
+                           std::vector<Rigid3d>* world_from_cams) const override;
 
  private:
   const Map& map_;

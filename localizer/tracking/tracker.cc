@@ -24,13 +24,6 @@ constexpr double kRadiansPerDegree = std::numbers::pi / 180.0;
 
 }  // namespace
 
-// The outcome of one solve from one starting pose.
-struct Tracker::Attempt {
-  RegistrationResult registration;
-  TrackingQuality quality;
-  bool good = false;
-};
-
 Tracker::Tracker(const MapSource& source, const Camera& camera, const TrackerOptions& options)
     : Tracker(nullptr, &source, camera, options) {}
 
@@ -77,6 +70,9 @@ void Tracker::Reset(const Rigid3d& world_from_cam, int64_t t_ns) {
   motion_.Reset(world_from_cam, t_ns);
   last_good_world_from_cam_ = world_from_cam;
   status_ = TrackingStatus::kTracking;
+  started_ = true;
+  has_pose_ = true;
+  lost_steps_ = 0;
   next_step_t_ns_ = t_ns + period_ns_;
   last_step_t_ns_ = t_ns;
   events_since_step_ = 0;
@@ -191,6 +187,10 @@ std::optional<PoseEstimate> Tracker::AddFrame(int64_t t_ns, const cv::Mat& gray)
 
 double Tracker::StepDecayTimeNs() const {
   const double longest_ns = options_.decay_time_s * 1e9;
+  if (search_decay_ns_ > 0 &&
+      (status_ == TrackingStatus::kInitializing || status_ == TrackingStatus::kRelocalizing)) {
+    return search_decay_ns_;
+  }
   if (options_.decay_trail_px <= 0 || status_ != TrackingStatus::kTracking || !has_selection_ ||
       motion_.velocity_span_ns() == 0) {
     return longest_ns;
@@ -450,6 +450,16 @@ PoseEstimate Tracker::Step(int64_t t_ns) {
 
   UpdateSurfaces(t_ns);
   estimate.timings.surface_ms = MillisecondsSince(step_start);
+  estimate.search.episode = search_progress_.episode;
+
+  if (status_ == TrackingStatus::kInitializing || status_ == TrackingStatus::kRelocalizing) {
+    const Clock::time_point search_start = Clock::now();
+    SearchStep(t_ns, &estimate);
+    estimate.timings.solve_ms = MillisecondsSince(search_start);
+    last_step_t_ns_ = t_ns;
+    estimate.timings.total_ms = MillisecondsSince(step_start);
+    return estimate;
+  }
 
   const Clock::time_point selection_start = Clock::now();
   const bool was_tracking = status_ == TrackingStatus::kTracking;
@@ -547,6 +557,7 @@ PoseEstimate Tracker::Step(int64_t t_ns) {
     }
     last_good_world_from_cam_ = estimate.world_from_cam;
     status_ = TrackingStatus::kTracking;
+    lost_steps_ = 0;
   } else {
     // The best failed attempt is no estimate: a LOST step reports the last good pose, with a
     // covariance that says it carries no information.
@@ -554,6 +565,14 @@ PoseEstimate Tracker::Step(int64_t t_ns) {
     motion_.Reset(last_good_world_from_cam_, t_ns);
     estimate.world_from_cam = last_good_world_from_cam_;
     estimate.covariance = Matrix6d::Identity() * kUnconstrainedVariance;
+    // The local recovery gave up for long enough: search the whole map from the next step.
+    ++lost_steps_;
+    if (options_.lost_steps_before_relocalization > 0 &&
+        lost_steps_ >= options_.lost_steps_before_relocalization &&
+        options_.input == TrackerInput::kEvents) {
+      BeginSearch(TrackingStatus::kRelocalizing, t_ns);
+      estimate.search.episode = search_progress_.episode;
+    }
   }
   estimate.status = status_;
   last_step_t_ns_ = t_ns;

@@ -29,13 +29,48 @@
 
 namespace evloc::tracking {
 
-// Whether the tracker trusts its estimate.
+// Whether the tracker trusts its estimate (docs/tracking.md, "States").
 enum class TrackingStatus {
-  // The last step met the quality thresholds.
+  // The last step met the quality thresholds (after a search: a verified hypothesis).
   kTracking,
   // The last step (and its recovery attempts) failed them; the tracker searches around the last
   // good pose at every step.
   kLost,
+  // Started without a pose and none verified yet: searching the whole map (or the search prior).
+  kInitializing,
+  // Had a pose, lost it, and the local recovery gave up: searching the whole map again.
+  kRelocalizing,
+};
+
+// "TRACKING", "LOST", "INITIALIZING" or "RELOCALIZING".
+const char* TrackingStatusName(TrackingStatus status);
+
+// True for the statuses whose steps carry no estimate (LOST, INITIALIZING, RELOCALIZING): their
+// pose is the last good one (identity before any) with a covariance of 1e6 * I.
+inline bool HasNoEstimate(TrackingStatus status) { return status != TrackingStatus::kTracking; }
+
+// What the global search (INITIALIZING / RELOCALIZING) did in a step.
+struct SearchProgress {
+  // Search episodes started so far (0: never searched); an episode runs from the step that left
+  // TRACKING or LOST for a search until the step that returns to TRACKING.
+  int64_t episode = 0;
+  // Rounds (hypotheses generated, pre-scored, the best refined, judged) of this episode so far.
+  int round = 0;
+  // Hypotheses pre-scored in this step.
+  int prescored = 0;
+  // Hypotheses aligned on the chamfer field with their pre-score points in this step.
+  int coarse = 0;
+  // Hypotheses refined (coarse-to-fine registration and Assess) in this step.
+  int refined = 0;
+  // Consecutive good steps tracked from the accepted hypothesis (verification), after this step.
+  int verified_steps = 0;
+  // True when this step ended an episode that searched relocalization_give_up_s without a
+  // verified pose (a new episode starts with the next step).
+  bool gave_up = false;
+  // Alignment of the best refined hypothesis of the last judged round (0 before one).
+  double best_alignment = 0;
+  // Alignment of the best refined hypothesis distinct from it (0 when there was none).
+  double second_alignment = 0;
 };
 
 // How well a step's estimate fits the measurements.
@@ -96,6 +131,8 @@ struct PoseEstimate {
   TrackingQuality quality;
   // Stage timings (the only field that differs between identical runs).
   StageTimings timings;
+  // The global search's work in this step (all zero but `episode` while not searching).
+  SearchProgress search;
 };
 
 // The tracker of one session.
@@ -118,18 +155,31 @@ class Tracker {
   // velocity, the next fixed-rate step at t_ns + 1 / step_rate_hz.
   void Reset(const Rigid3d& world_from_cam, int64_t t_ns);
 
+  // Starts without a pose at t_ns: status kInitializing, the first fixed-rate step at t_ns; the
+  // steps search the map (docs/relocalization.md, "Events") until a hypothesis is verified.
+  // Throws InvalidArgumentError for a frame tracker (the search works on events).
+  void StartWithoutPose(int64_t t_ns);
+
+  // Narrows the global search to viewpoints whose camera centre is within `radius_m` of
+  // `center` (world frame, metres); takes effect at the next search round. Throws
+  // InvalidArgumentError for a non-finite centre or a radius that is not positive.
+  void SetSearchPrior(const Eigen::Vector3d& center, double radius_m);
+  // Removes the search prior (the whole map is searched again from the next round).
+  void ClearSearchPrior();
+
   // Ingests events (time-ordered, also across calls) and runs every step that became due; the
-  // step at time t uses every event with t_ns <= t. Before the first Reset events are stored but
-  // no step runs. Throws InvalidArgumentError (nothing ingested) when the events go back in time
-  // or the tracker takes frames; an event outside the sensor throws too.
+  // step at time t uses every event with t_ns <= t. Before the first Reset (or StartWithoutPose)
+  // events are stored but no step runs. Throws InvalidArgumentError (nothing ingested) when the
+  // events go back in time or the tracker takes frames; an event outside the sensor throws too.
   std::vector<PoseEstimate> AddEvents(const EventBuffer& events);
 
   // Declares that every event with t_ns <= `t_ns` has been given (a packet's end time, or a
   // quiet sensor): runs every fixed-rate step whose time is at most `t_ns` without waiting for a
   // later event, so a pose need not wait for the next packet. Events given afterwards must be
   // later than `t_ns`. Steps and poses are the same as when the next event triggers them. Does
-  // nothing in every-N-events mode, for frame trackers, or before the first Reset (except to
-  // record the bound). Throws InvalidArgumentError when `t_ns` is before the last event.
+  // nothing in every-N-events mode, for frame trackers, or before the first Reset or
+  // StartWithoutPose (except to record the bound). Throws InvalidArgumentError when `t_ns` is
+  // before the last event.
   std::vector<PoseEstimate> AdvanceTo(int64_t t_ns);
 
   // Runs one Canny-VT step on a grey frame (CV_8UC1, the camera's size) taken at t_ns. Returns
@@ -137,11 +187,11 @@ class Tracker {
   // the image is of another type or size, or t_ns is not after the last step.
   std::optional<PoseEstimate> AddFrame(int64_t t_ns, const cv::Mat& gray);
 
-  // True once Reset was called.
-  bool initialized() const { return motion_.initialized(); }
-  // Status after the last step (kTracking after Reset).
+  // True once Reset or StartWithoutPose was called.
+  bool initialized() const { return started_; }
+  // Status after the last step (kTracking after Reset, kInitializing after StartWithoutPose).
   TrackingStatus status() const { return status_; }
-  // The last good pose.
+  // The last good pose (identity before any).
   const Rigid3d& last_good_world_from_cam() const { return last_good_world_from_cam_; }
   // The options in use.
   const TrackerOptions& options() const { return options_; }
@@ -153,7 +203,12 @@ class Tracker {
   const Vector6d& velocity() const { return motion_.velocity(); }
 
  private:
-  struct Attempt;
+  // The outcome of one solve from one starting pose.
+  struct Attempt {
+    RegistrationResult registration;
+    TrackingQuality quality;
+    bool good = false;
+  };
 
   // Tracks against `borrowed`, or when it is null against `owned`.
   Tracker(std::unique_ptr<const MapSource> owned, const MapSource* borrowed, const Camera& camera,
@@ -176,6 +231,64 @@ class Tracker {
   // of the last Solve), and `good`.
   void Assess(bool predicted_polarity, Attempt* attempt);
   bool IsGood(const TrackingQuality& quality) const;
+
+  // Global search (INITIALIZING / RELOCALIZING; tracker_search.cc).
+  // A starting pose of a round: the base viewpoint it perturbs and its pre-score.
+  struct Hypothesis {
+    Rigid3d world_from_cam;
+    size_t viewpoint = 0;
+    double prescore = 1;
+    // After CoarseAlign: on-edge minus chance fraction of the pre-score points (higher is better).
+    double coarse_score = -1;
+  };
+  // A refined hypothesis: the registered pose at its step and its quality.
+  struct Refinement {
+    Rigid3d world_from_cam;
+    int64_t t_ns = 0;
+    double alignment = 0;
+    int points_used = 0;
+    bool good = false;
+  };
+  enum class SearchPhase { kStart, kPrescore, kCoarse, kRefine, kVerify };
+  // Starts a search episode in `status` (kInitializing or kRelocalizing) at t_ns.
+  void BeginSearch(TrackingStatus status, int64_t t_ns);
+  // One searching step at t_ns (the surfaces are up to date): fills `estimate`.
+  void SearchStep(int64_t t_ns, PoseEstimate* estimate);
+  // Sets the decay time of the search's steps from the events themselves: the one that leaves
+  // relocalization_active_fraction of the pixels active at t_ns, within [min_decay_time_s,
+  // decay_time_s] (the velocity that sets the tracking decay is unknown while searching).
+  void ChooseSearchDecay(int64_t t_ns);
+  // Builds the chamfer fields (distance to the nearest active pixel) of this step; returns the
+  // fraction of active pixels.
+  double BuildChamferFields(int64_t t_ns);
+  // Starts the hypotheses of a new round: the source's viewpoints (and the last good pose when
+  // relocalizing) once per episode, and the grid of offsets around them.
+  void GenerateHypotheses();
+  // Pre-scores every hypothesis of one base viewpoint (its grid positions looking at its target,
+  // each turned) and keeps the best relocalization_candidates of the round; returns how many
+  // were scored.
+  int PrescoreViewpoint(size_t viewpoint);
+  // Samples the pre-score points of a base viewpoint (once per episode): up to
+  // relocalization_prescore_points of the points visible from it.
+  void SampleViewpointPoints(size_t viewpoint);
+  // The chamfer pre-score of a hypothesis: mean truncated distance of its viewpoint's sample
+  // points to the nearest active pixel, 0..1, lower is better.
+  double Prescore(const Hypothesis& hypothesis) const;
+  // Registers a hypothesis' pre-score points against the chamfer fields and scores the result
+  // (Hypothesis::coarse_score); moves the hypothesis to the aligned pose.
+  void CoarseAlign(Hypothesis* hypothesis);
+  // Coarse-to-fine registration from a hypothesis: chamfer fields, then Solve (unsigned) with
+  // Assess.
+  Refinement Refine(const Rigid3d& start_world_from_cam, int64_t t_ns);
+  // Registers the current selection against `field` (no culling) from `start`.
+  RegistrationResult RegisterSelection(PotentialField* field, const Rigid3d& start_world_from_cam);
+  // True when two poses are farther apart than relocalization_distinct_m / _deg.
+  bool Distinct(const Rigid3d& a, const Rigid3d& b) const;
+  // Keeps the best distinct refinements of the round (relocalization_rivals) for the next one.
+  void KeepRivals();
+  // Judges the refinements of a finished round: true (and `accepted`) when the best is good and
+  // clearly better than the best distinct one.
+  bool JudgeRound(Refinement* accepted);
   bool InsideImage(const Eigen::Vector2d& pixel) const;
   bool NearEdge(const Eigen::Vector2d& pixel) const;
   PotentialField* Field(SurfaceChannel channel);
@@ -205,6 +318,40 @@ class Tracker {
   ConstantVelocityModel motion_;
   TrackingStatus status_ = TrackingStatus::kTracking;
   Rigid3d last_good_world_from_cam_;
+  // True once Reset or StartWithoutPose was called.
+  bool started_ = false;
+  // True once a pose was set or verified.
+  bool has_pose_ = false;
+  // Consecutive LOST steps (reset by a good step).
+  int lost_steps_ = 0;
+
+  // Global search state.
+  SearchPhase search_phase_ = SearchPhase::kStart;
+  SearchProgress search_progress_;
+  int64_t search_start_t_ns_ = 0;
+  // The decay time of the search's steps, nanoseconds (0: not chosen yet).
+  double search_decay_ns_ = 0;
+  std::optional<Eigen::Vector3d> search_center_;
+  double search_radius_m_ = 0;
+  // Base viewpoints of the episode (regenerated when empty) and their pre-score points.
+  std::vector<Rigid3d> viewpoints_;
+  std::vector<std::vector<uint32_t>> viewpoint_points_;
+  std::vector<uint8_t> viewpoint_sampled_;
+  // Median depth of each viewpoint's sampled points, metres (its look-at distance).
+  std::vector<double> viewpoint_depth_m_;
+  std::vector<Eigen::Vector3d> grid_offsets_;
+  size_t next_viewpoint_ = 0;
+  size_t next_coarse_ = 0;
+  std::vector<uint32_t> scratch_group_indices_;
+  std::vector<int64_t> scratch_ages_;
+  std::vector<Hypothesis> hypotheses_;
+  size_t next_refinement_ = 0;
+  std::vector<Refinement> refinements_;
+  // The previous round's best distinct refinements, refined again first in the next round.
+  std::vector<Hypothesis> rivals_;
+  cv::Mat chamfer_distance_px_;
+  DenseField chamfer_coarse_;
+  DenseField chamfer_fine_;
   int64_t step_t_ns_ = 0;
 
   // Selection state.

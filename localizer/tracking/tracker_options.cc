@@ -73,6 +73,46 @@ void TrackerOptions::Check() const {
           "recovery_translation_m must be finite and >= 0.");
   Require(std::isfinite(recovery_rotation_deg) && recovery_rotation_deg >= 0,
           "recovery_rotation_deg must be finite and >= 0.");
+  Require(lost_steps_before_relocalization >= 0, "lost_steps_before_relocalization must be >= 0.");
+  Require(relocalization_samples_between_keyframes >= 0 &&
+              relocalization_samples_between_keyframes <= 100,
+          "relocalization_samples_between_keyframes must be in [0, 100].");
+  Require(Positive(relocalization_grid_step_m), "relocalization_grid_step_m must be positive.");
+  Require(std::isfinite(relocalization_grid_radius_m) && relocalization_grid_radius_m >= 0 &&
+              relocalization_grid_radius_m <= 100 * relocalization_grid_step_m,
+          "relocalization_grid_radius_m must be in [0, 100 grid steps].");
+  Require(std::isfinite(relocalization_perturbation_deg) && relocalization_perturbation_deg >= 0 &&
+              relocalization_perturbation_deg < 90,
+          "relocalization_perturbation_deg must be in [0, 90).");
+  Require(relocalization_prescore_points >= 10, "relocalization_prescore_points must be >= 10.");
+  Require(relocalization_prescores_per_step >= 1,
+          "relocalization_prescores_per_step must be at least 1.");
+  Require(relocalization_candidates >= 1, "relocalization_candidates must be at least 1.");
+  Require(relocalization_coarse_candidates >= relocalization_candidates,
+          "relocalization_coarse_candidates must be at least relocalization_candidates.");
+  Require(relocalization_rivals >= 0 && relocalization_rivals < relocalization_candidates,
+          "relocalization_rivals must be in [0, relocalization_candidates).");
+  Require(relocalization_coarse_per_step >= 1,
+          "relocalization_coarse_per_step must be at least 1.");
+  Require(relocalization_refinements_per_step >= 1,
+          "relocalization_refinements_per_step must be at least 1.");
+  Require(
+      Positive(relocalization_chamfer_truncation_px) && relocalization_chamfer_truncation_px <= 200,
+      "relocalization_chamfer_truncation_px must be in (0, 200].");
+  Require(std::isfinite(relocalization_min_alignment_margin) &&
+              relocalization_min_alignment_margin >= 0 && relocalization_min_alignment_margin <= 1,
+          "relocalization_min_alignment_margin must be in [0, 1].");
+  Require(Positive(relocalization_distinct_m), "relocalization_distinct_m must be positive.");
+  Require(Positive(relocalization_distinct_deg), "relocalization_distinct_deg must be positive.");
+  Require(relocalization_verify_steps >= 1, "relocalization_verify_steps must be at least 1.");
+  Require(std::isfinite(relocalization_active_fraction) && relocalization_active_fraction > 0 &&
+              relocalization_active_fraction <= 1,
+          "relocalization_active_fraction must be in (0, 1].");
+  Require(std::isfinite(relocalization_give_up_s) && relocalization_give_up_s >= 0,
+          "relocalization_give_up_s must be finite and >= 0 (0 = never).");
+  Require(std::isfinite(relocalization_min_active_fraction) &&
+              relocalization_min_active_fraction >= 0 && relocalization_min_active_fraction < 1,
+          "relocalization_min_active_fraction must be in [0, 1).");
   Require(std::isfinite(canny_low_threshold) && canny_low_threshold >= 0 &&
               canny_low_threshold <= canny_high_threshold,
           "canny thresholds must satisfy 0 <= canny_low_threshold <= canny_high_threshold.");

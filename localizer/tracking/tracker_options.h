@@ -156,6 +156,62 @@ struct TrackerOptions {
   // Rotation of the recovery perturbations (about each camera axis, both signs), degrees.
   double recovery_rotation_deg = 2.0;
 
+  // --- Relocalization (docs/relocalization.md, "Events") ---
+  // After this many consecutive LOST steps (local recovery around the last good pose failed)
+  // the tracker searches globally (RELOCALIZING); 0 never does.
+  int lost_steps_before_relocalization = 30;
+  // Base viewpoints sampled between two consecutive map keyframes (MapSource::
+  // CandidateViewpoints), in addition to the keyframes themselves.
+  int relocalization_samples_between_keyframes = 2;
+  // Around each base viewpoint, positions on a cubic grid of this spacing within
+  // relocalization_grid_radius_m are tried too, each looking at the point the base viewpoint
+  // looks at (its median depth along its optical axis), metres.
+  double relocalization_grid_step_m = 0.2;
+  // Radius of that grid, metres (0: only the base viewpoints' own positions).
+  double relocalization_grid_radius_m = 0.2;
+  // Every position is also tried turned by this much about the camera x and y axes (both
+  // signs), degrees (0: no turned copies).
+  double relocalization_perturbation_deg = 8.0;
+  // Map points projected per hypothesis by the pre-score (orientation-aware chamfer).
+  int relocalization_prescore_points = 300;
+  // Hypotheses pre-scored per step (bounds the work of a searching step); whole viewpoints are
+  // scored (grid positions x 5 turns each), at least one per step.
+  int relocalization_prescores_per_step = 400;
+  // Hypotheses (the best pre-scores of a round) aligned on the chamfer field with their
+  // pre-score points and scored against chance per round.
+  int relocalization_coarse_candidates = 96;
+  // Coarse alignments run per step.
+  int relocalization_coarse_per_step = 24;
+  // Hypotheses (the best coarse scores of a round) refined by full registration per round.
+  int relocalization_candidates = 12;
+  // The best distinct refinements of a round refined again in the next one (of the
+  // relocalization_candidates), so that an ambiguity seen once stays in view.
+  int relocalization_rivals = 3;
+  // Refinements (coarse-to-fine registration and Assess) run per step.
+  int relocalization_refinements_per_step = 2;
+  // Truncation of the coarse chamfer field (distance to the nearest active pixel), pixels; the
+  // refinement registers against it, then against a third of it, then the time surface.
+  double relocalization_chamfer_truncation_px = 24.0;
+  // A refined hypothesis is accepted only when its alignment exceeds that of the best distinct
+  // refined hypothesis of the round by at least this much.
+  double relocalization_min_alignment_margin = 0.15;
+  // Two refined poses farther apart than this are distinct hypotheses, metres.
+  double relocalization_distinct_m = 0.05;
+  // Or rotated by more than this, degrees.
+  double relocalization_distinct_deg = 3.0;
+  // Consecutive good steps, tracked from the accepted hypothesis, before the status becomes
+  // TRACKING (the first TRACKING pose is the last of them).
+  int relocalization_verify_steps = 10;
+  // While searching, each round's decay time leaves this fraction of the pixels active (the
+  // newest events; within [min_decay_time_s, decay_time_s]): thin edges without a velocity.
+  double relocalization_active_fraction = 0.1;
+  // An episode that has searched this long without a verified pose ends as not found and a new
+  // one starts at once (fresh viewpoints; reported by SearchProgress::gave_up), seconds; 0 never.
+  double relocalization_give_up_s = 0.0;
+  // Fraction of the image's pixels that must be active before a round starts (fewer events mean
+  // too little to search on).
+  double relocalization_min_active_fraction = 0.01;
+
   // --- Frame-based twin (Canny-VT) ---
   // Lower hysteresis threshold of cv::Canny on 8-bit frames.
   double canny_low_threshold = 50.0;

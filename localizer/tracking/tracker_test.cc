@@ -33,13 +33,11 @@ const Sequence& SmoothSequence() {
 }
 
 double PositionError(const PoseEstimate& estimate) {
-  return (estimate.world_from_cam.translation - testing::SmoothMotion(estimate.t_ns).translation)
-      .norm();
+  return testing::PositionErrorToSmoothMotion(estimate.world_from_cam, estimate.t_ns);
 }
 
 double RotationError(const PoseEstimate& estimate) {
-  return AngleBetween(estimate.world_from_cam.rotation,
-                      testing::SmoothMotion(estimate.t_ns).rotation);
+  return testing::RotationErrorToSmoothMotion(estimate.world_from_cam, estimate.t_ns);
 }
 
 constexpr int64_t kStartNs = 50'000'000;
@@ -202,6 +200,9 @@ TEST(Tracker, DeclaresLostWhenEventsStopMatchingAndRecoversAfterReset) {
   const EventBuffer events =
       testing::SimulateEdgeEvents(sequence.map, sequence.camera, jumped, 0, 450'000'000);
   TrackerOptions options;
+  // This test is about the local recovery: no global search after it fails (the map has no
+  // keyframes to search from anyway; tracker_search_test.cc tests the search).
+  options.lost_steps_before_relocalization = 0;
   Tracker tracker(sequence.map, nullptr, sequence.camera, options);
   tracker.Reset(jumped(kStartNs), kStartNs);
   // Feed up to 400 ms.

@@ -62,6 +62,14 @@ Rigid3d SmoothMotion(int64_t t_ns, double speed) {
   return Rigid3d(ExpSO3(rotation), translation);
 }
 
+double PositionErrorToSmoothMotion(const Rigid3d& world_from_cam, int64_t t_ns) {
+  return (world_from_cam.translation - SmoothMotion(t_ns).translation).norm();
+}
+
+double RotationErrorToSmoothMotion(const Rigid3d& world_from_cam, int64_t t_ns) {
+  return AngleBetween(world_from_cam.rotation, SmoothMotion(t_ns).rotation);
+}
+
 EventBuffer SimulateEdgeEvents(const Map& map, const Camera& camera,
                                const TrajectoryFunction& trajectory, int64_t t_begin_ns,
                                int64_t t_end_ns, int64_t render_period_ns) {

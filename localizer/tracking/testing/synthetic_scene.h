@@ -43,6 +43,12 @@ Map MakeRectangleMap(const std::vector<Rectangle>& rectangles, double spacing_m)
 // sinusoid, rotation rates (0.15, -0.25, 0.1) rad/s, scaled by `speed`.
 Rigid3d SmoothMotion(int64_t t_ns, double speed = 1.0);
 
+// Distance between the camera centre of `world_from_cam` and SmoothMotion(t_ns), metres.
+double PositionErrorToSmoothMotion(const Rigid3d& world_from_cam, int64_t t_ns);
+
+// Angle between the orientation of `world_from_cam` and SmoothMotion(t_ns), radians.
+double RotationErrorToSmoothMotion(const Rigid3d& world_from_cam, int64_t t_ns);
+
 // Ideal edge events of the map points seen by a pinhole `camera` moving along `trajectory`:
 // rendered every `render_period_ns` in [t_begin_ns, t_end_ns]; a point emits an event at its
 // rounded pixel whenever that pixel changes, with polarity sign(-d . f) (brightness constancy,

@@ -1,0 +1,550 @@
+// The tracker's global search: the INITIALIZING and RELOCALIZING states (docs/relocalization.md,
+// "Events"). Per round: hypotheses from the map source's viewpoints and perturbations around
+// them, a chamfer pre-score of each (bounded per step), a coarse-to-fine registration of the best
+// few (bounded per step) ending in the tracker's own Solve and Assess, a judgement (good and
+// clearly better than the best distinct hypothesis), then a verification window of consecutive
+// good steps before TRACKING.
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+
+#include <opencv2/imgproc.hpp>
+
+#include "core/common/error.h"
+#include "localizer/tracking/point_selection.h"
+#include "localizer/tracking/tracker.h"
+
+namespace evloc::tracking {
+namespace {
+
+constexpr double kRadiansPerDegree = std::numbers::pi / 180.0;
+
+}  // namespace
+
+const char* TrackingStatusName(TrackingStatus status) {
+  switch (status) {
+    case TrackingStatus::kTracking:
+      return "TRACKING";
+    case TrackingStatus::kLost:
+      return "LOST";
+    case TrackingStatus::kInitializing:
+      return "INITIALIZING";
+    case TrackingStatus::kRelocalizing:
+      return "RELOCALIZING";
+  }
+  return "LOST";
+}
+
+void Tracker::StartWithoutPose(int64_t t_ns) {
+  if (options_.input != TrackerInput::kEvents) {
+    throw InvalidArgumentError("Tracker::StartWithoutPose: the search needs events, not frames.");
+  }
+  started_ = true;
+  has_pose_ = false;
+  last_good_world_from_cam_ = Rigid3d();
+  motion_.Reset(Rigid3d(), t_ns);
+  next_step_t_ns_ = t_ns;
+  last_step_t_ns_ = t_ns - 1;
+  events_since_step_ = 0;
+  has_selection_ = false;
+  lost_steps_ = 0;
+  BeginSearch(TrackingStatus::kInitializing, t_ns);
+}
+
+void Tracker::SetSearchPrior(const Eigen::Vector3d& center, double radius_m) {
+  if (!center.allFinite() || !std::isfinite(radius_m) || radius_m <= 0) {
+    throw InvalidArgumentError(
+        "Tracker::SetSearchPrior: the centre must be finite and the radius positive.");
+  }
+  search_center_ = center;
+  search_radius_m_ = radius_m;
+  viewpoints_.clear();
+}
+
+void Tracker::ClearSearchPrior() {
+  search_center_.reset();
+  search_radius_m_ = 0;
+  viewpoints_.clear();
+}
+
+void Tracker::BeginSearch(TrackingStatus status, int64_t t_ns) {
+  status_ = status;
+  search_decay_ns_ = 0;
+  search_start_t_ns_ = t_ns;
+  search_phase_ = SearchPhase::kStart;
+  ++search_progress_.episode;
+  search_progress_.round = 0;
+  search_progress_.verified_steps = 0;
+  search_progress_.best_alignment = 0;
+  search_progress_.second_alignment = 0;
+  viewpoints_.clear();
+  hypotheses_.clear();
+  refinements_.clear();
+  rivals_.clear();
+}
+
+void Tracker::ChooseSearchDecay(int64_t t_ns) {
+  const double longest_ns = options_.decay_time_s * 1e9;
+  const double log_ratio = std::log(1.0 / options_.empty_threshold);
+  const int64_t longest_age_ns = std::llround(longest_ns * log_ratio);
+  const size_t pixels = static_cast<size_t>(surface_.width()) * surface_.height();
+  const int64_t* last = surface_.LastTimestamps(SurfaceChannel::kAll);
+  std::vector<int64_t>& ages = scratch_ages_;
+  ages.clear();
+  for (size_t i = 0; i < pixels; ++i) {
+    if (last[i] != kNeverFired && t_ns - last[i] <= longest_age_ns) ages.push_back(t_ns - last[i]);
+  }
+  const size_t wanted =
+      static_cast<size_t>(options_.relocalization_active_fraction * static_cast<double>(pixels));
+  double decay_ns = longest_ns;
+  if (wanted > 0 && ages.size() > wanted) {
+    std::nth_element(ages.begin(), ages.begin() + (wanted - 1), ages.end());
+    decay_ns = static_cast<double>(ages[wanted - 1]) / log_ratio;
+  }
+  search_decay_ns_ = std::clamp(decay_ns, options_.min_decay_time_s * 1e9, longest_ns);
+  // This step's surfaces were set up with the previous decay: again with the new one.
+  UpdateSurfaces(t_ns);
+}
+
+double Tracker::BuildChamferFields(int64_t t_ns) {
+  const int width = surface_.width();
+  const int height = surface_.height();
+  cv::Mat not_active(height, width, CV_8UC1);
+  const int64_t* last = surface_.LastTimestamps(SurfaceChannel::kAll);
+  const int64_t max_age = decay_.MaxActiveAgeExactNs();
+  int active = 0;
+  for (int y = 0; y < height; ++y) {
+    uint8_t* row = not_active.ptr<uint8_t>(y);
+    for (int x = 0; x < width; ++x) {
+      const int64_t t_last = last[static_cast<size_t>(y) * width + x];
+      const bool fired = t_last != kNeverFired && t_ns - t_last <= max_age;
+      row[x] = fired ? 0 : 255;
+      active += fired ? 1 : 0;
+    }
+  }
+  if (active == 0) {
+    chamfer_distance_px_ = cv::Mat(height, width, CV_32FC1, cv::Scalar(1e6f));
+  } else {
+    cv::distanceTransform(not_active, chamfer_distance_px_, cv::DIST_L2, cv::DIST_MASK_PRECISE);
+  }
+  const double coarse = options_.relocalization_chamfer_truncation_px;
+  const double fine = coarse / 3;
+  cv::Mat coarse_values;
+  cv::Mat fine_values;
+  cv::min(chamfer_distance_px_, coarse, coarse_values);
+  cv::min(chamfer_distance_px_, fine, fine_values);
+  chamfer_coarse_ = DenseField(coarse_values / coarse);
+  chamfer_fine_ = DenseField(fine_values / fine);
+  return static_cast<double>(active) / (static_cast<double>(width) * height);
+}
+
+void Tracker::GenerateHypotheses() {
+  if (viewpoints_.empty()) {
+    ViewpointQuery query;
+    query.samples_between_keyframes = options_.relocalization_samples_between_keyframes;
+    query.search_center = search_center_;
+    query.search_radius_m = search_radius_m_;
+    source_->CandidateViewpoints(query, &viewpoints_);
+    if (has_pose_ &&
+        (!search_center_ ||
+         (last_good_world_from_cam_.translation - *search_center_).norm() <= search_radius_m_)) {
+      viewpoints_.insert(viewpoints_.begin(), last_good_world_from_cam_);
+    }
+    // The pre-score points of each viewpoint are sampled when first needed.
+    viewpoint_points_.assign(viewpoints_.size(), {});
+    viewpoint_depth_m_.assign(viewpoints_.size(), 0);
+    viewpoint_sampled_.assign(viewpoints_.size(), 0);
+    // The grid of position offsets around each viewpoint, nearest first.
+    grid_offsets_.clear();
+    const double step = options_.relocalization_grid_step_m;
+    const double radius = options_.relocalization_grid_radius_m;
+    const int cells = static_cast<int>(std::floor(radius / step + 1e-9));
+    for (int i = -cells; i <= cells; ++i) {
+      for (int j = -cells; j <= cells; ++j) {
+        for (int k = -cells; k <= cells; ++k) {
+          const Eigen::Vector3d offset(i * step, j * step, k * step);
+          if (offset.norm() <= radius + 1e-9) grid_offsets_.push_back(offset);
+        }
+      }
+    }
+    std::stable_sort(
+        grid_offsets_.begin(), grid_offsets_.end(),
+        [](const Eigen::Vector3d& a, const Eigen::Vector3d& b) { return a.norm() < b.norm(); });
+  }
+  hypotheses_.clear();
+  next_viewpoint_ = 0;
+}
+
+int Tracker::PrescoreViewpoint(size_t viewpoint) {
+  SampleViewpointPoints(viewpoint);
+  if (viewpoint_points_[viewpoint].empty()) return 0;
+  const Rigid3d& base = viewpoints_[viewpoint];
+  const Eigen::Vector3d axis = base.rotation * Eigen::Vector3d::UnitZ();
+  const Eigen::Vector3d target = base.translation + viewpoint_depth_m_[viewpoint] * axis;
+  const double r = options_.relocalization_perturbation_deg * kRadiansPerDegree;
+  const size_t keep = static_cast<size_t>(options_.relocalization_coarse_candidates);
+  const auto worse = [](const Hypothesis& a, const Hypothesis& b) {
+    return a.prescore < b.prescore;
+  };
+  int scored = 0;
+  for (const Eigen::Vector3d& offset : grid_offsets_) {
+    const Eigen::Vector3d position = base.translation + offset;
+    const Eigen::Vector3d towards = target - position;
+    if (towards.norm() < options_.min_depth_m) continue;
+    // Turn the base orientation so that it looks at the same target (the roll is kept).
+    const Eigen::Quaterniond turn = Eigen::Quaterniond::FromTwoVectors(axis, towards);
+    const Rigid3d looking((turn * base.rotation).normalized(), position);
+    for (int variant = 0; variant < 5; ++variant) {
+      if (variant > 0 && r <= 0) break;
+      Vector6d perturbation = Vector6d::Zero();
+      if (variant > 0) perturbation(3 + (variant - 1) / 2) = (variant % 2 == 1 ? 1 : -1) * r;
+      Hypothesis hypothesis{variant == 0 ? looking : looking * ExpSE3(perturbation), viewpoint, 1};
+      hypothesis.prescore = Prescore(hypothesis);
+      ++scored;
+      // Keep the best `keep` in a max-heap on the pre-score.
+      if (hypotheses_.size() < keep) {
+        hypotheses_.push_back(hypothesis);
+        std::push_heap(hypotheses_.begin(), hypotheses_.end(), worse);
+      } else if (hypothesis.prescore < hypotheses_.front().prescore) {
+        std::pop_heap(hypotheses_.begin(), hypotheses_.end(), worse);
+        hypotheses_.back() = hypothesis;
+        std::push_heap(hypotheses_.begin(), hypotheses_.end(), worse);
+      }
+    }
+  }
+  return scored;
+}
+
+void Tracker::SampleViewpointPoints(size_t viewpoint) {
+  if (viewpoint_sampled_[viewpoint]) return;
+  viewpoint_sampled_[viewpoint] = 1;
+  const Camera& ideal = table_.ideal_camera();
+  VisibilityQueryOptions query;
+  query.min_depth_m = options_.min_depth_m;
+  query.max_depth_m = options_.max_depth_m;
+  query.image_margin_px = options_.registration.image_margin_px;
+  source_->VisibleCandidates(ideal, viewpoints_[viewpoint], query, &candidates_);
+  // The candidates inside the image, then every k-th of them (cheaper than SelectEvenly's
+  // buckets; the pre-score only ranks hypotheses).
+  const Rigid3d cam_from_world = viewpoints_[viewpoint].Inverse();
+  const Eigen::Matrix3d rotation = cam_from_world.RotationMatrix();
+  std::vector<uint32_t>& inside = scratch_group_indices_;
+  inside.clear();
+  for (const uint32_t index : candidates_) {
+    const Eigen::Vector3d point_in_cam =
+        rotation * points_.positions[index].cast<double>() + cam_from_world.translation;
+    Eigen::Vector2d pixel;
+    if (point_in_cam.z() < options_.min_depth_m || point_in_cam.z() > options_.max_depth_m ||
+        !intrinsics_.Project(point_in_cam, &pixel) || !InsideImage(pixel)) {
+      continue;
+    }
+    inside.push_back(index);
+  }
+  std::vector<uint32_t>& sample = viewpoint_points_[viewpoint];
+  sample.clear();
+  const size_t wanted = static_cast<size_t>(options_.relocalization_prescore_points);
+  if (inside.size() < static_cast<size_t>(options_.min_points)) return;
+  std::vector<double> depths;
+  depths.reserve(inside.size());
+  for (const uint32_t index : inside) {
+    depths.push_back(
+        (rotation * points_.positions[index].cast<double>() + cam_from_world.translation).z());
+  }
+  std::nth_element(depths.begin(), depths.begin() + depths.size() / 2, depths.end());
+  viewpoint_depth_m_[viewpoint] = depths[depths.size() / 2];
+  const double stride = std::max(1.0, static_cast<double>(inside.size()) / wanted);
+  for (double k = 0; k < static_cast<double>(inside.size()) && sample.size() < wanted;
+       k += stride) {
+    sample.push_back(inside[static_cast<size_t>(k)]);
+  }
+}
+
+double Tracker::Prescore(const Hypothesis& hypothesis) const {
+  if (viewpoint_points_[hypothesis.viewpoint].empty()) return 1;
+  const Rigid3d cam_from_world = hypothesis.world_from_cam.Inverse();
+  const Eigen::Matrix3d rotation = cam_from_world.RotationMatrix();
+  const double truncation = options_.relocalization_chamfer_truncation_px;
+  const int width = chamfer_distance_px_.cols;
+  const int height = chamfer_distance_px_.rows;
+  double cost = 0;
+  int count = 0;
+  for (const uint32_t index : viewpoint_points_[hypothesis.viewpoint]) {
+    ++count;
+    Eigen::Vector2d pixel;
+    const Eigen::Vector3d point_in_cam =
+        rotation * points_.positions[index].cast<double>() + cam_from_world.translation;
+    int x;
+    int y;
+    if (!intrinsics_.Project(point_in_cam, &pixel) ||
+        !NearestEdgeField::RoundToPixel(pixel, &x, &y) || x < 0 || y < 0 || x >= width ||
+        y >= height) {
+      cost += 1;
+      continue;
+    }
+    cost += std::min<double>(chamfer_distance_px_.ptr<float>(y)[x], truncation) / truncation;
+  }
+  return count > 0 ? cost / count : 1;
+}
+
+void Tracker::CoarseAlign(Hypothesis* hypothesis) {
+  const std::vector<uint32_t>& sample = viewpoint_points_[hypothesis->viewpoint];
+  Rigid3d pose = hypothesis->world_from_cam;
+  for (DenseField* field : {&chamfer_coarse_, &chamfer_fine_}) {
+    scratch_points_.clear();
+    for (const uint32_t index : sample) {
+      scratch_points_.push_back({points_.positions[index].cast<double>(), field});
+    }
+    pose = RegisterPoints(scratch_points_, intrinsics_, pose.Inverse(), options_.registration)
+               .cam_from_world.Inverse();
+  }
+  hypothesis->world_from_cam = pose;
+  // On-edge fraction of the sample at the aligned pose minus that of its copies displaced by
+  // 4 px (as Assess): high only where the points fit better than texture fits anything.
+  static const Eigen::Vector2d kOffsets[4] = {{4.0, 1.0}, {-1.0, 4.0}, {-4.0, -1.0}, {1.0, -4.0}};
+  const Rigid3d cam_from_world = pose.Inverse();
+  const Eigen::Matrix3d rotation = cam_from_world.RotationMatrix();
+  const auto near_edge = [this](const Eigen::Vector2d& pixel) {
+    int x;
+    int y;
+    if (!NearestEdgeField::RoundToPixel(pixel, &x, &y) || x < 0 || y < 0 ||
+        x >= chamfer_distance_px_.cols || y >= chamfer_distance_px_.rows) {
+      return false;
+    }
+    return chamfer_distance_px_.ptr<float>(y)[x] <= options_.on_edge_radius_px;
+  };
+  int on = 0;
+  int chance = 0;
+  int count = 0;
+  for (const uint32_t index : sample) {
+    Eigen::Vector2d pixel;
+    if (!intrinsics_.Project(
+            rotation * points_.positions[index].cast<double>() + cam_from_world.translation,
+            &pixel)) {
+      ++count;
+      continue;
+    }
+    on += near_edge(pixel) ? 1 : 0;
+    chance += near_edge(pixel + kOffsets[count % 4]) ? 1 : 0;
+    ++count;
+  }
+  hypothesis->coarse_score = count > 0 ? static_cast<double>(on - chance) / count : -1;
+}
+
+RegistrationResult Tracker::RegisterSelection(PotentialField* field,
+                                              const Rigid3d& start_world_from_cam) {
+  scratch_points_.clear();
+  for (const uint32_t index : selected_) {
+    scratch_points_.push_back({points_.positions[index].cast<double>(), field});
+  }
+  return RegisterPoints(scratch_points_, intrinsics_, start_world_from_cam.Inverse(),
+                        options_.registration);
+}
+
+Tracker::Refinement Tracker::Refine(const Rigid3d& start_world_from_cam, int64_t t_ns) {
+  Refinement refinement;
+  refinement.world_from_cam = start_world_from_cam;
+  refinement.t_ns = t_ns;
+  SelectPoints(start_world_from_cam);
+  if (selected_.size() < static_cast<size_t>(options_.min_points)) return refinement;
+  const Rigid3d coarse =
+      RegisterSelection(&chamfer_coarse_, start_world_from_cam).cam_from_world.Inverse();
+  const Rigid3d fine = RegisterSelection(&chamfer_fine_, coarse).cam_from_world.Inverse();
+  // Select again where the chamfer stages ended when they moved the pose (as tracking would).
+  if ((fine.translation - start_world_from_cam.translation).norm() >
+          options_.reselect_translation_m ||
+      AngleBetween(fine.rotation, start_world_from_cam.rotation) >
+          options_.reselect_rotation_deg * kRadiansPerDegree) {
+    SelectPoints(fine);
+  }
+  if (selected_.size() < static_cast<size_t>(options_.min_points)) return refinement;
+  const Attempt attempt = Solve(fine, nullptr);
+  refinement.world_from_cam = attempt.registration.cam_from_world.Inverse();
+  refinement.alignment = attempt.quality.alignment;
+  refinement.points_used = attempt.quality.points_used;
+  refinement.good = attempt.good;
+  return refinement;
+}
+
+bool Tracker::Distinct(const Rigid3d& a, const Rigid3d& b) const {
+  return (a.translation - b.translation).norm() > options_.relocalization_distinct_m ||
+         AngleBetween(a.rotation, b.rotation) >
+             options_.relocalization_distinct_deg * kRadiansPerDegree;
+}
+
+void Tracker::KeepRivals() {
+  std::vector<const Refinement*> order;
+  for (const Refinement& refinement : refinements_) {
+    if (refinement.points_used >= options_.min_points) order.push_back(&refinement);
+  }
+  std::stable_sort(order.begin(), order.end(), [](const Refinement* a, const Refinement* b) {
+    return a->alignment > b->alignment;
+  });
+  rivals_.clear();
+  for (const Refinement* refinement : order) {
+    if (rivals_.size() == static_cast<size_t>(options_.relocalization_rivals)) break;
+    bool is_new = true;
+    for (const Hypothesis& kept : rivals_) {
+      is_new = is_new && Distinct(kept.world_from_cam, refinement->world_from_cam);
+    }
+    if (is_new) rivals_.push_back({refinement->world_from_cam, 0, 0, refinement->alignment});
+  }
+}
+
+bool Tracker::JudgeRound(Refinement* accepted) {
+  // The best good refinement, against the best distinct one that registered enough points
+  // (good or not: an ambiguity need not pass every threshold to make the best one doubtful).
+  const Refinement* best = nullptr;
+  for (const Refinement& refinement : refinements_) {
+    if (refinement.good && (best == nullptr || refinement.alignment > best->alignment)) {
+      best = &refinement;
+    }
+  }
+  search_progress_.best_alignment = 0;
+  search_progress_.second_alignment = 0;
+  if (best == nullptr) {
+    KeepRivals();
+    return false;
+  }
+  double second = 0;
+  for (const Refinement& other : refinements_) {
+    if (other.points_used >= options_.min_points &&
+        Distinct(other.world_from_cam, best->world_from_cam)) {
+      second = std::max(second, other.alignment);
+    }
+  }
+  search_progress_.best_alignment = best->alignment;
+  search_progress_.second_alignment = second;
+  KeepRivals();
+  if (best->alignment - second < options_.relocalization_min_alignment_margin) return false;
+  *accepted = *best;
+  return true;
+}
+
+void Tracker::SearchStep(int64_t t_ns, PoseEstimate* estimate) {
+  SearchProgress& progress = search_progress_;
+  progress.prescored = 0;
+  progress.coarse = 0;
+  progress.refined = 0;
+  progress.gave_up = false;
+  estimate->world_from_cam = last_good_world_from_cam_;
+  estimate->covariance = Matrix6d::Identity() * kUnconstrainedVariance;
+  estimate->quality.decay_time_ms = decay_.decay_time_ns * 1e-6;
+
+  if (search_phase_ == SearchPhase::kVerify) {
+    // Track the accepted hypothesis normally (unsigned surface, constant velocity) and require
+    // every step of the window to be good.
+    const Rigid3d predicted = motion_.Predict(t_ns);
+    SelectPoints(predicted);
+    const Attempt attempt = Solve(predicted, nullptr);
+    estimate->quality = attempt.quality;
+    estimate->quality.decay_time_ms = decay_.decay_time_ns * 1e-6;
+    if (attempt.good) {
+      const Rigid3d pose = attempt.registration.cam_from_world.Inverse();
+      motion_.Update(pose, t_ns);
+      ++progress.verified_steps;
+      if (progress.verified_steps >= options_.relocalization_verify_steps) {
+        status_ = TrackingStatus::kTracking;
+        has_pose_ = true;
+        lost_steps_ = 0;
+        last_good_world_from_cam_ = pose;
+        estimate->world_from_cam = pose;
+        estimate->covariance = attempt.registration.covariance;
+        estimate->status = status_;
+        estimate->search = progress;
+        return;
+      }
+    } else {
+      progress.verified_steps = 0;
+      search_phase_ = SearchPhase::kStart;
+    }
+    estimate->status = status_;
+    estimate->search = progress;
+    return;
+  }
+
+  // A round needs one decay time of events since the first event, and enough active pixels.
+  const bool surfaces_full =
+      first_event_t_ns_ && t_ns - *first_event_t_ns_ >= options_.decay_time_s * 1e9;
+  if (search_phase_ == SearchPhase::kStart && surfaces_full) {
+    ChooseSearchDecay(t_ns);
+    const double active = BuildChamferFields(t_ns);
+    if (active >= options_.relocalization_min_active_fraction) {
+      GenerateHypotheses();
+      next_refinement_ = 0;
+      refinements_.clear();
+      ++progress.round;
+      if (!viewpoints_.empty()) search_phase_ = SearchPhase::kPrescore;
+    }
+  }
+  if (search_phase_ == SearchPhase::kPrescore) {
+    // Whole viewpoints (their grid and turns) while the step's budget allows (at least one).
+    const int per_viewpoint = static_cast<int>(grid_offsets_.size()) *
+                              (options_.relocalization_perturbation_deg > 0 ? 5 : 1);
+    while (next_viewpoint_ < viewpoints_.size() &&
+           (progress.prescored == 0 ||
+            progress.prescored + per_viewpoint <= options_.relocalization_prescores_per_step)) {
+      progress.prescored += PrescoreViewpoint(next_viewpoint_++);
+    }
+    if (next_viewpoint_ == viewpoints_.size()) {
+      std::sort_heap(
+          hypotheses_.begin(), hypotheses_.end(),
+          [](const Hypothesis& a, const Hypothesis& b) { return a.prescore < b.prescore; });
+      next_coarse_ = 0;
+      search_phase_ = hypotheses_.empty() ? SearchPhase::kStart : SearchPhase::kCoarse;
+    }
+  } else if (search_phase_ == SearchPhase::kCoarse) {
+    // Chamfer registration of the pre-score points, then a chance-corrected score: ranks the
+    // survivors of the pre-score by how well they fit once aligned.
+    for (int i = 0;
+         i < options_.relocalization_coarse_per_step && next_coarse_ < hypotheses_.size(); ++i) {
+      CoarseAlign(&hypotheses_[next_coarse_++]);
+      ++progress.coarse;
+    }
+    if (next_coarse_ == hypotheses_.size()) {
+      std::stable_sort(
+          hypotheses_.begin(), hypotheses_.end(),
+          [](const Hypothesis& a, const Hypothesis& b) { return a.coarse_score > b.coarse_score; });
+      // The previous round's best distinct refinements first (an ambiguity seen once stays in
+      // view: rounds see different subsets of the hypotheses), then the best distinct aligned
+      // poses (hypotheses aligned onto one pose would refine to it alike, and a list of one
+      // place would hide the ambiguity the judgement looks for).
+      std::vector<Hypothesis> distinct = rivals_;
+      for (const Hypothesis& hypothesis : hypotheses_) {
+        if (distinct.size() >= static_cast<size_t>(options_.relocalization_candidates)) break;
+        bool is_new = true;
+        for (const Hypothesis& kept : distinct) {
+          is_new = is_new && Distinct(kept.world_from_cam, hypothesis.world_from_cam);
+        }
+        if (is_new) distinct.push_back(hypothesis);
+      }
+      hypotheses_ = std::move(distinct);
+      search_phase_ = SearchPhase::kRefine;
+    }
+  } else if (search_phase_ == SearchPhase::kRefine) {
+    for (int i = 0;
+         i < options_.relocalization_refinements_per_step && next_refinement_ < hypotheses_.size();
+         ++i) {
+      refinements_.push_back(Refine(hypotheses_[next_refinement_++].world_from_cam, t_ns));
+      ++progress.refined;
+    }
+    if (next_refinement_ == hypotheses_.size()) {
+      Refinement accepted;
+      if (JudgeRound(&accepted)) {
+        motion_.Reset(accepted.world_from_cam, accepted.t_ns);
+        progress.verified_steps = 0;
+        search_phase_ = SearchPhase::kVerify;
+      } else {
+        search_phase_ = SearchPhase::kStart;
+      }
+    }
+  }
+  estimate->status = status_;
+  estimate->search = progress;
+  if (options_.relocalization_give_up_s > 0 &&
+      t_ns - search_start_t_ns_ >= options_.relocalization_give_up_s * 1e9) {
+    estimate->search.gave_up = true;
+    BeginSearch(status_, t_ns);
+  }
+}
+
+}  // namespace evloc::tracking

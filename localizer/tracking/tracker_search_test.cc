@@ -1,0 +1,263 @@
+// The tracker's global search (INITIALIZING / RELOCALIZING; docs/relocalization.md, "Events") on
+// the synthetic rectangle scene: from no pose, after a blackout, against unrelated events, and
+// the verification's refusal of an ambiguous round.
+#include <cmath>
+#include <iostream>
+#include <random>
+
+#include <gtest/gtest.h>
+
+#include "core/common/error.h"
+#include "localizer/tracking/testing/synthetic_scene.h"
+#include "localizer/tracking/tracker.h"
+
+namespace evloc::tracking {
+namespace {
+
+constexpr double kDegree = M_PI / 180.0;
+const Camera kCamera = Camera::Pinhole(240, 180, 200.0, 200.0, 119.5, 89.5);
+
+// The rectangle map with keyframes along a path beside the one the events are simulated on:
+// every 150 ms of SmoothMotion, displaced by 6 cm and turned by 3 degrees (a map built from
+// another pass through the scene).
+Map MapWithKeyframes(const std::vector<testing::Rectangle>& rectangles,
+                     const Eigen::Vector3d& shift = Eigen::Vector3d::Zero()) {
+  Map map = testing::MakeRectangleMap(rectangles, 0.004);
+  map.cameras.push_back(kCamera);
+  for (int64_t t_ns = 0; t_ns <= 900'000'000; t_ns += 150'000'000) {
+    Rigid3d world_from_cam =
+        testing::SmoothMotion(t_ns) *
+        ExpSE3((Vector6d() << 0.06, -0.03, 0.0, 0.0, 3 * kDegree, 0).finished());
+    world_from_cam.translation += shift;
+    Keyframe keyframe;
+    keyframe.cam_from_world = world_from_cam.Inverse();
+    keyframe.t_ns = t_ns;
+    map.keyframes.push_back(keyframe);
+  }
+  return map;
+}
+
+const Map& SceneMap() {
+  static const Map map = MapWithKeyframes(testing::DefaultRectangles());
+  return map;
+}
+
+EventBuffer SceneEvents(int64_t t_end_ns) {
+  return testing::SimulateEdgeEvents(
+      SceneMap(), kCamera, [](int64_t t_ns) { return testing::SmoothMotion(t_ns); }, 0, t_end_ns);
+}
+
+double PositionError(const PoseEstimate& estimate) {
+  return testing::PositionErrorToSmoothMotion(estimate.world_from_cam, estimate.t_ns);
+}
+
+double RotationError(const PoseEstimate& estimate) {
+  return testing::RotationErrorToSmoothMotion(estimate.world_from_cam, estimate.t_ns);
+}
+
+// Every estimate that is not TRACKING carries no information; every TRACKING pose is within
+// 5 cm / 3 degrees of the truth. Returns the time of the first TRACKING step (or -1).
+int64_t CheckEstimates(const std::vector<PoseEstimate>& estimates, const TrackerOptions& options) {
+  int64_t first_tracking_ns = -1;
+  for (const PoseEstimate& estimate : estimates) {
+    EXPECT_LE(estimate.search.prescored, options.relocalization_prescores_per_step);
+    EXPECT_LE(estimate.search.refined, options.relocalization_refinements_per_step);
+    if (estimate.status != TrackingStatus::kTracking) {
+      EXPECT_GE(estimate.covariance.diagonal().minCoeff(), kUnconstrainedVariance) << estimate.t_ns;
+      continue;
+    }
+    if (first_tracking_ns < 0) first_tracking_ns = estimate.t_ns;
+    EXPECT_LT(PositionError(estimate), 0.05) << estimate.t_ns;
+    EXPECT_LT(RotationError(estimate), 3 * kDegree) << estimate.t_ns;
+  }
+  return first_tracking_ns;
+}
+
+TEST(TrackerSearch, FindsItselfFromNoPoseAndEveryTrackingPoseIsRight) {
+  const EventBuffer events = SceneEvents(600'000'000);
+  TrackerOptions options;
+  Tracker tracker(SceneMap(), nullptr, kCamera, options);
+  tracker.StartWithoutPose(0);
+  EXPECT_EQ(tracker.status(), TrackingStatus::kInitializing);
+  const std::vector<PoseEstimate> estimates = tracker.AddEvents(events);
+  ASSERT_FALSE(estimates.empty());
+  EXPECT_EQ(estimates.front().t_ns, 0);  // The first step is at the start time.
+  EXPECT_EQ(estimates.front().status, TrackingStatus::kInitializing);
+  const int64_t first_tracking_ns = CheckEstimates(estimates, options);
+  ASSERT_GE(first_tracking_ns, 0) << "never TRACKING";
+  std::cout << "from no pose: TRACKING at " << first_tracking_ns * 1e-9 << " s\n";
+  // Measured: TRACKING at 0.09 s (30 ms to fill the surfaces, then one round and the
+  // 10-step verification). The target is 1 s.
+  EXPECT_LT(first_tracking_ns, 300'000'000);
+  // Once found it stays found.
+  int tracking_after = 0;
+  for (const PoseEstimate& estimate : estimates) {
+    if (estimate.t_ns > first_tracking_ns) {
+      tracking_after += estimate.status == TrackingStatus::kTracking ? 1 : 0;
+    }
+  }
+  EXPECT_GT(tracking_after, 100);
+  EXPECT_EQ(tracker.status(), TrackingStatus::kTracking);
+}
+
+TEST(TrackerSearch, NeverTracksEventsOfAnUnrelatedSceneOrNoise) {
+  // Another layout of rectangles (different sizes and places) seen along the same motion.
+  std::vector<testing::Rectangle> other;
+  for (const testing::Rectangle& rectangle : testing::DefaultRectangles()) {
+    testing::Rectangle moved = rectangle;
+    moved.centre = Eigen::Vector3d(-rectangle.centre.y(), rectangle.centre.x() * 0.8,
+                                   rectangle.centre.z() + 0.4);
+    moved.half_u = rectangle.half_v * 1.3;
+    moved.half_v = rectangle.half_u * 0.7;
+    other.push_back(moved);
+  }
+  const Map other_map = testing::MakeRectangleMap(other, 0.004);
+  EventBuffer unrelated = testing::SimulateEdgeEvents(
+      other_map, kCamera, [](int64_t t_ns) { return testing::SmoothMotion(t_ns); }, 0, 900'000'000);
+  // Uniform noise: 2 M events per second over the sensor.
+  EventBuffer noise;
+  std::mt19937 random(7);
+  std::uniform_int_distribution<int> x(0, 239);
+  std::uniform_int_distribution<int> y(0, 179);
+  for (int64_t t_ns = 0; t_ns < 900'000'000; t_ns += 500) {
+    noise.push_back(Event{t_ns, static_cast<uint16_t>(x(random)), static_cast<uint16_t>(y(random)),
+                          static_cast<int8_t>(t_ns % 1000 == 0 ? 1 : -1)});
+  }
+  for (const EventBuffer* events : {&unrelated, &noise}) {
+    TrackerOptions options;
+    Tracker tracker(SceneMap(), nullptr, kCamera, options);
+    tracker.StartWithoutPose(0);
+    const std::vector<PoseEstimate> estimates = tracker.AddEvents(*events);
+    ASSERT_GT(estimates.size(), 250u);
+    int rounds = 0;
+    for (const PoseEstimate& estimate : estimates) {
+      EXPECT_EQ(estimate.status, TrackingStatus::kInitializing) << estimate.t_ns;
+      rounds = std::max(rounds, estimate.search.round);
+    }
+    // It kept searching (several rounds), and found nothing.
+    EXPECT_GE(rounds, 3);
+  }
+}
+
+TEST(TrackerSearch, RelocalizesOnItsOwnAfterABlackout) {
+  const EventBuffer all = SceneEvents(900'000'000);
+  constexpr int64_t kBlackoutBeginNs = 200'000'000;
+  constexpr int64_t kBlackoutEndNs = 450'000'000;
+  EventBuffer events;
+  for (size_t i = 0; i < all.size(); ++i) {
+    if (all.t_ns[i] < kBlackoutBeginNs || all.t_ns[i] >= kBlackoutEndNs) events.push_back(all[i]);
+  }
+  TrackerOptions options;
+  Tracker tracker(SceneMap(), nullptr, kCamera, options);
+  tracker.Reset(testing::SmoothMotion(50'000'000), 50'000'000);
+  const std::vector<PoseEstimate> estimates = tracker.AddEvents(events);
+  // The sequence of statuses, without repeats: TRACKING, LOST, RELOCALIZING, TRACKING.
+  std::vector<TrackingStatus> sequence;
+  for (const PoseEstimate& estimate : estimates) {
+    if (sequence.empty() || sequence.back() != estimate.status) sequence.push_back(estimate.status);
+  }
+  const std::vector<TrackingStatus> expected = {TrackingStatus::kTracking, TrackingStatus::kLost,
+                                                TrackingStatus::kRelocalizing,
+                                                TrackingStatus::kTracking};
+  EXPECT_EQ(sequence, expected);
+  CheckEstimates(estimates, options);
+  int64_t back_ns = -1;
+  for (const PoseEstimate& estimate : estimates) {
+    if (estimate.t_ns >= kBlackoutEndNs && estimate.status == TrackingStatus::kTracking) {
+      back_ns = estimate.t_ns;
+      break;
+    }
+  }
+  ASSERT_GE(back_ns, 0);
+  std::cout << "after the blackout: TRACKING " << (back_ns - kBlackoutEndNs) * 1e-9
+            << " s after the events resume\n";
+  // Measured: back 0.057 s after the events resume; the target is 1 s.
+  EXPECT_LT(back_ns - kBlackoutEndNs, 300'000'000);
+}
+
+// Two identical copies of the scene 20 m apart (never in one view) with keyframes at both: the
+// true pose and its copy align equally well, so no round may be accepted...
+TEST(TrackerSearch, RefusesWhenTheSecondBestDistinctHypothesisIsAlmostAsGood) {
+  std::vector<testing::Rectangle> twins = testing::DefaultRectangles();
+  const Eigen::Vector3d shift(20.0, 0.0, 0.0);
+  for (const testing::Rectangle& rectangle : testing::DefaultRectangles()) {
+    testing::Rectangle copy = rectangle;
+    copy.centre += shift;
+    twins.push_back(copy);
+  }
+  Map map = MapWithKeyframes(twins);
+  const Map shifted = MapWithKeyframes(twins, shift);
+  map.keyframes.insert(map.keyframes.end(), shifted.keyframes.begin(), shifted.keyframes.end());
+  const EventBuffer events = SceneEvents(600'000'000);
+
+  TrackerOptions options;
+  Tracker tracker(map, nullptr, kCamera, options);
+  tracker.StartWithoutPose(0);
+  const std::vector<PoseEstimate> estimates = tracker.AddEvents(events);
+  int judged = 0;
+  for (const PoseEstimate& estimate : estimates) {
+    EXPECT_EQ(estimate.status, TrackingStatus::kInitializing) << estimate.t_ns;
+    if (estimate.search.best_alignment > 0) {
+      ++judged;
+      // The best and the second best (the twin) are both good and nearly equal.
+      EXPECT_GE(estimate.search.best_alignment, options.min_alignment);
+      EXPECT_LT(estimate.search.best_alignment - estimate.search.second_alignment,
+                options.relocalization_min_alignment_margin);
+    }
+  }
+  EXPECT_GT(judged, 0);
+
+  // ...without the margin the same search does accept one of the two (so it is the margin that
+  // refused them)...
+  TrackerOptions no_margin = options;
+  no_margin.relocalization_min_alignment_margin = 0;
+  Tracker accepting(map, nullptr, kCamera, no_margin);
+  accepting.StartWithoutPose(0);
+  int tracking = 0;
+  for (const PoseEstimate& estimate : accepting.AddEvents(events)) {
+    tracking += estimate.status == TrackingStatus::kTracking ? 1 : 0;
+  }
+  EXPECT_GT(tracking, 0);
+
+  // ...and a search prior around one copy removes the ambiguity: found, at the right copy.
+  Tracker with_prior(map, nullptr, kCamera, options);
+  with_prior.SetSearchPrior(testing::SmoothMotion(0).translation, 1.0);
+  with_prior.StartWithoutPose(0);
+  const int64_t first_tracking_ns = CheckEstimates(with_prior.AddEvents(events), options);
+  EXPECT_GE(first_tracking_ns, 0);
+}
+
+TEST(TrackerSearch, RejectsABadPriorAndFrameTrackers) {
+  Tracker tracker(SceneMap(), nullptr, kCamera, TrackerOptions());
+  EXPECT_THROW(tracker.SetSearchPrior(Eigen::Vector3d::Zero(), 0.0), InvalidArgumentError);
+  EXPECT_THROW(tracker.SetSearchPrior(Eigen::Vector3d::Constant(NAN), 1.0), InvalidArgumentError);
+  TrackerOptions frames;
+  frames.input = TrackerInput::kFrames;
+  Tracker frame_tracker(SceneMap(), nullptr, kCamera, frames);
+  EXPECT_THROW(frame_tracker.StartWithoutPose(0), InvalidArgumentError);
+  TrackerOptions bad;
+  bad.relocalization_verify_steps = 0;
+  EXPECT_THROW(bad.Check(), InvalidArgumentError);
+}
+
+TEST(StaticMapSource, GivesKeyframesAndViewpointsBetweenThemWithinThePrior) {
+  const Map& map = SceneMap();
+  const StaticMapSource source(map);
+  std::vector<Rigid3d> viewpoints;
+  ViewpointQuery query;
+  query.samples_between_keyframes = 2;
+  source.CandidateViewpoints(query, &viewpoints);
+  const size_t keyframes = map.keyframes.size();
+  ASSERT_EQ(viewpoints.size(), keyframes + 2 * (keyframes - 1));
+  EXPECT_TRUE(
+      viewpoints[0].translation.isApprox(map.keyframes[0].cam_from_world.Inverse().translation));
+  EXPECT_TRUE(
+      viewpoints[3].translation.isApprox(map.keyframes[1].cam_from_world.Inverse().translation));
+  query.search_center = viewpoints[0].translation;
+  query.search_radius_m = 1e-6;
+  source.CandidateViewpoints(query, &viewpoints);
+  EXPECT_EQ(viewpoints.size(), 1u);
+}
+
+}  // namespace
+}  // namespace evloc::tracking
