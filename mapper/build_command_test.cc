@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <fstream>
+#include <functional>
 
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -10,10 +11,10 @@
 #include "core/common/error.h"
 #include "core/common/file_util.h"
 #include "core/common/test_data.h"
-#include "mapper/map_accuracy.h"
 #include "mapper/map_builder.h"
-#include "mapper/middlebury_test_util.h"
+#include "core/dataset/testing/middlebury.h"
 #include "maps/map.h"
+#include "tools/map_accuracy/map_accuracy.h"
 
 namespace evloc::mapper {
 namespace {
@@ -159,6 +160,52 @@ TEST(BuildCommand, TimeKeyedPosesMayLeaveOutImagesAtTheEnds) {
                InvalidArgumentError);
   { std::ofstream(directory / "named.txt") << "a.png 0 0 0 0 0 0 1\n"; }
   EXPECT_FALSE(IsTimeKeyedPoseFile(directory / "named.txt"));
+  fs::remove_all(directory);
+}
+
+// The image list and named poses go through core/dataset's strict readers: errors name the file
+// and line (or the listed file), nothing is skipped silently.
+TEST(BuildCommand, ImageListsAndNamedPosesAreReadStrictly) {
+  const fs::path directory = evloc::testing::MakeTempDir("build_strict_lists");
+  fs::create_directories(directory / "images");
+  WriteImage(directory / "images" / "a.png", 64, 48);
+  WriteImage(directory / "images" / "b.png", 64, 48);
+  // Paths relative to the image folder or to the list's folder (an ECD images.txt) both resolve.
+  { std::ofstream(directory / "images.txt") << "# t path\n0.5 a.png\n1.0 images/b.png\n"; }
+  const std::vector<InputImage> images =
+      ListInputImages(directory / "images", directory / "images.txt");
+  ASSERT_EQ(images.size(), 2u);
+  EXPECT_EQ(images[1].name, "b.png");
+  EXPECT_EQ(images[1].t_ns, 1'000'000'000);
+  const auto error_of = [](const std::function<void()>& run) -> std::string {
+    try {
+      run();
+    } catch (const Error& error) {
+      return error.what();
+    }
+    return "";
+  };
+  const auto list_error = [&](const std::string& text) {
+    { std::ofstream(directory / "bad.txt") << text; }
+    return error_of([&] { ListInputImages(directory / "images", directory / "bad.txt"); });
+  };
+  EXPECT_NE(list_error("0.5 a.png\n0.5 b.png\n").find("line 2"), std::string::npos);
+  EXPECT_NE(list_error("0.5,a.png\n").find("line 1"), std::string::npos);
+  EXPECT_NE(list_error("0.5 a.png extra\n").find("line 1"), std::string::npos);
+  EXPECT_NE(list_error("nan a.png\n").find("line 1"), std::string::npos);
+  EXPECT_THROW(ListInputImages(directory / "images", directory / "bad.txt"), ParseError);
+  EXPECT_NE(list_error("0.5 missing.png\n").find("missing.png"), std::string::npos);
+  EXPECT_THROW(ListInputImages(directory / "images", directory / "bad.txt"), IoError);
+  // Named poses: the pose-text rule of core/dataset/pose_text.h, errors naming the line.
+  const auto pose_error = [&](const std::string& text) {
+    { std::ofstream(directory / "named.txt") << text; }
+    return error_of([&] { ReadPosesForImages(directory / "named.txt", images); });
+  };
+  EXPECT_EQ(pose_error("a.png 0 0 0 0 0 0 1\nb.png 1 0 0 0 0 0.7071068 0.7071068\n"), "");
+  EXPECT_NE(pose_error("a.png 0 0 0 0 0 0 1\nb.png 0 0 0 0 0 0 2\n").find("line 2"),
+            std::string::npos);
+  EXPECT_NE(pose_error("a.png 0 nan 0 0 0 0 1\n").find("line 1"), std::string::npos);
+  EXPECT_NE(pose_error("a.png 0 0 0 0 0 0 0\n").find("norm 0"), std::string::npos);
   fs::remove_all(directory);
 }
 

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <set>
+#include <span>
 #include <sstream>
 #include <unordered_map>
 
@@ -10,6 +11,8 @@
 
 #include "core/common/error.h"
 #include "core/common/file_util.h"
+#include "core/dataset/dataset.h"
+#include "core/dataset/pose_text.h"
 #include "core/trajectory/trajectory.h"
 #include "core/trajectory/tum_io.h"
 #include "mapper/build_stages.h"
@@ -40,16 +43,6 @@ std::vector<std::string> Tokenize(const std::string& line) {
   return tokens;
 }
 
-double ParseFiniteDouble(const std::string& token, const std::string& source, int64_t line) {
-  try {
-    size_t used = 0;
-    const double value = std::stod(token, &used);
-    if (used == token.size() && std::isfinite(value)) return value;
-  } catch (const std::exception&) {
-  }
-  throw ParseError::AtLine(source, line, "'" + token + "' is not a finite number");
-}
-
 // True when the first data line of a pose file starts with a time (TUM layout) rather than an
 // image name.
 bool IsTimeKeyedPoseText(const std::string& text) {
@@ -68,20 +61,6 @@ bool IsTimeKeyedPoseText(const std::string& text) {
   return false;
 }
 
-// The (possibly partial) world_from_cam of a line `NAME tx ty tz qx qy qz qw`.
-Rigid3d PoseFromTokens(const std::vector<std::string>& tokens, size_t first,
-                       const std::string& source, int64_t line) {
-  const Eigen::Vector3d translation(ParseFiniteDouble(tokens[first], source, line),
-                                    ParseFiniteDouble(tokens[first + 1], source, line),
-                                    ParseFiniteDouble(tokens[first + 2], source, line));
-  const Eigen::Quaterniond rotation(ParseFiniteDouble(tokens[first + 6], source, line),
-                                    ParseFiniteDouble(tokens[first + 3], source, line),
-                                    ParseFiniteDouble(tokens[first + 4], source, line),
-                                    ParseFiniteDouble(tokens[first + 5], source, line));
-  if (rotation.norm() < 1e-12) throw ParseError::AtLine(source, line, "zero quaternion");
-  return Rigid3d(rotation, translation);
-}
-
 }  // namespace
 
 std::vector<InputImage> ListInputImages(const fs::path& image_dir,
@@ -94,41 +73,22 @@ std::vector<InputImage> ListInputImages(const fs::path& image_dir,
   const fs::path root = fs::weakly_canonical(image_dir);
   std::vector<InputImage> images;
   if (image_list) {
+    // The strict `t_s path` reader of core/dataset; a listed path is relative to the image folder
+    // or, failing that, to the list's folder (docs/dataset-format.md, "Timed file lists").
     const std::string source = image_list->string();
-    const std::string text = ReadFileToString(*image_list);
-    std::istringstream stream(text);
-    std::string line;
-    int64_t line_number = 0;
-    while (std::getline(stream, line)) {
-      ++line_number;
-      if (!line.empty() && line.back() == '\r') line.pop_back();
-      const std::vector<std::string> tokens = Tokenize(line);
-      if (tokens.empty() || tokens[0][0] == '#') continue;
-      if (tokens.size() != 2) {
-        throw ParseError::AtLine(source, line_number, "expected `t_s path`");
-      }
-      InputImage image;
-      try {
-        image.t_ns = ParseSecondsAsNanoseconds(tokens[0]);
-      } catch (const InvalidArgumentError& parse_error) {
-        throw ParseError::AtLine(source, line_number, parse_error.what());
-      }
-      image.has_time = true;
-      fs::path file = image_dir / tokens[1];
-      if (!fs::exists(file, error)) file = image_list->parent_path() / tokens[1];
+    for (const TimedFile& listed : ReadTimedFileList(*image_list, fs::path())) {
+      fs::path file = image_dir / listed.path;
+      if (!fs::exists(file, error)) file = image_list->parent_path() / listed.path;
       if (!fs::exists(file, error)) {
-        throw InvalidArgumentError(source + ": line " + std::to_string(line_number) + ": image " +
-                                   tokens[1] + " exists neither in " + image_dir.string() +
-                                   " nor beside the list");
+        throw IoError(source + " lists image '" + listed.path.string() +
+                      "', which exists neither in " + image_dir.string() + " nor beside the list");
       }
       const fs::path relative = fs::weakly_canonical(file).lexically_relative(root);
       if (relative.empty() || *relative.begin() == "..") {
-        throw InvalidArgumentError(source + ": line " + std::to_string(line_number) + ": image " +
-                                   tokens[1] + " is outside the image folder " +
-                                   image_dir.string());
+        throw InvalidArgumentError(source + " lists image '" + listed.path.string() +
+                                   "', which is outside the image folder " + image_dir.string());
       }
-      image.name = relative.generic_string();
-      images.push_back(image);
+      images.push_back({relative.generic_string(), listed.t_ns, true});
     }
   } else {
     for (const fs::directory_entry& entry : fs::directory_iterator(image_dir, error)) {
@@ -193,7 +153,12 @@ std::map<std::string, Rigid3d> ReadPosesForImages(const fs::path& path,
       throw ParseError::AtLine(source, line_number,
                                "expected `IMAGE_NAME tx ty tz qx qy qz qw` (world_from_cam)");
     }
-    const Rigid3d pose = PoseFromTokens(tokens, 1, source, line_number);
+    Rigid3d pose;
+    try {
+      pose = ParsePoseTokens("pose", std::span(tokens).subspan(1));
+    } catch (const InvalidArgumentError& pose_error) {
+      throw ParseError::AtLine(source, line_number, pose_error.what());
+    }
     const auto image = by_name.find(tokens[0]);
     if (image == by_name.end()) {
       throw InvalidArgumentError(source + ": line " + std::to_string(line_number) + ": image " +

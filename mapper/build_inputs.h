@@ -24,9 +24,11 @@ struct InputImage {
   bool has_time = false;
 };
 
-// The input images: from the list (`t_s path` lines) or all image files of the folder, sorted by
-// name. Throws InvalidArgumentError when the folder is missing or holds no images, or a listed
-// file is missing or outside the folder; ParseError for a malformed list.
+// The input images: from the list (`t_s path` lines, read by core/dataset's ReadTimedFileList;
+// a path relative to the folder or to the list's folder) or all image files of the folder, sorted
+// by name. Throws InvalidArgumentError when the folder is missing or holds no images, or a listed
+// file is outside the folder; IoError when a listed file is missing; ParseError naming the line
+// for a malformed list or a time that does not increase.
 std::vector<InputImage> ListInputImages(const std::filesystem::path& image_dir,
                                         const std::optional<std::filesystem::path>& image_list);
 

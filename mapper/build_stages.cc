@@ -14,28 +14,17 @@
 
 #include "core/common/error.h"
 #include "core/common/file_util.h"
+#include "core/common/provenance.h"
 #include "mapper/build_workspace.h"
 #include "mapper/map_preview.h"
 #include "maps/edge_lifting.h"
 #include "maps/map_directory.h"
 
-#ifndef EVLOC_VERSION
-#define EVLOC_VERSION "unknown"
-#endif
 
 namespace evloc::mapper {
 namespace {
 
 namespace fs = std::filesystem;
-
-std::string UtcNow() {
-  const std::time_t now = std::time(nullptr);
-  std::tm utc{};
-  gmtime_r(&now, &utc);
-  std::ostringstream text;
-  text << std::put_time(&utc, "%Y-%m-%dT%H:%M:%SZ");
-  return text.str();
-}
 
 // Keyframe indices sorted by how many sparse points they share with keyframe `k`.
 std::vector<std::vector<uint32_t>> KeyframeConsistencyNeighbours(
@@ -236,8 +225,8 @@ Map MergeKeyframePoints(const MapBuilderOptions& options, const RegisteredViews&
   // Provenance is not part of the map's content checksum (docs/map-format.md): the build time
   // and the absolute input paths leave content_crc32c unchanged.
   map.provenance.tool = "evloc-mapper build";
-  map.provenance.tool_version = EVLOC_VERSION;
-  map.provenance.created_utc = UtcNow();
+  map.provenance.tool_version = ToolVersion();
+  map.provenance.created_utc = UtcNowIso8601();
   map.provenance.command_line = options.command_line;
   map.provenance.inputs.push_back(fs::absolute(options.image_dir).string());
   for (const auto& input :

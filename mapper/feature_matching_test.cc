@@ -14,9 +14,9 @@
 
 #include "core/common/error.h"
 #include "core/common/test_data.h"
+#include "core/dataset/testing/middlebury.h"
 #include "mapper/colmap_model.h"
 #include "mapper/colmap_runner.h"
-#include "mapper/middlebury_test_util.h"
 
 namespace evloc::mapper {
 namespace {

@@ -7,10 +7,10 @@
 #include <numbers>
 
 #include "core/common/test_data.h"
-#include "mapper/map_accuracy.h"
 #include "mapper/map_builder.h"
-#include "mapper/middlebury_test_util.h"
+#include "core/dataset/testing/middlebury.h"
 #include "maps/map.h"
+#include "tools/map_accuracy/map_accuracy.h"
 
 namespace evloc::mapper {
 namespace {

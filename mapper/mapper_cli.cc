@@ -1,14 +1,13 @@
 #include "mapper/mapper_cli.h"
 
-#include <chrono>
-#include <ctime>
-#include <exception>
 #include <filesystem>
 #include <iomanip>
 #include <optional>
 #include <sstream>
 
+#include "core/common/cli.h"
 #include "core/common/error.h"
+#include "core/common/provenance.h"
 #include "mapper/build_command.h"
 #include "maps/map.h"
 #include "maps/map_directory.h"
@@ -16,24 +15,6 @@
 
 namespace evloc {
 namespace {
-
-constexpr int kExitFailure = 1;
-constexpr int kExitUsage = 2;
-
-// A usage error: bad flags or arguments.
-class UsageError : public Error {
- public:
-  using Error::Error;
-};
-
-std::string CurrentTimeUtc() {
-  const std::time_t now = std::chrono::system_clock::to_time_t(std::chrono::system_clock::now());
-  std::tm utc{};
-  gmtime_r(&now, &utc);
-  std::ostringstream text;
-  text << std::put_time(&utc, "%Y-%m-%dT%H:%M:%SZ");
-  return text.str();
-}
 
 const char kImportPcdHelp[] =
     "usage: evloc-mapper import-pcd FILE.pcd --out MAPDIR [--force] [--min-gradient-offset M]\n"
@@ -69,33 +50,24 @@ struct ImportPcdCommandOptions {
   // Import options (--min-gradient-offset).
   PcdImportOptions import;
 
-  // Throws UsageError when the input or output is missing, InvalidArgumentError for bad values.
+  // Throws UsageError when the input or output is missing or a value is out of its domain.
   void Check() const {
     if (pcd_path.empty()) throw UsageError("import-pcd needs an input FILE.pcd");
     if (output_directory.empty()) throw UsageError("import-pcd needs --out MAPDIR");
-    import.Check();
+    try {
+      import.Check();
+    } catch (const InvalidArgumentError& error) {
+      throw UsageError(error.what());
+    }
   }
 };
-
-double ParseDouble(const std::string& flag, const std::string& value) {
-  try {
-    size_t used = 0;
-    const double parsed = std::stod(value, &used);
-    if (used == value.size()) return parsed;
-  } catch (const std::exception&) {
-  }
-  throw UsageError(flag + " needs a number, got '" + value + "'");
-}
 
 int ImportPcd(const std::vector<std::string>& arguments, const std::string& command_line,
               std::ostream& out) {
   ImportPcdCommandOptions options;
   for (size_t i = 0; i < arguments.size(); ++i) {
     const std::string& argument = arguments[i];
-    const auto value = [&]() -> const std::string& {
-      if (i + 1 >= arguments.size()) throw UsageError(argument + " needs a value");
-      return arguments[++i];
-    };
+    const auto value = [&]() -> const std::string& { return TakeFlagValue(arguments, &i); };
     if (argument == "--help" || argument == "-h") {
       out << kImportPcdHelp;
       return 0;
@@ -104,7 +76,7 @@ int ImportPcd(const std::vector<std::string>& arguments, const std::string& comm
     } else if (argument == "--force") {
       options.force = true;
     } else if (argument == "--min-gradient-offset") {
-      options.import.min_gradient_offset_m = ParseDouble(argument, value());
+      options.import.min_gradient_offset_m = ParseDoubleFlag(argument, value());
     } else if (argument.rfind("-", 0) == 0) {
       throw UsageError("unknown option '" + argument + "'");
     } else if (options.pcd_path.empty()) {
@@ -130,8 +102,8 @@ int ImportPcd(const std::vector<std::string>& arguments, const std::string& comm
   }
   MapProvenance& provenance = imported.map.provenance;
   provenance.tool = "evloc-mapper import-pcd";
-  provenance.tool_version = EVLOC_VERSION;
-  provenance.created_utc = CurrentTimeUtc();
+  provenance.tool_version = ToolVersion();
+  provenance.created_utc = UtcNowIso8601();
   provenance.command_line = command_line;
   provenance.inputs = {std::filesystem::absolute(options.pcd_path).lexically_normal().string()};
   MapDirectoryWriteOptions write_options;
@@ -181,20 +153,6 @@ int Info(const std::vector<std::string>& arguments, std::ostream& out) {
   return 0;
 }
 
-// Runs `body`, turning errors into a message on `err` and an exit code.
-int RunGuarded(const std::string& subcommand, const char* help, std::ostream& err,
-               const std::function<int()>& body) {
-  try {
-    return body();
-  } catch (const UsageError& error) {
-    err << "evloc-mapper " << subcommand << ": " << error.what() << "\n\n" << help;
-    return kExitUsage;
-  } catch (const std::exception& error) {
-    err << "evloc-mapper " << subcommand << ": error: " << error.what() << "\n";
-    return kExitFailure;
-  }
-}
-
 std::string TopLevelHelp() {
   std::ostringstream text;
   text << "usage: evloc-mapper SUBCOMMAND [ARGS...]\n\n"
@@ -210,13 +168,13 @@ std::string TopLevelHelp() {
 
 int RunImportPcdCommand(const std::vector<std::string>& arguments, const std::string& command_line,
                         std::ostream& out, std::ostream& err) {
-  return RunGuarded("import-pcd", kImportPcdHelp, err,
+  return RunGuarded("evloc-mapper import-pcd", err,
                     [&] { return ImportPcd(arguments, command_line, out); });
 }
 
 int RunInfoCommand(const std::vector<std::string>& arguments, const std::string& /*command_line*/,
                    std::ostream& out, std::ostream& err) {
-  return RunGuarded("info", kInfoHelp, err, [&] { return Info(arguments, out); });
+  return RunGuarded("evloc-mapper info", err, [&] { return Info(arguments, out); });
 }
 
 // `build` keeps its own argv-style entry point (mapper/build_command.h), which prints to the
@@ -257,8 +215,8 @@ int RunMapperCli(int argc, const char* const* argv, std::ostream& out, std::ostr
   for (const MapperSubcommand& subcommand : MapperSubcommands()) {
     if (subcommand.name == name) return subcommand.run(arguments, command_line, out, err);
   }
-  err << "evloc-mapper: unknown subcommand '" << name << "'\n\n" << TopLevelHelp();
-  return kExitUsage;
+  return RunGuarded("evloc-mapper", err,
+                    [&]() -> int { throw UsageError("unknown subcommand '" + name + "'"); });
 }
 
 }  // namespace evloc

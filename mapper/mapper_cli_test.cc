@@ -149,7 +149,7 @@ TEST_F(MapperCliTest, UsageErrorsAndHelp) {
   EXPECT_TRUE(Contains(result.err, "needs --out MAPDIR")) << result.err;
   result = RunCli({"import-pcd", pcd_.string(), "--out", "x", "--min-gradient-offset", "abc"});
   EXPECT_EQ(result.exit_code, 2);
-  EXPECT_TRUE(Contains(result.err, "needs a number, got 'abc'")) << result.err;
+  EXPECT_TRUE(Contains(result.err, "expects a number, got 'abc'")) << result.err;
   result = RunCli({"info", "--bogus"});
   EXPECT_EQ(result.exit_code, 2);
   for (const char* subcommand : {"import-pcd", "info"}) {
@@ -157,6 +157,26 @@ TEST_F(MapperCliTest, UsageErrorsAndHelp) {
     EXPECT_EQ(result.exit_code, 0);
     EXPECT_TRUE(Contains(result.out, std::string("usage: evloc-mapper ") + subcommand));
   }
+}
+
+// Numbers are parsed strictly (core/common/cli.h): nan, infinities and trailing text are bad
+// command lines, and nothing is written.
+TEST_F(MapperCliTest, RefusesNanInfinityAndTrailingText) {
+  const std::filesystem::path map_dir = directory_ / "out";
+  for (const char* value : {"nan", "inf", "-inf", "0.01m"}) {
+    const CliResult result = RunCli(
+        {"import-pcd", pcd_.string(), "--out", map_dir.string(), "--min-gradient-offset", value});
+    EXPECT_EQ(result.exit_code, 2) << value;
+    EXPECT_TRUE(Contains(result.err, std::string("evloc-mapper import-pcd: error: "
+                                                 "--min-gradient-offset expects a number, got '") +
+                                         value + "'"))
+        << result.err;
+  }
+  // A number outside the option's domain is a bad command line too.
+  const CliResult negative = RunCli(
+      {"import-pcd", pcd_.string(), "--out", map_dir.string(), "--min-gradient-offset", "-1"});
+  EXPECT_EQ(negative.exit_code, 2) << negative.err;
+  EXPECT_FALSE(std::filesystem::exists(map_dir));
 }
 
 TEST_F(MapperCliTest, TheBinaryExitsNonZeroOnAForeignFile) {

@@ -24,25 +24,11 @@ add_library(evloc_mapper_pipeline
 target_include_directories(evloc_mapper_pipeline PUBLIC ${PROJECT_SOURCE_DIR})
 target_link_libraries(evloc_mapper_pipeline
   PUBLIC evloc_maps evloc_camera evloc_geometry evloc_common opencv_core opencv_imgproc opencv_imgcodecs
-  PRIVATE evloc_trajectory nlohmann_json::nlohmann_json SQLite::SQLite3 Threads::Threads
-          opencv_calib3d ${PCL_LIBRARIES})
-target_compile_definitions(evloc_mapper_pipeline PRIVATE EVLOC_VERSION="${PROJECT_VERSION}")
+  PRIVATE evloc_dataset evloc_trajectory nlohmann_json::nlohmann_json SQLite::SQLite3
+          Threads::Threads opencv_calib3d ${PCL_LIBRARIES})
 # PCL headers are included by map_merge.cc only; SYSTEM keeps their warnings out.
 target_include_directories(evloc_mapper_pipeline SYSTEM PRIVATE ${PCL_INCLUDE_DIRS})
 target_compile_definitions(evloc_mapper_pipeline PRIVATE ${PCL_DEFINITIONS})
-
-# Accuracy of a map against an exact synthetic scene (scripts/accuracy/mapper_synthetic.sh).
-add_library(evloc_mapper_accuracy ${CMAKE_CURRENT_LIST_DIR}/map_accuracy.cc)
-target_include_directories(evloc_mapper_accuracy PUBLIC ${PROJECT_SOURCE_DIR})
-target_link_libraries(evloc_mapper_accuracy
-  PUBLIC evloc_maps evloc_camera evloc_geometry evloc_common opencv_core
-  PRIVATE evloc_trajectory evloc_sim_world nlohmann_json::nlohmann_json opencv_imgproc
-          opencv_imgcodecs ${PCL_LIBRARIES})
-target_include_directories(evloc_mapper_accuracy SYSTEM PRIVATE ${PCL_INCLUDE_DIRS})
-target_compile_definitions(evloc_mapper_accuracy PRIVATE ${PCL_DEFINITIONS})
-add_executable(evloc-mapper-accuracy ${CMAKE_CURRENT_LIST_DIR}/map_accuracy_main.cc)
-target_link_libraries(evloc-mapper-accuracy PRIVATE evloc_mapper_accuracy evloc_trajectory
-  opencv_imgcodecs nlohmann_json::nlohmann_json)
 
 evloc_add_test(NAME evloc_mapper_pipeline_test
   SOURCES ${CMAKE_CURRENT_LIST_DIR}/colmap_model_test.cc
@@ -53,16 +39,9 @@ evloc_add_test(NAME evloc_mapper_pipeline_test
           ${CMAKE_CURRENT_LIST_DIR}/build_command_test.cc
           ${CMAKE_CURRENT_LIST_DIR}/build_workspace_test.cc
           ${CMAKE_CURRENT_LIST_DIR}/feature_matching_test.cc
-          ${CMAKE_CURRENT_LIST_DIR}/map_accuracy_test.cc
-  LIBS evloc_mapper_pipeline evloc_mapper_accuracy evloc_trajectory SQLite::SQLite3)
+  LIBS evloc_mapper_pipeline evloc_map_accuracy evloc_trajectory SQLite::SQLite3)
 
 evloc_add_test(NAME evloc_mapper_accuracy_test
   SOURCES ${CMAKE_CURRENT_LIST_DIR}/map_builder_accuracy_test.cc
-  LIBS evloc_mapper_pipeline evloc_mapper_accuracy
+  LIBS evloc_mapper_pipeline evloc_map_accuracy
   LABELS long)
-
-# The short synthetic-room check of the default suite: render 30 frames (no events), map with the
-# known poses, measure against the exact scene (about 40 s of CPU).
-evloc_add_test(NAME evloc_mapper_synthetic_test
-  SOURCES ${CMAKE_CURRENT_LIST_DIR}/synthetic_room_test.cc
-  LIBS evloc_mapper_pipeline evloc_mapper_accuracy evloc_sim evloc_sim_world opencv_imgcodecs)

@@ -7,6 +7,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -49,11 +50,41 @@ struct MapProvenance {
   std::vector<std::string> inputs;
 };
 
+// The local features of one keyframe that see a relocalization landmark (map format v2).
+struct KeyframeFeatures {
+  // Feature positions in the keyframe's image, pixels (centres at integer coordinates).
+  std::vector<Eigen::Vector2f> keypoints;
+  // Descriptors, kRelocalizationDescriptorBytes bytes per keypoint, row-major (root-SIFT of
+  // core/features, quantised to uint8).
+  std::vector<uint8_t> descriptors;
+  // Index into RelocalizationData::landmarks of the 3D point each keypoint sees.
+  std::vector<uint32_t> landmarks;
+  // Global descriptor of the keyframe image (VLAD over RelocalizationData::vocabulary), unit
+  // L2 norm; vocabulary words x kRelocalizationDescriptorBytes floats.
+  std::vector<float> global_descriptor;
+};
+
+// Bytes of one local feature descriptor in the map (SIFT: 128).
+inline constexpr size_t kRelocalizationDescriptorBytes = 128;
+
+// What global relocalization needs beyond the edge map (map format v2): sparse 3D landmarks, the
+// features of every keyframe that see them, a visual vocabulary and each keyframe's global
+// descriptor. Absent from v1 maps and from imported maps.
+struct RelocalizationData {
+  // Landmark positions p_world, metres.
+  std::vector<Eigen::Vector3f> landmarks;
+  // Visual words, row-major, words x kRelocalizationDescriptorBytes floats (the
+  // core/features Vocabulary::ToVector layout).
+  std::vector<float> vocabulary;
+  // Per keyframe, in the order of Map::keyframes (same size).
+  std::vector<KeyframeFeatures> keyframes;
+};
+
 // A semi-dense point map. Per-point data is struct-of-arrays: every per-point vector has size().
 struct Map {
   // Positions p_world, metres.
   std::vector<Eigen::Vector3f> positions;
-  // Unit 3D gradient directions g_world (method.md §3.4).
+  // Unit 3D gradient directions g_world (docs/mapper.md, "3D gradients").
   std::vector<Eigen::Vector3f> gradients;
   // Standard deviation of the inverse depth, 1/m; 0 when unknown.
   std::vector<float> inverse_depth_sigma;
@@ -67,6 +98,8 @@ struct Map {
   std::vector<Camera> cameras;
   // How the map was made.
   MapProvenance provenance;
+  // Relocalization data (format v2); nullopt for v1 and imported maps.
+  std::optional<RelocalizationData> relocalization;
 
   // Number of points.
   size_t size() const { return positions.size(); }

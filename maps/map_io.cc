@@ -10,6 +10,7 @@
 #include "evloc/map.pb.h"
 #include "maps/crc32c.h"
 #include "maps/map.h"
+#include "proto/convert/proto_convert.h"
 
 namespace evloc {
 namespace {
@@ -139,18 +140,6 @@ MapFileHeader ReadAndCheckHeader(const std::filesystem::path& path, std::ifstrea
   return header;
 }
 
-pb::CameraModel ToProto(CameraModel model) {
-  switch (model) {
-    case CameraModel::kPinhole:
-      return pb::CAMERA_MODEL_PINHOLE;
-    case CameraModel::kRadialTangential:
-      return pb::CAMERA_MODEL_RADIAL_TANGENTIAL;
-    case CameraModel::kEquidistant:
-      return pb::CAMERA_MODEL_EQUIDISTANT;
-  }
-  return pb::CAMERA_MODEL_UNSPECIFIED;
-}
-
 template <typename Element, typename Value>
 void CopyToRepeated(const std::vector<Element>& values,
                     google::protobuf::RepeatedField<Value>* field) {
@@ -171,28 +160,10 @@ pb::MapFile ToProto(const Map& map) {
   provenance->set_created_utc(map.provenance.created_utc);
   provenance->set_command_line(map.provenance.command_line);
   for (const std::string& input : map.provenance.inputs) provenance->add_inputs(input);
-  for (const Camera& camera : map.cameras) {
-    pb::Camera* out = file.add_cameras();
-    out->set_model(ToProto(camera.model));
-    out->set_width(static_cast<uint32_t>(camera.width));
-    out->set_height(static_cast<uint32_t>(camera.height));
-    out->set_fx(camera.fx);
-    out->set_fy(camera.fy);
-    out->set_cx(camera.cx);
-    out->set_cy(camera.cy);
-    for (const double coefficient : camera.distortion) out->add_distortion(coefficient);
-  }
+  for (const Camera& camera : map.cameras) *file.add_cameras() = CameraToProto(camera);
   for (const Keyframe& keyframe : map.keyframes) {
     pb::Keyframe* out = file.add_keyframes();
-    pb::Quaternion* rotation = out->mutable_cam_from_world()->mutable_rotation();
-    rotation->set_w(keyframe.cam_from_world.rotation.w());
-    rotation->set_x(keyframe.cam_from_world.rotation.x());
-    rotation->set_y(keyframe.cam_from_world.rotation.y());
-    rotation->set_z(keyframe.cam_from_world.rotation.z());
-    pb::Vector3* translation = out->mutable_cam_from_world()->mutable_translation();
-    translation->set_x(keyframe.cam_from_world.translation.x());
-    translation->set_y(keyframe.cam_from_world.translation.y());
-    translation->set_z(keyframe.cam_from_world.translation.z());
+    *out->mutable_cam_from_world() = RigidToProto(keyframe.cam_from_world);
     out->set_camera_index(keyframe.camera_index);
     out->set_t_ns(keyframe.t_ns);
     out->set_image_name(keyframe.image_name);
@@ -236,44 +207,22 @@ Map FromProto(const pb::MapFile& file, const std::string& source) {
   map.provenance.command_line = file.provenance().command_line();
   map.provenance.inputs.assign(file.provenance().inputs().begin(),
                                file.provenance().inputs().end());
-  for (int i = 0; i < file.cameras_size(); ++i) {
-    const pb::Camera& in = file.cameras(i);
-    Camera camera;
-    switch (in.model()) {
-      case pb::CAMERA_MODEL_PINHOLE:
-        camera.model = CameraModel::kPinhole;
-        break;
-      case pb::CAMERA_MODEL_RADIAL_TANGENTIAL:
-        camera.model = CameraModel::kRadialTangential;
-        break;
-      case pb::CAMERA_MODEL_EQUIDISTANT:
-        camera.model = CameraModel::kEquidistant;
-        break;
-      default:
-        throw payload_error("camera " + std::to_string(i) + " has unknown model code " +
-                            std::to_string(static_cast<int>(in.model())));
-    }
-    camera.width = static_cast<int>(in.width());
-    camera.height = static_cast<int>(in.height());
-    camera.fx = in.fx();
-    camera.fy = in.fy();
-    camera.cx = in.cx();
-    camera.cy = in.cy();
-    camera.distortion.assign(in.distortion().begin(), in.distortion().end());
-    map.cameras.push_back(std::move(camera));
-  }
   map.keyframes.resize(static_cast<size_t>(file.keyframes_size()));
+  try {
+    for (int i = 0; i < file.cameras_size(); ++i) {
+      map.cameras.push_back(CameraFromProto(file.cameras(i), "camera " + std::to_string(i)));
+    }
+    for (int i = 0; i < file.keyframes_size(); ++i) {
+      // Not normalised, so that values round-trip bit for bit (the content checksum covers them).
+      map.keyframes[static_cast<size_t>(i)].cam_from_world = RigidFromProtoExact(
+          file.keyframes(i).cam_from_world(), "keyframe " + std::to_string(i) + " cam_from_world");
+    }
+  } catch (const InvalidArgumentError& error) {
+    throw payload_error(error.what());
+  }
   for (int i = 0; i < file.keyframes_size(); ++i) {
     const pb::Keyframe& in = file.keyframes(i);
     Keyframe& keyframe = map.keyframes[static_cast<size_t>(i)];
-    const pb::Quaternion& rotation = in.cam_from_world().rotation();
-    const pb::Vector3& translation = in.cam_from_world().translation();
-    // Assigned directly (not through the normalising constructor) so that values round-trip
-    // bit for bit.
-    keyframe.cam_from_world.rotation =
-        Eigen::Quaterniond(rotation.w(), rotation.x(), rotation.y(), rotation.z());
-    keyframe.cam_from_world.translation =
-        Eigen::Vector3d(translation.x(), translation.y(), translation.z());
     keyframe.camera_index = in.camera_index();
     keyframe.t_ns = in.t_ns();
     keyframe.image_name = in.image_name();

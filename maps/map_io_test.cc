@@ -2,11 +2,13 @@
 
 #include <cstring>
 #include <fstream>
+#include <limits>
 #include <string>
 
 #include "core/common/error.h"
 #include "core/common/file_util.h"
 #include "core/common/test_data.h"
+#include "evloc/map.pb.h"
 #include "maps/crc32c.h"
 #include "maps/map.h"
 #include "maps/synthetic_map.h"
@@ -59,6 +61,25 @@ class MapIoTest : public ::testing::Test {
     const std::filesystem::path path = directory_ / name;
     WriteFileAtomically(path, bytes);
     return path;
+  }
+
+  // Saves MakeMap(), lets `edit` change its payload, and writes the result with valid header and
+  // payload checksums (the content checksum left as saved) to a sibling file.
+  template <typename Edit>
+  std::filesystem::path WriteEditedPayload(Edit edit, const std::string& name) {
+    SaveMap(path_, MakeMap());
+    std::string bytes = ReadFileToString(path_);
+    map_format::MapFile file;
+    EXPECT_TRUE(file.ParseFromString(bytes.substr(kMapFileHeaderSize)));
+    edit(file);
+    const std::string payload = file.SerializeAsString();
+    const uint32_t payload_crc = Crc32c(payload);
+    const uint64_t length = payload.size();
+    std::memcpy(bytes.data() + 12, &payload_crc, 4);
+    std::memcpy(bytes.data() + 16, &length, 8);
+    const uint32_t header_crc = Crc32c(std::string_view(bytes).substr(0, 24));
+    std::memcpy(bytes.data() + 24, &header_crc, 4);
+    return WriteVariant(bytes.substr(0, kMapFileHeaderSize) + payload, name);
   }
 
   std::filesystem::path directory_;
@@ -211,6 +232,47 @@ TEST_F(MapIoTest, GarbagePayloadWithAValidChecksumIsRejected) {
   std::memcpy(bytes.data() + 24, &header_crc, 4);
   const auto path = WriteVariant(bytes + payload, "garbage.evmap");
   ExpectParseError([&] { LoadMap(path); }, {"not a valid MapFile protobuf"});
+}
+
+// The map reader checks cameras as the service checks a session's camera (proto/convert).
+TEST_F(MapIoTest, InvalidCameraNamesTheFileAndTheCamera) {
+  const auto path = WriteEditedPayload(
+      [](map_format::MapFile& file) { file.mutable_cameras(0)->set_fx(-1.0); }, "bad_fx.evmap");
+  ExpectParseError([&] { LoadMap(path); },
+                   {path.string(), "invalid evloc map payload: camera 0: ", "focal lengths"});
+  const auto unset = WriteEditedPayload(
+      [](map_format::MapFile& file) {
+        file.mutable_cameras(0)->set_model(map_format::CAMERA_MODEL_UNSPECIFIED);
+      },
+      "unset_model.evmap");
+  ExpectParseError([&] { LoadMap(unset); }, {unset.string(), "camera 0.model is not set"});
+  const auto wide = WriteEditedPayload(
+      [](map_format::MapFile& file) { file.mutable_cameras(0)->set_width(70'000); }, "wide.evmap");
+  ExpectParseError([&] { LoadMap(wide); }, {wide.string(), "camera 0: width and height"});
+}
+
+TEST_F(MapIoTest, InvalidKeyframePoseNamesTheFileAndTheKeyframe) {
+  const auto path = WriteEditedPayload(
+      [](map_format::MapFile& file) {
+        file.mutable_keyframes(2)->mutable_cam_from_world()->mutable_translation()->set_x(
+            std::numeric_limits<double>::quiet_NaN());
+      },
+      "nan_pose.evmap");
+  ExpectParseError([&] { LoadMap(path); },
+                   {path.string(), "keyframe 2 cam_from_world: the pose has a non-finite value"});
+}
+
+// A radial-tangential camera stored with 4 coefficients gets k3 = 0, as in a SessionStart.
+TEST_F(MapIoTest, FourCoefficientRadialTangentialCameraGetsZeroK3) {
+  const auto path = WriteEditedPayload(
+      [](map_format::MapFile& file) {
+        ASSERT_EQ(file.cameras(0).distortion_size(), 5);
+        ASSERT_EQ(file.cameras(0).distortion(4), 0.0);
+        file.mutable_cameras(0)->mutable_distortion()->RemoveLast();
+      },
+      "four_coefficients.evmap");
+  const Map loaded = LoadMap(path);
+  EXPECT_EQ(loaded.cameras[0].distortion, MakeMap().cameras[0].distortion);
 }
 
 TEST_F(MapIoTest, MissingFileAndDirectoryAreIoErrors) {

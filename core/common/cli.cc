@@ -1,18 +1,40 @@
 #include "core/common/cli.h"
 
+#include <algorithm>
 #include <charconv>
 #include <cmath>
+#include <exception>
+#include <iostream>
 #include <limits>
 
-#include "core/common/error.h"
-
 namespace evloc {
+
+int RunGuarded(std::string_view name, std::ostream& err, const std::function<int()>& body) {
+  try {
+    return body();
+  } catch (const UsageError& error) {
+    err << name << ": error: " << error.what() << "\nRun `" << name << " --help` for the usage.\n";
+    return kExitUsage;
+  } catch (const std::exception& error) {
+    err << name << ": error: " << error.what() << "\n";
+    return kExitFailure;
+  } catch (...) {
+    err << name << ": error: an unknown exception\n";
+    return kExitFailure;
+  }
+}
+
+int RunTool(std::string_view name, int argc, const char* const* argv,
+            const std::function<int(const std::vector<std::string>& arguments)>& body) {
+  const std::vector<std::string> arguments(argv + std::min(argc, 1), argv + argc);
+  return RunGuarded(name, std::cerr, [&] { return body(arguments); });
+}
 
 const std::string& TakeFlagValue(const std::vector<std::string>& arguments, size_t* index) {
   const std::string& flag = arguments[*index];
   if (*index + 1 >= arguments.size()) {
-    throw InvalidArgumentError(flag.rfind("--", 0) == 0 ? flag + " needs a value"
-                                                        : "unexpected argument '" + flag + "'");
+    throw UsageError(flag.rfind("--", 0) == 0 ? flag + " needs a value"
+                                              : "unexpected argument '" + flag + "'");
   }
   return arguments[++*index];
 }
@@ -22,26 +44,39 @@ double ParseDoubleFlag(std::string_view flag, std::string_view text) {
   const auto [end, error] = std::from_chars(text.data(), text.data() + text.size(), value);
   if (text.empty() || error != std::errc() || end != text.data() + text.size() ||
       !std::isfinite(value)) {
-    throw InvalidArgumentError(std::string(flag) + " expects a number, got '" + std::string(text) +
-                               "'");
+    throw UsageError(std::string(flag) + " expects a number, got '" + std::string(text) + "'");
   }
   return value;
 }
 
-int64_t ParseIntegerFlag(std::string_view flag, std::string_view text) {
-  int64_t value = 0;
+namespace {
+
+// Parses a whole base-10 number of type T; throws UsageError "FLAG expects WHAT, got 'TEXT'".
+template <typename T>
+T ParseWholeNumber(std::string_view flag, std::string_view text, std::string_view what) {
+  T value = 0;
   const auto [end, error] = std::from_chars(text.data(), text.data() + text.size(), value);
   if (text.empty() || error != std::errc() || end != text.data() + text.size()) {
-    throw InvalidArgumentError(std::string(flag) + " expects an integer, got '" +
-                               std::string(text) + "'");
+    throw UsageError(std::string(flag) + " expects " + std::string(what) + ", got '" +
+                     std::string(text) + "'");
   }
   return value;
+}
+
+}  // namespace
+
+int64_t ParseIntegerFlag(std::string_view flag, std::string_view text) {
+  return ParseWholeNumber<int64_t>(flag, text, "an integer");
+}
+
+uint64_t ParseUnsignedFlag(std::string_view flag, std::string_view text) {
+  return ParseWholeNumber<uint64_t>(flag, text, "a non-negative integer");
 }
 
 int ParseIntFlag(std::string_view flag, std::string_view text) {
   const int64_t value = ParseIntegerFlag(flag, text);
   if (value < std::numeric_limits<int>::min() || value > std::numeric_limits<int>::max()) {
-    throw InvalidArgumentError(std::string(flag) + " is out of range: '" + std::string(text) + "'");
+    throw UsageError(std::string(flag) + " is out of range: '" + std::string(text) + "'");
   }
   return static_cast<int>(value);
 }
@@ -49,22 +84,20 @@ int ParseIntFlag(std::string_view flag, std::string_view text) {
 void ParseSizeFlag(std::string_view flag, std::string_view text, int* width, int* height) {
   const size_t x = text.find('x');
   if (x == std::string_view::npos) {
-    throw InvalidArgumentError(std::string(flag) + " expects WIDTHxHEIGHT, got '" +
-                               std::string(text) + "'");
+    throw UsageError(std::string(flag) + " expects WIDTHxHEIGHT, got '" + std::string(text) + "'");
   }
   *width = ParseIntFlag(flag, text.substr(0, x));
   *height = ParseIntFlag(flag, text.substr(x + 1));
   if (*width <= 0 || *height <= 0) {
-    throw InvalidArgumentError(std::string(flag) + " expects positive sizes, got '" +
-                               std::string(text) + "'");
+    throw UsageError(std::string(flag) + " expects positive sizes, got '" + std::string(text) +
+                     "'");
   }
 }
 
 bool ParseSwitchFlag(std::string_view flag, std::string_view text) {
   if (text == "on" || text == "true" || text == "1") return true;
   if (text == "off" || text == "false" || text == "0") return false;
-  throw InvalidArgumentError(std::string(flag) + " expects on or off, got '" + std::string(text) +
-                             "'");
+  throw UsageError(std::string(flag) + " expects on or off, got '" + std::string(text) + "'");
 }
 
 }  // namespace evloc

@@ -1,6 +1,10 @@
 #include "core/common/cli.h"
 
+#include <functional>
+#include <sstream>
+#include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -35,9 +39,12 @@ TEST(TakeFlagValue, ReturnsTheNextArgumentOrSaysWhatIsMissing) {
 TEST(ParseDoubleFlag, AcceptsWholeNumbersOnly) {
   EXPECT_DOUBLE_EQ(ParseDoubleFlag("--rate", "300"), 300.0);
   EXPECT_DOUBLE_EQ(ParseDoubleFlag("--rate", "-1.5e-3"), -1.5e-3);
-  EXPECT_THROW(ParseDoubleFlag("--rate", "300Hz"), InvalidArgumentError);
-  EXPECT_THROW(ParseDoubleFlag("--rate", ""), InvalidArgumentError);
-  EXPECT_THROW(ParseDoubleFlag("--rate", "nan"), InvalidArgumentError);
+  EXPECT_THROW(ParseDoubleFlag("--rate", "300Hz"), UsageError);
+  EXPECT_THROW(ParseDoubleFlag("--rate", ""), UsageError);
+  EXPECT_THROW(ParseDoubleFlag("--rate", "nan"), UsageError);
+  EXPECT_THROW(ParseDoubleFlag("--rate", "inf"), UsageError);
+  EXPECT_THROW(ParseDoubleFlag("--rate", "-inf"), UsageError);
+  EXPECT_THROW(ParseDoubleFlag("--rate", "1e999"), UsageError);
   try {
     ParseDoubleFlag("--rate", "fast");
     FAIL();
@@ -48,13 +55,21 @@ TEST(ParseDoubleFlag, AcceptsWholeNumbersOnly) {
 
 TEST(ParseIntegerFlag, RejectsFractionsAndText) {
   EXPECT_EQ(ParseIntegerFlag("--n", "42"), 42);
-  EXPECT_THROW(ParseIntegerFlag("--n", "4.2"), InvalidArgumentError);
-  EXPECT_THROW(ParseIntegerFlag("--n", "x"), InvalidArgumentError);
+  EXPECT_THROW(ParseIntegerFlag("--n", "4.2"), UsageError);
+  EXPECT_THROW(ParseIntegerFlag("--n", "x"), UsageError);
+}
+
+TEST(ParseUnsignedFlag, RejectsSignsFractionsAndText) {
+  EXPECT_EQ(ParseUnsignedFlag("--seed", "18446744073709551615"), 18446744073709551615u);
+  EXPECT_THROW(ParseUnsignedFlag("--seed", "-1"), UsageError);
+  EXPECT_THROW(ParseUnsignedFlag("--seed", "1.5"), UsageError);
+  EXPECT_THROW(ParseUnsignedFlag("--seed", "7 "), UsageError);
+  EXPECT_THROW(ParseUnsignedFlag("--seed", ""), UsageError);
 }
 
 TEST(ParseIntFlag, RejectsValuesBeyondInt) {
   EXPECT_EQ(ParseIntFlag("--n", "-7"), -7);
-  EXPECT_THROW(ParseIntFlag("--n", "4294967296"), InvalidArgumentError);
+  EXPECT_THROW(ParseIntFlag("--n", "4294967296"), UsageError);
 }
 
 TEST(ParseSizeFlag, WidthByHeight) {
@@ -63,14 +78,79 @@ TEST(ParseSizeFlag, WidthByHeight) {
   ParseSizeFlag("--ecd-size", "240x180", &width, &height);
   EXPECT_EQ(width, 240);
   EXPECT_EQ(height, 180);
-  EXPECT_THROW(ParseSizeFlag("--ecd-size", "240", &width, &height), InvalidArgumentError);
-  EXPECT_THROW(ParseSizeFlag("--ecd-size", "0x180", &width, &height), InvalidArgumentError);
+  EXPECT_THROW(ParseSizeFlag("--ecd-size", "240", &width, &height), UsageError);
+  EXPECT_THROW(ParseSizeFlag("--ecd-size", "0x180", &width, &height), UsageError);
 }
 
 TEST(ParseSwitchFlag, OnOff) {
   EXPECT_TRUE(ParseSwitchFlag("--polarity", "on"));
   EXPECT_FALSE(ParseSwitchFlag("--polarity", "off"));
-  EXPECT_THROW(ParseSwitchFlag("--polarity", "maybe"), InvalidArgumentError);
+  EXPECT_THROW(ParseSwitchFlag("--polarity", "maybe"), UsageError);
+}
+
+// The exit code and the text RunGuarded writes for a body that throws `thrown`.
+std::pair<int, std::string> RunThrowing(const std::function<void()>& thrown) {
+  std::ostringstream err;
+  const int code = RunGuarded("evloc-x", err, [&] {
+    thrown();
+    return 0;
+  });
+  return {code, err.str()};
+}
+
+TEST(RunGuarded, OneErrorLineAndOneExitCodePerKindOfError) {
+  std::ostringstream err;
+  EXPECT_EQ(RunGuarded("evloc-x", err, [] { return 7; }), 7);
+  EXPECT_EQ(err.str(), "");
+
+  EXPECT_EQ(RunThrowing([] { throw UsageError("--rate expects a number, got 'x'"); }),
+            std::make_pair(kExitUsage, std::string("evloc-x: error: --rate expects a number, got "
+                                                   "'x'\nRun `evloc-x --help` for the usage.\n")));
+  EXPECT_EQ(RunThrowing([] { throw InvalidArgumentError("bad camera"); }),
+            std::make_pair(kExitFailure, std::string("evloc-x: error: bad camera\n")));
+  EXPECT_EQ(RunThrowing([] { throw IoError("cannot open a.txt"); }),
+            std::make_pair(kExitFailure, std::string("evloc-x: error: cannot open a.txt\n")));
+  EXPECT_EQ(RunThrowing([] { throw ParseError::AtLine("a.txt", 3, "bad"); }),
+            std::make_pair(kExitFailure, std::string("evloc-x: error: a.txt: line 3: bad\n")));
+  EXPECT_EQ(RunThrowing([] { throw std::runtime_error("disk full"); }),
+            std::make_pair(kExitFailure, std::string("evloc-x: error: disk full\n")));
+  EXPECT_EQ(RunThrowing([] { throw 42; }),
+            std::make_pair(kExitFailure, std::string("evloc-x: error: an unknown exception\n")));
+}
+
+TEST(RunTool, GivesTheBodyTheArgumentsAfterTheProgramName) {
+  const char* argv[] = {"evloc-x", "--rate", "300"};
+  std::vector<std::string> seen;
+  EXPECT_EQ(RunTool("evloc-x", 3, argv,
+                    [&](const std::vector<std::string>& arguments) {
+                      seen = arguments;
+                      return 3;
+                    }),
+            3);
+  EXPECT_EQ(seen, (std::vector<std::string>{"--rate", "300"}));
+  const char* usage_argv[] = {"evloc-x", "--rate", "nan"};
+  EXPECT_EQ(RunTool("evloc-x", 3, usage_argv,
+                    [](const std::vector<std::string>& arguments) {
+                      return static_cast<int>(ParseDoubleFlag(arguments[0], arguments[1]));
+                    }),
+            kExitUsage);
+}
+
+TEST(ParseCommandLine, TurnsEveryParserErrorIntoAUsageError) {
+  const std::vector<std::string> arguments = {"--rate", "-5"};
+  const auto parse = [](const std::vector<std::string>& given) {
+    const double rate = ParseDoubleFlag(given[0], given[1]);
+    if (rate <= 0) throw InvalidArgumentError("step_rate_hz must be > 0.");
+    return rate;
+  };
+  try {
+    ParseCommandLine(parse, arguments);
+    FAIL() << "expected a UsageError";
+  } catch (const UsageError& error) {
+    EXPECT_STREQ(error.what(), "step_rate_hz must be > 0.");
+  }
+  EXPECT_DOUBLE_EQ(ParseCommandLine(parse, {"--rate", "300"}), 300.0);
+  EXPECT_THROW(ParseCommandLine(parse, {"--rate", "nan"}), UsageError);
 }
 
 }  // namespace

@@ -10,6 +10,8 @@
 #include "core/common/cli.h"
 #include "core/common/error.h"
 #include "core/common/file_util.h"
+#include "core/dataset/dataset.h"
+#include "core/dataset/pose_text.h"
 #include "core/events/event_reader.h"
 #include "core/trajectory/tum_io.h"
 #include "localizer/offline/debug_images.h"
@@ -117,35 +119,6 @@ Exit codes: 0 success, 1 bad input or failure, 2 bad command line.
 )";
 }
 
-TimedPose ResolveInitialPose(const sim::Dataset& dataset,
-                             const std::optional<Rigid3d>& initial_world_from_cam,
-                             int64_t fallback_t_ns) {
-  const bool has_ground_truth = dataset.ground_truth && !dataset.ground_truth->empty();
-  if (!initial_world_from_cam && !has_ground_truth) {
-    throw InvalidArgumentError("dataset '" + dataset.root.string() +
-                               "' has no groundtruth.txt: give the initial pose with --init-pose");
-  }
-  return TimedPose{has_ground_truth ? dataset.ground_truth->start_ns() : fallback_t_ns,
-                   initial_world_from_cam ? *initial_world_from_cam
-                                          : dataset.ground_truth->poses().front().world_from_cam};
-}
-
-Rigid3d ParsePoseText(const std::string& flag, const std::string& text) {
-  std::istringstream stream(text);
-  std::vector<double> values;
-  std::string token;
-  while (stream >> token) values.push_back(ParseDoubleFlag(flag, token));
-  if (values.size() != 7) {
-    throw InvalidArgumentError(flag + " expects 7 numbers \"tx ty tz qx qy qz qw\", got " +
-                               std::to_string(values.size()));
-  }
-  const Eigen::Quaterniond rotation(values[6], values[3], values[4], values[5]);
-  if (rotation.norm() < 1e-6) {
-    throw InvalidArgumentError(flag + ": the quaternion has zero norm");
-  }
-  return Rigid3d(rotation, Eigen::Vector3d(values[0], values[1], values[2]));
-}
-
 TrackCommandOptions ParseTrackCommandLine(const std::vector<std::string>& arguments) {
   TrackCommandOptions options;
   TrackerOptions& tracker = options.tracking.tracker;
@@ -226,10 +199,10 @@ TrackCommandOptions ParseTrackCommandLine(const std::vector<std::string>& argume
 
 OfflineTrackingResult RunTrackCommand(const TrackCommandOptions& options, std::ostream& log) {
   options.Check();
-  sim::DatasetReaderOptions reader_options;
+  DatasetReaderOptions reader_options;
   reader_options.ecd_width = options.ecd_width;
   reader_options.ecd_height = options.ecd_height;
-  const sim::Dataset dataset = sim::ReadDataset(options.dataset_path, reader_options);
+  const Dataset dataset = ReadDataset(options.dataset_path, reader_options);
   const bool events_mode = options.tracking.tracker.input == TrackerInput::kEvents;
 
   // The initial pose, at the ground truth's start or else at the first measurement.

@@ -9,7 +9,6 @@
 
 #include "core/geometry/rigid3.h"
 #include "localizer/offline/offline_tracking.h"
-#include "tools/sim/dataset.h"
 
 namespace evloc::tracking {
 
@@ -53,16 +52,5 @@ TrackCommandOptions ParseTrackCommandLine(const std::vector<std::string>& argume
 
 // Runs evloc-track; progress and the summary go to `log`. Throws the library's errors.
 OfflineTrackingResult RunTrackCommand(const TrackCommandOptions& options, std::ostream& log);
-
-// The pose a run over `dataset` starts from: `initial_world_from_cam` when given, else the first
-// ground-truth pose; at the ground truth's start time when there is ground truth, else at
-// `fallback_t_ns` (the first measurement's time). Throws InvalidArgumentError naming the dataset
-// when there is neither an initial pose nor ground truth.
-TimedPose ResolveInitialPose(const sim::Dataset& dataset,
-                             const std::optional<Rigid3d>& initial_world_from_cam,
-                             int64_t fallback_t_ns);
-
-// Parses "tx ty tz qx qy qz qw" (TUM order). Throws InvalidArgumentError naming `flag`.
-Rigid3d ParsePoseText(const std::string& flag, const std::string& text);
 
 }  // namespace evloc::tracking

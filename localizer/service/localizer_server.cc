@@ -20,13 +20,15 @@
 #include "evloc/localizer.grpc.pb.h"
 #include "localizer/service/bounded_queue.h"
 #include "localizer/service/metrics_http.h"
-#include "localizer/service/percentile.h"
 #include "localizer/service/session.h"
+#include "localizer/wire/percentile.h"
+#include "localizer/wire/status_name.h"
 
 namespace evloc::service {
 namespace {
 
 using Clock = std::chrono::steady_clock;
+using wire::Percentile;
 using TrackServerStream = grpc::ServerReaderWriter<api::TrackResponse, api::TrackRequest>;
 
 double MicrosecondsSince(Clock::time_point start) {
@@ -668,8 +670,8 @@ grpc::Status LocalizerServer::Service::Track(grpc::ServerContext* context,
   if (!status.ok()) {
     ++counters_.rejected;
     if (!session.started()) {
-      Log("Track from " + context->peer() + " refused: " + StatusCodeName(status.error_code()) +
-          ": " + status.error_message());
+      Log("Track from " + context->peer() +
+          " refused: " + wire::StatusCodeName(status.error_code()) + ": " + status.error_message());
     }
   }
   return status;

@@ -23,6 +23,7 @@
 #include "localizer/service/session.h"
 #include "localizer/service/testing/service_fixture.h"
 #include "localizer/tracking/testing/synthetic_scene.h"
+#include "proto/convert/proto_convert.h"
 
 namespace evloc::service {
 namespace {

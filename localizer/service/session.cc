@@ -1,20 +1,14 @@
 #include "localizer/service/session.h"
 
-#include <cmath>
 #include <cstring>
 #include <string>
 
 #include "core/common/error.h"
+#include "localizer/wire/packed_events.h"
+#include "proto/convert/proto_convert.h"
 
 namespace evloc::service {
 namespace {
-
-bool AllFinite(std::initializer_list<double> values) {
-  for (double value : values) {
-    if (!std::isfinite(value)) return false;
-  }
-  return true;
-}
 
 std::string PacketName(uint64_t index) { return "event packet " + std::to_string(index); }
 
@@ -31,178 +25,6 @@ grpc::Status InvalidArgument(const std::string& message) {
 }
 
 }  // namespace
-
-const char* StatusCodeName(grpc::StatusCode code) {
-  switch (code) {
-    case grpc::StatusCode::OK:
-      return "OK";
-    case grpc::StatusCode::CANCELLED:
-      return "CANCELLED";
-    case grpc::StatusCode::UNKNOWN:
-      return "UNKNOWN";
-    case grpc::StatusCode::INVALID_ARGUMENT:
-      return "INVALID_ARGUMENT";
-    case grpc::StatusCode::DEADLINE_EXCEEDED:
-      return "DEADLINE_EXCEEDED";
-    case grpc::StatusCode::NOT_FOUND:
-      return "NOT_FOUND";
-    case grpc::StatusCode::PERMISSION_DENIED:
-      return "PERMISSION_DENIED";
-    case grpc::StatusCode::RESOURCE_EXHAUSTED:
-      return "RESOURCE_EXHAUSTED";
-    case grpc::StatusCode::FAILED_PRECONDITION:
-      return "FAILED_PRECONDITION";
-    case grpc::StatusCode::UNAUTHENTICATED:
-      return "UNAUTHENTICATED";
-    case grpc::StatusCode::INTERNAL:
-      return "INTERNAL";
-    case grpc::StatusCode::UNAVAILABLE:
-      return "UNAVAILABLE";
-    default:
-      return "other";
-  }
-}
-
-std::string EncodePackedEvents(const EventBuffer& events, size_t begin, size_t end,
-                               int64_t time_base_ns) {
-  std::string data(kPackedEventBytes * (end - begin), '\0');
-  auto* out = reinterpret_cast<uint8_t*>(data.data());
-  for (size_t i = begin; i < end; ++i, out += kPackedEventBytes) {
-    const int64_t offset_ns = events.t_ns[i] - time_base_ns;
-    if (offset_ns < 0 || offset_ns > 0x7fffffff) {
-      throw InvalidArgumentError("EncodePackedEvents: event " + std::to_string(i) +
-                                 " lies outside [time base, time base + 2^31 ns)");
-    }
-    const uint32_t word =
-        static_cast<uint32_t>(offset_ns) | (events.polarity[i] > 0 ? 0x80000000u : 0u);
-    out[0] = static_cast<uint8_t>(word);
-    out[1] = static_cast<uint8_t>(word >> 8);
-    out[2] = static_cast<uint8_t>(word >> 16);
-    out[3] = static_cast<uint8_t>(word >> 24);
-    out[4] = static_cast<uint8_t>(events.x[i]);
-    out[5] = static_cast<uint8_t>(events.x[i] >> 8);
-    out[6] = static_cast<uint8_t>(events.y[i]);
-    out[7] = static_cast<uint8_t>(events.y[i] >> 8);
-  }
-  return data;
-}
-
-std::vector<api::EventPacket> PackEventWindows(const EventBuffer& events, int64_t origin_ns,
-                                               int64_t window_ns) {
-  if (window_ns < 1 || window_ns > 0x7fffffff) {
-    throw InvalidArgumentError("PackEventWindows: the window must be 1 .. 2^31 - 1 ns");
-  }
-  if (!events.empty() && events.t_ns.front() <= origin_ns) {
-    throw InvalidArgumentError("PackEventWindows: the first event lies at or before the origin");
-  }
-  std::vector<api::EventPacket> packets;
-  size_t begin = 0;
-  for (int64_t window_start = origin_ns; begin < events.size(); window_start += window_ns) {
-    const int64_t window_end = window_start + window_ns;
-    size_t end = begin;
-    while (end < events.size() && events.t_ns[end] <= window_end) ++end;
-    api::EventPacket& packet = packets.emplace_back();
-    packet.set_encoding(api::EVENT_ENCODING_PACKED);
-    packet.set_time_base_ns(window_start);
-    packet.set_end_t_ns(window_end);
-    packet.set_data(EncodePackedEvents(events, begin, end, window_start));
-    begin = end;
-  }
-  return packets;
-}
-
-Camera CameraFromProto(const map_format::Camera& camera) {
-  Camera result;
-  switch (camera.model()) {
-    case map_format::CAMERA_MODEL_PINHOLE:
-      result.model = CameraModel::kPinhole;
-      break;
-    case map_format::CAMERA_MODEL_RADIAL_TANGENTIAL:
-      result.model = CameraModel::kRadialTangential;
-      break;
-    case map_format::CAMERA_MODEL_EQUIDISTANT:
-      result.model = CameraModel::kEquidistant;
-      break;
-    default:
-      throw InvalidArgumentError(
-          "SessionStart.camera.model is not set (PINHOLE, "
-          "RADIAL_TANGENTIAL or EQUIDISTANT)");
-  }
-  if (camera.width() == 0 || camera.height() == 0 || camera.width() > 65535 ||
-      camera.height() > 65535) {
-    throw InvalidArgumentError("SessionStart.camera: width and height must be 1..65535, got " +
-                               std::to_string(camera.width()) + "x" +
-                               std::to_string(camera.height()));
-  }
-  result.width = static_cast<int>(camera.width());
-  result.height = static_cast<int>(camera.height());
-  result.fx = camera.fx();
-  result.fy = camera.fy();
-  result.cx = camera.cx();
-  result.cy = camera.cy();
-  result.distortion.assign(camera.distortion().begin(), camera.distortion().end());
-  // Radial-tangential with 4 coefficients (k1 k2 p1 p2, as many calibration tools write) gets
-  // k3 = 0.
-  if (result.model == CameraModel::kRadialTangential && result.distortion.size() == 4) {
-    result.distortion.push_back(0.0);
-  }
-  try {
-    result.Check();
-  } catch (const InvalidArgumentError& error) {
-    throw InvalidArgumentError(std::string("SessionStart.camera: ") + error.what());
-  }
-  return result;
-}
-
-map_format::Camera CameraToProto(const Camera& camera) {
-  map_format::Camera result;
-  switch (camera.model) {
-    case CameraModel::kPinhole:
-      result.set_model(map_format::CAMERA_MODEL_PINHOLE);
-      break;
-    case CameraModel::kRadialTangential:
-      result.set_model(map_format::CAMERA_MODEL_RADIAL_TANGENTIAL);
-      break;
-    case CameraModel::kEquidistant:
-      result.set_model(map_format::CAMERA_MODEL_EQUIDISTANT);
-      break;
-  }
-  result.set_width(static_cast<uint32_t>(camera.width));
-  result.set_height(static_cast<uint32_t>(camera.height));
-  result.set_fx(camera.fx);
-  result.set_fy(camera.fy);
-  result.set_cx(camera.cx);
-  result.set_cy(camera.cy);
-  for (double value : camera.distortion) result.add_distortion(value);
-  return result;
-}
-
-Rigid3d RigidFromProto(const map_format::Rigid3& pose, const char* what) {
-  const auto& q = pose.rotation();
-  const auto& t = pose.translation();
-  if (!AllFinite({q.w(), q.x(), q.y(), q.z(), t.x(), t.y(), t.z()})) {
-    throw InvalidArgumentError(std::string(what) + ": the pose has a non-finite value");
-  }
-  const Eigen::Quaterniond rotation(q.w(), q.x(), q.y(), q.z());
-  if (std::abs(rotation.norm() - 1.0) > 1e-3) {
-    throw InvalidArgumentError(std::string(what) +
-                               ": the rotation must be a unit quaternion (norm " +
-                               std::to_string(rotation.norm()) + ")");
-  }
-  return Rigid3d(rotation.normalized(), Eigen::Vector3d(t.x(), t.y(), t.z()));
-}
-
-map_format::Rigid3 RigidToProto(const Rigid3d& pose) {
-  map_format::Rigid3 result;
-  result.mutable_rotation()->set_w(pose.rotation.w());
-  result.mutable_rotation()->set_x(pose.rotation.x());
-  result.mutable_rotation()->set_y(pose.rotation.y());
-  result.mutable_rotation()->set_z(pose.rotation.z());
-  result.mutable_translation()->set_x(pose.translation.x());
-  result.mutable_translation()->set_y(pose.translation.y());
-  result.mutable_translation()->set_z(pose.translation.z());
-  return result;
-}
 
 api::MapDescription DescribeMap(const LoadedMap& map) {
   api::MapDescription description;
@@ -286,7 +108,7 @@ SessionSettings SessionSettingsFromProto(const api::SessionStart& start,
     throw InvalidArgumentError("SessionStart.initial_world_from_cam is missing");
   }
   SessionSettings settings;
-  settings.camera = CameraFromProto(start.camera());
+  settings.camera = CameraFromProto(start.camera(), "SessionStart.camera");
   const int64_t pixels = int64_t{settings.camera.width} * settings.camera.height;
   if (pixels > limits.max_camera_pixels) {
     throw InvalidArgumentError("SessionStart.camera: " + std::to_string(settings.camera.width) +
@@ -361,26 +183,11 @@ void PacketDecoder::Decode(const api::EventPacket& packet, EventBuffer* out) {
   }
   const auto* bytes = reinterpret_cast<const uint8_t*>(data.data());
   if (encoding_ == api::EVENT_ENCODING_PACKED && !data.empty()) {
-    if (data.size() % kPackedEventBytes != 0) {
-      throw InvalidArgumentError(PacketName(index) + ": PACKED data of " +
-                                 std::to_string(data.size()) +
-                                 " bytes is not a whole number of 8-byte events");
-    }
     CheckSessionTime(packet.time_base_ns(), PacketName(index) + ": time_base_ns");
-    const size_t count = data.size() / kPackedEventBytes;
-    out->t_ns.resize(count);
-    out->x.resize(count);
-    out->y.resize(count);
-    out->polarity.resize(count);
-    for (size_t i = 0; i < count; ++i) {
-      const uint8_t* record = bytes + i * kPackedEventBytes;
-      const uint32_t time_word =
-          static_cast<uint32_t>(record[0]) | (static_cast<uint32_t>(record[1]) << 8) |
-          (static_cast<uint32_t>(record[2]) << 16) | (static_cast<uint32_t>(record[3]) << 24);
-      out->t_ns[i] = packet.time_base_ns() + static_cast<int64_t>(time_word & 0x7fffffffu);
-      out->polarity[i] = (time_word >> 31) != 0 ? 1 : -1;
-      out->x[i] = static_cast<uint16_t>(record[4] | (record[5] << 8));
-      out->y[i] = static_cast<uint16_t>(record[6] | (record[7] << 8));
+    try {
+      wire::DecodePackedEvents(data, packet.time_base_ns(), out);
+    } catch (const InvalidArgumentError& error) {
+      throw InvalidArgumentError(PacketName(index) + ": " + error.what());
     }
   } else if (encoding_ == api::EVENT_ENCODING_EVT3 || encoding_ == api::EVENT_ENCODING_EVT2) {
     if (!raw_decoder_) {

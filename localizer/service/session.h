@@ -1,8 +1,9 @@
 // The transport-free parts of a tracking session (docs/api.md): the admission of a SessionStart,
 // the validation of every later request with the gRPC status of each refusal (run by the stream
 // reader), and the tracker state (run by the session's tracking worker). The threads, queues and
-// the stream itself are in localizer_server.cc; the fuzz targets in fuzz/ drive this code
-// without a network.
+// the stream itself are in localizer_server.cc; the byte-level codec shared with the clients is in
+// localizer/wire, the camera and pose conversions in proto/convert; the fuzz targets in fuzz/
+// drive this code without a network.
 #pragma once
 
 #include <cstdint>
@@ -24,36 +25,6 @@
 
 namespace evloc::service {
 
-// The name of a gRPC status code as docs/api.md writes it (e.g. "RESOURCE_EXHAUSTED").
-const char* StatusCodeName(grpc::StatusCode code);
-
-// Bytes per event of the PACKED encoding.
-inline constexpr size_t kPackedEventBytes = 8;
-
-// Encodes events [begin, end) of `events` in the PACKED layout relative to `time_base_ns`
-// (for clients and tests). Throws InvalidArgumentError when an event lies before the base or
-// 2^31 ns or more after it.
-std::string EncodePackedEvents(const EventBuffer& events, size_t begin, size_t end,
-                               int64_t time_base_ns);
-
-// Splits time-ordered events into PACKED EventPackets of consecutive windows
-// (origin_ns + k window_ns, origin_ns + (k + 1) window_ns], k = 0, 1, ... up to the window of
-// the last event (for clients and tests); a window without events gives an empty packet. Throws
-// InvalidArgumentError when window_ns is not in 1..2^31 - 1 or an event lies at or before
-// origin_ns.
-std::vector<api::EventPacket> PackEventWindows(const EventBuffer& events, int64_t origin_ns,
-                                               int64_t window_ns);
-
-// Converts a protobuf camera. Throws InvalidArgumentError naming the problem when the model is
-// unset or the camera fails Camera::Check().
-Camera CameraFromProto(const map_format::Camera& camera);
-// Converts a camera to protobuf.
-map_format::Camera CameraToProto(const Camera& camera);
-// Converts a protobuf pose; throws InvalidArgumentError when a value is not finite or the
-// quaternion is far from unit norm (it is normalised otherwise).
-Rigid3d RigidFromProto(const map_format::Rigid3& pose, const char* what);
-// Converts a pose to protobuf.
-map_format::Rigid3 RigidToProto(const Rigid3d& pose);
 // Describes a loaded map for clients.
 api::MapDescription DescribeMap(const LoadedMap& map);
 // A PoseUpdate for a tracker step (latency_us left at 0: set when handed to the transport).

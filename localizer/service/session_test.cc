@@ -12,6 +12,7 @@
 #include "localizer/offline/offline_tracking.h"
 #include "localizer/service/testing/service_fixture.h"
 #include "localizer/tracking/testing/synthetic_scene.h"
+#include "localizer/wire/packed_events.h"
 
 namespace evloc::service {
 namespace {
@@ -29,7 +30,7 @@ api::EventPacket Packed(const EventBuffer& events, int64_t base, int64_t end) {
   packet.set_encoding(api::EVENT_ENCODING_PACKED);
   packet.set_time_base_ns(base);
   packet.set_end_t_ns(end);
-  packet.set_data(EncodePackedEvents(events, 0, events.size(), base));
+  packet.set_data(wire::EncodePackedEvents(events, 0, events.size(), base));
   return packet;
 }
 
@@ -39,7 +40,7 @@ TEST(PacketDecoder, PackedRoundTripAndEmptyWindows) {
   EventBuffer decoded;
   decoder.Decode(Packed(events, 500, 2'000), &decoded);
   EXPECT_EQ(decoded, events);
-  EXPECT_EQ(decoded.size() * kPackedEventBytes, 24u);
+  EXPECT_EQ(decoded.size() * wire::kPackedEventBytes, 24u);
   api::EventPacket empty;
   empty.set_end_t_ns(5'000);
   decoder.Decode(empty, &decoded);

@@ -20,7 +20,8 @@ uint32_t Mix(uint32_t value) {
 
 }  // namespace
 
-std::vector<uint32_t> SelectEvenly(const Map& map, const std::vector<uint32_t>& candidates,
+std::vector<uint32_t> SelectEvenly(std::span<const Eigen::Vector3f> positions,
+                                   const std::vector<uint32_t>& candidates,
                                    const PinholeIntrinsics& intrinsics, int width, int height,
                                    const Rigid3d& cam_from_world,
                                    const PointSelectionOptions& options) {
@@ -39,9 +40,10 @@ std::vector<uint32_t> SelectEvenly(const Map& map, const std::vector<uint32_t>& 
   visible.reserve(candidates.size());
   const Eigen::Matrix3d rotation = cam_from_world.RotationMatrix();
   for (const uint32_t index : candidates) {
-    if (index >= map.size()) throw InvalidArgumentError("SelectEvenly: candidate out of range.");
+    if (index >= positions.size())
+      throw InvalidArgumentError("SelectEvenly: candidate out of range.");
     const Eigen::Vector3d point_in_cam =
-        rotation * map.positions[index].cast<double>() + cam_from_world.translation;
+        rotation * positions[index].cast<double>() + cam_from_world.translation;
     if (!(point_in_cam.z() >= options.min_depth_m && point_in_cam.z() <= options.max_depth_m)) {
       continue;
     }

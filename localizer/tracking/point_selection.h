@@ -2,12 +2,13 @@
 // depth range and the image, subsampled to a budget with even image coverage (buckets).
 #pragma once
 
+#include <Eigen/Core>
 #include <cstdint>
+#include <span>
 #include <vector>
 
 #include "core/geometry/rigid3.h"
 #include "localizer/tracking/registration.h"
-#include "maps/map.h"
 
 namespace evloc::tracking {
 
@@ -25,12 +26,13 @@ struct PointSelectionOptions {
   double image_margin_px = 2.0;
 };
 
-// From `candidates` (indices into map.positions), the points in front of the camera within the
-// depth range that project inside the width x height image, subsampled to max_points: every
+// From `candidates` (indices into `positions`, p_world), the points in front of the camera within
+// the depth range that project inside the width x height image, subsampled to max_points: every
 // non-empty bucket gets the same share (round robin over buckets, in a fixed pseudo-random order
 // inside each bucket so that one bucket's points spread along its curves). Deterministic; the
 // result is sorted ascending.
-std::vector<uint32_t> SelectEvenly(const Map& map, const std::vector<uint32_t>& candidates,
+std::vector<uint32_t> SelectEvenly(std::span<const Eigen::Vector3f> positions,
+                                   const std::vector<uint32_t>& candidates,
                                    const PinholeIntrinsics& intrinsics, int width, int height,
                                    const Rigid3d& cam_from_world,
                                    const PointSelectionOptions& options);

@@ -5,6 +5,8 @@
 
 #include <gtest/gtest.h>
 
+#include "maps/map.h"
+
 namespace evloc::tracking {
 namespace {
 
@@ -27,7 +29,7 @@ TEST(PointSelection, CoversTheImageEvenlyWithinTheBudget) {
   PointSelectionOptions options;
   options.max_points = 100;
   const std::vector<uint32_t> selected =
-      SelectEvenly(map, candidates, intrinsics, 320, 240, Rigid3d(), options);
+      SelectEvenly(map.positions, candidates, intrinsics, 320, 240, Rigid3d(), options);
   ASSERT_EQ(selected.size(), 100u);
   EXPECT_TRUE(std::is_sorted(selected.begin(), selected.end()));
   // Every sparse point is kept; the crowded bucket gets the rest.
@@ -38,10 +40,13 @@ TEST(PointSelection, CoversTheImageEvenlyWithinTheBudget) {
   EXPECT_FALSE(std::binary_search(selected.begin(), selected.end(), 2031u));
   // Deterministic and independent of the candidate order.
   std::vector<uint32_t> reversed(candidates.rbegin(), candidates.rend());
-  EXPECT_EQ(SelectEvenly(map, reversed, intrinsics, 320, 240, Rigid3d(), options), selected);
+  EXPECT_EQ(SelectEvenly(map.positions, reversed, intrinsics, 320, 240, Rigid3d(), options),
+            selected);
   // Within budget everything visible is returned.
   options.max_points = 5000;
-  EXPECT_EQ(SelectEvenly(map, candidates, intrinsics, 320, 240, Rigid3d(), options).size(), 2030u);
+  EXPECT_EQ(
+      SelectEvenly(map.positions, candidates, intrinsics, 320, 240, Rigid3d(), options).size(),
+      2030u);
 }
 
 }  // namespace

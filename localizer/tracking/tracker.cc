@@ -4,7 +4,6 @@
 #include <chrono>
 #include <cmath>
 #include <numbers>
-#include <numeric>
 #include <string>
 
 #include <opencv2/imgproc.hpp>
@@ -32,10 +31,17 @@ struct Tracker::Attempt {
   bool good = false;
 };
 
+Tracker::Tracker(const MapSource& source, const Camera& camera, const TrackerOptions& options)
+    : Tracker(nullptr, &source, camera, options) {}
+
 Tracker::Tracker(const Map& map, const VisibilityIndex* visibility, const Camera& camera,
                  const TrackerOptions& options)
-    : map_(map),
-      visibility_(visibility),
+    : Tracker(std::make_unique<const StaticMapSource>(map, visibility), nullptr, camera, options) {}
+
+Tracker::Tracker(std::unique_ptr<const MapSource> owned, const MapSource* borrowed,
+                 const Camera& camera, const TrackerOptions& options)
+    : owned_source_(std::move(owned)),
+      source_(borrowed != nullptr ? borrowed : owned_source_.get()),
       options_((options.Check(), options)),
       table_(camera),
       intrinsics_(PinholeIntrinsics::FromCamera(table_.ideal_camera())),
@@ -44,9 +50,6 @@ Tracker::Tracker(const Map& map, const VisibilityIndex* visibility, const Camera
                         options.min_flow_px},
       surface_(table_),
       motion_(std::llround(options.velocity_window_s * 1e9)) {
-  if (map.positions.size() != map.gradients.size()) {
-    throw InvalidArgumentError("Tracker: the map has not one gradient per point.");
-  }
   if (table_.ideal_camera().width < 8 || table_.ideal_camera().height < 8) {
     throw InvalidArgumentError("Tracker: the camera image must be at least 8x8 pixels.");
   }
@@ -54,11 +57,17 @@ Tracker::Tracker(const Map& map, const VisibilityIndex* visibility, const Camera
     lazy_fields_[channel] = std::make_unique<TimeSurfaceField>(
         surface_, static_cast<SurfaceChannel>(channel), decay_, options_.smooth_field);
   }
-  if (visibility_ == nullptr) {
-    all_points_.resize(map.size());
-    std::iota(all_points_.begin(), all_points_.end(), 0u);
-  }
+  ReadSourcePoints();
   period_ns_ = std::max<int64_t>(1, std::llround(1e9 / options_.step_rate_hz));
+}
+
+void Tracker::ReadSourcePoints() {
+  const MapPoints points = source_->points();
+  if (points.positions.size() != points.gradients.size()) {
+    throw InvalidArgumentError("Tracker: the map source has not one gradient per point.");
+  }
+  points_ = points;
+  source_generation_ = source_->generation();
 }
 
 void Tracker::Reset(const Rigid3d& world_from_cam, int64_t t_ns) {
@@ -196,7 +205,7 @@ double Tracker::StepDecayTimeNs() const {
   std::vector<double> speeds;
   speeds.reserve(selected_.size() / stride + 1);
   for (size_t i = 0; i < selected_.size(); i += stride) {
-    const Eigen::Vector3d world = map_.positions[selected_[i]].cast<double>();
+    const Eigen::Vector3d world = points_.positions[selected_[i]].cast<double>();
     Eigen::Vector2d before;
     Eigen::Vector2d after;
     if (!intrinsics_.Project(cam_from_world * world, &before) ||
@@ -248,19 +257,13 @@ void Tracker::SelectPoints(const Rigid3d& predicted_world_from_cam) {
   selection.max_depth_m = options_.max_depth_m;
   selection.image_margin_px = options_.registration.image_margin_px;
   const Rigid3d cam_from_world = predicted_world_from_cam.Inverse();
-  if (visibility_ != nullptr) {
-    VisibilityQueryOptions query;
-    query.min_depth_m = options_.min_depth_m;
-    query.max_depth_m = options_.max_depth_m;
-    query.image_margin_px = options_.registration.image_margin_px;
-    const std::vector<uint32_t> candidates =
-        visibility_->Query(ideal, predicted_world_from_cam, query);
-    selected_ = SelectEvenly(map_, candidates, intrinsics_, ideal.width, ideal.height,
-                             cam_from_world, selection);
-  } else {
-    selected_ = SelectEvenly(map_, all_points_, intrinsics_, ideal.width, ideal.height,
-                             cam_from_world, selection);
-  }
+  VisibilityQueryOptions query;
+  query.min_depth_m = options_.min_depth_m;
+  query.max_depth_m = options_.max_depth_m;
+  query.image_margin_px = options_.registration.image_margin_px;
+  source_->VisibleCandidates(ideal, predicted_world_from_cam, query, &candidates_);
+  selected_ = SelectEvenly(points_.positions, candidates_, intrinsics_, ideal.width, ideal.height,
+                           cam_from_world, selection);
   selection_world_from_cam_ = predicted_world_from_cam;
   steps_since_selection_ = 0;
   has_selection_ = true;
@@ -309,7 +312,7 @@ Tracker::Attempt Tracker::Solve(const Rigid3d& start_world_from_cam,
                                     polarity_options_);
   for (size_t i = 0; i < num_selected; ++i) {
     const uint32_t index = selected_[i];
-    const Eigen::Vector3d position = map_.positions[index].cast<double>();
+    const Eigen::Vector3d position = points_.positions[index].cast<double>();
     const Eigen::Vector3d point_in_cam =
         start_rotation * position + start_cam_from_world.translation;
     scratch_depths_[i] = point_in_cam.z();
@@ -319,7 +322,7 @@ Tracker::Attempt Tracker::Solve(const Rigid3d& start_world_from_cam,
     SurfaceChannel channel = SurfaceChannel::kAll;
     if (predict_polarity) {
       const PredictedPolarity polarity =
-          predictor.Predict(position, map_.gradients[index].cast<double>());
+          predictor.Predict(position, points_.gradients[index].cast<double>());
       if (polarity == PredictedPolarity::kOn) channel = SurfaceChannel::kOn;
       if (polarity == PredictedPolarity::kOff) channel = SurfaceChannel::kOff;
     }
@@ -358,7 +361,7 @@ Tracker::Attempt Tracker::Solve(const Rigid3d& start_world_from_cam,
   points.clear();
   for (size_t i = 0; i < num_selected; ++i) {
     if (scratch_keep_[i]) {
-      points.push_back({map_.positions[selected_[i]].cast<double>(), scratch_fields_[i]});
+      points.push_back({points_.positions[selected_[i]].cast<double>(), scratch_fields_[i]});
     }
   }
   Attempt attempt;
@@ -389,7 +392,7 @@ void Tracker::Assess(bool predicted_polarity, Attempt* attempt) {
   for (const uint32_t index : selected_) {
     Eigen::Vector2d pixel;
     const Eigen::Vector3d point_in_cam =
-        estimate_rotation * map_.positions[index].cast<double>() + estimate_translation;
+        estimate_rotation * points_.positions[index].cast<double>() + estimate_translation;
     if (!intrinsics_.Project(point_in_cam, &pixel) || !InsideImage(pixel)) continue;
     const Eigen::Vector2d displaced = pixel + kChanceOffsets[in_image % 4];
     ++in_image;
@@ -409,7 +412,7 @@ void Tracker::Assess(bool predicted_polarity, Attempt* attempt) {
       if (!on && field != Field(SurfaceChannel::kOff)) continue;
       Eigen::Vector2d pixel;
       const Eigen::Vector3d point_in_cam =
-          estimate_rotation * map_.positions[selected_[i]].cast<double>() + estimate_translation;
+          estimate_rotation * points_.positions[selected_[i]].cast<double>() + estimate_translation;
       int x;
       int y;
       if (!intrinsics_.Project(point_in_cam, &pixel) || !InsideImage(pixel) ||
@@ -439,6 +442,11 @@ PoseEstimate Tracker::Step(int64_t t_ns) {
   PoseEstimate estimate;
   estimate.t_ns = t_ns;
   step_t_ns_ = t_ns;
+  if (source_->generation() != source_generation_) {
+    // A new point set: the selected indices (which the adaptive decay reads too) are stale.
+    ReadSourcePoints();
+    has_selection_ = false;
+  }
 
   UpdateSurfaces(t_ns);
   estimate.timings.surface_ms = MillisecondsSince(step_start);

@@ -16,6 +16,7 @@
 #include "core/camera/undistortion_table.h"
 #include "core/events/event.h"
 #include "core/geometry/rigid3.h"
+#include "localizer/tracking/map_source.h"
 #include "localizer/tracking/motion_model.h"
 #include "localizer/tracking/occlusion.h"
 #include "localizer/tracking/polarity.h"
@@ -100,10 +101,16 @@ struct PoseEstimate {
 // The tracker of one session.
 class Tracker {
  public:
-  // `map` (and `visibility`, when given; built on `map`) must outlive the tracker. Without a
-  // visibility index every map point is a selection candidate. `camera` is the event (or frame)
-  // camera; its undistortion table is built here once. Throws InvalidArgumentError when the
-  // options, the camera or the map are invalid.
+  // Tracks against `source`, which must outlive the tracker; a change of its generation takes
+  // effect at the next step (the selection is redone from the new points). `camera` is the
+  // event (or frame) camera; its undistortion table is built here once. Throws
+  // InvalidArgumentError when the options, the camera or the source's points are invalid (also
+  // from the first step after a generation change with invalid points).
+  Tracker(const MapSource& source, const Camera& camera, const TrackerOptions& options);
+
+  // Tracks against a fixed map through a StaticMapSource the tracker owns: `map` (and
+  // `visibility`, when given; built on `map`) must outlive the tracker. Without a visibility
+  // index every map point is a selection candidate.
   Tracker(const Map& map, const VisibilityIndex* visibility, const Camera& camera,
           const TrackerOptions& options);
 
@@ -148,7 +155,14 @@ class Tracker {
  private:
   struct Attempt;
 
+  // Tracks against `borrowed`, or when it is null against `owned`.
+  Tracker(std::unique_ptr<const MapSource> owned, const MapSource* borrowed, const Camera& camera,
+          const TrackerOptions& options);
+
   PoseEstimate Step(int64_t t_ns);
+  // Reads the source's points and generation; throws InvalidArgumentError when they are
+  // inconsistent.
+  void ReadSourcePoints();
   void UpdateSurfaces(int64_t t_ns);
   double StepDecayTimeNs() const;
   void SelectPoints(const Rigid3d& predicted_world_from_cam);
@@ -166,8 +180,12 @@ class Tracker {
   bool NearEdge(const Eigen::Vector2d& pixel) const;
   PotentialField* Field(SurfaceChannel channel);
 
-  const Map& map_;
-  const VisibilityIndex* visibility_;
+  // Set by the Map constructor only.
+  std::unique_ptr<const MapSource> owned_source_;
+  const MapSource* source_;
+  // The source's points of generation source_generation_.
+  MapPoints points_;
+  uint64_t source_generation_ = 0;
   TrackerOptions options_;
   UndistortionTable table_;
   PinholeIntrinsics intrinsics_;
@@ -190,7 +208,7 @@ class Tracker {
   int64_t step_t_ns_ = 0;
 
   // Selection state.
-  std::vector<uint32_t> all_points_;
+  std::vector<uint32_t> candidates_;
   std::vector<uint32_t> selected_;
   Rigid3d selection_world_from_cam_;
   int steps_since_selection_ = 0;

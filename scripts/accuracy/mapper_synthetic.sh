@@ -61,4 +61,4 @@ if alignment:
           f"{alignment['rotation_max_deg']:.3f} deg")
 EOF
 echo "accuracy against $dataset (depth maps, gt_map):"
-"$build/mapper/evloc-mapper-accuracy" --map "$map" --dataset "$dataset"
+"$build/tools/map_accuracy/evloc-mapper-accuracy" --map "$map" --dataset "$dataset"

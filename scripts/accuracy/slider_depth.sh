@@ -36,7 +36,7 @@ rm -rf "$out/slider_map"
 sed -n '/"timings"/,/]/p' "$out/slider_map/report.json" | tr -d '\n ' | sed 's/},{/}\n{/g'
 echo
 echo "== edge distance of the map on its keyframe frames (pixels)"
-"$build/mapper/evloc-mapper-accuracy" --map "$out/slider_map" --images "$data"
+"$build/tools/map_accuracy/evloc-mapper-accuracy" --map "$out/slider_map" --images "$data"
 
 echo "== events from the frames (contrast ${CONTRAST:-0.5})"
 "$build/tools/sim/evloc-sim" events-from-frames --in "$data" --out "$out/slider_events" \

@@ -15,18 +15,19 @@
 #include "core/common/cli.h"
 #include "core/common/error.h"
 #include "core/common/file_util.h"
+#include "core/dataset/dataset.h"
 #include "core/events/event_reader.h"
 #include "evloc/localizer.grpc.pb.h"
-#include "localizer/offline/track_command.h"
-#include "localizer/service/percentile.h"
-#include "localizer/service/session.h"
-#include "tools/sim/dataset.h"
+#include "localizer/wire/packed_events.h"
+#include "localizer/wire/percentile.h"
+#include "localizer/wire/status_name.h"
+#include "proto/convert/proto_convert.h"
 
 namespace evloc::load {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-using service::Percentile;
+using wire::Percentile;
 
 // How a session ends.
 enum class Ending { kNormal, kCancel, kBadPacket };
@@ -45,7 +46,7 @@ struct Workload {
 };
 
 Workload MakeWorkload(const LoadOptions& options) {
-  const sim::Dataset dataset = sim::ReadDataset(options.dataset);
+  const Dataset dataset = ReadDataset(options.dataset);
   if (!dataset.events_path) {
     throw InvalidArgumentError("dataset '" + options.dataset.string() +
                                "' has no events.evb or events.txt");
@@ -55,7 +56,7 @@ Workload MakeWorkload(const LoadOptions& options) {
   if (reader->Read(1, &events) == 0) {
     throw InvalidArgumentError("dataset '" + options.dataset.string() + "' has no events");
   }
-  const TimedPose initial = tracking::ResolveInitialPose(dataset, std::nullopt, events.t_ns[0]);
+  const TimedPose initial = ResolveInitialPose(dataset, std::nullopt, events.t_ns[0]);
   const int64_t stop_ns = initial.t_ns + static_cast<int64_t>(options.session_s * 1e9);
   while (events.t_ns.back() <= stop_ns && reader->Read(1 << 20, &events) > 0) {
   }
@@ -72,15 +73,15 @@ Workload MakeWorkload(const LoadOptions& options) {
   workload.sensor_width = dataset.camera.width;
   workload.events = static_cast<int64_t>(events.size());
   for (api::EventPacket& packet :
-       service::PackEventWindows(events, workload.origin_ns, workload.packet_ns)) {
+       wire::PackEventWindows(events, workload.origin_ns, workload.packet_ns)) {
     *workload.packets.emplace_back().mutable_events() = std::move(packet);
   }
   workload.first_tracked_packet = static_cast<size_t>(
       std::max<int64_t>(0, (initial.t_ns - workload.origin_ns) / workload.packet_ns));
   api::SessionStart* start = workload.start.mutable_start();
   start->set_map_name(options.map_name);
-  *start->mutable_camera() = service::CameraToProto(dataset.camera);
-  *start->mutable_initial_world_from_cam() = service::RigidToProto(initial.world_from_cam);
+  *start->mutable_camera() = CameraToProto(dataset.camera);
+  *start->mutable_initial_world_from_cam() = RigidToProto(initial.world_from_cam);
   start->set_initial_t_ns(initial.t_ns);
   if (options.step_rate_hz) start->mutable_options()->set_step_rate_hz(*options.step_rate_hz);
   start->set_client_name("evloc-load " + options.dataset.filename().string());
@@ -105,7 +106,7 @@ api::TrackRequest BadPacket(const api::TrackRequest& packet, int width) {
   EventBuffer outside;
   outside.push_back({packet.events().time_base_ns() + 1, static_cast<uint16_t>(width), 0, 1});
   bad.mutable_events()->set_data(
-      service::EncodePackedEvents(outside, 0, 1, packet.events().time_base_ns()));
+      wire::EncodePackedEvents(outside, 0, 1, packet.events().time_base_ns()));
   return bad;
 }
 
@@ -186,7 +187,7 @@ SessionOutcome RunSession(api::Localizer::Stub& stub, const Workload& workload,
     if (!stream->Write(request)) break;
     ++outcome.packets;
     outcome.events +=
-        static_cast<int64_t>(request.events().data().size() / service::kPackedEventBytes);
+        static_cast<int64_t>(request.events().data().size() / wire::kPackedEventBytes);
   }
   if (!cancelled) stream->WritesDone();
   reader.join();
@@ -294,7 +295,7 @@ LoadResult RunLoad(const LoadOptions& options, std::ostream& log) {
         if (outcome.as_planned) {
           ++result.sessions_as_planned;
         } else {
-          ++result.unplanned[service::StatusCodeName(outcome.status.error_code())];
+          ++result.unplanned[wire::StatusCodeName(outcome.status.error_code())];
           if (result.unplanned_messages.size() < 5) {
             result.unplanned_messages.push_back(outcome.status.error_message());
           }

@@ -21,7 +21,7 @@ struct LoadOptions {
   std::string server;
   // Map name on the server (--map).
   std::string map_name;
-  // Dataset folder (tools/sim/dataset.h layout) with ground truth for the initial pose
+  // Dataset folder (core/dataset/dataset.h layout) with ground truth for the initial pose
   // (--dataset).
   std::filesystem::path dataset;
   // Concurrent session slots (--sessions).

@@ -1,28 +1,35 @@
 // evloc-load: many concurrent sessions against a localizer server (tools/load/load_driver.h).
 #include <iostream>
+#include <string>
+#include <vector>
 
-#include "core/common/error.h"
+#include "core/common/cli.h"
 #include "tools/load/load_driver.h"
 
-int main(int argc, char** argv) {
-  const std::vector<std::string> arguments(argv + 1, argv + argc);
+namespace {
+
+// The parsed command line.
+struct LoadCommand {
+  // The load to run.
   evloc::load::LoadOptions options;
-  try {
-    bool help = false;
-    options = evloc::load::ParseLoadCommandLine(arguments, &help);
-    if (help) {
-      std::cout << evloc::load::LoadUsage();
-      return 0;
-    }
-  } catch (const evloc::Error& error) {
-    std::cerr << "evloc-load: " << error.what() << "\n";
-    return 2;
-  }
-  try {
-    const evloc::load::LoadResult result = evloc::load::RunLoad(options, std::cout);
-    return result.sessions_as_planned == result.sessions ? 0 : 1;
-  } catch (const std::exception& error) {
-    std::cerr << "evloc-load: " << error.what() << "\n";
-    return 1;
-  }
+  // --help was given.
+  bool help = false;
+};
+
+LoadCommand ParseLoadCommand(const std::vector<std::string>& arguments) {
+  LoadCommand command;
+  command.options = evloc::load::ParseLoadCommandLine(arguments, &command.help);
+  return command;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  return evloc::RunCommandTool(
+      "evloc-load", argc, argv, ParseLoadCommand, evloc::load::LoadUsage,
+      [](const LoadCommand& command) {
+        const evloc::load::LoadResult result = evloc::load::RunLoad(command.options, std::cout);
+        return result.sessions_as_planned == result.sessions ? evloc::kExitSuccess
+                                                             : evloc::kExitFailure;
+      });
 }

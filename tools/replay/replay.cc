@@ -18,21 +18,22 @@
 #include "core/common/cli.h"
 #include "core/common/error.h"
 #include "core/common/file_util.h"
+#include "core/dataset/dataset.h"
+#include "core/dataset/pose_text.h"
 #include "core/events/event_reader.h"
+#include "core/events/evt3_encoder.h"
 #include "core/trajectory/tum_io.h"
 #include "evloc/localizer.grpc.pb.h"
-#include "localizer/offline/track_command.h"
-#include "localizer/service/percentile.h"
-#include "localizer/service/session.h"
-#include "tools/replay/evt3_encoder.h"
-#include "tools/sim/dataset.h"
+#include "localizer/wire/packed_events.h"
+#include "localizer/wire/percentile.h"
+#include "proto/convert/proto_convert.h"
 
 namespace evloc::replay {
 namespace {
 
 using Clock = std::chrono::steady_clock;
 
-using service::Percentile;
+using wire::Percentile;
 
 // Floor division for possibly negative numerators.
 int64_t FloorDiv(int64_t numerator, int64_t denominator) {
@@ -181,10 +182,10 @@ struct SharedState {
 class Replayer {
  public:
   Replayer(const ReplayOptions& options, std::ostream& log) : options_(options), log_(log) {
-    sim::DatasetReaderOptions reader_options;
+    DatasetReaderOptions reader_options;
     reader_options.ecd_width = options.ecd_width;
     reader_options.ecd_height = options.ecd_height;
-    dataset_ = sim::ReadDataset(options.dataset, reader_options);
+    dataset_ = ReadDataset(options.dataset, reader_options);
     if (!dataset_.events_path) {
       throw InvalidArgumentError("dataset '" + options.dataset.string() +
                                  "' has no events.evb or events.txt");
@@ -196,7 +197,7 @@ class Replayer {
     }
     evt3_ = options.encoding == WireEncoding::kEvt3;
     const int64_t first_t_ns = source_->event().t_ns;
-    initial_ = tracking::ResolveInitialPose(dataset_, options.initial_world_from_cam, first_t_ns);
+    initial_ = ResolveInitialPose(dataset_, options.initial_world_from_cam, first_t_ns);
     next_window_start_ns_ = SessionTime(first_t_ns) - 1;
     dataset_start_ns_ = next_window_start_ns_;
     packet_ns_ = options.packet_us * 1000;
@@ -232,7 +233,7 @@ class Replayer {
 
   const ReplayOptions& options_;
   std::ostream& log_;
-  sim::Dataset dataset_;
+  Dataset dataset_;
   std::unique_ptr<EventReader> reader_;
   std::unique_ptr<EventSource> source_;
   bool evt3_ = false;
@@ -334,8 +335,8 @@ grpc::Status Replayer::RunSession(const TimedPose& start, bool resumed, bool* st
   api::TrackRequest start_request;
   api::SessionStart* session_start = start_request.mutable_start();
   session_start->set_map_name(options_.map_name);
-  *session_start->mutable_camera() = service::CameraToProto(dataset_.camera);
-  *session_start->mutable_initial_world_from_cam() = service::RigidToProto(start.world_from_cam);
+  *session_start->mutable_camera() = CameraToProto(dataset_.camera);
+  *session_start->mutable_initial_world_from_cam() = RigidToProto(start.world_from_cam);
   session_start->set_initial_t_ns(start.t_ns);
   if (options_.step_rate_hz) {
     session_start->mutable_options()->set_step_rate_hz(*options_.step_rate_hz);
@@ -382,8 +383,7 @@ grpc::Status Replayer::RunSession(const TimedPose& start, bool resumed, bool* st
         shared_.server_latency_us.push_back(pose.latency_us());
         shared_.server_overhead_us.push_back(pose.latency_us() - pose.step_ms() * 1e3);
         shared_.step_ms.push_back(pose.step_ms());
-        const TimedPose timed{pose.t_ns(),
-                              service::RigidFromProto(pose.world_from_cam(), "PoseUpdate")};
+        const TimedPose timed{pose.t_ns(), RigidFromProto(pose.world_from_cam(), "PoseUpdate")};
         shared_.poses.push_back(timed);
         shared_.tracking.push_back(pose.status() == api::TRACKING);
         if (pose.status() == api::LOST) ++shared_.lost;
@@ -456,7 +456,7 @@ grpc::Status Replayer::RunSession(const TimedPose& start, bool resumed, bool* st
     } else {
       packet->set_encoding(api::EVENT_ENCODING_PACKED);
       packet->set_time_base_ns(packet_start_ns);
-      packet->set_data(service::EncodePackedEvents(*events, 0, events->size(), packet_start_ns));
+      packet->set_data(wire::EncodePackedEvents(*events, 0, events->size(), packet_start_ns));
     }
     // Pacing: real time from the replay's start, or by the poses. A later session that is
     // behind the real-time schedule catches up paced by the poses, so that it does not
@@ -812,7 +812,7 @@ ReplayCommand ParseReplayCommandLine(const std::vector<std::string>& arguments) 
     } else if (flag == "--tls-server-name") {
       options.tls_server_name = value;
     } else if (flag == "--init-pose") {
-      options.initial_world_from_cam = tracking::ParsePoseText(flag, value);
+      options.initial_world_from_cam = ParsePoseText(flag, value);
     } else if (flag == "--rate") {
       options.step_rate_hz = ParseDoubleFlag(flag, value);
     } else if (flag == "--max-lead-ms") {

@@ -29,7 +29,7 @@ struct ReplayOptions {
   std::string server;
   // Map name on the server (--map).
   std::string map_name;
-  // Dataset folder (tools/sim/dataset.h layout) (--dataset).
+  // Dataset folder (core/dataset/dataset.h layout) (--dataset).
   std::filesystem::path dataset;
   // Output TUM trajectory of the received poses (--out).
   std::filesystem::path output;

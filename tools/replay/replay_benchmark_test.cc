@@ -15,7 +15,6 @@
 #include "localizer/tracking/testing/synthetic_scene.h"
 #include "tools/load/load_driver.h"
 #include "tools/replay/replay.h"
-#include "tools/sim/dataset.h"
 
 namespace evloc::replay {
 namespace {

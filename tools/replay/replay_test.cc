@@ -11,13 +11,13 @@
 
 #include "core/common/error.h"
 #include "core/common/file_util.h"
+#include "core/dataset/dataset.h"
 #include "core/events/evb.h"
 #include "core/events/event_reader.h"
 #include "localizer/offline/offline_tracking.h"
 #include "localizer/service/localizer_server.h"
 #include "localizer/service/testing/service_fixture.h"
 #include "localizer/tracking/testing/synthetic_scene.h"
-#include "tools/sim/dataset.h"
 
 namespace evloc::replay {
 namespace {
@@ -49,7 +49,7 @@ class ReplayTest : public ::testing::Test {
 
   // The offline reference: TrackEventStream over the same event file.
   tracking::OfflineTrackingResult Offline() const {
-    const sim::Dataset dataset = sim::ReadDataset(dataset_);
+    const Dataset dataset = ReadDataset(dataset_);
     const auto reader = OpenEventFile(*dataset.events_path);
     tracking::OfflineTrackingOptions options;
     options.tracker.step_rate_hz = 200;
@@ -311,7 +311,7 @@ TEST_F(ReplayTest, ReconnectsToAnotherServerAndResumesFromTheLastPose) {
   // within 1 cm of them (resuming from a wrong pose, e.g. the initial one, is off by ~7 cm).
   const Trajectory& served = result.trajectory;
   ASSERT_EQ(served.size(), reference.size()) << log.str();
-  const Trajectory ground_truth = *sim::ReadDataset(dataset_).ground_truth;
+  const Trajectory ground_truth = *ReadDataset(dataset_).ground_truth;
   double worst_m = 0;
   double worst_rad = 0;
   double served_sq = 0;

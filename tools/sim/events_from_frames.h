@@ -10,8 +10,8 @@
 
 #include <opencv2/core.hpp>
 
+#include "core/dataset/dataset.h"
 #include "core/events/event.h"
-#include "tools/sim/dataset.h"
 #include "tools/sim/esim.h"
 
 namespace evloc::sim {

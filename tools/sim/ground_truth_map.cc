@@ -1,14 +1,13 @@
 #include "tools/sim/ground_truth_map.h"
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
-#include <ctime>
 #include <string>
 
 #include <opencv2/core/utility.hpp>
 
 #include "core/common/error.h"
+#include "core/common/provenance.h"
 #include "tools/sim/renderer.h"
 
 namespace evloc::sim {
@@ -140,15 +139,6 @@ bool OnOutline(const Surface& surface, const Eigen::Vector3d& point) {
 
 double LogContrast(double a, double b, double epsilon) {
   return std::abs(std::log(a + epsilon) - std::log(b + epsilon));
-}
-
-std::string CurrentUtcTime() {
-  const std::time_t now = std::chrono::system_clock::to_time_t(std::chrono::system_clock::now());
-  std::tm utc{};
-  gmtime_r(&now, &utc);
-  char buffer[32];
-  std::strftime(buffer, sizeof(buffer), "%Y-%m-%dT%H:%M:%SZ", &utc);
-  return buffer;
 }
 
 }  // namespace
@@ -343,8 +333,8 @@ Map BuildGroundTruthMap(const Scene& scene, const Camera& camera,
     map.keyframes.push_back(std::move(keyframe));
   }
   map.provenance.tool = options.tool;
-  map.provenance.tool_version = "0.1.0";
-  map.provenance.created_utc = CurrentUtcTime();
+  map.provenance.tool_version = ToolVersion();
+  map.provenance.created_utc = UtcNowIso8601();
   map.provenance.command_line = "BuildGroundTruthMap";
   map.provenance.inputs.push_back("scene:" + scene.name);
   map.Check();

@@ -7,12 +7,12 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "core/common/error.h"
+#include "core/dataset/dataset.h"
 #include "core/events/ecd_text.h"
 #include "core/events/evb.h"
 #include "core/trajectory/tum_io.h"
 #include "maps/map.h"
 #include "maps/ply.h"
-#include "tools/sim/dataset.h"
 #include "tools/sim/ground_truth_map.h"
 #include "tools/sim/renderer.h"
 #include "tools/sim/scene.h"

@@ -1,20 +1,23 @@
 // evloc-sim: the event camera simulator's command line (docs/simulator.md). Parses flags into
 // the options of tools/sim/render_command.h and reports errors; all work is in the library.
 #include <algorithm>
-#include <charconv>
-#include <cstdlib>
 #include <iostream>
 #include <map>
-#include <stdexcept>
 #include <string>
 #include <vector>
 
+#include "core/common/cli.h"
 #include "core/common/error.h"
 #include "tools/sim/render_command.h"
 
 namespace {
 
 using evloc::InvalidArgumentError;
+using evloc::ParseDoubleFlag;
+using evloc::ParseSizeFlag;
+using evloc::ParseUnsignedFlag;
+using evloc::TakeFlagValue;
+using evloc::UsageError;
 
 constexpr char kUsage[] = R"(evloc-sim: simulate an event camera dataset (docs/simulator.md).
 
@@ -52,12 +55,6 @@ events-from-frames options:
 Exit codes: 0 success, 2 bad command line, 1 failure while running.
 )";
 
-// A command-line mistake: reported with the usage hint and exit code 2.
-class UsageError : public std::runtime_error {
- public:
-  using std::runtime_error::runtime_error;
-};
-
 // Flags as name -> value ("" for switches), checked against the allowed names.
 std::map<std::string, std::string> ParseFlags(const std::vector<std::string>& args,
                                               const std::vector<std::string>& valued,
@@ -71,31 +68,12 @@ std::map<std::string, std::string> ParseFlags(const std::vector<std::string>& ar
     if (contains(switches)) {
       flags[arg] = "";
     } else if (contains(valued)) {
-      if (i + 1 >= args.size()) throw UsageError(arg + " needs a value.");
-      flags[arg] = args[++i];
+      flags[arg] = TakeFlagValue(args, &i);
     } else {
       throw UsageError("unknown argument '" + arg + "'.");
     }
   }
   return flags;
-}
-
-double ParseDouble(const std::string& flag, const std::string& text) {
-  double value = 0;
-  const auto result = std::from_chars(text.data(), text.data() + text.size(), value);
-  if (result.ec != std::errc() || result.ptr != text.data() + text.size()) {
-    throw UsageError(flag + " expects a number, got '" + text + "'.");
-  }
-  return value;
-}
-
-uint64_t ParseUnsigned(const std::string& flag, const std::string& text) {
-  uint64_t value = 0;
-  const auto result = std::from_chars(text.data(), text.data() + text.size(), value);
-  if (result.ec != std::errc() || result.ptr != text.data() + text.size()) {
-    throw UsageError(flag + " expects a non-negative integer, got '" + text + "'.");
-  }
-  return value;
 }
 
 int RunRender(const std::vector<std::string>& args) {
@@ -117,14 +95,16 @@ int RunRender(const std::vector<std::string>& args) {
       if (flag == "--scene") options.scene_json = value;
       if (flag == "--motion") options.motion = evloc::sim::ParseMotionProfile(value);
       if (flag == "--trajectory") options.trajectory_file = value;
-      if (flag == "--duration") options.duration_s = ParseDouble(flag, value);
-      if (flag == "--fps") options.fps = ParseDouble(flag, value);
+      if (flag == "--duration") options.duration_s = ParseDoubleFlag(flag, value);
+      if (flag == "--fps") options.fps = ParseDoubleFlag(flag, value);
       if (flag == "--lighting") options.lighting = evloc::sim::ParseLightingCondition(value);
-      if (flag == "--seed") options.seed = ParseUnsigned(flag, value);
-      if (flag == "--render-motion") options.max_render_motion_px = ParseDouble(flag, value);
+      if (flag == "--seed") options.seed = ParseUnsignedFlag(flag, value);
+      if (flag == "--render-motion") options.max_render_motion_px = ParseDoubleFlag(flag, value);
       if (flag == "--clean") options.clean = true;
       if (flag == "--events-txt") options.events_txt = true;
       if (flag == "--force") options.force = true;
+    } catch (const UsageError&) {
+      throw;
     } catch (const InvalidArgumentError& error) {
       throw UsageError(flag + ": " + error.what());
     }
@@ -136,11 +116,7 @@ int RunRender(const std::vector<std::string>& args) {
       throw UsageError(std::string("--camera: ") + error.what());
     }
   }
-  try {
-    options.Check();
-  } catch (const InvalidArgumentError& error) {
-    throw UsageError(error.what());
-  }
+  options.Check();
   const auto info = evloc::sim::RunRenderCommand(options);
   std::cout << "evloc-sim render: wrote " << options.out_dir.string() << ": "
             << info["counts"]["events"] << " events (" << info["counts"]["event_rate_per_s"]
@@ -161,29 +137,20 @@ int RunEventsFromFrames(const std::vector<std::string>& args) {
   for (const auto& [flag, value] : flags) {
     if (flag == "--in") options.in_dir = value;
     if (flag == "--out") options.out_dir = value;
-    if (flag == "--ecd-size") {
-      const size_t x = value.find('x');
-      if (x == std::string::npos) throw UsageError("--ecd-size expects WxH, got '" + value + "'.");
-      options.ecd_width = static_cast<int>(ParseUnsigned(flag, value.substr(0, x)));
-      options.ecd_height = static_cast<int>(ParseUnsigned(flag, value.substr(x + 1)));
-    }
+    if (flag == "--ecd-size") ParseSizeFlag(flag, value, &options.ecd_width, &options.ecd_height);
     if (flag == "--contrast") {
-      options.conversion.esim.contrast_threshold_on = ParseDouble(flag, value);
+      options.conversion.esim.contrast_threshold_on = ParseDoubleFlag(flag, value);
       options.conversion.esim.contrast_threshold_off =
           options.conversion.esim.contrast_threshold_on;
     }
-    if (flag == "--gamma") options.conversion.input_gamma = ParseDouble(flag, value);
-    if (flag == "--seed") options.conversion.esim.seed = ParseUnsigned(flag, value);
+    if (flag == "--gamma") options.conversion.input_gamma = ParseDoubleFlag(flag, value);
+    if (flag == "--seed") options.conversion.esim.seed = ParseUnsignedFlag(flag, value);
     if (flag == "--clean") clean = true;
     if (flag == "--events-txt") options.events_txt = true;
     if (flag == "--force") options.force = true;
   }
   if (clean) options.conversion.esim = options.conversion.esim.Clean();
-  try {
-    options.Check();
-  } catch (const InvalidArgumentError& error) {
-    throw UsageError(error.what());
-  }
+  options.Check();
   const auto info = evloc::sim::RunEventsFromFramesCommand(options);
   std::cout << "evloc-sim events-from-frames: wrote " << options.out_dir.string() << ": "
             << info["counts"]["events"] << " events (" << info["counts"]["event_rate_per_s"]
@@ -196,28 +163,23 @@ int RunEventsFromFrames(const std::vector<std::string>& args) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  const std::vector<std::string> args(argv + 1, argv + argc);
-  if (args.empty() || args[0] == "--help" || args[0] == "-h" ||
-      std::find(args.begin(), args.end(), "--help") != args.end()) {
-    std::cout << kUsage;
-    return args.empty() ? 2 : 0;
-  }
-  const std::vector<std::string> rest(args.begin() + 1, args.end());
-  try {
-    if (args[0] == "render") return RunRender(rest);
-    if (args[0] == "events-from-frames") return RunEventsFromFrames(rest);
+  return evloc::RunTool("evloc-sim", argc, argv, [](const std::vector<std::string>& args) {
+    if (args.empty() || args[0] == "--help" || args[0] == "-h" ||
+        std::find(args.begin(), args.end(), "--help") != args.end()) {
+      std::cout << kUsage;
+      return args.empty() ? evloc::kExitUsage : evloc::kExitSuccess;
+    }
+    const std::vector<std::string> rest(args.begin() + 1, args.end());
+    try {
+      if (args[0] == "render") return RunRender(rest);
+      if (args[0] == "events-from-frames") return RunEventsFromFrames(rest);
+    } catch (const UsageError&) {
+      throw;
+    } catch (const InvalidArgumentError& error) {
+      // An option value found invalid while running (an option's Check(), an existing --out
+      // without --force) is a bad command line too (docs/simulator.md).
+      throw UsageError(error.what());
+    }
     throw UsageError("unknown command '" + args[0] + "'; expected render or events-from-frames.");
-  } catch (const UsageError& error) {
-    std::cerr << "evloc-sim: " << error.what() << " Run `evloc-sim --help` for usage.\n";
-    return 2;
-  } catch (const evloc::InvalidArgumentError& error) {
-    std::cerr << "evloc-sim: " << error.what() << "\n";
-    return 2;
-  } catch (const evloc::Error& error) {
-    std::cerr << "evloc-sim: " << error.what() << "\n";
-    return 1;
-  } catch (const std::exception& error) {
-    std::cerr << "evloc-sim: unexpected error: " << error.what() << "\n";
-    return 1;
-  }
+  });
 }

@@ -11,8 +11,8 @@
 
 #include "core/common/file_util.h"
 #include "core/common/test_data.h"
+#include "core/dataset/dataset.h"
 #include "core/events/event_reader.h"
-#include "tools/sim/dataset.h"
 
 namespace {
 
@@ -33,6 +33,16 @@ RunResult RunSim(const std::string& arguments) {
   return {WEXITSTATUS(status), output};
 }
 
+// Runs each command line of `cases` and expects exit code 2 and the paired message fragment.
+void ExpectBadCommandLines(const std::vector<std::pair<std::string, std::string>>& cases) {
+  for (const auto& [arguments, expected] : cases) {
+    const RunResult result = RunSim(arguments);
+    EXPECT_EQ(result.exit_code, 2) << arguments;
+    EXPECT_NE(result.output.find(expected), std::string::npos)
+        << arguments << ": " << result.output;
+  }
+}
+
 TEST(EvlocSimCli, HelpSucceeds) {
   const RunResult result = RunSim("--help");
   EXPECT_EQ(result.exit_code, 0);
@@ -42,20 +52,35 @@ TEST(EvlocSimCli, HelpSucceeds) {
 TEST(EvlocSimCli, BadFlagValuesFailWithAClearMessage) {
   const fs::path dir = evloc::testing::MakeTempDir("sim_cli_bad");
   const std::string out = (dir / "out").string();
-  for (const auto& [arguments, expected] : std::vector<std::pair<std::string, std::string>>{
-           {"render --out " + out + " --motion medium", "slow, mid, fast or aggressive"},
-           {"render --out " + out + " --lighting night", "bright, dim, dark or hdr"},
-           {"render --out " + out + " --duration -1", "--duration"},
-           {"render --out " + out + " --fps abc", "--fps expects a number"},
-           {"render --out " + out + " --camera vga", "default or davis240"},
-           {"render --out " + out + " --bogus", "unknown argument '--bogus'"},
-           {"render", "needs --out"},
-           {"explode", "unknown command"}}) {
-    const RunResult result = RunSim(arguments);
-    EXPECT_EQ(result.exit_code, 2) << arguments;
-    EXPECT_NE(result.output.find(expected), std::string::npos)
-        << arguments << ": " << result.output;
-  }
+  ExpectBadCommandLines(
+      {{"render --out " + out + " --motion medium", "slow, mid, fast or aggressive"},
+       {"render --out " + out + " --lighting night", "bright, dim, dark or hdr"},
+       {"render --out " + out + " --duration -1", "--duration"},
+       {"render --out " + out + " --fps abc", "--fps expects a number"},
+       {"render --out " + out + " --camera vga", "default or davis240"},
+       {"render --out " + out + " --bogus", "unknown argument '--bogus'"},
+       {"render", "needs --out"},
+       {"explode", "unknown command"}});
+  EXPECT_FALSE(fs::exists(out));
+  fs::remove_all(dir);
+}
+
+// Numbers are parsed strictly (core/common/cli.h): nan, infinities and trailing text are bad
+// command lines, named with the flag, before anything is written.
+TEST(EvlocSimCli, RefusesNanInfinityAndTrailingText) {
+  const fs::path dir = evloc::testing::MakeTempDir("sim_cli_nan");
+  const std::string out = (dir / "out").string();
+  const std::string error = "evloc-sim: error: ";
+  ExpectBadCommandLines(
+      {{"render --out " + out + " --duration nan",
+        error + "--duration expects a number, got 'nan'"},
+       {"render --out " + out + " --fps inf", error + "--fps expects a number, got 'inf'"},
+       {"render --out " + out + " --render-motion 2px", error + "--render-motion expects a number"},
+       {"render --out " + out + " --seed -1", error + "--seed expects a non-negative integer"},
+       {"events-from-frames --in " + out + " --out " + out + " --contrast nan",
+        error + "--contrast expects a number, got 'nan'"},
+       {"events-from-frames --in " + out + " --out " + out + " --ecd-size 240x",
+        error + "--ecd-size expects an integer"}});
   EXPECT_FALSE(fs::exists(out));
   fs::remove_all(dir);
 }
@@ -83,7 +108,7 @@ TEST(EvlocSimCli, SameSeedSameBytesAndTheDatasetLoads) {
     EXPECT_EQ(evloc::ReadFileToString(dir / "a" / name), evloc::ReadFileToString(dir / "b" / name))
         << name;
   }
-  const evloc::sim::Dataset dataset = evloc::sim::ReadDataset(dir / "a");
+  const evloc::Dataset dataset = evloc::ReadDataset(dir / "a");
   EXPECT_EQ(dataset.camera.width, 240);
   EXPECT_EQ(dataset.images.size(), 5u);  // exposures [k/30, k/30 + 10 ms] inside 0.15 s: k = 0..4
   EXPECT_EQ(dataset.depth.size(), 5u);

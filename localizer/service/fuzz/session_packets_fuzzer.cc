@@ -19,6 +19,7 @@
 #include "core/common/error.h"
 #include "core/events/prophesee_decoder.h"
 #include "localizer/service/fuzz/session_fuzz_common.h"
+#include "localizer/wire/packed_events.h"
 
 namespace evloc::service::fuzz {
 namespace {
@@ -92,8 +93,8 @@ int Run(const uint8_t* data, size_t size) {
     accepted_end_t_ns = item.t_ns;
     if (packet->data().empty()) continue;
     if (packet->encoding() == api::EVENT_ENCODING_PACKED) {
-      EVLOC_FUZZ_REQUIRE(EncodePackedEvents(item.events, 0, item.events.size(),
-                                            packet->time_base_ns()) == packet->data());
+      EVLOC_FUZZ_REQUIRE(wire::EncodePackedEvents(item.events, 0, item.events.size(),
+                                                  packet->time_base_ns()) == packet->data());
     } else {
       EVLOC_FUZZ_REQUIRE(raw_encoding == api::EVENT_ENCODING_UNSPECIFIED ||
                          raw_encoding == packet->encoding());

@@ -8,10 +8,12 @@
 #include <iostream>
 
 #include "core/common/error.h"
+#include "core/events/evt3_encoder.h"
 #include "localizer/service/fuzz/session_fuzz_common.h"
 #include "localizer/service/testing/service_fixture.h"
 #include "localizer/tracking/testing/synthetic_scene.h"
-#include "tools/replay/evt3_encoder.h"
+#include "localizer/wire/packed_events.h"
+#include "proto/convert/proto_convert.h"
 
 namespace evloc::service::fuzz {
 namespace {
@@ -57,13 +59,13 @@ std::string EncodeEvt2(const EventBuffer& events, std::optional<int64_t>* time_h
 std::vector<std::string> EncodeWindows(const std::vector<EventBuffer>& windows, int64_t start_ns,
                                        api::EventEncoding encoding) {
   std::vector<std::string> packets;
-  replay::Evt3Encoder evt3;
+  Evt3Encoder evt3;
   std::optional<int64_t> evt2_time_high;
   for (size_t i = 0; i < windows.size(); ++i) {
     std::string data;
     if (encoding == api::EVENT_ENCODING_PACKED) {
-      data = EncodePackedEvents(windows[i], 0, windows[i].size(),
-                                start_ns + static_cast<int64_t>(i) * kWindowNs);
+      data = wire::EncodePackedEvents(windows[i], 0, windows[i].size(),
+                                      start_ns + static_cast<int64_t>(i) * kWindowNs);
     } else if (encoding == api::EVENT_ENCODING_EVT3) {
       evt3.Encode(windows[i], &data);
     } else {

@@ -6,12 +6,14 @@
 
 #include <grpcpp/grpcpp.h>
 
+#include "core/dataset/dataset.h"
 #include "core/events/evb.h"
 #include "core/trajectory/trajectory.h"
 #include "localizer/service/session.h"
 #include "localizer/tracking/testing/synthetic_scene.h"
+#include "localizer/wire/packed_events.h"
 #include "maps/map_directory.h"
-#include "tools/sim/dataset.h"
+#include "proto/convert/proto_convert.h"
 
 namespace evloc::service::testing {
 
@@ -57,14 +59,14 @@ void WriteTestMap(const std::filesystem::path& maps_dir, const std::string& name
 
 std::filesystem::path WriteTestDataset(const std::filesystem::path& root, int64_t duration_ns) {
   const std::filesystem::path out = root / "dataset";
-  sim::DatasetWriter writer(out, {});
+  DatasetWriter writer(out, {});
   writer.WriteCamera(TestCamera());
   std::vector<TimedPose> poses;
   for (int64_t t = kInitialTimeNs; t <= duration_ns; t += 5'000'000) {
     poses.push_back({t, tracking::testing::SmoothMotion(t)});
   }
   writer.WriteGroundTruth(Trajectory(poses));
-  EvbWriter events(writer.staging_dir() / sim::dataset_files::kEventsEvb, SensorSize{320, 240});
+  EvbWriter events(writer.staging_dir() / dataset_files::kEventsEvb, SensorSize{320, 240});
   events.Write(TestEvents(duration_ns));
   events.Close();
   writer.Commit();
@@ -104,7 +106,8 @@ api::TrackRequest TestSessionStart() {
 std::vector<api::TrackRequest> PackedPackets(const EventBuffer& events, int64_t packet_ns) {
   std::vector<api::TrackRequest> requests;
   if (events.empty()) return requests;
-  for (api::EventPacket& packet : PackEventWindows(events, events.t_ns.front() - 1, packet_ns)) {
+  for (api::EventPacket& packet :
+       wire::PackEventWindows(events, events.t_ns.front() - 1, packet_ns)) {
     *requests.emplace_back().mutable_events() = std::move(packet);
   }
   return requests;

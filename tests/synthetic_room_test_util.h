@@ -17,9 +17,9 @@
 #include <gtest/gtest.h>
 #include <opencv2/imgcodecs.hpp>
 
-#include "mapper/map_accuracy.h"
 #include "mapper/map_builder.h"
 #include "maps/map.h"
+#include "tools/map_accuracy/map_accuracy.h"
 #include "tools/sim/ground_truth_map.h"
 #include "tools/sim/motion.h"
 #include "tools/sim/renderer.h"

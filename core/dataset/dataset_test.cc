@@ -1,4 +1,4 @@
-#include "tools/sim/dataset.h"
+#include "core/dataset/dataset.h"
 
 #include <filesystem>
 #include <fstream>
@@ -9,7 +9,7 @@
 #include "core/common/error.h"
 #include "core/common/test_data.h"
 
-namespace evloc::sim {
+namespace evloc {
 namespace {
 
 namespace fs = std::filesystem;
@@ -122,5 +122,29 @@ TEST(Dataset, ListErrorsNameTheLine) {
   fs::remove_all(root);
 }
 
+TEST(ResolveInitialPose, GroundTruthStartElseFirstMeasurement) {
+  Dataset dataset;
+  dataset.root = "/data/seq";
+  const Rigid3d given(Eigen::Quaterniond::Identity(), Eigen::Vector3d(1, 2, 3));
+  // No ground truth: the given pose at the first measurement's time.
+  const TimedPose without_truth = ResolveInitialPose(dataset, given, 5'000'000'000);
+  EXPECT_EQ(without_truth.t_ns, 5'000'000'000);
+  EXPECT_EQ(without_truth.world_from_cam.translation, given.translation);
+  // Neither: a clear error naming the dataset.
+  try {
+    ResolveInitialPose(dataset, std::nullopt, 0);
+    FAIL();
+  } catch (const InvalidArgumentError& error) {
+    EXPECT_NE(std::string(error.what()).find("/data/seq"), std::string::npos);
+  }
+  // Ground truth: its first pose at its start, unless a pose is given.
+  const Rigid3d truth(Eigen::Quaterniond::Identity(), Eigen::Vector3d(-1, 0, 0));
+  dataset.ground_truth = Trajectory({{7, truth}, {9, truth}});
+  const TimedPose from_truth = ResolveInitialPose(dataset, std::nullopt, 5);
+  EXPECT_EQ(from_truth.t_ns, 7);
+  EXPECT_EQ(from_truth.world_from_cam.translation, truth.translation);
+  EXPECT_EQ(ResolveInitialPose(dataset, given, 5).world_from_cam.translation, given.translation);
+}
+
 }  // namespace
-}  // namespace evloc::sim
+}  // namespace evloc

@@ -31,18 +31,11 @@ struct DepthView {
   std::optional<int64_t> t_ns;
 };
 
-// The rendered depth maps of an evloc-sim dataset (depth.txt: `t path` lines of 16-bit PNGs in
-// millimetres; calib.yaml; groundtruth.txt for the poses), every `stride`-th one. Throws IoError /
-// ParseError for unreadable or malformed files, InvalidArgumentError for a stride below 1.
+// The rendered depth maps of an evloc-sim dataset, every `stride`-th one of depth.txt, read with
+// core/dataset (ReadDataset, ReadDepthPng) and posed by groundtruth.txt; a depth map outside the
+// ground truth's time span is left out. Throws IoError / ParseError (naming the file and line) for
+// missing, unreadable or malformed files, InvalidArgumentError for a stride below 1.
 std::vector<DepthView> ReadDatasetDepthViews(const std::filesystem::path& dataset, int stride = 1);
-
-// Per point of an evloc-sim dataset's gt_map: whether its gradient is defined by the scene
-// (texture edges and concave creases) or not (convex creases). The edges are sampled again from
-// the dataset's scene (info.json "scene": the default room or a scene JSON) with the options the
-// simulator uses, and must match the reference map point for point. Throws IoError / ParseError
-// when info.json or the scene cannot be read, InvalidArgumentError when the points differ.
-std::vector<bool> ReferenceGradientDefined(const std::filesystem::path& dataset,
-                                           const Map& reference);
 
 // Options of MeasureMapAccuracy.
 struct MapAccuracyOptions {

@@ -16,9 +16,10 @@
 #include "core/common/cli.h"
 #include "core/common/error.h"
 #include "core/common/file_util.h"
-#include "mapper/map_accuracy.h"
 #include "maps/map.h"
 #include "maps/map_directory.h"
+#include "tools/map_accuracy/map_accuracy.h"
+#include "tools/map_accuracy/reference_gradients.h"
 
 namespace {
 
@@ -52,14 +53,14 @@ int main(int argc, char** argv) {
   int stride = 1;
   evloc::mapper::MapAccuracyOptions options;
   try {
-    for (int i = 1; i < argc; ++i) {
-      const std::string flag = argv[i];
+    const std::vector<std::string> arguments(argv + 1, argv + argc);
+    for (size_t i = 0; i < arguments.size(); ++i) {
+      const std::string& flag = arguments[i];
       if (flag == "--help" || flag == "-h") {
         std::cout << kUsage;
         return 0;
       }
-      if (i + 1 >= argc) throw evloc::InvalidArgumentError(flag + " needs a value");
-      const std::string value = argv[++i];
+      const std::string& value = evloc::TakeFlagValue(arguments, &i);
       if (flag == "--map") {
         map_path = value;
       } else if (flag == "--dataset") {
@@ -73,7 +74,7 @@ int main(int argc, char** argv) {
       } else if (flag == "--depth-stride") {
         stride = evloc::ParseIntFlag(flag, value);
       } else {
-        throw evloc::InvalidArgumentError("unknown flag '" + flag + "'");
+        throw evloc::InvalidArgumentError("unknown flag '" + flag + "' (see --help)");
       }
     }
     if (map_path.empty() || dataset.empty() == image_dir.empty()) {

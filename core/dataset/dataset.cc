@@ -1,4 +1,4 @@
-#include "tools/sim/dataset.h"
+#include "core/dataset/dataset.h"
 
 #include <cmath>
 #include <cstdio>
@@ -12,7 +12,7 @@
 #include "core/common/file_util.h"
 #include "core/trajectory/tum_io.h"
 
-namespace evloc::sim {
+namespace evloc {
 namespace fs = std::filesystem;
 namespace {
 
@@ -254,6 +254,19 @@ Dataset ReadDataset(const fs::path& root, const DatasetReaderOptions& options) {
   return dataset;
 }
 
+TimedPose ResolveInitialPose(const Dataset& dataset,
+                             const std::optional<Rigid3d>& initial_world_from_cam,
+                             int64_t fallback_t_ns) {
+  const bool has_ground_truth = dataset.ground_truth && !dataset.ground_truth->empty();
+  if (!initial_world_from_cam && !has_ground_truth) {
+    throw InvalidArgumentError("dataset '" + dataset.root.string() +
+                               "' has no groundtruth.txt: give the initial pose with --init-pose");
+  }
+  return TimedPose{has_ground_truth ? dataset.ground_truth->start_ns() : fallback_t_ns,
+                   initial_world_from_cam ? *initial_world_from_cam
+                                          : dataset.ground_truth->poses().front().world_from_cam};
+}
+
 cv::Mat ReadDepthPng(const fs::path& path) {
   const cv::Mat raw = cv::imread(path.string(), cv::IMREAD_UNCHANGED);
   if (raw.empty()) throw IoError("cannot read depth image '" + path.string() + "'.");
@@ -289,4 +302,4 @@ cv::Mat ReadGrayImage(const fs::path& path) {
   return gray;
 }
 
-}  // namespace evloc::sim
+}  // namespace evloc

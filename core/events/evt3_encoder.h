@@ -1,6 +1,6 @@
 // A streaming encoder of events into Prophesee EVT 3.0 words (docs/event-formats.md §3.1), the
-// inverse of core/events' Evt3Decoder: for clients that stream raw EVT 3.0 to the localizer
-// (evloc-replay --encoding evt3) and for tests.
+// inverse of Evt3Decoder (prophesee_decoder.h): for clients that stream raw EVT 3.0 to the
+// localizer (evloc-replay --encoding evt3) and for tests.
 #pragma once
 
 #include <cstdint>
@@ -9,7 +9,7 @@
 
 #include "core/events/event.h"
 
-namespace evloc::replay {
+namespace evloc {
 
 // Encodes time-ordered events with microsecond times into EVT 3.0. Uses EVT_TIME_HIGH,
 // EVT_TIME_LOW, EVT_ADDR_Y and EVT_ADDR_X words only (no vector words): 2 bytes per event plus
@@ -32,4 +32,4 @@ class Evt3Encoder {
   int64_t last_t_ns_ = 0;
 };
 
-}  // namespace evloc::replay
+}  // namespace evloc

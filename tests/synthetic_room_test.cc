@@ -18,7 +18,7 @@
 #include "core/common/file_util.h"
 #include "core/common/test_data.h"
 #include "mapper/colmap_runner.h"
-#include "mapper/synthetic_room_test_util.h"
+#include "tests/synthetic_room_test_util.h"
 
 namespace evloc::mapper {
 namespace {

@@ -1,5 +1,5 @@
-// Test helpers for the Middlebury templeSparseRing data: calibrated poses (the edge-distance
-// measure of docs/mapper.md is KeyframeEdgeDistances in mapper/map_accuracy.h).
+// Test helpers for the Middlebury multi-view data (templeSparseRing): calibrated poses (the edge-distance
+// measure of docs/mapper.md is KeyframeEdgeDistances in tools/map_accuracy/map_accuracy.h).
 #pragma once
 
 #include <filesystem>
@@ -12,7 +12,7 @@
 #include "core/camera/camera.h"
 #include "core/geometry/rigid3.h"
 
-namespace evloc::mapper::testing {
+namespace evloc::testing {
 
 // One calibrated view of a Middlebury `*_par.txt` file: P = K [R | t] maps world to image.
 struct MiddleburyView {
@@ -72,4 +72,4 @@ inline Camera MiddleburyCamera(const MiddleburyView& view, int width, int height
   return Camera::Pinhole(width, height, k(0, 0), k(1, 1), k(0, 2), k(1, 2));
 }
 
-}  // namespace evloc::mapper::testing
+}  // namespace evloc::testing

@@ -17,7 +17,7 @@
 #include "core/camera/camera.h"
 #include "core/trajectory/trajectory.h"
 
-namespace evloc::sim {
+namespace evloc {
 
 // A file of a dataset with its time stamp (an image or a depth map).
 struct TimedFile {
@@ -143,6 +143,14 @@ struct Dataset {
 // calib.yaml nor calib.txt, or is an unfinished OUT.partial.
 Dataset ReadDataset(const std::filesystem::path& root, const DatasetReaderOptions& options = {});
 
+// The pose a run over `dataset` starts from: `initial_world_from_cam` when given, else the first
+// ground-truth pose; at the ground truth's start time when there is ground truth, else at
+// `fallback_t_ns` (the first measurement's time). Throws InvalidArgumentError naming the dataset
+// when there is neither an initial pose nor ground truth.
+TimedPose ResolveInitialPose(const Dataset& dataset,
+                             const std::optional<Rigid3d>& initial_world_from_cam,
+                             int64_t fallback_t_ns);
+
 // Reads a list file `t_s path` (images.txt, depth.txt); `#` comments and blank lines skipped.
 // Paths are resolved against `root`. Throws ParseError naming the line for a malformed line or a
 // time that does not increase.
@@ -157,4 +165,4 @@ cv::Mat ReadDepthPng(const std::filesystem::path& path);
 // (Rec. 709 luminance). Throws IoError when it cannot be read.
 cv::Mat ReadGrayImage(const std::filesystem::path& path);
 
-}  // namespace evloc::sim
+}  // namespace evloc

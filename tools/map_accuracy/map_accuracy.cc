@@ -1,4 +1,4 @@
-#include "mapper/map_accuracy.h"
+#include "tools/map_accuracy/map_accuracy.h"
 
 #include <algorithm>
 #include <cmath>
@@ -7,22 +7,17 @@
 #include <map>
 #include <numbers>
 #include <optional>
-#include <sstream>
 #include <string>
 
 #include <pcl/kdtree/kdtree_flann.h>
 #include <pcl/point_cloud.h>
 #include <pcl/point_types.h>
-#include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "core/common/error.h"
-#include "core/common/file_util.h"
+#include "core/dataset/dataset.h"
 #include "core/trajectory/trajectory.h"
-#include "core/trajectory/tum_io.h"
-#include "tools/sim/ground_truth_map.h"
-#include "tools/sim/scene.h"
 
 namespace evloc::mapper {
 namespace {
@@ -268,64 +263,24 @@ std::vector<double> KeyframeEdgeDistances(const Map& map, const std::filesystem:
 
 std::vector<DepthView> ReadDatasetDepthViews(const std::filesystem::path& dataset, int stride) {
   if (stride < 1) throw InvalidArgumentError("the depth-map stride must be at least 1");
-  const Camera camera = ReadCameraYaml(dataset / "calib.yaml");
-  const Trajectory trajectory = ReadTumTrajectory(dataset / "groundtruth.txt");
-  std::istringstream lines(ReadFileToString(dataset / "depth.txt"));
+  const Dataset data = ReadDataset(dataset);
+  if (!data.ground_truth) {
+    throw IoError("dataset '" + dataset.string() + "' has no " + dataset_files::kGroundTruthTxt +
+                  ": the depth maps have no poses.");
+  }
   std::vector<DepthView> views;
-  std::string line;
-  int index = 0;
-  while (std::getline(lines, line)) {
-    std::istringstream fields(line);
-    std::string time;
-    std::string path;
-    if (!(fields >> time >> path) || time[0] == '#') continue;
-    if (index++ % stride != 0) continue;
-    const std::optional<Rigid3d> world_from_cam =
-        trajectory.Lookup(ParseSecondsAsNanoseconds(time));
-    if (!world_from_cam) continue;
-    const cv::Mat millimetres = cv::imread((dataset / path).string(), cv::IMREAD_UNCHANGED);
-    if (millimetres.empty() || millimetres.type() != CV_16UC1) {
-      throw IoError("cannot read the 16-bit depth map " + (dataset / path).string());
-    }
+  for (size_t index = 0; index < data.depth.size(); index += static_cast<size_t>(stride)) {
+    const TimedFile& depth = data.depth[index];
+    const std::optional<Rigid3d> world_from_cam = data.ground_truth->Lookup(depth.t_ns);
+    if (!world_from_cam) continue;  // outside the ground truth's time span
     DepthView view;
-    view.camera = camera;
+    view.camera = data.camera;
     view.cam_from_world = world_from_cam->Inverse();
-    view.t_ns = ParseSecondsAsNanoseconds(time);
-    millimetres.convertTo(view.depth_m, CV_32F, 1e-3);
+    view.t_ns = depth.t_ns;
+    view.depth_m = ReadDepthPng(depth.path);
     views.push_back(std::move(view));
   }
   return views;
-}
-
-std::vector<bool> ReferenceGradientDefined(const std::filesystem::path& dataset,
-                                           const Map& reference) {
-  const std::filesystem::path info_path = dataset / "info.json";
-  nlohmann::json info;
-  try {
-    info = nlohmann::json::parse(ReadFileToString(info_path));
-  } catch (const nlohmann::json::exception& error) {
-    throw ParseError(info_path.string(), "JSON", error.what());
-  }
-  const std::string scene_name = info.value("/options/scene"_json_pointer, std::string());
-  const sim::Scene scene = scene_name.empty() || scene_name == "default room"
-                               ? sim::MakeDefaultRoom()
-                               : sim::LoadSceneJson(scene_name);
-  const std::vector<sim::GroundTruthEdgePoint> edges =
-      sim::SampleGroundTruthEdges(scene, sim::GroundTruthMapOptions());
-  if (edges.size() != reference.size()) {
-    throw InvalidArgumentError("the scene of " + info_path.string() + " gives " +
-                               std::to_string(edges.size()) + " edge points, the gt_map has " +
-                               std::to_string(reference.size()));
-  }
-  std::vector<bool> defined(edges.size());
-  for (size_t i = 0; i < edges.size(); ++i) {
-    if ((edges[i].position - reference.positions[i].cast<double>()).norm() > 1e-4) {
-      throw InvalidArgumentError("edge point " + std::to_string(i) + " of the scene of " +
-                                 info_path.string() + " differs from the gt_map's");
-    }
-    defined[i] = edges[i].kind != sim::EdgeKind::kConvexCrease;
-  }
-  return defined;
 }
 
 }  // namespace evloc::mapper

@@ -1,8 +1,8 @@
-#include "tools/replay/evt3_encoder.h"
+#include "core/events/evt3_encoder.h"
 
 #include "core/common/error.h"
 
-namespace evloc::replay {
+namespace evloc {
 namespace {
 
 constexpr uint16_t kAddrY = 0x0;
@@ -72,4 +72,4 @@ void Evt3Encoder::Encode(const EventBuffer& events, std::string* out) {
   if (!events.empty()) last_t_ns_ = events.t_ns.back();
 }
 
-}  // namespace evloc::replay
+}  // namespace evloc

@@ -1,4 +1,4 @@
-#include "tools/replay/evt3_encoder.h"
+#include "core/events/evt3_encoder.h"
 
 #include <gtest/gtest.h>
 
@@ -7,7 +7,7 @@
 #include "core/common/error.h"
 #include "core/events/prophesee_decoder.h"
 
-namespace evloc::replay {
+namespace evloc {
 namespace {
 
 EventBuffer RandomEvents(size_t count, uint32_t seed) {
@@ -71,4 +71,4 @@ TEST(Evt3Encoder, RejectsWhatEvt3CannotCarry) {
 }
 
 }  // namespace
-}  // namespace evloc::replay
+}  // namespace evloc

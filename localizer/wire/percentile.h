@@ -5,7 +5,7 @@
 #include <cstddef>
 #include <vector>
 
-namespace evloc::service {
+namespace evloc::wire {
 
 // The value at `fraction` (0..1) of the sorted samples: the element at index
 // floor(fraction * n), clamped to the last; 0 for no samples.
@@ -18,4 +18,4 @@ inline double Percentile(std::vector<double> values, double fraction) {
   return values[index];
 }
 
-}  // namespace evloc::service
+}  // namespace evloc::wire
