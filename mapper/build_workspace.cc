@@ -54,7 +54,7 @@ std::string WorkspaceFingerprint(const MapBuilderOptions& options,
   }
   text << "matcher " << MatcherTypeName(matcher) << " overlap " << options.colmap.sequential_overlap
        << " features " << options.colmap.max_num_features << "\n";
-  text << (options.colmap.deterministic ? "matching evloc deterministic v1\n"
+  text << (options.colmap.deterministic ? "matching evloc deterministic v2\n"
                                         : "matching colmap\n");
   return text.str();
 }

@@ -25,8 +25,11 @@ enum class TwoViewConfig : int {
   kDegenerate = 1,
   // Essential matrix of calibrated cameras.
   kCalibrated = 2,
-  // Fundamental matrix of uncalibrated cameras.
+  // Fundamental matrix of uncalibrated cameras (or calibrated ones whose essential matrix explains
+  // too few of the fundamental matrix's inliers).
   kUncalibrated = 3,
+  // A homography explains most of the epipolar inliers (planar scene or pure rotation).
+  kPlanarOrPanoramic = 6,
 };
 
 // One image's SIFT features as COLMAP's feature_extractor stored them.

@@ -256,7 +256,7 @@ void ColmapRunner::MatchFeatures(size_t num_images) const {
         DatabasePath(), exhaustive ? 0 : options_.sequential_overlap, options_.camera, matching);
     std::ofstream log(LogDir() / "evloc_matcher.log", std::ios::app);
     log << "evloc matcher (" << (exhaustive ? "exhaustive" : "sequential") << ", "
-        << (options_.camera ? "essential" : "fundamental") << " matrix): " << summary.num_images
+        << (options_.camera ? "E, F and H" : "F and H") << "): " << summary.num_images
         << " images, " << summary.num_pairs << " pairs, " << summary.num_matches << " matches, "
         << summary.num_verified_pairs << " verified pairs, " << summary.num_inlier_matches
         << " inlier matches\n";

@@ -3,6 +3,8 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
+#include <initializer_list>
+#include <limits>
 #include <numbers>
 #include <set>
 
@@ -18,6 +20,12 @@ namespace {
 
 // COLMAP stores unit descriptors scaled by 512: the dot product of two is at most 512^2.
 constexpr double kDescriptorNormSquared = 512.0 * 512.0;
+// Below this squared norm a descriptor is not one COLMAP normalised (clamping bytes at 255 removes
+// little of the 512^2): COLMAP 3.8's feature_extractor occasionally writes such a descriptor (one
+// of 551 of slider_depth's frame 72 was [255, 0, 0, ...] in one of two runs, a normal one in the
+// other). With an L2 search its small norm makes it the second-nearest neighbour of many
+// descriptors, which changes their ratio tests; it takes no part in the matching.
+constexpr float kMinDescriptorNormSquared = 0.5f * 512.0f * 512.0f;
 // Rows of the first image's descriptors per block of dot products (bounds the block's memory).
 constexpr size_t kMatchBlockRows = 512;
 
@@ -32,27 +40,53 @@ DescriptorMatrix ToFloatMatrix(const std::vector<uint8_t>& descriptors) {
   return matrix;
 }
 
-// Best and second-best dot product of one descriptor against the other image's.
-struct BestTwo {
-  float best = -1.0f;
-  float second = -1.0f;
-  int index = -1;
+// A descriptor's two nearest neighbours in the other image by L2 distance, as COLMAP 3.8's CPU
+// matcher searches them (FLANN, approximately; exactly here), with their dot products. The key
+// of a candidate is its squared L2 distance less the query's own squared norm: |c|^2 - 2 q.c.
+struct NearestTwo {
+  struct Neighbour {
+    float key = std::numeric_limits<float>::max();
+    float dot = 0.0f;
+    int index = -1;
+  };
+  Neighbour best;
+  Neighbour second;
 
   // Ties keep the earlier candidate (candidates arrive in increasing index order).
-  void Update(float dot, int candidate) {
-    if (dot > best) {
+  void Update(float key, float dot, int candidate) {
+    if (key < best.key) {
       second = best;
-      best = dot;
-      index = candidate;
-    } else if (dot > second) {
-      second = dot;
+      best = {key, dot, candidate};
+    } else if (key < second.key) {
+      second = {key, dot, candidate};
+    }
+  }
+};
+
+// COLMAP's choice among the two neighbours: the larger dot product is the match (the nearer
+// neighbour on a tie), the other one is the second best; a zero dot product is no match.
+struct BestTwo {
+  float best = 0.0f;
+  float second = 0.0f;
+  int index = -1;
+
+  explicit BestTwo(const NearestTwo& nearest) {
+    for (const NearestTwo::Neighbour& neighbour : {nearest.best, nearest.second}) {
+      if (neighbour.index < 0) continue;
+      if (neighbour.dot > best) {
+        second = best;
+        best = neighbour.dot;
+        index = neighbour.index;
+      } else if (neighbour.dot > second) {
+        second = neighbour.dot;
+      }
     }
   }
 };
 
 // The angle between two descriptors of dot product `dot` (COLMAP's normalised distance).
 double DescriptorAngle(float dot) {
-  return std::acos(std::min(std::max(static_cast<double>(dot), 0.0) / kDescriptorNormSquared, 1.0));
+  return std::acos(std::min(static_cast<double>(dot) / kDescriptorNormSquared, 1.0));
 }
 
 // COLMAP's one-way acceptance: best angle within max_distance and below max_ratio times the
@@ -72,6 +106,33 @@ FeatureMatches InliersOf(const FeatureMatches& matches, const std::vector<size_t
     if (mask.at<uint8_t>(static_cast<int>(i)) != 0) inliers.push_back(matches[kept[i]]);
   }
   return inliers;
+}
+
+// COLMAP 3.8's TwoViewGeometry::Options: min_E_F_inlier_ratio and max_H_inlier_ratio.
+constexpr double kMinEssentialToFundamentalInliers = 0.95;
+constexpr double kMaxHomographyToEpipolarInliers = 0.8;
+
+// A RANSAC model (its first 3x3 solution) and its inlier mask; no inliers when it failed.
+struct RansacResult {
+  cv::Mat model;
+  cv::Mat mask;
+  size_t num_inliers = 0;
+};
+
+// Runs `estimate(&mask)`; a failure or a configuration OpenCV refuses gives no inliers.
+template <typename Estimate>
+RansacResult RunRansac(const Estimate& estimate) {
+  RansacResult result;
+  cv::Mat model;
+  try {
+    model = estimate(&result.mask);
+  } catch (const cv::Exception&) {
+    return {};
+  }
+  if (model.rows < 3 || model.cols != 3 || result.mask.empty()) return {};
+  result.model = model.rowRange(0, 3).clone();
+  result.num_inliers = static_cast<size_t>(cv::countNonZero(result.mask));
+  return result;
 }
 
 Eigen::Matrix3d ToEigen(const cv::Mat& matrix) {
@@ -134,22 +195,30 @@ FeatureMatches MatchDescriptors(const std::vector<uint8_t>& descriptors1,
   const Eigen::Index rows1 = first.rows();
   const Eigen::Index rows2 = second.rows();
   if (rows1 == 0 || rows2 == 0) return {};
-  std::vector<BestTwo> forward(static_cast<size_t>(rows1));
-  std::vector<BestTwo> backward(static_cast<size_t>(rows2));
-  // Products of bytes summed in float are exact (every partial sum is an integer below 2^24), so
-  // the dot products do not depend on the order of the sums.
+  std::vector<NearestTwo> forward_nearest(static_cast<size_t>(rows1));
+  std::vector<NearestTwo> backward_nearest(static_cast<size_t>(rows2));
+  const Eigen::VectorXf norms1 = first.rowwise().squaredNorm();
+  const Eigen::VectorXf norms2 = second.rowwise().squaredNorm();
+  // Products of bytes summed in float are exact (every partial sum, squared norms included, is an
+  // integer below 2^24, and so is each key |c|^2 - 2 q.c in magnitude), so the keys and dot
+  // products do not depend on the order of the sums.
   for (Eigen::Index begin = 0; begin < rows1; begin += kMatchBlockRows) {
     const Eigen::Index count = std::min<Eigen::Index>(kMatchBlockRows, rows1 - begin);
     const Eigen::MatrixXf dots = first.middleRows(begin, count) * second.transpose();
     for (Eigen::Index j = 0; j < rows2; ++j) {
-      BestTwo& column = backward[static_cast<size_t>(j)];
+      if (norms2(j) < kMinDescriptorNormSquared) continue;
+      NearestTwo& column = backward_nearest[static_cast<size_t>(j)];
       for (Eigen::Index r = 0; r < count; ++r) {
+        if (norms1(begin + r) < kMinDescriptorNormSquared) continue;
         const float dot = dots(r, j);
-        forward[static_cast<size_t>(begin + r)].Update(dot, static_cast<int>(j));
-        column.Update(dot, static_cast<int>(begin + r));
+        forward_nearest[static_cast<size_t>(begin + r)].Update(norms2(j) - 2.0f * dot, dot,
+                                                               static_cast<int>(j));
+        column.Update(norms1(begin + r) - 2.0f * dot, dot, static_cast<int>(begin + r));
       }
     }
   }
+  const std::vector<BestTwo> forward(forward_nearest.begin(), forward_nearest.end());
+  const std::vector<BestTwo> backward(backward_nearest.begin(), backward_nearest.end());
   FeatureMatches matches;
   for (size_t i = 0; i < forward.size(); ++i) {
     if (!PassesRatioTest(forward[i], options)) continue;
@@ -173,6 +242,8 @@ void VerifyPair(const ImageFeatures& image1, const ImageFeatures& image2,
   pair->H.setZero();
   const FeatureMatches& matches = pair->matches;
   if (matches.size() < static_cast<size_t>(options.min_num_inliers)) return;
+  std::vector<cv::Point2d> pixels1;
+  std::vector<cv::Point2d> pixels2;
   std::vector<cv::Point2d> points1;
   std::vector<cv::Point2d> points2;
   std::vector<size_t> kept;
@@ -192,47 +263,78 @@ void VerifyPair(const ImageFeatures& image1, const ImageFeatures& image2,
       if (!camera->Unproject(pixel1, &ray1) || !camera->Unproject(pixel2, &ray2)) continue;
       points1.emplace_back(ray1.x(), ray1.y());
       points2.emplace_back(ray2.x(), ray2.y());
-    } else {
-      points1.emplace_back(pixel1.x(), pixel1.y());
-      points2.emplace_back(pixel2.x(), pixel2.y());
     }
+    pixels1.emplace_back(pixel1.x(), pixel1.y());
+    pixels2.emplace_back(pixel2.x(), pixel2.y());
     kept.push_back(i);
   }
   pair->config = TwoViewConfig::kDegenerate;
   if (kept.size() < static_cast<size_t>(options.min_num_inliers)) return;
+  const size_t min_inliers = static_cast<size_t>(options.min_num_inliers);
   // OpenCV's RANSAC (RANSACPointSetRegistrator) draws its samples from a cv::RNG seeded with a
-  // constant on each call: the same inputs give the same model and mask.
-  cv::Mat mask;
-  cv::Mat model;
-  try {
-    if (camera) {
-      const double threshold = options.max_error_px / (0.5 * (camera->fx + camera->fy));
-      model = cv::findEssentialMat(points1, points2, cv::Mat::eye(3, 3, CV_64F), cv::RANSAC,
-                                   options.confidence, threshold, options.max_num_trials, mask);
-    } else {
-      model = cv::findFundamentalMat(points1, points2, cv::FM_RANSAC, options.max_error_px,
-                                     options.confidence, options.max_num_trials, mask);
-    }
-  } catch (const cv::Exception&) {
-    return;  // A degenerate configuration OpenCV refuses: no geometry.
-  }
-  if (model.rows < 3 || model.cols != 3 || mask.empty()) return;
-  FeatureMatches inliers = InliersOf(matches, kept, mask);
-  if (inliers.size() < static_cast<size_t>(options.min_num_inliers)) return;
-  pair->inlier_matches = std::move(inliers);
-  const Eigen::Matrix3d estimated = ToEigen(model.rowRange(0, 3));
+  // constant on each call: the same inputs give the same models and masks.
+  const RansacResult fundamental = RunRansac([&](cv::Mat* mask) {
+    // OpenCV's F error is the larger of the two point-to-epipolar-line distances; COLMAP's is the
+    // Sampson distance, about 1/sqrt(2) of it: sqrt(2) * max_error_px selects the same points.
+    return cv::findFundamentalMat(pixels1, pixels2, cv::FM_RANSAC,
+                                  std::numbers::sqrt2 * options.max_error_px, options.confidence,
+                                  options.max_num_trials, *mask);
+  });
+  const RansacResult homography = RunRansac([&](cv::Mat* mask) {
+    return cv::findHomography(pixels1, pixels2, cv::RANSAC, options.max_error_px, *mask,
+                              options.max_num_trials, options.confidence);
+  });
+  RansacResult essential;
   if (camera) {
+    essential = RunRansac([&](cv::Mat* mask) {
+      const double threshold = options.max_error_px / (0.5 * (camera->fx + camera->fy));
+      return cv::findEssentialMat(points1, points2, cv::Mat::eye(3, 3, CV_64F), cv::RANSAC,
+                                  options.confidence, threshold, options.max_num_trials, *mask);
+    });
+  }
+  // COLMAP 3.8's TwoViewGeometry::EstimateCalibrated: calibrated when E explains more than 95 %
+  // of F's inliers, then the larger of the E and F inlier sets; else uncalibrated with F's; a
+  // homography explaining more than 80 % of the epipolar inliers makes it planar or panoramic
+  // and its inliers are kept when there are more of them; a homography alone also counts.
+  const auto ratio = [](size_t numerator, size_t denominator) {
+    return denominator == 0 ? 0.0
+                            : static_cast<double>(numerator) / static_cast<double>(denominator);
+  };
+  const RansacResult* best = nullptr;
+  size_t epipolar_inliers = 0;
+  if (camera && essential.num_inliers >= min_inliers &&
+      ratio(essential.num_inliers, fundamental.num_inliers) > kMinEssentialToFundamentalInliers) {
+    best = essential.num_inliers >= fundamental.num_inliers ? &essential : &fundamental;
+    epipolar_inliers = essential.num_inliers;
+    pair->config = TwoViewConfig::kCalibrated;
+  } else if (fundamental.num_inliers >= min_inliers) {
+    best = &fundamental;
+    epipolar_inliers = fundamental.num_inliers;
+    pair->config = TwoViewConfig::kUncalibrated;
+  } else if (homography.num_inliers >= min_inliers) {
+    best = &homography;
+    pair->config = TwoViewConfig::kPlanarOrPanoramic;
+  } else {
+    return;
+  }
+  if (best != &homography &&
+      ratio(homography.num_inliers, epipolar_inliers) > kMaxHomographyToEpipolarInliers) {
+    pair->config = TwoViewConfig::kPlanarOrPanoramic;
+    if (homography.num_inliers > best->num_inliers) best = &homography;
+  }
+  pair->inlier_matches = InliersOf(matches, kept, best->mask);
+  if (!homography.model.empty()) pair->H = ToEigen(homography.model);
+  if (!fundamental.model.empty()) pair->F = ToEigen(fundamental.model);
+  if (!essential.model.empty()) {
     // F of the pinhole part in COLMAP's pixels (exact without lens distortion).
     Eigen::Matrix3d k = Eigen::Matrix3d::Identity();
     k << camera->fx, 0, camera->cx + kColmapPixelOffset, 0, camera->fy,
         camera->cy + kColmapPixelOffset, 0, 0, 1;
     const Eigen::Matrix3d k_inverse = k.inverse();
-    pair->config = TwoViewConfig::kCalibrated;
-    pair->E = estimated;
-    pair->F = k_inverse.transpose() * estimated * k_inverse;
-  } else {
-    pair->config = TwoViewConfig::kUncalibrated;
-    pair->F = estimated;
+    pair->E = ToEigen(essential.model);
+    if (pair->config == TwoViewConfig::kCalibrated) {
+      pair->F = k_inverse.transpose() * pair->E * k_inverse;
+    }
   }
 }
 
