@@ -111,7 +111,8 @@ std::string ServerCounters::PrometheusText() const {
          rejected);
   metric("evloc_events_total", "counter", "Events tracked (rate() gives events/s).", events);
   metric("evloc_poses_total", "counter", "PoseUpdates sent (rate() gives poses/s).", poses);
-  metric("evloc_lost_poses_total", "counter", "PoseUpdates with status LOST.", lost_poses);
+  metric("evloc_lost_poses_total", "counter",
+         "PoseUpdates without a trusted pose (LOST, INITIALIZING, RELOCALIZING).", lost_poses);
   text << "# HELP evloc_pose_latency_microseconds Packet received to PoseUpdate sent.\n"
        << "# TYPE evloc_pose_latency_microseconds histogram\n";
   int64_t cumulative = 0;

@@ -48,14 +48,30 @@ api::MapDescription DescribeMap(const LoadedMap& map) {
 api::PoseUpdate PoseUpdateFromEstimate(const tracking::PoseEstimate& estimate) {
   api::PoseUpdate update;
   update.set_t_ns(estimate.t_ns);
-  *update.mutable_world_from_cam() = RigidToProto(estimate.world_from_cam);
-  for (int row = 0; row < 6; ++row) {
-    for (int col = 0; col < 6; ++col) update.add_covariance(estimate.covariance(row, col));
+  switch (estimate.status) {
+    case tracking::TrackingStatus::kTracking:
+      update.set_status(api::TRACKING);
+      break;
+    case tracking::TrackingStatus::kLost:
+      update.set_status(api::LOST);
+      break;
+    case tracking::TrackingStatus::kInitializing:
+      update.set_status(api::INITIALIZING);
+      break;
+    case tracking::TrackingStatus::kRelocalizing:
+      update.set_status(api::RELOCALIZING);
+      break;
   }
-  // The proto has no INITIALIZING / RELOCALIZING yet: a searching step carries no estimate, as a
-  // LOST one, and is sent as LOST (the service's own change adds the statuses).
-  update.set_status(estimate.status == tracking::TrackingStatus::kTracking ? api::TRACKING
-                                                                           : api::LOST);
+  // A searching step has no pose to report: no invented one goes out (docs/api.md). A LOST step
+  // carries the last good pose with the no-information covariance, as before.
+  const bool searching = estimate.status == tracking::TrackingStatus::kInitializing ||
+                         estimate.status == tracking::TrackingStatus::kRelocalizing;
+  if (!searching) {
+    *update.mutable_world_from_cam() = RigidToProto(estimate.world_from_cam);
+    for (int row = 0; row < 6; ++row) {
+      for (int col = 0; col < 6; ++col) update.add_covariance(estimate.covariance(row, col));
+    }
+  }
   auto* quality = update.mutable_quality();
   quality->set_on_edge_fraction(estimate.quality.on_edge_fraction);
   quality->set_mean_residual(estimate.quality.mean_residual);
@@ -112,9 +128,6 @@ void SessionLimits::Check() const {
 SessionSettings SessionSettingsFromProto(const api::SessionStart& start,
                                          const SessionLimits& limits) {
   if (!start.has_camera()) throw InvalidArgumentError("SessionStart.camera is missing");
-  if (!start.has_initial_world_from_cam() && !kTrackerStartsWithoutPose) {
-    throw InvalidArgumentError(kNoPoseNeedsRelocalizationMessage);
-  }
   SessionSettings settings;
   settings.camera = CameraFromProto(start.camera(), "SessionStart.camera");
   const int64_t pixels = int64_t{settings.camera.width} * settings.camera.height;
@@ -358,8 +371,14 @@ SessionTracker::SessionTracker(std::shared_ptr<const LoadedMap> map,
 
 void SessionTracker::StartTracker() {
   if (!settings_.initial_world_from_cam) {
-    // Wiring the relocalizing tracker: start it here without a pose at initial_t_ns.
-    throw InvalidArgumentError(kNoPoseNeedsRelocalizationMessage);
+    if (takes_frames_) {
+      throw InvalidArgumentError(
+          "SessionStart.initial_world_from_cam is missing: a frame session needs an initial pose "
+          "(find one with the Locate RPC); event sessions may start without one");
+    }
+    tracker_.StartWithoutPose(settings_.initial_t_ns);
+    started_ = true;
+    return;
   }
   tracker_.Reset(*settings_.initial_world_from_cam, settings_.initial_t_ns);
   started_ = true;

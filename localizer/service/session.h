@@ -41,23 +41,12 @@ cv::Mat GrayFromProto(uint32_t width, uint32_t height, const std::string& pixels
 cv::Mat FrameFromProto(const api::Frame& frame, const Camera& camera,
                        std::optional<int64_t> previous_t_ns);
 
-// True once the tracker can start without a pose (it relocalizes: TrackingStatus INITIALIZING);
-// until then a SessionStart without initial_world_from_cam is INVALID_ARGUMENT. Wiring it:
-// SessionTracker::StartTracker and PoseUpdateFromEstimate (docs/api.md).
-inline constexpr bool kTrackerStartsWithoutPose = false;
-
-// The INVALID_ARGUMENT message of a SessionStart without a pose while the tracker cannot start
-// without one.
-inline constexpr const char* kNoPoseNeedsRelocalizationMessage =
-    "SessionStart.initial_world_from_cam is missing: starting without a pose needs the "
-    "tracker's relocalization (not in this build)";
-
 // What a session runs with, from its SessionStart.
 struct SessionSettings {
   // The event (or frame) camera.
   Camera camera;
-  // Pose at initial_t_ns; nullopt: the session starts without a pose (it relocalizes first), only
-  // when kTrackerStartsWithoutPose.
+  // Pose at initial_t_ns; nullopt: the session starts without a pose and relocalizes first (event
+  // sessions only; docs/api.md, "Starting without a pose").
   std::optional<Rigid3d> initial_world_from_cam;
   // Session time of the initial pose, ns.
   int64_t initial_t_ns = 0;
@@ -220,8 +209,8 @@ class SessionTracker {
 
  private:
   std::vector<tracking::PoseEstimate> AddEvents(const EventBuffer& events, int64_t end_t_ns);
-  // Starts the tracker at the initial pose and time (throws InvalidArgumentError without a pose
-  // until kTrackerStartsWithoutPose).
+  // Starts the tracker at the initial pose and time, or without a pose (it searches the map);
+  // throws InvalidArgumentError for a frame session without a pose.
   void StartTracker();
 
   std::shared_ptr<const LoadedMap> map_;

@@ -282,23 +282,64 @@ TEST(SessionSettings, RejectsInvalidCamerasAndOptions) {
   }
 }
 
-// A SessionStart without a pose: INVALID_ARGUMENT naming what is missing until the tracker can
-// start without one (then the settings carry no pose and the session relocalizes).
-TEST(SessionSettings, StartWithoutAPoseNeedsTheTrackersRelocalization) {
-  api::SessionStart start;
-  *start.mutable_camera() = CameraToProto(testing::TestCamera());
-  if (kTrackerStartsWithoutPose) {
-    EXPECT_FALSE(SessionSettingsFromProto(start, SessionLimits()).initial_world_from_cam);
-    return;
+// A SessionStart without a pose opens an event session that relocalizes: its first updates are
+// INITIALIZING without a pose, then TRACKING with poses near the truth; a frame session without
+// a pose is refused with advice.
+TEST(SessionTracker, StartsWithoutAPoseAndFindsItselfInTheMap) {
+  api::SessionStart start = testing::TestSessionStart().start();
+  start.clear_initial_world_from_cam();
+  const SessionSettings settings = SessionSettingsFromProto(start, SessionLimits());
+  EXPECT_FALSE(settings.initial_world_from_cam);
+  auto map = std::make_shared<LoadedMap>();
+  map->map = testing::TestMap();
+  // Keyframes beside the path the events are simulated on (a map built from another pass).
+  map->map.cameras.push_back(settings.camera);
+  for (int64_t t_ns = 0; t_ns <= 600'000'000; t_ns += 150'000'000) {
+    Rigid3d world_from_cam = tracking::testing::SmoothMotion(t_ns) *
+                             ExpSE3((Vector6d() << 0.05, -0.03, 0.0, 0.0, 0.05, 0.0).finished());
+    Keyframe keyframe;
+    keyframe.cam_from_world = world_from_cam.Inverse();
+    keyframe.t_ns = t_ns;
+    map->map.keyframes.push_back(keyframe);
   }
+  map->visibility = std::make_unique<VisibilityIndex>(map->map);
+  SessionTracker tracker(map, settings);
+  RequestValidator validator(settings, SessionLimits{});
+  SessionItem item;
+  int initializing = 0;
+  int tracking_poses = 0;
+  for (const api::TrackRequest& packet :
+       testing::PackedPackets(testing::TestEvents(600'000'000), 5'000'000)) {
+    ASSERT_TRUE(validator.Accept(packet, &item).ok());
+    for (const tracking::PoseEstimate& estimate : tracker.Process(item)) {
+      const api::PoseUpdate update = PoseUpdateFromEstimate(estimate);
+      if (update.status() == api::INITIALIZING || update.status() == api::RELOCALIZING) {
+        ++initializing;
+        EXPECT_FALSE(update.has_world_from_cam()) << "a searching step invents no pose";
+        EXPECT_EQ(update.covariance_size(), 0);
+        continue;
+      }
+      if (update.status() != api::TRACKING) continue;
+      ++tracking_poses;
+      EXPECT_LT(
+          tracking::testing::PositionErrorToSmoothMotion(estimate.world_from_cam, estimate.t_ns),
+          0.05)
+          << estimate.t_ns;
+    }
+  }
+  EXPECT_GT(initializing, 0);
+  EXPECT_GT(tracking_poses, 50) << "never found itself";
+
+  // Frames need a pose: the tracker's search runs on events.
+  api::SessionStart frames = start;
+  frames.mutable_options()->set_frames(true);
+  const SessionSettings frame_settings = SessionSettingsFromProto(frames, SessionLimits());
   try {
-    SessionSettingsFromProto(start, SessionLimits());
+    SessionTracker frame_tracker(map, frame_settings);
     FAIL() << "expected an error";
   } catch (const InvalidArgumentError& error) {
-    EXPECT_EQ(std::string(error.what()), kNoPoseNeedsRelocalizationMessage);
+    EXPECT_NE(std::string(error.what()).find("Locate"), std::string::npos) << error.what();
   }
-  start.mutable_initial_world_from_cam()->mutable_rotation()->set_w(1);
-  EXPECT_TRUE(SessionSettingsFromProto(start, SessionLimits()).initial_world_from_cam);
 }
 
 }  // namespace

@@ -43,7 +43,8 @@ void CheckPose(const tracking::PoseEstimate& estimate) {
   EVLOC_FUZZ_REQUIRE(std::abs(pose.rotation.norm() - 1.0) < 1e-6);
   EVLOC_FUZZ_REQUIRE(estimate.status == tracking::TrackingStatus::kTracking ||
                      estimate.status == tracking::TrackingStatus::kLost ||
-                     estimate.status == tracking::TrackingStatus::kRelocalizing);
+                     estimate.status == tracking::TrackingStatus::kRelocalizing ||
+                     estimate.status == tracking::TrackingStatus::kInitializing);
 }
 
 int Run(const uint8_t* data, size_t size) {
