@@ -3,6 +3,7 @@
 #include <sqlite3.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstring>
 
 #include "core/common/error.h"
@@ -190,14 +191,24 @@ std::vector<ImageFeatures> ReadImageFeatures(const std::filesystem::path& databa
   const Database database(database_path, false);
   std::vector<ImageFeatures> images;
   std::map<uint32_t, size_t> index_of_id;
-  database.Query("SELECT image_id, name FROM images ORDER BY name", [&](sqlite3_stmt* row) {
-    ImageFeatures image;
-    image.image_id = static_cast<uint32_t>(sqlite3_column_int64(row, 0));
-    const unsigned char* name = sqlite3_column_text(row, 1);
-    image.name = name ? reinterpret_cast<const char*>(name) : "";
-    index_of_id[image.image_id] = images.size();
-    images.push_back(std::move(image));
+  std::vector<int64_t> camera_of_image;
+  database.Query("SELECT image_id, name, camera_id FROM images ORDER BY name",
+                 [&](sqlite3_stmt* row) {
+                   ImageFeatures image;
+                   image.image_id = static_cast<uint32_t>(sqlite3_column_int64(row, 0));
+                   const unsigned char* name = sqlite3_column_text(row, 1);
+                   image.name = name ? reinterpret_cast<const char*>(name) : "";
+                   index_of_id[image.image_id] = images.size();
+                   images.push_back(std::move(image));
+                   camera_of_image.push_back(sqlite3_column_int64(row, 2));
+                 });
+  std::map<int64_t, Eigen::Vector2f> camera_size;
+  database.Query("SELECT camera_id, width, height FROM cameras", [&](sqlite3_stmt* row) {
+    camera_size[sqlite3_column_int64(row, 0)] =
+        Eigen::Vector2f(static_cast<float>(sqlite3_column_int64(row, 1)),
+                        static_cast<float>(sqlite3_column_int64(row, 2)));
   });
+  std::vector<std::vector<float>> scales(images.size());
   std::vector<bool> has_keypoints(images.size(), false);
   std::vector<bool> has_descriptors(images.size(), false);
   // Calls body(image index, rows, cols, bytes) for each row of a features table (`keypoints` or
@@ -223,11 +234,18 @@ std::vector<ImageFeatures> ReadImageFeatures(const std::filesystem::path& databa
                [&](size_t index, int64_t rows, int64_t cols, std::vector<uint8_t> bytes) {
                  ImageFeatures& image = images[index];
                  image.keypoints.resize(static_cast<size_t>(rows));
+                 scales[index].assign(static_cast<size_t>(rows), 0.0f);
                  for (size_t i = 0; i < image.keypoints.size(); ++i) {
-                   float xy[2];
-                   std::memcpy(xy, bytes.data() + i * static_cast<size_t>(cols) * sizeof(float),
-                               sizeof(xy));
-                   image.keypoints[i] = Eigen::Vector2f(xy[0], xy[1]);
+                   float values[6] = {0, 0, 0, 0, 0, 0};
+                   std::memcpy(values, bytes.data() + i * static_cast<size_t>(cols) * sizeof(float),
+                               static_cast<size_t>(cols) * sizeof(float));
+                   image.keypoints[i] = Eigen::Vector2f(values[0], values[1]);
+                   // 4 columns: x y scale orientation; 6: x y and the affine shape a11 a12 a21 a22.
+                   if (cols == 4) scales[index][i] = values[2];
+                   if (cols == 6) {
+                     scales[index][i] =
+                         std::sqrt(std::abs(values[2] * values[5] - values[3] * values[4]));
+                   }
                  }
                  has_keypoints[index] = true;
                });
@@ -237,7 +255,7 @@ std::vector<ImageFeatures> ReadImageFeatures(const std::filesystem::path& databa
                  has_descriptors[index] = true;
                });
   for (size_t i = 0; i < images.size(); ++i) {
-    const ImageFeatures& image = images[i];
+    ImageFeatures& image = images[i];
     if (!has_keypoints[i] || !has_descriptors[i]) {
       throw ParseError(database.path().string(), "image " + std::to_string(image.image_id),
                        image.name +
@@ -249,6 +267,24 @@ std::vector<ImageFeatures> ReadImageFeatures(const std::filesystem::path& databa
                        std::to_string(image.keypoints.size()) + " keypoints but " +
                            std::to_string(image.descriptors.size() / kSiftDescriptorSize) +
                            " descriptors");
+    }
+    // A keypoint whose centre lies within one scale of the image border has most of its
+    // descriptor window outside the image, and COLMAP 3.8 computes that descriptor from memory
+    // outside the image: measured on slider_depth, frame 72's keypoint at y = 179.27 (0.73 px
+    // from the border, scale 3.75) had a normal descriptor in one run and an all-zero one in
+    // another. Such descriptors are zeroed, so that the matcher (which skips descriptors of small
+    // norm) never uses them and two runs match the same features.
+    const auto size = camera_size.find(camera_of_image[i]);
+    if (size == camera_size.end()) continue;
+    for (size_t k = 0; k < image.keypoints.size(); ++k) {
+      const Eigen::Vector2f& point = image.keypoints[k];
+      const float border = std::min(
+          {point.x(), point.y(), size->second.x() - point.x(), size->second.y() - point.y()});
+      if (border < scales[i][k]) {
+        std::fill_n(
+            image.descriptors.begin() + static_cast<std::ptrdiff_t>(k * kSiftDescriptorSize),
+            kSiftDescriptorSize, uint8_t{0});
+      }
     }
   }
   return images;
