@@ -268,7 +268,7 @@ std::vector<ImageFeatures> ReadImageFeatures(const std::filesystem::path& databa
                            std::to_string(image.descriptors.size() / kSiftDescriptorSize) +
                            " descriptors");
     }
-    // A keypoint whose centre lies within one scale of the image border has most of its
+    // A keypoint whose centre lies within half its scale of the image border has most of its
     // descriptor window outside the image, and COLMAP 3.8 computes that descriptor from memory
     // outside the image: measured on slider_depth, frame 72's keypoint at y = 179.27 (0.73 px
     // from the border, scale 3.75) had a normal descriptor in one run and an all-zero one in
@@ -280,7 +280,7 @@ std::vector<ImageFeatures> ReadImageFeatures(const std::filesystem::path& databa
       const Eigen::Vector2f& point = image.keypoints[k];
       const float border = std::min(
           {point.x(), point.y(), size->second.x() - point.x(), size->second.y() - point.y()});
-      if (border < scales[i][k]) {
+      if (border < 0.5f * scales[i][k]) {
         std::fill_n(
             image.descriptors.begin() + static_cast<std::ptrdiff_t>(k * kSiftDescriptorSize),
             kSiftDescriptorSize, uint8_t{0});

@@ -74,7 +74,7 @@ uint64_t ColmapPairId(uint32_t image_id1, uint32_t image_id2);
 // database cannot be opened or read, ParseError when a keypoint or descriptor blob does not have
 // the layout COLMAP 3.8 writes (keypoints: rows x 2, 4 or 6 float32; descriptors: rows x 128
 // uint8, as many rows as keypoints) or an image has no features row. The descriptor of a keypoint
-// within one scale of its image's border is returned as zeros (COLMAP computes it from memory
+// within half its scale of its image's border is returned as zeros (COLMAP computes it from memory
 // outside the image, differently from run to run), which the matcher never matches.
 std::vector<ImageFeatures> ReadImageFeatures(const std::filesystem::path& database_path);
 

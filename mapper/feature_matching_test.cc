@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <fstream>
 #include <random>
 #include <set>
@@ -353,6 +354,58 @@ TEST(ColmapDatabase, PairGeometriesRoundTripAndMalformedDatabasesAreRefused) {
   sqlite3_close(handle);
   EXPECT_THROW(ReadImageFeatures(database), ParseError);
   fs::remove_all(directory);
+}
+
+// A keypoint within half its scale of the image border has a descriptor COLMAP computed from
+// memory outside the image (it differed between two runs on real frames): ReadImageFeatures
+// returns it as zeros; moving one keypoint there zeroes its descriptor and no other.
+TEST(ColmapDatabase, DescriptorsOfKeypointsAtTheBorderAreNotUsed) {
+  const fs::path directory = evloc::testing::MakeTempDir("colmap_database_border");
+  const fs::path images = directory / "images";
+  fs::create_directories(images);
+  WriteTexture(images / "a.png", 1);
+  const fs::path database = ExtractFeatures(directory / "workspace", images, {"a.png"},
+                                            Camera::Pinhole(320, 240, 300, 300, 159.5, 119.5));
+  const std::vector<ImageFeatures> before = ReadImageFeatures(database);
+  ASSERT_EQ(before.size(), 1u);
+  ASSERT_GT(before[0].keypoints.size(), 10u);
+  const auto is_zero = [](const ImageFeatures& image, size_t k) {
+    return std::all_of(image.descriptors.begin() + k * kSiftDescriptorSize,
+                       image.descriptors.begin() + (k + 1) * kSiftDescriptorSize,
+                       [](uint8_t value) { return value == 0; });
+  };
+  ASSERT_FALSE(is_zero(before[0], 3)) << "keypoint 3 must start away from the border";
+  // Move keypoint 3 to 0.1 px from the bottom border (its scale stays, and is larger than 0.2 px).
+  sqlite3* db = nullptr;
+  ASSERT_EQ(sqlite3_open(database.c_str(), &db), SQLITE_OK);
+  sqlite3_stmt* select = nullptr;
+  ASSERT_EQ(sqlite3_prepare_v2(db, "SELECT rows, cols, data FROM keypoints WHERE image_id = ?", -1,
+                               &select, nullptr),
+            SQLITE_OK);
+  sqlite3_bind_int64(select, 1, before[0].image_id);
+  ASSERT_EQ(sqlite3_step(select), SQLITE_ROW);
+  const int64_t cols = sqlite3_column_int64(select, 1);
+  ASSERT_GE(cols, 4);
+  const auto* bytes = static_cast<const uint8_t*>(sqlite3_column_blob(select, 2));
+  std::vector<uint8_t> blob(bytes, bytes + sqlite3_column_bytes(select, 2));
+  sqlite3_finalize(select);
+  float y = 239.9f;
+  std::memcpy(blob.data() + (3 * cols + 1) * sizeof(float), &y, sizeof(y));
+  sqlite3_stmt* update = nullptr;
+  ASSERT_EQ(sqlite3_prepare_v2(db, "UPDATE keypoints SET data = ? WHERE image_id = ?", -1, &update,
+                               nullptr),
+            SQLITE_OK);
+  sqlite3_bind_blob(update, 1, blob.data(), static_cast<int>(blob.size()), SQLITE_TRANSIENT);
+  sqlite3_bind_int64(update, 2, before[0].image_id);
+  ASSERT_EQ(sqlite3_step(update), SQLITE_DONE);
+  sqlite3_finalize(update);
+  sqlite3_close(db);
+
+  const std::vector<ImageFeatures> after = ReadImageFeatures(database);
+  ASSERT_EQ(after[0].keypoints.size(), before[0].keypoints.size());
+  for (size_t k = 0; k < after[0].keypoints.size(); ++k) {
+    EXPECT_EQ(is_zero(after[0], k), k == 3 || is_zero(before[0], k)) << k;
+  }
 }
 
 }  // namespace

@@ -7,8 +7,8 @@
 #include <numbers>
 
 #include "core/common/test_data.h"
-#include "mapper/map_builder.h"
 #include "core/dataset/testing/middlebury.h"
+#include "mapper/map_builder.h"
 #include "maps/map.h"
 #include "tools/map_accuracy/map_accuracy.h"
 

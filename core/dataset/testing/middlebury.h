@@ -1,5 +1,6 @@
-// Test helpers for the Middlebury multi-view data (templeSparseRing): calibrated poses (the edge-distance
-// measure of docs/mapper.md is KeyframeEdgeDistances in tools/map_accuracy/map_accuracy.h).
+// Test helpers for the Middlebury multi-view data (templeSparseRing): calibrated poses (the
+// edge-distance measure of docs/mapper.md is KeyframeEdgeDistances in
+// tools/map_accuracy/map_accuracy.h).
 #pragma once
 
 #include <filesystem>
