@@ -252,11 +252,7 @@ BuildInputs LoadInputs(const MapBuilderOptions& options) {
   std::optional<Camera>& camera = inputs.camera;
   camera = options.camera;
   if (options.calibration_file) {
-    const std::string extension = Lowercase(options.calibration_file->extension().string());
-    camera =
-        (extension == ".yaml" || extension == ".yml")
-            ? ReadCameraYaml(*options.calibration_file)
-            : ReadEcdCalibration(*options.calibration_file, image_size.width, image_size.height);
+    camera = ReadCalibrationFile(*options.calibration_file, image_size.width, image_size.height);
   }
   if (camera && (camera->width != image_size.width || camera->height != image_size.height)) {
     throw InvalidArgumentError("the camera is " + std::to_string(camera->width) + " x " +

@@ -546,4 +546,15 @@ Camera ReadEcdCalibration(const std::filesystem::path& calib_txt, int width, int
   return camera;
 }
 
+bool IsCameraYamlPath(const std::filesystem::path& path) {
+  std::string extension = path.extension().string();
+  std::transform(extension.begin(), extension.end(), extension.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  return extension == ".yaml" || extension == ".yml";
+}
+
+Camera ReadCalibrationFile(const std::filesystem::path& path, int width, int height) {
+  return IsCameraYamlPath(path) ? ReadCameraYaml(path) : ReadEcdCalibration(path, width, height);
+}
+
 }  // namespace evloc

@@ -120,4 +120,12 @@ void WriteCameraYaml(const std::filesystem::path& path, const Camera& camera);
 // malformed, InvalidArgumentError when width or height is not positive.
 Camera ReadEcdCalibration(const std::filesystem::path& calib_txt, int width, int height);
 
+// True when `path` names an evloc YAML camera: its extension is .yaml or .yml, in any case.
+bool IsCameraYamlPath(const std::filesystem::path& path);
+
+// Reads a calibration file the tools take with --calib: an evloc YAML camera when
+// IsCameraYamlPath (its own size is kept), else an ECD calib.txt of size width x height. Throws as
+// ReadCameraYaml and ReadEcdCalibration.
+Camera ReadCalibrationFile(const std::filesystem::path& path, int width, int height);
+
 }  // namespace evloc

@@ -66,20 +66,17 @@ LocateCommand ParseLocateCommandLine(const std::vector<std::string>& arguments) 
 }
 
 Camera ReadLocateCalibration(const LocateCommand& command, int image_width, int image_height) {
-  const std::string extension = command.calib.extension().string();
-  if (extension == ".yaml" || extension == ".yml") {
-    const Camera camera = ReadCameraYaml(command.calib);
-    if (camera.width != image_width || camera.height != image_height) {
-      throw InvalidArgumentError("the camera of '" + command.calib.string() + "' is " +
-                                 std::to_string(camera.width) + "x" +
-                                 std::to_string(camera.height) + ", the image " +
-                                 std::to_string(image_width) + "x" + std::to_string(image_height));
-    }
-    return camera;
-  }
   const int width = command.width > 0 ? command.width : image_width;
   const int height = command.height > 0 ? command.height : image_height;
-  return ReadEcdCalibration(command.calib, width, height);
+  const Camera camera = ReadCalibrationFile(command.calib, width, height);
+  if (IsCameraYamlPath(command.calib) &&
+      (camera.width != image_width || camera.height != image_height)) {
+    throw InvalidArgumentError("the camera of '" + command.calib.string() + "' is " +
+                               std::to_string(camera.width) + "x" + std::to_string(camera.height) +
+                               ", the image " + std::to_string(image_width) + "x" +
+                               std::to_string(image_height));
+  }
+  return camera;
 }
 
 std::string LocateResultJson(const relocalization::LocateResult& result) {
