@@ -291,17 +291,8 @@ TEST(SessionTracker, StartsWithoutAPoseAndFindsItselfInTheMap) {
   const SessionSettings settings = SessionSettingsFromProto(start, SessionLimits());
   EXPECT_FALSE(settings.initial_world_from_cam);
   auto map = std::make_shared<LoadedMap>();
-  map->map = testing::TestMap();
-  // Keyframes beside the path the events are simulated on (a map built from another pass).
-  map->map.cameras.push_back(settings.camera);
-  for (int64_t t_ns = 0; t_ns <= 600'000'000; t_ns += 150'000'000) {
-    Rigid3d world_from_cam = tracking::testing::SmoothMotion(t_ns) *
-                             ExpSE3((Vector6d() << 0.05, -0.03, 0.0, 0.0, 0.05, 0.0).finished());
-    Keyframe keyframe;
-    keyframe.cam_from_world = world_from_cam.Inverse();
-    keyframe.t_ns = t_ns;
-    map->map.keyframes.push_back(keyframe);
-  }
+  map->map = testing::TestMapWithKeyframesBesideThePath();
+  ASSERT_TRUE(map->map.cameras.front() == settings.camera);
   map->visibility = std::make_unique<VisibilityIndex>(map->map);
   SessionTracker tracker(map, settings);
   RequestValidator validator(settings, SessionLimits{});

@@ -164,6 +164,11 @@ struct SharedState {
   std::vector<double> step_ms;
   int64_t lost = 0;
   int64_t backpressure = 0;
+  // Updates without a pose (the server searching), the session time of the newest update, and
+  // that of the first TRACKING pose.
+  int64_t searching = 0;
+  int64_t last_update_t_ns = 0;
+  std::optional<int64_t> first_tracking_t_ns;
   // The last pose received (the initial pose before the first), and when it arrived.
   TimedPose last_pose;
   Clock::time_point last_pose_wall;
@@ -197,7 +202,10 @@ class Replayer {
     }
     evt3_ = options.encoding == WireEncoding::kEvt3;
     const int64_t first_t_ns = source_->event().t_ns;
-    initial_ = ResolveInitialPose(dataset_, options.initial_world_from_cam, first_t_ns);
+    // Without a pose the session starts at the first event, which only primes the surfaces.
+    initial_ = options.start_without_pose
+                   ? TimedPose{SessionTime(first_t_ns), Rigid3d()}
+                   : ResolveInitialPose(dataset_, options.initial_world_from_cam, first_t_ns);
     next_window_start_ns_ = SessionTime(first_t_ns) - 1;
     dataset_start_ns_ = next_window_start_ns_;
     packet_ns_ = options.packet_us * 1000;
@@ -285,9 +293,15 @@ void Replayer::Prune(size_t* next) {
   int64_t keep_after_ns = 0;
   {
     std::lock_guard<std::mutex> lock(shared_.mutex);
-    // Before the first pose a new session starts from the beginning again.
-    if (shared_.poses.empty()) return;
-    keep_after_ns = shared_.last_pose.t_ns - prime_ns_;
+    if (!shared_.poses.empty()) {
+      keep_after_ns = shared_.last_pose.t_ns - prime_ns_;
+    } else if (options_.start_without_pose) {
+      // A new session searches again from the newest events: keep only what primes it.
+      keep_after_ns = shared_.last_update_t_ns - prime_ns_;
+    } else {
+      // Before the first pose a new session starts from the initial pose again.
+      return;
+    }
   }
   while (*next > 0 && history_.front().end_ns <= keep_after_ns) {
     history_.pop_front();
@@ -336,7 +350,10 @@ grpc::Status Replayer::RunSession(const TimedPose& start, bool resumed, bool* st
   api::SessionStart* session_start = start_request.mutable_start();
   session_start->set_map_name(options_.map_name);
   *session_start->mutable_camera() = CameraToProto(dataset_.camera);
-  *session_start->mutable_initial_world_from_cam() = RigidToProto(start.world_from_cam);
+  // Until a first pose arrives, a session --init-pose none starts without one again.
+  if (!options_.start_without_pose || resumed) {
+    *session_start->mutable_initial_world_from_cam() = RigidToProto(start.world_from_cam);
+  }
   session_start->set_initial_t_ns(start.t_ns);
   if (options_.step_rate_hz) {
     session_start->mutable_options()->set_step_rate_hz(*options_.step_rate_hz);
@@ -383,13 +400,22 @@ grpc::Status Replayer::RunSession(const TimedPose& start, bool resumed, bool* st
         shared_.server_latency_us.push_back(pose.latency_us());
         shared_.server_overhead_us.push_back(pose.latency_us() - pose.step_ms() * 1e3);
         shared_.step_ms.push_back(pose.step_ms());
-        const TimedPose timed{pose.t_ns(), RigidFromProto(pose.world_from_cam(), "PoseUpdate")};
-        shared_.poses.push_back(timed);
-        shared_.tracking.push_back(pose.status() == api::TRACKING);
-        if (pose.status() == api::LOST) ++shared_.lost;
-        shared_.last_pose = timed;
-        shared_.last_pose_wall = now;
-        if (shared_.session_poses++ == 0) shared_.first_session_pose_wall = now;
+        shared_.last_update_t_ns = pose.t_ns();
+        if (!pose.has_world_from_cam()) {
+          // INITIALIZING / RELOCALIZING: the server is searching and has no pose to give.
+          ++shared_.searching;
+        } else {
+          const TimedPose timed{pose.t_ns(), RigidFromProto(pose.world_from_cam(), "PoseUpdate")};
+          shared_.poses.push_back(timed);
+          shared_.tracking.push_back(pose.status() == api::TRACKING);
+          if (pose.status() == api::LOST) ++shared_.lost;
+          if (pose.status() == api::TRACKING && !shared_.first_tracking_t_ns) {
+            shared_.first_tracking_t_ns = pose.t_ns();
+          }
+          shared_.last_pose = timed;
+          shared_.last_pose_wall = now;
+          if (shared_.session_poses++ == 0) shared_.first_session_pose_wall = now;
+        }
         // The step at t ran after every event up to t was ingested.
         while (!shared_.unconfirmed_window_ends.empty() &&
                shared_.unconfirmed_window_ends.front() <= pose.t_ns()) {
@@ -586,6 +612,11 @@ ReplayResult Replayer::Run() {
   result.trajectory = Trajectory(shared_.poses);
   result.tracking = shared_.tracking;
   result.lost_poses = shared_.lost;
+  result.searching_updates = shared_.searching;
+  if (shared_.first_tracking_t_ns) {
+    result.first_tracking_s =
+        static_cast<double>(*shared_.first_tracking_t_ns - initial_.t_ns) * 1e-9;
+  }
   result.backpressure_notices = shared_.backpressure;
   result.client_latency_p50_us = Percentile(shared_.client_latency_us, 0.5);
   result.client_latency_p99_us = Percentile(shared_.client_latency_us, 0.99);
@@ -600,6 +631,15 @@ ReplayResult Replayer::Run() {
        << " packets, received " << result.trajectory.size() << " poses (" << result.lost_poses
        << " LOST), " << result.backpressure_notices << " backpressure notices, in " << result.wall_s
        << " s\n";
+  if (options_.start_without_pose) {
+    log_ << "evloc-replay: started without a pose: " << result.searching_updates
+         << " updates while the server searched; ";
+    if (result.first_tracking_s) {
+      log_ << "first TRACKING pose " << *result.first_tracking_s << " s after the first event\n";
+    } else {
+      log_ << "no TRACKING pose\n";
+    }
+  }
   if (!result.outages.empty()) {
     std::vector<double> resume_ms;
     for (const Outage& outage : result.outages) resume_ms.push_back(outage.resume_ms);
@@ -624,6 +664,9 @@ ReplayResult Replayer::Run() {
 void ReplayOptions::Check() const {
   CheckServerOptions(*this);
   if (map_name.empty()) throw InvalidArgumentError("--map is required: a map name (ListMaps)");
+  if (start_without_pose && initial_world_from_cam) {
+    throw InvalidArgumentError("--init-pose none and a pose exclude each other");
+  }
   if (dataset.empty()) throw InvalidArgumentError("--dataset is required: a dataset folder");
   if (output.empty()) throw InvalidArgumentError("--out is required: the TUM trajectory to write");
   if (speed && !(*speed > 0)) throw InvalidArgumentError("--speed must be positive or 'max'");
@@ -664,19 +707,23 @@ void WriteReplayReport(const std::filesystem::path& path, const ReplayResult& re
                        {"resume_ms", outage.resume_ms},
                        {"interruption_ms", outage.interruption_ms}});
   }
-  const nlohmann::json report = {{"events_sent", result.events_sent},
-                                 {"packets_sent", result.packets_sent},
-                                 {"packets_resent", result.packets_resent},
-                                 {"poses", result.trajectory.size()},
-                                 {"lost_poses", result.lost_poses},
-                                 {"backpressure_notices", result.backpressure_notices},
-                                 {"outages", outages},
-                                 {"client_latency_p50_us", result.client_latency_p50_us},
-                                 {"client_latency_p99_us", result.client_latency_p99_us},
-                                 {"server_latency_p50_us", result.server_latency_p50_us},
-                                 {"server_latency_p99_us", result.server_latency_p99_us},
-                                 {"step_p50_ms", result.step_p50_ms},
-                                 {"wall_s", result.wall_s}};
+  const nlohmann::json report = {
+      {"events_sent", result.events_sent},
+      {"packets_sent", result.packets_sent},
+      {"packets_resent", result.packets_resent},
+      {"poses", result.trajectory.size()},
+      {"lost_poses", result.lost_poses},
+      {"searching_updates", result.searching_updates},
+      {"first_tracking_s", result.first_tracking_s ? nlohmann::json(*result.first_tracking_s)
+                                                   : nlohmann::json(nullptr)},
+      {"backpressure_notices", result.backpressure_notices},
+      {"outages", outages},
+      {"client_latency_p50_us", result.client_latency_p50_us},
+      {"client_latency_p99_us", result.client_latency_p99_us},
+      {"server_latency_p50_us", result.server_latency_p50_us},
+      {"server_latency_p99_us", result.server_latency_p99_us},
+      {"step_p50_ms", result.step_p50_ms},
+      {"wall_s", result.wall_s}};
   WriteFileAtomically(path, report.dump(2) + "\n");
 }
 
@@ -746,8 +793,10 @@ Options:
   --token T              bearer token (sent as 'authorization: Bearer T')
   --tls-ca PEM           use TLS, trusting these root certificates (default plaintext)
   --tls-server-name NAME host name in the server's certificate, when not --server's host
-  --init-pose "tx ty tz qx qy qz qw"
-                         initial world_from_cam (default: first ground-truth pose)
+  --init-pose "tx ty tz qx qy qz qw"|none
+                         initial world_from_cam (default: first ground-truth pose); none: start
+                         without a pose, the server finds the camera in the map (updates
+                         INITIALIZING until then; docs/relocalization.md)
   --rate HZ              tracking steps per second (default: the server's)
   --max-lead-ms MS       with --speed max: session time sent ahead of the last pose (default 50)
   --duration S           stop after S seconds of session time after the initial pose
@@ -812,7 +861,11 @@ ReplayCommand ParseReplayCommandLine(const std::vector<std::string>& arguments) 
     } else if (flag == "--tls-server-name") {
       options.tls_server_name = value;
     } else if (flag == "--init-pose") {
-      options.initial_world_from_cam = ParsePoseText(flag, value);
+      if (value == "none") {
+        options.start_without_pose = true;
+      } else {
+        options.initial_world_from_cam = ParsePoseText(flag, value);
+      }
     } else if (flag == "--rate") {
       options.step_rate_hz = ParseDoubleFlag(flag, value);
     } else if (flag == "--max-lead-ms") {

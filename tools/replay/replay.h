@@ -49,6 +49,9 @@ struct ReplayOptions {
   std::optional<std::string> tls_server_name;
   // Initial world_from_cam; default: the dataset's first ground-truth pose (--init-pose).
   std::optional<Rigid3d> initial_world_from_cam;
+  // Start without a pose: the server searches the map (PoseUpdates INITIALIZING, without a pose,
+  // until it verifies one); the dataset needs no ground truth (--init-pose none).
+  bool start_without_pose = false;
   // Tracking steps per second asked of the server; nullopt: the server's default (--rate).
   std::optional<double> step_rate_hz;
   // With --speed max: the most session time sent ahead of the last pose received, ms
@@ -119,6 +122,12 @@ struct ReplayResult {
   std::vector<Outage> outages;
   // Poses received with status LOST.
   int64_t lost_poses = 0;
+  // Updates received without a pose (INITIALIZING or RELOCALIZING: the server was searching).
+  int64_t searching_updates = 0;
+  // Session time from the session's start (the initial pose's time, or the first event with
+  // --init-pose none) to the first TRACKING pose, seconds; unset when no pose
+  // was TRACKING (with --init-pose none: the time the server took to find the camera).
+  std::optional<double> first_tracking_s;
   // Backpressure notices received.
   int64_t backpressure_notices = 0;
   // Client-side latency, microseconds: pose received minus sending of the packet holding the

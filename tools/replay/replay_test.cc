@@ -137,6 +137,46 @@ TEST_F(ReplayTest, ServerErrorsBecomeClearFailures) {
   }
 }
 
+// --init-pose none: the session starts without a pose, the server searches the map's keyframes
+// (6 cm and 3 degrees off the path) and the replay gets updates without a pose until the first
+// TRACKING one; no TRACKING pose is far from the truth.
+TEST(ReplayWithoutPose, TheServerFindsTheCameraAndTheReplayReportsWhen) {
+  fixture::TemporaryFolder folder;
+  fixture::WriteTestMap(folder.path() / "maps", "beside",
+                        fixture::TestMapWithKeyframesBesideThePath());
+  const std::filesystem::path dataset = fixture::WriteTestDataset(folder.path(), 600'000'000);
+  service::LocalizerServer server(fixture::TestServerOptions(folder.path() / "maps"));
+  ReplayOptions options;
+  options.server = "127.0.0.1:" + std::to_string(server.port());
+  options.map_name = "beside";
+  options.dataset = dataset;
+  options.output = folder.path() / "trajectory.txt";
+  options.report = folder.path() / "report.json";
+  options.speed = std::nullopt;
+  options.step_rate_hz = 200;
+  options.start_without_pose = true;
+  std::ostringstream log;
+  const ReplayResult result = RunReplay(options, log);
+  EXPECT_GT(result.searching_updates, 0);
+  ASSERT_TRUE(result.first_tracking_s.has_value()) << log.str();
+  EXPECT_LT(*result.first_tracking_s, 0.3);
+  int tracking = 0;
+  for (size_t i = 0; i < result.trajectory.size(); ++i) {
+    if (!result.tracking[i]) continue;
+    ++tracking;
+    const TimedPose& pose = result.trajectory.poses()[i];
+    EXPECT_LT(
+        (pose.world_from_cam.translation - tracking::testing::SmoothMotion(pose.t_ns).translation)
+            .norm(),
+        0.05)
+        << pose.t_ns;
+  }
+  EXPECT_GT(tracking, 50);
+  EXPECT_NE(log.str().find("first TRACKING pose"), std::string::npos) << log.str();
+  const std::string report = ReadFileToString(folder.path() / "report.json");
+  EXPECT_NE(report.find("\"first_tracking_s\""), std::string::npos) << report;
+}
+
 TEST(ReplayTls, ReplaysOverTls) {
   if (std::system("openssl version > /dev/null 2>&1") != 0) {
     GTEST_SKIP() << "the openssl command is not installed: cannot make a test certificate";
@@ -225,6 +265,14 @@ TEST(ReplayCommandLine, FlagsMapToOptions) {
   EXPECT_EQ(options.lb_policy, "round_robin");
   EXPECT_EQ(options.report, std::filesystem::path("r.json"));
   EXPECT_THROW(ParseReplayCommandLine({"--server", "x"}), InvalidArgumentError);
+  const std::vector<std::string> required = {"--server",  "x", "--map", "m",
+                                             "--dataset", "d", "--out", "o"};
+  std::vector<std::string> no_pose = required;
+  no_pose.insert(no_pose.end(), {"--init-pose", "none"});
+  EXPECT_TRUE(ParseReplayCommandLine(no_pose).options.start_without_pose);
+  EXPECT_FALSE(ParseReplayCommandLine(required).options.start_without_pose);
+  no_pose.insert(no_pose.end(), {"--init-pose", "0 0 0 0 0 0 1"});
+  EXPECT_THROW(ParseReplayCommandLine(no_pose), InvalidArgumentError);
   EXPECT_THROW(ParseReplayCommandLine({"--server", "x", "--map", "m", "--dataset", "d", "--out",
                                        "o", "--encoding", "evt2"}),
                InvalidArgumentError);

@@ -8,6 +8,7 @@
 
 #include "core/dataset/dataset.h"
 #include "core/events/evb.h"
+#include "core/geometry/rigid3.h"
 #include "core/trajectory/trajectory.h"
 #include "localizer/service/session.h"
 #include "localizer/tracking/testing/synthetic_scene.h"
@@ -19,6 +20,21 @@ namespace evloc::service::testing {
 
 Map TestMap() {
   return tracking::testing::MakeRectangleMap(tracking::testing::DefaultRectangles(), 0.01);
+}
+
+Map TestMapWithKeyframesBesideThePath() {
+  Map map = TestMap();
+  map.cameras.push_back(TestCamera());
+  for (int64_t t_ns = 0; t_ns <= 600'000'000; t_ns += 150'000'000) {
+    const Rigid3d world_from_cam =
+        tracking::testing::SmoothMotion(t_ns) *
+        ExpSE3((Vector6d() << 0.05, -0.03, 0.0, 0.0, 0.05, 0.0).finished());
+    Keyframe keyframe;
+    keyframe.cam_from_world = world_from_cam.Inverse();
+    keyframe.t_ns = t_ns;
+    map.keyframes.push_back(keyframe);
+  }
+  return map;
 }
 
 Camera TestCamera() { return Camera::Pinhole(320, 240, 250, 250, 159.5, 119.5); }

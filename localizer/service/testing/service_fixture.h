@@ -24,6 +24,10 @@ inline constexpr int64_t kInitialTimeNs = 20'000'000;
 
 // The synthetic rectangle map (outline points every centimetre).
 Map TestMap();
+// TestMap() with keyframes every 150 ms over [0, 600 ms] of testing::SmoothMotion, each moved
+// 6 cm and 3 degrees off the path (a map built from another pass): what a session started
+// without a pose searches from.
+Map TestMapWithKeyframesBesideThePath();
 // The 320x240 pinhole camera of the synthetic scene.
 Camera TestCamera();
 // Ideal edge events of TestMap() seen along testing::SmoothMotion over [0, duration_ns].
