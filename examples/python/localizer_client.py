@@ -11,6 +11,9 @@ Input:
                               "distortion": []},
                    "initial_t_ns": 20000000,
                    "initial_world_from_cam": {"t": [x, y, z], "q": [qw, qx, qy, qz]}}
+                  Without "initial_world_from_cam" the service finds the camera in the map
+                  from the events: its updates say INITIALIZING, without a pose, until then
+                  (locate_client.py finds a pose from one image instead).
   --events FILE   text events, one per line: t_ns x y polarity (polarity 1 = ON, 0 or -1 = OFF),
                   in time order.
 
@@ -52,6 +55,28 @@ def load_stubs(stubs_dir):
     return localizer_pb2, localizer_pb2_grpc
 
 
+def stubs(stubs_dir, protoc):
+    """The stub modules (api, api_grpc): imported from stubs_dir, or generated with protoc into a
+    temporary folder that is removed once they are imported."""
+    if stubs_dir is not None:
+        return load_stubs(stubs_dir)
+    temporary = tempfile.mkdtemp(prefix="evloc-stubs-")
+    try:
+        generate_stubs(os.path.join(REPO_ROOT, "proto"), temporary, protoc=protoc)
+        return load_stubs(temporary)
+    finally:
+        shutil.rmtree(temporary, ignore_errors=True)
+
+
+def fill_camera(camera, message):
+    """Fills an evloc.map_format.Camera message from the session JSON's "camera" object."""
+    models = {"pinhole": 1, "radtan": 2, "equidistant": 3}
+    message.model = models[camera["model"]]
+    for key in ("width", "height", "fx", "fy", "cx", "cy"):
+        setattr(message, key, camera[key])
+    message.distortion.extend(camera.get("distortion", []))
+
+
 def read_events(path):
     """Reads `t_ns x y polarity` lines into numpy arrays (t int64, x, y uint16, on bool)."""
     table = np.loadtxt(path, dtype=np.int64, ndmin=2)
@@ -87,13 +112,7 @@ def main():
 
     import grpc  # pylint: disable=import-outside-toplevel
 
-    temporary = None
-    stubs_dir = args.stubs
-    if stubs_dir is None:
-        temporary = tempfile.mkdtemp(prefix="evloc-stubs-")
-        generate_stubs(os.path.join(REPO_ROOT, "proto"), temporary, protoc=args.protoc)
-        stubs_dir = temporary
-    api, api_grpc = load_stubs(stubs_dir)
+    api, api_grpc = stubs(args.stubs, args.protoc)
 
     with open(args.session, encoding="utf-8") as file:
         session = json.load(file)
@@ -101,17 +120,13 @@ def main():
 
     start = api.SessionStart(map_name=args.map, initial_t_ns=session["initial_t_ns"],
                              client_name="examples/python/localizer_client.py")
-    camera = session["camera"]
-    models = {"pinhole": 1, "radtan": 2, "equidistant": 3}
-    start.camera.model = models[camera["model"]]
-    for key in ("width", "height", "fx", "fy", "cx", "cy"):
-        setattr(start.camera, key, camera[key])
-    start.camera.distortion.extend(camera.get("distortion", []))
-    pose = session["initial_world_from_cam"]
-    start.initial_world_from_cam.translation.x, start.initial_world_from_cam.translation.y, \
-        start.initial_world_from_cam.translation.z = pose["t"]
-    rotation = start.initial_world_from_cam.rotation
-    rotation.w, rotation.x, rotation.y, rotation.z = pose["q"]
+    fill_camera(session["camera"], start.camera)
+    if "initial_world_from_cam" in session:
+        pose = session["initial_world_from_cam"]
+        start.initial_world_from_cam.translation.x, start.initial_world_from_cam.translation.y, \
+            start.initial_world_from_cam.translation.z = pose["t"]
+        rotation = start.initial_world_from_cam.rotation
+        rotation.w, rotation.x, rotation.y, rotation.z = pose["q"]
     if args.rate > 0:
         start.options.step_rate_hz = args.rate
 
@@ -146,6 +161,7 @@ def main():
     stub = api_grpc.LocalizerStub(channel)
     metadata = [("authorization", "Bearer " + args.token)] if args.token else None
     poses = 0
+    searching = 0
     try:
         for response in stub.Track(requests(), metadata=metadata):
             kind = response.WhichOneof("message")
@@ -155,13 +171,19 @@ def main():
                       f"{response.started.step_rate_hz:g} Hz")
             elif kind == "pose":
                 update = response.pose
-                poses += 1
                 with confirmed:
                     state["last_pose_t_ns"] = update.t_ns
                     confirmed.notify_all()
+                status = api.TrackingStatus.Name(update.status)
+                if not update.HasField("world_from_cam"):
+                    # INITIALIZING / RELOCALIZING: the service is searching and has no pose.
+                    searching += 1
+                    if not args.quiet:
+                        print(f"update t={update.t_ns * 1e-9:.6f} s  {status}")
+                    continue
+                poses += 1
                 if not args.quiet:
                     p = update.world_from_cam
-                    status = api.TrackingStatus.Name(update.status)
                     print(f"pose t={update.t_ns * 1e-9:.6f} s  t=({p.translation.x:.4f}, "
                           f"{p.translation.y:.4f}, {p.translation.z:.4f}) "
                           f"q=({p.rotation.w:.5f}, {p.rotation.x:.5f}, {p.rotation.y:.5f}, "
@@ -181,9 +203,8 @@ def main():
         with confirmed:
             state["done"] = True
             confirmed.notify_all()
-        if temporary:
-            shutil.rmtree(temporary, ignore_errors=True)
-    print(f"received {poses} poses")
+    print(f"received {poses} poses" +
+          (f" after {searching} updates without a pose (searching)" if searching else ""))
     return 0
 
 
