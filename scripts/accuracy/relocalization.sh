@@ -16,7 +16,8 @@
 # positives: 60 s of events of another room (scripts/accuracy/foreign_room.json, DAVIS240
 # camera) and the ECD snippets of /work/shared/data/ecd/snippets, with --give-up 1 (a search
 # episode ends "not_found" after 1 s and a new one starts). Each run prints one JSON line
-# (relocalization_eval.py); uptime before and after.
+# (relocalization_eval.py); uptime before and after. Then `evloc-localizer locate` on the frames of
+# a third path and of other scenes (locate_eval.py, one JSON line each).
 set -euo pipefail
 if [ $# -lt 2 ]; then sed -n 2,20p "$0"; exit 2; fi
 BUILD=$(realpath "$1"); OUT=$2
@@ -28,7 +29,7 @@ STARTS=${STARTS:-1 3 5}
 BLACKOUT=${BLACKOUT:-4:4.5}
 BLACKOUT_OTHER=${BLACKOUT_OTHER:-6.5:7}
 CPU=${CPU:-1}
-for tool in "$SIM" "$MAPPER" "$TRACK"; do
+for tool in "$SIM" "$MAPPER" "$TRACK" "$BUILD/localizer/service/evloc-localizer"; do
   [ -x "$tool" ] || { echo "relocalization: $tool is missing; build it first" >&2; exit 1; }
 done
 mkdir -p "$OUT"
@@ -80,4 +81,23 @@ print(json.dumps({'label': 'ECD ' + sys.argv[2], 'steps': len(steps),
                   'tracking_steps': sum(p['status'] == 'TRACKING' for p in steps)}))
 " "$OUT/ecd_$name.json" "$name"
 done
+# Locating single frames (evloc-localizer locate): a third path, `--motion mid --seed 23`, 0.16-0.66 m
+# from the map's path; then frames of scenes not in the map (the foreign room, the real DAVIS frames
+# of ECD slider_depth), which must all be NOT_FOUND.
+LOCALIZER=$BUILD/localizer/service/evloc-localizer
+SLIDER=${SLIDER:-/work/shared/data/ecd/slider_depth}
+[ -f "$OUT/locseq/groundtruth.txt" ] ||
+  "$SIM" render --out "$OUT/locseq" --motion mid --seed 23 --duration 10 --fps 10 --force
+/usr/bin/python3 "$HERE/locate_eval.py" "$LOCALIZER" "$OUT/map_known" --dataset "$OUT/locseq" \
+  --label "locate: third path (100 frames)" --details "$OUT/locate_locseq.jsonl"
+/usr/bin/python3 "$HERE/locate_eval.py" "$LOCALIZER" "$OUT/map_known" --dataset "$OUT/evseq" \
+  --label "locate: the events' path (40 frames)" --details "$OUT/locate_evseq.jsonl"
+/usr/bin/python3 "$HERE/locate_eval.py" "$LOCALIZER" "$OUT/map_known" \
+  --foreign "$OUT/foreign/calib.yaml" "$OUT/foreign/images/"*.png \
+  --label "locate: foreign room (60 frames)" --details "$OUT/locate_foreign.jsonl"
+if [ -f "$SLIDER/calib.txt" ]; then
+  /usr/bin/python3 "$HERE/locate_eval.py" "$LOCALIZER" "$OUT/map_known" \
+    --foreign "$SLIDER/calib.txt" "$SLIDER/images/"*.png \
+    --label "locate: ECD slider_depth frames" --details "$OUT/locate_slider.jsonl"
+fi
 echo "uptime after: $(uptime)"

@@ -1,0 +1,128 @@
+#!/usr/bin/python3
+"""Runs `evloc-localizer locate --json` on images and scores the answers (docs/accuracy.md,
+"Relocalization from one image").
+
+  locate_eval.py LOCALIZER MAP --dataset DIR [--every N] [--label L]
+      the frames of an evloc dataset (images.txt, calib.yaml, groundtruth.txt): FOUND rate, how
+      many FOUND within 2 cm / 1 degree of the ground truth (pose at the frame's time, linearly
+      interpolated), how many FOUND farther than 10 cm, errors, time per locate.
+  locate_eval.py LOCALIZER MAP --foreign CALIB IMAGE... [--label L]
+      images of scenes that are not in the map, with their calibration: every one should be
+      NOT_FOUND (exit 3).
+Prints one JSON line with the figures (and, with --details FILE, every answer).
+"""
+
+import argparse
+import json
+import math
+import os
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+
+def quaternion_angle_deg(q1, q2):
+    """Angle between two unit quaternions (x, y, z, w), degrees."""
+    dot = abs(float(np.dot(q1, q2)))
+    return math.degrees(2 * math.acos(min(1.0, dot)))
+
+
+def read_ground_truth(path):
+    table = np.loadtxt(path, comments="#", ndmin=2)
+    return table[:, 0], table[:, 1:4], table[:, 4:8]
+
+
+def pose_at(ground_truth, t):
+    """Ground-truth (translation, quaternion xyzw) at time t: linear / normalised-linear."""
+    times, translations, quaternions = ground_truth
+    i = int(np.searchsorted(times, t))
+    if i <= 0:
+        return translations[0], quaternions[0]
+    if i >= len(times):
+        return translations[-1], quaternions[-1]
+    a = (t - times[i - 1]) / (times[i] - times[i - 1])
+    q0, q1 = quaternions[i - 1], quaternions[i]
+    if np.dot(q0, q1) < 0:
+        q1 = -q1
+    q = (1 - a) * q0 + a * q1
+    return (1 - a) * translations[i - 1] + a * translations[i], q / np.linalg.norm(q)
+
+
+def locate(localizer, map_path, image, calib):
+    start = time.monotonic()
+    run = subprocess.run([localizer, "locate", "--map", map_path, "--image", image, "--calib",
+                          calib, "--json"], capture_output=True, text=True, check=False)
+    seconds = time.monotonic() - start
+    if run.returncode not in (0, 3):
+        sys.exit(f"locate failed on {image} (exit {run.returncode}): {run.stderr.strip()}")
+    answer = json.loads(run.stdout)
+    answer["exit"] = run.returncode
+    answer["wall_s"] = seconds
+    answer["image"] = image
+    return answer
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n", maxsplit=1)[0])
+    parser.add_argument("localizer")
+    parser.add_argument("map")
+    parser.add_argument("--dataset")
+    parser.add_argument("--every", type=int, default=1, help="every N-th frame of the dataset")
+    parser.add_argument("--foreign", nargs="+", metavar="CALIB IMAGE",
+                        help="a calibration file, then images of other scenes")
+    parser.add_argument("--label", default="")
+    parser.add_argument("--details", help="write every answer as JSON lines")
+    args = parser.parse_args()
+    answers = []
+    figures = {"label": args.label}
+    if args.dataset:
+        ground_truth = read_ground_truth(os.path.join(args.dataset, "groundtruth.txt"))
+        calib = os.path.join(args.dataset, "calib.yaml")
+        with open(os.path.join(args.dataset, "images.txt"), encoding="utf-8") as file:
+            frames = [line.split() for line in file if line.strip() and not line.startswith("#")]
+        translation_errors, rotation_errors = [], []
+        within, far = 0, 0
+        for t, name in frames[::args.every]:
+            answer = locate(args.localizer, args.map, os.path.join(args.dataset, name), calib)
+            answer["t_s"] = float(t)
+            if answer["status"] == "FOUND":
+                truth_t, truth_q = pose_at(ground_truth, float(t))
+                pose = np.array(answer["world_from_cam"])
+                answer["error_m"] = float(np.linalg.norm(pose[:3] - truth_t))
+                answer["error_deg"] = quaternion_angle_deg(pose[3:], truth_q)
+                translation_errors.append(answer["error_m"])
+                rotation_errors.append(answer["error_deg"])
+                within += answer["error_m"] <= 0.02 and answer["error_deg"] <= 1.0
+                far += answer["error_m"] > 0.10
+            answers.append(answer)
+        found = len(translation_errors)
+        figures.update({
+            "frames": len(answers), "found": found, "found_fraction": found / len(answers),
+            "within_2cm_1deg": within, "within_fraction": within / len(answers),
+            "found_beyond_10cm": far,
+            "error_cm_median": 100 * float(np.median(translation_errors)) if found else None,
+            "error_cm_max": 100 * max(translation_errors) if found else None,
+            "error_deg_median": float(np.median(rotation_errors)) if found else None,
+            "error_deg_max": max(rotation_errors) if found else None})
+    if args.foreign:
+        calib, images = args.foreign[0], args.foreign[1:]
+        for image in images:
+            answers.append(locate(args.localizer, args.map, image, calib))
+        figures.update({"images": len(images),
+                        "found": sum(a["status"] == "FOUND" for a in answers),
+                        "not_found_exit_3": sum(a["exit"] == 3 for a in answers)})
+    walls = [a["wall_s"] for a in answers]
+    figures["wall_s_median"] = float(np.median(walls))
+    figures["wall_s_p99"] = float(np.percentile(walls, 99))
+    if args.details:
+        with open(args.details, "w", encoding="utf-8") as file:
+            for answer in answers:
+                answer.pop("covariance", None)
+                file.write(json.dumps(answer) + "\n")
+    print(json.dumps(figures))
+
+
+if __name__ == "__main__":
+    main()
