@@ -35,8 +35,12 @@ HONEST_SESSIONS = 4
 MAP_NAME = "room"
 # Bounds of one attack's waits, seconds.
 STATUS_WAIT_S = 10.0
-# The first-message deadline the issue asks for (--handshake-timeout default), plus slack.
-HANDSHAKE_BOUND_S = 5.0 + 3.0
+# The first-message deadline the issue asks for (--handshake-timeout default, 5 s) twice (a
+# stream that HTTP/2's MAX_CONCURRENT_STREAMS queued on the client reaches the server only when
+# an earlier one ended), plus slack.
+HANDSHAKE_BOUND_S = 2 * 5.0 + 3.0
+# How long the metrics slowloris client keeps going, seconds.
+SLOW_CLIENT_S = 15.0
 # SIGTERM: drain timeout within a Kubernetes grace period (30 s), plus slack.
 SHUTDOWN_BOUND_S = 35.0
 
@@ -205,9 +209,14 @@ class Server:
         self.handle.close()
         return code, time.time() - begin
 
-    def channel(self):
-        return grpc.insecure_channel(self.address, options=[
-            ("grpc.max_send_message_length", 64 << 20), ("grpc.max_receive_message_length", 64 << 20)])
+    def channel(self, own_connection=False):
+        """A channel to the server; with own_connection, on a TCP connection of its own (gRPC
+        Python otherwise shares one between channels with the same arguments)."""
+        options = [("grpc.max_send_message_length", 64 << 20),
+                   ("grpc.max_receive_message_length", 64 << 20)]
+        if own_connection:
+            options.append(("grpc.use_local_subchannel_pool", 1))
+        return grpc.insecure_channel(self.address, options=options)
 
 
 def health(server, timeout_s=2.0):
@@ -454,11 +463,13 @@ class Attacks:
                 code == SC.RESOURCE_EXHAUSTED)
 
     def a3_silent_streams(self):
-        """40 Track streams that never send a SessionStart; then health and a new session."""
-        silent = [Stream(self.stub) for _ in range(40)]
+        """40 Track streams that never send a SessionStart (4 connections of 10); then health
+        and a new session on another connection."""
+        stubs = [pb_grpc.LocalizerStub(self.server.channel(own_connection=True)) for _ in range(4)]
+        silent = [Stream(stubs[i % 4]) for i in range(40)]
         time.sleep(1.0)
         status = health(self.server)
-        probe = Stream(self.stub)
+        probe = Stream(pb_grpc.LocalizerStub(self.server.channel(own_connection=True)))
         probe.send(session_start(client_name="attack-3-probe"))
         begin = time.time()
         probe_started = probe.wait_started(3.0)
@@ -598,7 +609,7 @@ class Attacks:
             if i == 1:
                 thread = threading.Thread(target=scraper)
                 thread.start()
-            if time.time() - begin > STATUS_WAIT_S:
+            if time.time() - begin > SLOW_CLIENT_S:
                 break
         slow.close()
         if thread:
@@ -693,13 +704,14 @@ EXPECTED = {
     "1": "INVALID_ARGUMENT or RESOURCE_EXHAUSTED within 10 s (caps on max_points, steps, CPU)",
     "2": "RESOURCE_EXHAUSTED (events-per-packet cap, memory budget)",
     "3": "each stream DEADLINE_EXCEEDED (handshake timeout) or RESOURCE_EXHAUSTED (per-peer "
-         "limit) within 8 s; a new session answered in 3 s or health NOT_SERVING",
+         "limit) within 13 s; a new session started in 3 s or health NOT_SERVING",
     "5": "FAILED_PRECONDITION without server paths; ListMaps OK; the replaced map keeps its "
          "last good version and serves sessions",
     "6": "OK, each call < 1 s, the server reads < 1/4 of the map files, RSS growth < 64 MiB "
          "(ListMaps from headers)",
     "7": "FAILED_PRECONDITION x100, the file read < 3 times (negative cache), no server path",
-    "8": "a concurrent scrape answered 200 in < 2 s; the slow client disconnected by the server",
+    "8": "a concurrent scrape answered 200 in < 2 s; the slow client disconnected by the server "
+         "within 15 s",
     "9": "OK with SessionEnd, server RSS growth < 16 MiB",
     "11a": "the server refuses the token file, or the token gets PERMISSION_DENIED",
     "11b": "UNAUTHENTICATED for every guess",
@@ -746,9 +758,12 @@ def main():
     if any(repeat[i][1] != reference[i][1] for i in range(HONEST_SESSIONS)):
         raise SystemExit("attack-service: two undisturbed runs gave different poses: the "
                          "bit-identical check cannot hold (see %s)" % OUT)
-    reference_p99 = median_p99(reference + repeat)
-    log("undisturbed: client latency p99 %.1f ms, server RSS peak %.0f MiB" %
-        (reference_p99 / 1e3, reference_server.rss_peak_kb / 1024))
+    # The quieter of the two rounds (the stricter reference: a shared machine's load comes and
+    # goes between rounds).
+    reference_p99 = min(median_p99(reference), median_p99(repeat))
+    log("undisturbed: client latency p99 (median of the sessions') %.1f ms and %.1f ms in the two "
+        "rounds, server RSS peak %.0f MiB" % (median_p99(reference) / 1e3, median_p99(repeat) / 1e3,
+                                              reference_server.rss_peak_kb / 1024))
 
     # 2. Attacked.
     server = Server("server-attacked", maps, args.server_arg)
