@@ -8,7 +8,6 @@
 #include <future>
 #include <limits>
 #include <mutex>
-#include <random>
 #include <thread>
 
 #include <grpcpp/generic/generic_stub.h>
@@ -27,6 +26,7 @@
 #include "localizer/wire/packed_events.h"
 #include "localizer/wire/percentile.h"
 #include "proto/convert/proto_convert.h"
+#include "tools/replay/reconnect.h"
 
 namespace evloc::replay {
 namespace {
@@ -81,7 +81,8 @@ std::shared_ptr<grpc::Channel> MakeChannel(const ReplayOptions& options) {
   if (options.reconnect > 0) {
     const int backoff_ms = static_cast<int>(options.reconnect_backoff_ms);
     arguments.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS, backoff_ms);
-    arguments.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, static_cast<int>(kMaxReconnectBackoffMs));
+    arguments.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS,
+                     static_cast<int>(options.reconnect_backoff_max_ms));
   }
   std::shared_ptr<grpc::ChannelCredentials> credentials = grpc::InsecureChannelCredentials();
   if (options.tls_ca_file) {
@@ -110,6 +111,36 @@ bool IsTransient(const grpc::Status& status) {
       return false;
   }
 }
+
+// The reconnect backoff's options of a replay.
+ReconnectOptions ReconnectOptionsOf(const ReplayOptions& options) {
+  ReconnectOptions reconnect;
+  reconnect.max_attempts = options.reconnect;
+  reconnect.base_ms = options.reconnect_backoff_ms;
+  reconnect.cap_ms = options.reconnect_backoff_max_ms;
+  reconnect.max_total_s = options.reconnect_max_s;
+  reconnect.stable_s = options.reconnect_stable_s;
+  reconnect.seed = options.reconnect_seed;
+  return reconnect;
+}
+
+// The value of trailing-metadata `key` of a finished call, empty when absent.
+std::string TrailingValue(const grpc::ClientContext& context, const std::string& key) {
+  const auto& trailers = context.GetServerTrailingMetadata();
+  const auto found = trailers.find(key);
+  return found == trailers.end() ? std::string()
+                                 : std::string(found->second.data(), found->second.size());
+}
+
+// How a Track call went, beyond its status.
+struct SessionOutcome {
+  // The server admitted the session (SessionStarted).
+  bool started = false;
+  // The client sent everything and half-closed; false when the server ended the stream first.
+  bool complete = false;
+  // The retry delay the server asked for in the call's trailers (ServerRetryDelay).
+  std::optional<Clock::duration> server_delay;
+};
 
 // Reads events from a file one at a time, in batches underneath.
 class EventSource {
@@ -186,7 +217,8 @@ struct SharedState {
 // One replay: the dataset, the windows that a new session may need again, and the sessions.
 class Replayer {
  public:
-  Replayer(const ReplayOptions& options, std::ostream& log) : options_(options), log_(log) {
+  Replayer(const ReplayOptions& options, std::ostream& log)
+      : options_(options), log_(log), backoff_(ReconnectOptionsOf(options)) {
     DatasetReaderOptions reader_options;
     reader_options.ecd_width = options.ecd_width;
     reader_options.ecd_height = options.ecd_height;
@@ -231,13 +263,11 @@ class Replayer {
   // Drops the sent windows that no new session can need again, shifting `next`.
   void Prune(size_t* next);
   // Runs one Track call from `start`: resends the windows of history_ from `start` minus the
-  // priming time (all of them before the first pose), then the rest of the dataset. `started`
-  // tells whether the server admitted it.
-  grpc::Status RunSession(const TimedPose& start, bool resumed, bool* started);
+  // priming time (all of them before the first pose), then the rest of the dataset; `outcome`:
+  // whether the server admitted it, whether the client got to its end, the server's retry delay.
+  grpc::Status RunSession(const TimedPose& start, bool resumed, SessionOutcome* outcome);
   // Completes the pending outage once the new session delivered a pose (or ended).
   void FinishOutage(Clock::time_point resumed_wall);
-  // Wait before reconnect attempt `attempt` (1-based).
-  Clock::duration Backoff(int attempt);
 
   const ReplayOptions& options_;
   std::ostream& log_;
@@ -270,7 +300,8 @@ class Replayer {
   std::optional<Outage> outage_;
   Clock::time_point failure_wall_;
   Clock::time_point last_pose_wall_before_failure_;
-  std::minstd_rand jitter_{std::random_device{}()};
+  // When to reconnect, and when to give up.
+  ReconnectBackoff backoff_;
 };
 
 bool Replayer::ProduceWindow() {
@@ -320,16 +351,8 @@ void Replayer::FinishOutage(Clock::time_point resumed_wall) {
   outage_.reset();
 }
 
-Clock::duration Replayer::Backoff(int attempt) {
-  const double base =
-      std::min(kMaxReconnectBackoffMs, options_.reconnect_backoff_ms * std::pow(2.0, attempt - 1));
-  std::uniform_real_distribution<double> jitter(0.8, 1.2);
-  return std::chrono::duration_cast<Clock::duration>(
-      std::chrono::duration<double, std::milli>(base * jitter(jitter_)));
-}
-
-grpc::Status Replayer::RunSession(const TimedPose& start, bool resumed, bool* started) {
-  *started = false;
+grpc::Status Replayer::RunSession(const TimedPose& start, bool resumed, SessionOutcome* outcome) {
+  *outcome = SessionOutcome();
   // A later session sends what it must send again as fast as the poses confirm it.
   const bool catching_up = ++sessions_ > 1;
   // The first window of this session.
@@ -345,6 +368,17 @@ grpc::Status Replayer::RunSession(const TimedPose& start, bool resumed, bool* st
   grpc::ClientContext context;
   if (options_.token) context.AddMetadata("authorization", "Bearer " + *options_.token);
   auto stream = stub_->Track(&context);
+  // Finishes the call and reads the retry delay the server may have sent with its status.
+  const auto finish = [&] {
+    grpc::Status status = stream->Finish();
+    if (!status.ok()) {
+      std::string details = status.error_details();
+      if (details.empty()) details = TrailingValue(context, "grpc-status-details-bin");
+      outcome->server_delay =
+          ServerRetryDelay(TrailingValue(context, "grpc-retry-pushback-ms"), details);
+    }
+    return status;
+  };
 
   api::TrackRequest start_request;
   api::SessionStart* session_start = start_request.mutable_start();
@@ -363,9 +397,10 @@ grpc::Status Replayer::RunSession(const TimedPose& start, bool resumed, bool* st
 
   api::TrackResponse response;
   if (!stream->Write(start_request) || !stream->Read(&response) || !response.has_started()) {
-    return stream->Finish();
+    return finish();
   }
-  *started = true;
+  outcome->started = true;
+  backoff_.SessionStarted(Clock::now());
   if (!schedule_start_) schedule_start_ = Clock::now();
   log_ << "evloc-replay: session " << response.started().session_id() << " on map "
        << response.started().map().name() << " version " << response.started().map().version()
@@ -523,15 +558,17 @@ grpc::Status Replayer::RunSession(const TimedPose& start, bool resumed, bool* st
       if (resumed_wall) FinishOutage(*resumed_wall);
     }
   }
+  outcome->complete = stream_open;
   stream->WritesDone();
   response_reader.join();
-  return stream->Finish();
+  return finish();
 }
 
 ReplayResult Replayer::Run() {
   wall_start_ = Clock::now();
-  int attempts = 0;
-  Clock::duration last_backoff{};
+  // Attempt number of the next Track call in the current outage (0: not reconnecting).
+  int attempt = 0;
+  Clock::duration last_delay{};
   for (;;) {
     TimedPose start;
     bool resumed = false;
@@ -541,19 +578,29 @@ ReplayResult Replayer::Run() {
       resumed = !shared_.poses.empty();
       shared_.session_poses = 0;
     }
-    bool started = false;
+    SessionOutcome outcome;
     grpc::Status status;
-    // A reconnect attempt waits (at most its backoff again) for a connection, so that it does
-    // not fail at once while the channel is still moving to another address.
-    if (attempts > 0 &&
+    // A reconnect attempt waits for a connection (its delay, at least --reconnect-backoff-ms:
+    // a full-jitter delay may be near zero), so that it does not fail at once while the channel
+    // is still moving to another address.
+    const Clock::duration connect_wait = std::max(
+        last_delay, std::chrono::duration_cast<Clock::duration>(
+                        std::chrono::duration<double, std::milli>(options_.reconnect_backoff_ms)));
+    if (attempt > 0 &&
         !channel_->WaitForConnected(
             std::chrono::system_clock::now() +
-            std::chrono::duration_cast<std::chrono::system_clock::duration>(last_backoff))) {
+            std::chrono::duration_cast<std::chrono::system_clock::duration>(connect_wait))) {
       status = grpc::Status(grpc::StatusCode::UNAVAILABLE,
                             "no connection to '" + options_.server + "' within " +
-                                std::to_string(MillisecondsOf(last_backoff)) + " ms");
+                                std::to_string(MillisecondsOf(connect_wait)) + " ms");
     } else {
-      status = RunSession(start, resumed, &started);
+      status = RunSession(start, resumed, &outcome);
+    }
+    // A server that ends the stream before the client's end without an error (a draining
+    // replica sends its SessionEnd and OK) has not finished the replay: resume elsewhere.
+    if (status.ok() && outcome.started && !outcome.complete) {
+      status = grpc::Status(grpc::StatusCode::UNAVAILABLE,
+                            "the server ended the session before the end of the stream");
     }
     int64_t session_poses = 0;
     Clock::time_point first_pose_wall;
@@ -562,14 +609,13 @@ ReplayResult Replayer::Run() {
       session_poses = shared_.session_poses;
       first_pose_wall = shared_.first_session_pose_wall;
     }
-    if (session_poses > 0) attempts = 0;
     if (outage_ && (session_poses > 0 || status.ok())) {
       FinishOutage(session_poses > 0 ? first_pose_wall : Clock::now());
     }
     if (status.ok()) break;
     const std::string sent = std::to_string(result_.packets_sent) + " packets";
     if (options_.reconnect == 0 || !IsTransient(status)) {
-      if (!started) {
+      if (!outcome.started) {
         throw Error("the server refused the session (status code, message): " + StatusText(status));
       }
       throw Error("the session failed after " + sent + ": " + StatusText(status));
@@ -585,25 +631,34 @@ ReplayResult Replayer::Run() {
       last_pose_wall_before_failure_ =
           shared_.poses.empty() ? failure_wall_ : shared_.last_pose_wall;
     }
-    if (++attempts > options_.reconnect) {
-      throw Error("gave up after " + std::to_string(options_.reconnect) +
-                  " reconnect attempts; the last one ended with " + StatusText(status) +
+    // RESOURCE_EXHAUSTED: the replica is full or this session overflowed its queue: slow down.
+    const FailureKind kind = status.error_code() == grpc::StatusCode::RESOURCE_EXHAUSTED
+                                 ? FailureKind::kOverloaded
+                                 : FailureKind::kTransient;
+    const ReconnectDecision decision = backoff_.OnFailure(Clock::now(), kind, outcome.server_delay);
+    if (!decision.retry) {
+      throw Error(decision.reason + "; the last one ended with " + StatusText(status) +
                   " (the stream first failed after " + sent + " with " +
                   std::to_string(outage_->status_code) + " " + outage_->status_message + ")");
     }
-    outage_->attempts = attempts;
-    last_backoff = Backoff(attempts);
+    attempt = decision.attempt;
+    last_delay = decision.delay;
+    outage_->attempts = attempt;
     int64_t resume_t_ns = 0;
     {
       std::lock_guard<std::mutex> lock(shared_.mutex);
       resume_t_ns = shared_.last_pose.t_ns;
     }
-    log_ << "evloc-replay: stream " << (started ? "failed" : "refused") << " ("
-         << StatusText(status) << "); reconnect " << attempts << "/" << options_.reconnect << " in "
-         << MillisecondsOf(last_backoff)
-         << " ms from the pose at t = " << static_cast<double>(resume_t_ns) * 1e-9 << " s"
+    log_ << "evloc-replay: stream " << (outcome.started ? "failed" : "refused") << " ("
+         << StatusText(status) << "); reconnect " << attempt << "/" << options_.reconnect << " in "
+         << MillisecondsOf(last_delay) << " ms"
+         << (outcome.server_delay
+                 ? " (the server asked for " +
+                       std::to_string(MillisecondsOf(*outcome.server_delay)) + " ms)"
+                 : std::string())
+         << " from the pose at t = " << static_cast<double>(resume_t_ns) * 1e-9 << " s"
          << std::endl;
-    std::this_thread::sleep_for(last_backoff);
+    std::this_thread::sleep_for(last_delay);
   }
 
   ReplayResult& result = result_;
@@ -679,11 +734,7 @@ void ReplayOptions::Check() const {
   if (ecd_width <= 0 || ecd_height <= 0) {
     throw InvalidArgumentError("--ecd-size must be WIDTHxHEIGHT with positive sizes");
   }
-  if (reconnect < 0) throw InvalidArgumentError("--reconnect must be 0 or more");
-  if (!(reconnect_backoff_ms >= 1 && reconnect_backoff_ms <= kMaxReconnectBackoffMs)) {
-    throw InvalidArgumentError("--reconnect-backoff-ms must be in 1.." +
-                               std::to_string(static_cast<int>(kMaxReconnectBackoffMs)));
-  }
+  ReconnectOptionsOf(*this).Check();
   // A merged priming packet spans at most this (PACKED offsets are below 2^31 ns).
   if (!(resume_prime_ms >= 0 && resume_prime_ms <= 1000)) {
     throw InvalidArgumentError("--resume-prime-ms must be in 0..1000");
@@ -776,9 +827,12 @@ std::string ReplayUsage() {
 Streams a dataset's events to an evloc localizer (docs/api.md) as a live camera would, writes
 the poses it gets back as a TUM trajectory, and prints events sent, poses received and the
 packet-to-pose latency (p50, p99). With --reconnect N, a stream that fails because its server
-went away or is overloaded (UNAVAILABLE, CANCELLED, ABORTED, RESOURCE_EXHAUSTED, or UNKNOWN:
-ended without a status, as a proxy does when its backend dies) is started again as a new
-session at the last pose received, and the trajectory continues (docs/deploy.md).
+went away, drains or is overloaded (UNAVAILABLE, CANCELLED, ABORTED, RESOURCE_EXHAUSTED, or
+UNKNOWN: ended without a status, as a proxy does when its backend dies) is started again as a
+new session at the last pose received, and the trajectory continues (docs/deploy.md). Attempt k
+of an outage waits a random time in [0, min(max, backoff * 2^(k-1))] (full jitter; at least half
+of it after RESOURCE_EXHAUSTED, and at least the server's grpc-retry-pushback-ms or RetryInfo
+delay); the outage ends only when a new session stayed up --reconnect-stable-s.
 
 Options:
   --server TARGET        localizer address: HOST:PORT, or a gRPC target such as
@@ -801,10 +855,15 @@ Options:
   --max-lead-ms MS       with --speed max: session time sent ahead of the last pose (default 50)
   --duration S           stop after S seconds of session time after the initial pose
   --ecd-size WxH         sensor size for ECD folders with calib.txt only (default 240x180)
-  --reconnect N          reconnect attempts in a row after a transient failure (default 0: fail)
+  --reconnect N          reconnect attempts of one outage (default 0: fail at once)
   --reconnect-backoff-ms MS
-                         wait before the first attempt, doubled per attempt up to 2000 ms,
-                         +-20 % jitter (default 100)
+                         delay ceiling of the first attempt, doubled per attempt (default 100)
+  --reconnect-backoff-max-ms MS
+                         largest delay ceiling (default 2000)
+  --reconnect-max-s S    no attempt starts later than S after the outage began (default 60)
+  --reconnect-stable-s S a session that stays up S seconds ends the outage and resets the
+                         backoff; one that fails sooner continues it (default 10)
+  --reconnect-seed N     seed of the jitter (default random)
   --resume-prime-ms MS   events before the resume pose sent again to prime the new session
                          (default 100)
   --lb pick_first|round_robin
@@ -878,6 +937,14 @@ ReplayCommand ParseReplayCommandLine(const std::vector<std::string>& arguments) 
       options.reconnect = ParseIntFlag(flag, value);
     } else if (flag == "--reconnect-backoff-ms") {
       options.reconnect_backoff_ms = ParseDoubleFlag(flag, value);
+    } else if (flag == "--reconnect-backoff-max-ms") {
+      options.reconnect_backoff_max_ms = ParseDoubleFlag(flag, value);
+    } else if (flag == "--reconnect-max-s") {
+      options.reconnect_max_s = ParseDoubleFlag(flag, value);
+    } else if (flag == "--reconnect-stable-s") {
+      options.reconnect_stable_s = ParseDoubleFlag(flag, value);
+    } else if (flag == "--reconnect-seed") {
+      options.reconnect_seed = ParseUnsignedFlag(flag, value);
     } else if (flag == "--resume-prime-ms") {
       options.resume_prime_ms = ParseDoubleFlag(flag, value);
     } else if (flag == "--lb") {

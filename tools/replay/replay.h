@@ -63,15 +63,28 @@ struct ReplayOptions {
   int ecd_width = 240;
   // Sensor height for ECD folders.
   int ecd_height = 180;
-  // Most reconnect attempts in a row after the stream failed with a transient status
-  // (UNAVAILABLE, CANCELLED, ABORTED, UNKNOWN: no status, as from a proxy whose backend died;
-  // RESOURCE_EXHAUSTED: the replica is full or the session's queue overflowed); 0: fail at once
-  // (--reconnect N). A new session
-  // starts at the last pose received, and the count starts again once it delivers a pose.
+  // Most reconnect attempts of one outage after the stream failed with a transient status
+  // (UNAVAILABLE, e.g. "draining"; CANCELLED, ABORTED, UNKNOWN: no status, as from a proxy whose
+  // backend died; RESOURCE_EXHAUSTED: the replica is full or the session's queue overflowed,
+  // retried as "slow down"); 0: fail at once (--reconnect N). A new session starts at the last
+  // pose received. The outage, and with it the count and the backoff, ends only once a new
+  // session stayed up for reconnect_stable_s.
   int reconnect = 0;
-  // Wait before the first reconnect attempt, ms; doubled per further attempt up to
-  // kMaxReconnectBackoffMs, with +-20 % jitter (--reconnect-backoff-ms).
+  // Ceiling of the first reconnect attempt's delay, ms: attempt k waits uniformly in
+  // [0, min(reconnect_backoff_max_ms, reconnect_backoff_ms * 2^(k-1))] (full jitter), at least
+  // half that ceiling after RESOURCE_EXHAUSTED, and at least the retry delay the server asked
+  // for (--reconnect-backoff-ms).
   double reconnect_backoff_ms = 100.0;
+  // Largest ceiling of a reconnect delay, ms (--reconnect-backoff-max-ms).
+  double reconnect_backoff_max_ms = 2000.0;
+  // Most wall time of one outage, seconds: no attempt starts later than this after the failure
+  // that began it (--reconnect-max-s).
+  double reconnect_max_s = 60.0;
+  // Wall time a new session must stay up, seconds, before its failure counts as a new outage
+  // with a fresh backoff (--reconnect-stable-s).
+  double reconnect_stable_s = 10.0;
+  // Seed of the reconnect jitter; unset: random (--reconnect-seed).
+  std::optional<uint64_t> reconnect_seed;
   // Session time of events before the resume pose that a new session is sent again to prime
   // its time surfaces, ms (--resume-prime-ms).
   double resume_prime_ms = 100.0;
@@ -84,9 +97,6 @@ struct ReplayOptions {
   // Throws InvalidArgumentError naming the first invalid field.
   void Check() const;
 };
-
-// Longest wait between two reconnect attempts, ms.
-inline constexpr double kMaxReconnectBackoffMs = 2000.0;
 
 // One stream failure the replay recovered from.
 struct Outage {

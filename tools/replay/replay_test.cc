@@ -242,6 +242,14 @@ TEST(ReplayCommandLine, FlagsMapToOptions) {
                                                         "5",
                                                         "--reconnect-backoff-ms",
                                                         "50",
+                                                        "--reconnect-backoff-max-ms",
+                                                        "400",
+                                                        "--reconnect-max-s",
+                                                        "30",
+                                                        "--reconnect-stable-s",
+                                                        "5",
+                                                        "--reconnect-seed",
+                                                        "42",
                                                         "--resume-prime-ms",
                                                         "80",
                                                         "--lb",
@@ -261,6 +269,10 @@ TEST(ReplayCommandLine, FlagsMapToOptions) {
   EXPECT_EQ(options.duration_s, 2);
   EXPECT_EQ(options.reconnect, 5);
   EXPECT_EQ(options.reconnect_backoff_ms, 50);
+  EXPECT_EQ(options.reconnect_backoff_max_ms, 400);
+  EXPECT_EQ(options.reconnect_max_s, 30);
+  EXPECT_EQ(options.reconnect_stable_s, 5);
+  EXPECT_EQ(options.reconnect_seed, 42u);
   EXPECT_EQ(options.resume_prime_ms, 80);
   EXPECT_EQ(options.lb_policy, "round_robin");
   EXPECT_EQ(options.report, std::filesystem::path("r.json"));
@@ -281,6 +293,10 @@ TEST(ReplayCommandLine, FlagsMapToOptions) {
                InvalidArgumentError);
   EXPECT_THROW(ParseReplayCommandLine({"--server", "x", "--map", "m", "--dataset", "d", "--out",
                                        "o", "--reconnect", "-1"}),
+               InvalidArgumentError);
+  EXPECT_THROW(ParseReplayCommandLine({"--server", "x", "--map", "m", "--dataset", "d", "--out",
+                                       "o", "--reconnect-backoff-ms", "500",
+                                       "--reconnect-backoff-max-ms", "100"}),
                InvalidArgumentError);
 
   // A health check needs the server only.
