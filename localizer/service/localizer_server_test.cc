@@ -377,7 +377,10 @@ TEST_F(LocalizerServerTest, IdleSessionIsCancelled) {
 // the server's writes block once gRPC's flow-control window is full, and the watchdog ends the
 // session after the idle timeout (it would otherwise hold its slot forever).
 TEST_F(LocalizerServerTest, ClientThatStopsReadingIsCancelled) {
-  StartServer([](LocalizerServerOptions& options) { options.idle_timeout_s = 0.5; });
+  StartServer([](LocalizerServerOptions& options) {
+    options.idle_timeout_s = 0.5;
+    options.max_step_rate_hz = 5000;
+  });
   std::vector<api::TrackRequest> requests{TestSessionStart()};
   requests[0].mutable_start()->mutable_options()->set_step_rate_hz(5000);
   for (auto& packet : testing::PackedPackets(testing::TestEvents(300'000'000), 10'000'000)) {
@@ -396,6 +399,60 @@ TEST_F(LocalizerServerTest, ClientThatStopsReadingIsCancelled) {
   // Far fewer poses were written than the 1500 steps of the stream (the writes blocked).
   EXPECT_LT(server_->counters().poses.load(), 1500);
   context.TryCancel();
+}
+
+// A SessionStart and one empty packet that completes `steps` steps at 1 kHz (the server's
+// per-request limits raised in the test to allow it).
+std::vector<api::TrackRequest> LongPacketSession(int64_t steps) {
+  std::vector<api::TrackRequest> requests{TestSessionStart()};
+  requests[0].mutable_start()->mutable_options()->set_step_rate_hz(1000);
+  api::TrackRequest packet;
+  packet.mutable_events()->set_end_t_ns(testing::kInitialTimeNs + steps * 1'000'000);
+  requests.push_back(packet);
+  return requests;
+}
+
+void AllowLongPackets(LocalizerServerOptions& options) {
+  options.max_packet_span_s = 1000;
+  options.max_steps_per_request = 1'000'000;
+}
+
+// Finding 1 of issue 14: a request's steps could not be interrupted, so a cancelled session kept
+// its worker (and a core) busy for the whole packet. The worker now stops within one step of the
+// cancellation: the slot is free long before the 1M steps could have run.
+TEST_F(LocalizerServerTest, CancelledSessionStopsItsWorkerWithinOneStep) {
+  StartServer(AllowLongPackets);
+  const auto requests = LongPacketSession(900'000);
+  {
+    grpc::ClientContext context;
+    auto stream = stub_->Track(&context);
+    for (const auto& request : requests) ASSERT_TRUE(stream->Write(request));
+    api::TrackResponse response;
+    ASSERT_TRUE(stream->Read(&response));
+    ASSERT_TRUE(response.has_started());
+    ASSERT_TRUE(Eventually([&] { return server_->counters().sessions_active == 1; }));
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));  // The long packet's steps run.
+    context.TryCancel();
+  }
+  EXPECT_TRUE(Eventually([&] { return server_->counters().sessions_active == 0; }));
+  EXPECT_LT(server_->counters().poses.load(), 900'000);
+}
+
+// Finding 1: a session over its CPU budget (CPU seconds per second of session time, after the
+// grace) is ended with RESOURCE_EXHAUSTED within a step.
+TEST_F(LocalizerServerTest, SessionOverItsCpuBudgetIsResourceExhausted) {
+  StartServer([](LocalizerServerOptions& options) {
+    AllowLongPackets(options);
+    options.session_cpu_grace_s = 0.2;
+    options.session_cpu_per_second = 1e-4;
+  });
+  const TrackOutcome outcome = RunTrack(*stub_, LongPacketSession(900'000));
+  EXPECT_EQ(outcome.status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED)
+      << outcome.status.error_message();
+  EXPECT_NE(outcome.status.error_message().find("--session-cpu-budget"), std::string::npos)
+      << outcome.status.error_message();
+  EXPECT_LT(outcome.Poses().size(), 900'000u);
+  EXPECT_GE(server_->counters().limited.load(), 1);
 }
 
 TEST_F(LocalizerServerTest, OverflowingSessionIsToldThenStopped) {
