@@ -1119,7 +1119,10 @@ LocalizerServer::LocalizerServer(const LocalizerServerOptions& options, LogFunct
   }
   grpc::ResourceQuota quota("evloc-localizer");
   quota.SetMaxThreads(options.threads == 0 ? options.max_sessions + 8 : options.threads);
-  quota.Resize(static_cast<size_t>(options.max_memory_bytes));
+  // gRPC's own buffers (messages being received and sent): the same budget, but room for at
+  // least 16 messages of the largest size.
+  quota.Resize(static_cast<size_t>(
+      std::max(options.max_memory_bytes, int64_t{16} * options.max_message_bytes)));
   builder.SetResourceQuota(quota);
   server_ = builder.BuildAndStart();
   if (!server_ || port_ == 0) {

@@ -77,7 +77,7 @@ struct LocalizerServerOptions {
   // Server-wide budget for decoded requests waiting in the sessions' queues, bytes (13 per
   // event, frame pixels); a packet that does not fit ends its session with RESOURCE_EXHAUSTED,
   // and no session is admitted while 3/4 of it is used. gRPC's own buffers get a ResourceQuota
-  // of the same size (--max-memory).
+  // of the same size, at least 16 x max_message_bytes (--max-memory).
   int64_t max_memory_bytes = int64_t{1} << 30;
   // CPU budget of a session's tracking thread: CPU seconds per second of session time tracked,
   // beyond session_cpu_grace_s; a session over it ends with RESOURCE_EXHAUSTED

@@ -23,6 +23,7 @@
 #include "localizer/service/session.h"
 #include "localizer/service/testing/service_fixture.h"
 #include "localizer/tracking/testing/synthetic_scene.h"
+#include "localizer/wire/packed_events.h"
 #include "proto/convert/proto_convert.h"
 
 namespace evloc::service {
@@ -453,6 +454,206 @@ TEST_F(LocalizerServerTest, SessionOverItsCpuBudgetIsResourceExhausted) {
       << outcome.status.error_message();
   EXPECT_LT(outcome.Poses().size(), 900'000u);
   EXPECT_GE(server_->counters().limited.load(), 1);
+}
+
+// A PACKED packet of `count` events in the first microsecond after `after_ns`, ending at
+// `end_ns`.
+api::TrackRequest DensePacket(size_t count, int64_t after_ns, int64_t end_ns) {
+  EventBuffer events;
+  for (size_t i = 0; i < count; ++i) {
+    events.push_back({after_ns + 1 + static_cast<int64_t>(i % 1000), static_cast<uint16_t>(i % 320),
+                      static_cast<uint16_t>(i / 320 % 240), 1});
+  }
+  api::TrackRequest request;
+  api::EventPacket* packet = request.mutable_events();
+  packet->set_encoding(api::EVENT_ENCODING_PACKED);
+  packet->set_time_base_ns(after_ns);
+  packet->set_end_t_ns(end_ns);
+  packet->set_data(wire::EncodePackedEvents(events, 0, events.size(), after_ns));
+  return request;
+}
+
+// A session whose first packet keeps the worker busy (900k steps) while dense packets follow.
+std::vector<api::TrackRequest> BusyWorkerThenDensePackets(size_t packets, size_t events) {
+  std::vector<api::TrackRequest> requests{TestSessionStart()};
+  requests[0].mutable_start()->mutable_options()->set_step_rate_hz(1000);
+  int64_t end = testing::kInitialTimeNs + 900'000'000'000;
+  requests.push_back(DensePacket(events, testing::kInitialTimeNs, end));
+  for (size_t i = 0; i < packets; ++i) {
+    requests.push_back(DensePacket(events, end, end + 1'000'000));
+    end += 1'000'000;
+  }
+  return requests;
+}
+
+// Finding 2 of issue 14: the queue counted packets, not events (a packet may decode to millions):
+// it is bounded in events too.
+TEST_F(LocalizerServerTest, QueueBoundedInEventsOverflows) {
+  StartServer([](LocalizerServerOptions& options) {
+    AllowLongPackets(options);
+    options.max_packet_events = 1000;
+    options.queue_events = 2500;
+  });
+  const TrackOutcome outcome = RunTrack(*stub_, BusyWorkerThenDensePackets(10, 1000));
+  EXPECT_EQ(outcome.status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED)
+      << outcome.status.error_message();
+  EXPECT_NE(outcome.status.error_message().find("2500 events overflowed"), std::string::npos)
+      << outcome.status.error_message();
+}
+
+// Finding 2: the server's own accounting of queued decoded events refuses packets (and new
+// sessions) before the process runs out of memory.
+TEST_F(LocalizerServerTest, PacketsBeyondTheServerMemoryBudgetAreRefused) {
+  StartServer([](LocalizerServerOptions& options) {
+    AllowLongPackets(options);
+    // The queue takes 3 packets; the budget too, and the packet being tracked counts in it.
+    options.max_packet_events = 1000;
+    options.queue_events = 3000;
+    options.max_memory_bytes = 3000 * kDecodedEventBytes;
+  });
+  const TrackOutcome outcome = RunTrack(*stub_, BusyWorkerThenDensePackets(10, 1000));
+  EXPECT_EQ(outcome.status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED)
+      << outcome.status.error_message();
+  EXPECT_NE(outcome.status.error_message().find("--max-memory"), std::string::npos)
+      << outcome.status.error_message();
+  EXPECT_TRUE(Eventually([&] { return server_->counters().sessions_active == 0; }));
+}
+
+// Finding 3 of issue 14: a stream that never sent its SessionStart held a handler thread
+// forever; it is cancelled after --handshake-timeout.
+TEST_F(LocalizerServerTest, StreamWithoutSessionStartIsCancelledAfterTheHandshakeTimeout) {
+  StartServer([](LocalizerServerOptions& options) { options.handshake_timeout_s = 0.3; });
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(20));
+  auto stream = stub_->Track(&context);
+  api::TrackResponse response;
+  EXPECT_FALSE(stream->Read(&response));
+  EXPECT_EQ(stream->Finish().error_code(), grpc::StatusCode::CANCELLED);
+  EXPECT_GE(server_->counters().limited.load(), 1);
+  EXPECT_TRUE(Eventually([&] {
+    for (const std::string& line : LogLines()) {
+      if (line.find("--handshake-timeout") != std::string::npos) return true;
+    }
+    return false;
+  }));
+}
+
+// Finding 3: one peer may not hold every handler thread with streams (sessions or not).
+TEST_F(LocalizerServerTest, StreamsPerPeerAreLimited) {
+  StartServer([](LocalizerServerOptions& options) {
+    options.max_sessions = 2;
+    options.handshake_timeout_s = 30;
+  });
+  grpc::ClientContext first_context;
+  grpc::ClientContext second_context;
+  auto first = stub_->Track(&first_context);
+  auto second = stub_->Track(&second_context);
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));  // Both calls reached the server.
+  grpc::ClientContext third_context;
+  third_context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
+  auto third = stub_->Track(&third_context);
+  api::TrackResponse response;
+  EXPECT_FALSE(third->Read(&response));
+  const grpc::Status status = third->Finish();
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << status.error_message();
+  EXPECT_NE(status.error_message().find("--max-streams-per-peer"), std::string::npos);
+  first_context.TryCancel();
+  second_context.TryCancel();
+}
+
+// The health of service `name` on the test server: 1 SERVING, 2 NOT_SERVING, -1 when the call
+// failed (the status in `status`).
+int HealthOf(int port, const std::string& name, grpc::Status* status) {
+  auto channel =
+      grpc::CreateChannel("127.0.0.1:" + std::to_string(port), grpc::InsecureChannelCredentials());
+  grpc::GenericStub generic(channel);
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
+  // HealthCheckRequest{service = name}: field 1, length-delimited.
+  const std::string bytes =
+      name.empty() ? std::string() : std::string("\x0a") + static_cast<char>(name.size()) + name;
+  const grpc::Slice slice(bytes.data(), bytes.size());
+  const grpc::ByteBuffer request(&slice, 1);
+  grpc::ByteBuffer response;
+  std::promise<grpc::Status> done;
+  generic.UnaryCall(&context, "/grpc.health.v1.Health/Check", grpc::StubOptions(), &request,
+                    &response, [&done](grpc::Status result) { done.set_value(result); });
+  *status = done.get_future().get();
+  if (!status->ok()) return -1;
+  std::vector<grpc::Slice> slices;
+  if (!response.Dump(&slices).ok()) return -1;
+  std::string answer;
+  for (const auto& part : slices) {
+    answer.append(reinterpret_cast<const char*>(part.begin()), part.size());
+  }
+  return answer.size() == 2 && answer[0] == '\x08' ? answer[1] : -1;
+}
+
+constexpr int kServing = 1;
+constexpr int kNotServing = 2;
+
+// Finding 3: health stayed SERVING while the server could admit nothing; the Localizer
+// service's health (what readiness asks) now follows admission, the overall health (liveness)
+// stays SERVING.
+TEST_F(LocalizerServerTest, LocalizerHealthIsNotServingWhileNoSessionCanBeAdmitted) {
+  StartServer([](LocalizerServerOptions& options) { options.max_sessions = 1; });
+  const std::string service = api::Localizer::service_full_name();
+  grpc::Status status;
+  EXPECT_EQ(HealthOf(server_->port(), service, &status), kServing) << status.error_message();
+  grpc::ClientContext context;
+  auto stream = stub_->Track(&context);
+  ASSERT_TRUE(stream->Write(TestSessionStart()));
+  api::TrackResponse response;
+  ASSERT_TRUE(stream->Read(&response));
+  EXPECT_EQ(HealthOf(server_->port(), service, &status), kNotServing);
+  EXPECT_EQ(HealthOf(server_->port(), "", &status), kServing);
+  stream->WritesDone();
+  while (stream->Read(&response)) {
+  }
+  EXPECT_TRUE(stream->Finish().ok());
+  EXPECT_TRUE(Eventually([&] { return HealthOf(server_->port(), service, &status) == kServing; }));
+}
+
+// Finding 13 of issue 14: a newline in client_name forged log lines.
+TEST_F(LocalizerServerTest, ClientNameCannotForgeLogLines) {
+  StartServer();
+  auto requests = ShortSession();
+  requests[0].mutable_start()->set_client_name("replay\nsession 99 end: OK; forged" +
+                                               std::string(1000, 'x'));
+  EXPECT_TRUE(RunTrack(*stub_, requests).status.ok());
+  bool logged = false;
+  for (const std::string& line : LogLines()) {
+    EXPECT_EQ(line.find('\n'), std::string::npos) << line;
+    EXPECT_LT(line.size(), 800u) << line;
+    logged |= line.find("replay\\x0asession 99") != std::string::npos;
+  }
+  EXPECT_TRUE(logged);
+}
+
+// Finding 13: statuses carried absolute server paths (the map folder, a map file).
+TEST_F(LocalizerServerTest, StatusesCarryNoServerPaths) {
+  StartServer();
+  std::filesystem::create_directories(folder_.path() / "broken");
+  std::ofstream(folder_.path() / "broken" / "map.evmap") << "not a map";
+  const std::string folder = folder_.path().string();
+  {
+    grpc::ClientContext context;
+    api::GetMapRequest request;
+    request.set_name("broken");
+    api::MapDescription description;
+    const grpc::Status status = stub_->GetMap(&context, request, &description);
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::FAILED_PRECONDITION);
+    EXPECT_EQ(status.error_message().find(folder), std::string::npos) << status.error_message();
+    EXPECT_EQ(status.error_message().find("/tmp"), std::string::npos) << status.error_message();
+  }
+  for (const std::string name : {"broken", "absent"}) {
+    auto requests = ShortSession();
+    requests[0].mutable_start()->set_map_name(name);
+    const grpc::Status status = RunTrack(*stub_, requests).status;
+    EXPECT_FALSE(status.ok());
+    EXPECT_EQ(status.error_message().find(folder), std::string::npos) << status.error_message();
+    EXPECT_EQ(status.error_message().find("/tmp"), std::string::npos) << status.error_message();
+  }
 }
 
 TEST_F(LocalizerServerTest, OverflowingSessionIsToldThenStopped) {
