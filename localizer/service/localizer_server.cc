@@ -79,6 +79,7 @@ void LocalizerServerOptions::Check() const {
   if (tls_cert_file.has_value() != tls_key_file.has_value()) {
     throw InvalidArgumentError("--tls-cert and --tls-key go together");
   }
+  if (queue_events > (int64_t{1} << 40)) throw InvalidArgumentError("--queue-events is too large");
   if (queue_events < max_packet_events) {
     throw InvalidArgumentError("--queue-events must be at least --max-packet-events (" +
                                std::to_string(max_packet_events) + ")");
@@ -627,6 +628,9 @@ class TrackStream {
     return static_cast<double>(now.tv_sec) + 1e-9 * static_cast<double>(now.tv_nsec);
   }
 
+  // How long a draining session waits for its client's next message before it is cancelled.
+  static constexpr auto kDrainReadWait = std::chrono::seconds(1);
+
   // The status of a session stopped by the drain.
   static grpc::Status DrainingStatus() {
     return {grpc::StatusCode::UNAVAILABLE,
@@ -774,6 +778,7 @@ class TrackStream {
     const auto poll = std::min<Clock::duration>(std::min(limit, handshake_limit) / 10,
                                                 std::chrono::milliseconds(100));
     const auto call_start = Clock::now();
+    std::optional<Clock::time_point> drain_start;
     uint64_t last_progress = progress_.load();
     auto last_change = Clock::now();
     bool cancelled = false;
@@ -782,7 +787,10 @@ class TrackStream {
       if (service_.draining()) {
         stop_requested_ = true;
         draining_ = true;
-        if (!handshake_done_ && !cancelled) {
+        if (!drain_start) drain_start = Clock::now();
+        // A stream without a session ends at once; a session whose client sends nothing (the
+        // reader waits for its next message to answer "draining") is cancelled after 1 s.
+        if (!cancelled && (!handshake_done_ || Clock::now() - *drain_start > kDrainReadWait)) {
           cancelled = true;
           context_->TryCancel();
         }
@@ -911,6 +919,7 @@ class TrackStream {
   // Asked by the tracker between steps (worker thread): true to stop (the reader ended or the
   // drain: stop_requested_; the CPU budget: cpu_exceeded_).
   bool ShouldStop() {
+    ++progress_;  // A step ran: the session is alive even when one packet takes long.
     if (stop_requested_) return true;
     const double used = ThreadCpuSeconds() - worker_cpu_start_s_;
     cpu_used_s_ = used;

@@ -110,9 +110,9 @@ struct LocalizerServerOptions {
   double max_connection_age_grace_s = 300.0;
   // On SIGTERM (Shutdown), running sessions stop within one step and end with UNAVAILABLE
   // "draining" when their client next sends or half-closes; calls still open after this long are
-  // cancelled, seconds. Keep it below the pod's terminationGracePeriodSeconds (20)
-  // (--drain-timeout).
-  double drain_timeout_s = 15.0;
+  // cancelled, seconds. Keep it below the pod's terminationGracePeriodSeconds (20) minus its
+  // preStop sleep (5) (--drain-timeout).
+  double drain_timeout_s = 10.0;
   // Default tracker options of every session (SessionStart.options override them).
   tracking::TrackerOptions tracker;
 

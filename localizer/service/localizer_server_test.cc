@@ -614,6 +614,34 @@ TEST_F(LocalizerServerTest, LocalizerHealthIsNotServingWhileNoSessionCanBeAdmitt
   EXPECT_TRUE(Eventually([&] { return HealthOf(server_->port(), service, &status) == kServing; }));
 }
 
+// Finding 3: sessions per token are limited (--max-sessions-per-token, the per-token hook).
+TEST_F(LocalizerServerTest, SessionsPerTokenAreLimited) {
+  const auto tokens = folder_.path() / "tokens.txt";
+  std::ofstream(tokens) << "alpha\nbeta\n";
+  StartServer([&](LocalizerServerOptions& options) {
+    options.auth_tokens_file = tokens;
+    options.max_sessions_per_token = 1;
+  });
+  grpc::ClientContext context;
+  context.AddMetadata("authorization", "Bearer alpha");
+  auto first = stub_->Track(&context);
+  ASSERT_TRUE(first->Write(TestSessionStart()));
+  api::TrackResponse response;
+  ASSERT_TRUE(first->Read(&response));
+  ASSERT_TRUE(response.has_started());
+  const auto requests = ShortSession();
+  const grpc::Status refused = RunTrack(*stub_, requests, "alpha").status;
+  EXPECT_EQ(refused.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
+  EXPECT_NE(refused.error_message().find("--max-sessions-per-token"), std::string::npos)
+      << refused.error_message();
+  EXPECT_TRUE(RunTrack(*stub_, requests, "beta").status.ok());
+  first->WritesDone();
+  while (first->Read(&response)) {
+  }
+  EXPECT_TRUE(first->Finish().ok());
+  EXPECT_TRUE(RunTrack(*stub_, requests, "alpha").status.ok());
+}
+
 // Finding 13 of issue 14: a newline in client_name forged log lines.
 TEST_F(LocalizerServerTest, ClientNameCannotForgeLogLines) {
   StartServer();

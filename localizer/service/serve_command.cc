@@ -46,8 +46,8 @@ Options:
   --max-connection-age S     send GOAWAY to a connection after S (default 3600; 0: never)
   --max-connection-age-grace S  then cut its streams after S more (default 300)
   --drain-timeout S          on SIGTERM: sessions stop within a step and end UNAVAILABLE
-                             "draining"; calls still open after S are cancelled (default 15,
-                             below Kubernetes' terminationGracePeriodSeconds 20)
+                             "draining"; calls still open after S are cancelled (default 10:
+                             Kubernetes' grace of 20 s also covers the 5 s preStop sleep)
   --auth-tokens FILE         bearer tokens, one per line: TOKEN [map1,map2]
   --metrics IPV4:PORT        serve Prometheus metrics at http://IPV4:PORT/metrics (e.g.
                              127.0.0.1:9464): sessions, events, poses, LOST, rejections,
