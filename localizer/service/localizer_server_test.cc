@@ -642,6 +642,42 @@ TEST_F(LocalizerServerTest, SessionsPerTokenAreLimited) {
   EXPECT_TRUE(RunTrack(*stub_, requests, "alpha").status.ok());
 }
 
+// Finding 3: a connection has a maximum age (GOAWAY, then its streams are cut after the
+// grace): a session on it ends, and a new one (a new connection) is served.
+TEST_F(LocalizerServerTest, ConnectionsOlderThanTheMaximumAgeAreClosed) {
+  StartServer([](LocalizerServerOptions& options) {
+    options.max_connection_age_s = 0.3;
+    options.max_connection_age_grace_s = 0.3;
+  });
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(30));
+  auto stream = stub_->Track(&context);
+  ASSERT_TRUE(stream->Write(TestSessionStart()));
+  api::TrackResponse response;
+  ASSERT_TRUE(stream->Read(&response));
+  // Keep the session busy with empty packets (time passes) until the server cuts the stream.
+  std::thread reader([&] {
+    while (stream->Read(&response)) {
+    }
+  });
+  const auto start = std::chrono::steady_clock::now();
+  int64_t end_t_ns = testing::kInitialTimeNs;
+  while (std::chrono::steady_clock::now() - start < std::chrono::seconds(10)) {
+    api::TrackRequest packet;
+    end_t_ns += 1'000'000;
+    packet.mutable_events()->set_end_t_ns(end_t_ns);
+    if (!stream->Write(packet)) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  const auto cut = std::chrono::steady_clock::now() - start;
+  stream->WritesDone();
+  reader.join();
+  const grpc::Status status = stream->Finish();
+  EXPECT_FALSE(status.ok());
+  EXPECT_LT(cut, std::chrono::seconds(5));
+  EXPECT_TRUE(Eventually([&] { return server_->counters().sessions_active == 0; }));
+}
+
 // Finding 13 of issue 14: a newline in client_name forged log lines.
 TEST_F(LocalizerServerTest, ClientNameCannotForgeLogLines) {
   StartServer();
