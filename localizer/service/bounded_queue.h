@@ -1,14 +1,19 @@
 // A bounded, closable multi-producer multi-consumer queue: the hand-over between a session's
 // stream reader and its tracking worker (the reader never waits: a full queue is the session's
-// overflow).
+// overflow); bounded in items and in weight (a session's queue: packets and events). And the
+// server-wide memory budget that queued items are charged to.
 #pragma once
 
+#include <atomic>
 #include <chrono>
 #include <condition_variable>
 #include <cstddef>
+#include <cstdint>
 #include <deque>
+#include <limits>
 #include <mutex>
 #include <optional>
+#include <utility>
 
 namespace evloc::service {
 
@@ -22,20 +27,24 @@ enum class PushResult {
   kClosed,
 };
 
-// A FIFO of at most `capacity` items. Close() lets consumers drain what is queued; Abort()
-// drops it.
+// A FIFO of at most `capacity` items whose weights sum to at most `max_weight` (an item heavier
+// than max_weight alone is queued only into an empty queue). Close() lets consumers drain what
+// is queued; Abort() drops it.
 template <typename T>
 class BoundedQueue {
  public:
-  // `capacity` >= 1.
-  explicit BoundedQueue(size_t capacity) : capacity_(capacity) {}
+  // `capacity` >= 1; `max_weight` >= 1.
+  explicit BoundedQueue(size_t capacity, uint64_t max_weight = std::numeric_limits<uint64_t>::max())
+      : capacity_(capacity), max_weight_(max_weight) {}
 
-  // Queues `item` unless the queue is full or closed.
-  PushResult TryPush(T item) {
+  // Queues `item` of `weight` unless the queue is full (items or weight) or closed.
+  PushResult TryPush(T item, uint64_t weight = 0) {
     std::lock_guard<std::mutex> lock(mutex_);
     if (closed_) return PushResult::kClosed;
     if (items_.size() >= capacity_) return PushResult::kFull;
-    items_.push_back(std::move(item));
+    if (!items_.empty() && weight > max_weight_ - weight_) return PushResult::kFull;
+    items_.emplace_back(std::move(item), weight);
+    weight_ += weight;
     not_empty_.notify_one();
     return PushResult::kQueued;
   }
@@ -48,7 +57,8 @@ class BoundedQueue {
         not_empty_.wait_for(lock, timeout, [&] { return closed_ || !items_.empty(); });
     if (timed_out) *timed_out = !ready;
     if (!ready || items_.empty()) return std::nullopt;
-    T item = std::move(items_.front());
+    T item = std::move(items_.front().first);
+    weight_ -= items_.front().second;
     items_.pop_front();
     return item;
   }
@@ -65,6 +75,7 @@ class BoundedQueue {
     std::lock_guard<std::mutex> lock(mutex_);
     closed_ = true;
     items_.clear();
+    weight_ = 0;
     not_empty_.notify_all();
   }
 
@@ -73,15 +84,78 @@ class BoundedQueue {
     std::lock_guard<std::mutex> lock(mutex_);
     return items_.size();
   }
+  // Sum of the weights of the items queued now.
+  uint64_t weight() const {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return weight_;
+  }
   // The capacity.
   size_t capacity() const { return capacity_; }
+  // The most weight queued at once.
+  uint64_t max_weight() const { return max_weight_; }
 
  private:
   const size_t capacity_;
+  const uint64_t max_weight_;
   mutable std::mutex mutex_;
   std::condition_variable not_empty_;
-  std::deque<T> items_;
+  std::deque<std::pair<T, uint64_t>> items_;
+  uint64_t weight_ = 0;
   bool closed_ = false;
+};
+
+// A budget of bytes shared by threads (the server's decoded, queued data): reservations that
+// would exceed the limit are refused. Thread-safe.
+class MemoryBudget {
+ public:
+  // Reservations beyond `limit_bytes` are refused.
+  explicit MemoryBudget(int64_t limit_bytes) : limit_(limit_bytes) {}
+
+  // A reservation, released when destroyed (movable).
+  class Reservation {
+   public:
+    Reservation() = default;
+    Reservation(MemoryBudget* budget, int64_t bytes) : budget_(budget), bytes_(bytes) {}
+    Reservation(Reservation&& other) noexcept
+        : budget_(std::exchange(other.budget_, nullptr)), bytes_(other.bytes_) {}
+    Reservation& operator=(Reservation&& other) noexcept {
+      if (this != &other) {
+        Release();
+        budget_ = std::exchange(other.budget_, nullptr);
+        bytes_ = other.bytes_;
+      }
+      return *this;
+    }
+    Reservation(const Reservation&) = delete;
+    Reservation& operator=(const Reservation&) = delete;
+    ~Reservation() { Release(); }
+    // Gives the bytes back now.
+    void Release() {
+      if (budget_) budget_->used_ -= bytes_;
+      budget_ = nullptr;
+    }
+
+   private:
+    MemoryBudget* budget_ = nullptr;
+    int64_t bytes_ = 0;
+  };
+
+  // Reserves `bytes` (>= 0); nullopt when that would exceed the limit.
+  std::optional<Reservation> TryReserve(int64_t bytes) {
+    int64_t used = used_.load();
+    do {
+      if (bytes > limit_ - used) return std::nullopt;
+    } while (!used_.compare_exchange_weak(used, used + bytes));
+    return Reservation(this, bytes);
+  }
+  // Bytes reserved now.
+  int64_t used() const { return used_.load(); }
+  // The limit, bytes.
+  int64_t limit() const { return limit_; }
+
+ private:
+  const int64_t limit_;
+  std::atomic<int64_t> used_{0};
 };
 
 }  // namespace evloc::service

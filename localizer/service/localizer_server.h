@@ -65,6 +65,54 @@ struct LocalizerServerOptions {
   double max_packet_span_s = 1.0;
   // Highest step rate a session may ask for, Hz (--max-rate).
   double max_step_rate_hz = SessionLimits{}.max_step_rate_hz;
+  // Most map points per step a session may ask for (--max-points-limit).
+  int max_points_limit = SessionLimits{}.max_points_limit;
+  // Most steps one EventPacket may complete (--max-steps-per-request).
+  int64_t max_steps_per_request = SessionLimits{}.max_steps_per_request;
+  // Most events one EventPacket may decode to (--max-packet-events).
+  int64_t max_packet_events = SessionLimits{}.max_packet_events;
+  // Decoded events a session may have waiting for its tracker; more end the session with
+  // RESOURCE_EXHAUSTED like a packet overflow (--queue-events). At least max_packet_events.
+  int64_t queue_events = int64_t{1} << 21;
+  // Server-wide budget for decoded requests waiting in the sessions' queues, bytes (13 per
+  // event, frame pixels); a packet that does not fit ends its session with RESOURCE_EXHAUSTED,
+  // and no session is admitted while 3/4 of it is used. gRPC's own buffers get a ResourceQuota
+  // of the same size, at least 16 x max_message_bytes (--max-memory).
+  int64_t max_memory_bytes = int64_t{1} << 30;
+  // CPU budget of a session's tracking thread: CPU seconds per second of session time tracked,
+  // beyond session_cpu_grace_s; a session over it ends with RESOURCE_EXHAUSTED
+  // (--session-cpu-budget).
+  double session_cpu_per_second = 8.0;
+  // CPU seconds a session may use before its budget applies (start-up, a first search)
+  // (--session-cpu-grace).
+  double session_cpu_grace_s = 10.0;
+  // A Track stream whose first message (SessionStart) has not arrived this long after the call
+  // started is cancelled, seconds (--handshake-timeout).
+  double handshake_timeout_s = 5.0;
+  // Most Track streams open at once from one peer address (host, without the port), sessions
+  // or not; 0: max_sessions. More get RESOURCE_EXHAUSTED (--max-streams-per-peer). Behind a
+  // proxy every client has the proxy's address: raise it there.
+  int max_streams_per_peer = 0;
+  // Most sessions at once from one peer address; 0: max_sessions (--max-sessions-per-peer).
+  int max_sessions_per_peer = 0;
+  // Most sessions at once per bearer token (with auth_tokens_file); 0: no limit
+  // (--max-sessions-per-token).
+  int max_sessions_per_token = 0;
+  // Most concurrent streams on one HTTP/2 connection (GRPC_ARG_MAX_CONCURRENT_STREAMS)
+  // (--max-streams-per-connection).
+  int max_streams_per_connection = 16;
+  // A connection is told to go away (GOAWAY) after this long, seconds; 0: never
+  // (--max-connection-age). Its streams get max_connection_age_grace_s more, then are cut
+  // (UNAVAILABLE: clients reconnect, evloc-replay --reconnect resumes from the last pose).
+  double max_connection_age_s = 3600.0;
+  // Grace after max_connection_age_s for the streams of an old connection, seconds
+  // (--max-connection-age-grace).
+  double max_connection_age_grace_s = 300.0;
+  // On SIGTERM (Shutdown), running sessions stop within one step and end with UNAVAILABLE
+  // "draining" when their client next sends or half-closes; calls still open after this long are
+  // cancelled, seconds. Keep it below the pod's terminationGracePeriodSeconds (20) minus its
+  // preStop sleep (5) (--drain-timeout).
+  double drain_timeout_s = 10.0;
   // Default tracker options of every session (SessionStart.options override them).
   tracking::TrackerOptions tracker;
 
@@ -90,6 +138,9 @@ struct ServerCounters {
   std::atomic<int64_t> poses{0};
   // PoseUpdates with status LOST.
   std::atomic<int64_t> lost_poses{0};
+  // Requests refused by a server limit (sessions, per peer or token, memory, handshake, CPU,
+  // packet events, steps) (RESOURCE_EXHAUSTED, or CANCELLED for a missed handshake).
+  std::atomic<int64_t> limited{0};
   // Upper bounds of the latency histogram buckets, microseconds (the last bucket is +Inf).
   static constexpr std::array<double, 8> kLatencyBucketsUs = {100,  250,  500,   1000,
                                                               2000, 5000, 10000, 50000};
@@ -138,7 +189,10 @@ class LocalizerServer {
 
   // The port actually bound (useful with port 0).
   int port() const { return port_; }
-  // Cancels running sessions and stops; idempotent.
+  // Drains and stops; idempotent: health turns NOT_SERVING, new calls are refused, running
+  // sessions stop within one step and end with UNAVAILABLE "draining" (or their SessionEnd when
+  // they were finishing), calls still open after drain_timeout_s are cancelled, then the metrics
+  // server stops.
   void Shutdown();
   // Blocks until Shutdown() is called from another thread.
   void Wait();
@@ -157,6 +211,7 @@ class LocalizerServer {
   std::unique_ptr<grpc::Server> server_;
   std::unique_ptr<MetricsHttpServer> metrics_;
   int port_ = 0;
+  double drain_timeout_s_ = 0;
   std::atomic<bool> shut_down_{false};
 };
 

@@ -23,6 +23,7 @@
 #include "localizer/service/session.h"
 #include "localizer/service/testing/service_fixture.h"
 #include "localizer/tracking/testing/synthetic_scene.h"
+#include "localizer/wire/packed_events.h"
 #include "proto/convert/proto_convert.h"
 
 namespace evloc::service {
@@ -377,7 +378,10 @@ TEST_F(LocalizerServerTest, IdleSessionIsCancelled) {
 // the server's writes block once gRPC's flow-control window is full, and the watchdog ends the
 // session after the idle timeout (it would otherwise hold its slot forever).
 TEST_F(LocalizerServerTest, ClientThatStopsReadingIsCancelled) {
-  StartServer([](LocalizerServerOptions& options) { options.idle_timeout_s = 0.5; });
+  StartServer([](LocalizerServerOptions& options) {
+    options.idle_timeout_s = 0.5;
+    options.max_step_rate_hz = 5000;
+  });
   std::vector<api::TrackRequest> requests{TestSessionStart()};
   requests[0].mutable_start()->mutable_options()->set_step_rate_hz(5000);
   for (auto& packet : testing::PackedPackets(testing::TestEvents(300'000'000), 10'000'000)) {
@@ -396,6 +400,324 @@ TEST_F(LocalizerServerTest, ClientThatStopsReadingIsCancelled) {
   // Far fewer poses were written than the 1500 steps of the stream (the writes blocked).
   EXPECT_LT(server_->counters().poses.load(), 1500);
   context.TryCancel();
+}
+
+// A SessionStart and one empty packet that completes `steps` steps at 1 kHz (the server's
+// per-request limits raised in the test to allow it).
+std::vector<api::TrackRequest> LongPacketSession(int64_t steps) {
+  std::vector<api::TrackRequest> requests{TestSessionStart()};
+  requests[0].mutable_start()->mutable_options()->set_step_rate_hz(1000);
+  api::TrackRequest packet;
+  packet.mutable_events()->set_end_t_ns(testing::kInitialTimeNs + steps * 1'000'000);
+  requests.push_back(packet);
+  return requests;
+}
+
+void AllowLongPackets(LocalizerServerOptions& options) {
+  options.max_packet_span_s = 1000;
+  options.max_steps_per_request = 1'000'000;
+}
+
+// Finding 1 of issue 14: a request's steps could not be interrupted, so a cancelled session kept
+// its worker (and a core) busy for the whole packet. The worker now stops within one step of the
+// cancellation: the slot is free long before the 1M steps could have run.
+TEST_F(LocalizerServerTest, CancelledSessionStopsItsWorkerWithinOneStep) {
+  StartServer(AllowLongPackets);
+  const auto requests = LongPacketSession(900'000);
+  {
+    grpc::ClientContext context;
+    auto stream = stub_->Track(&context);
+    for (const auto& request : requests) ASSERT_TRUE(stream->Write(request));
+    api::TrackResponse response;
+    ASSERT_TRUE(stream->Read(&response));
+    ASSERT_TRUE(response.has_started());
+    ASSERT_TRUE(Eventually([&] { return server_->counters().sessions_active == 1; }));
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));  // The long packet's steps run.
+    context.TryCancel();
+  }
+  EXPECT_TRUE(Eventually([&] { return server_->counters().sessions_active == 0; }));
+  EXPECT_LT(server_->counters().poses.load(), 900'000);
+}
+
+// Finding 1: a session over its CPU budget (CPU seconds per second of session time, after the
+// grace) is ended with RESOURCE_EXHAUSTED within a step.
+TEST_F(LocalizerServerTest, SessionOverItsCpuBudgetIsResourceExhausted) {
+  StartServer([](LocalizerServerOptions& options) {
+    AllowLongPackets(options);
+    options.session_cpu_grace_s = 0.2;
+    options.session_cpu_per_second = 1e-4;
+  });
+  const TrackOutcome outcome = RunTrack(*stub_, LongPacketSession(900'000));
+  EXPECT_EQ(outcome.status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED)
+      << outcome.status.error_message();
+  EXPECT_NE(outcome.status.error_message().find("--session-cpu-budget"), std::string::npos)
+      << outcome.status.error_message();
+  EXPECT_LT(outcome.Poses().size(), 900'000u);
+  EXPECT_GE(server_->counters().limited.load(), 1);
+}
+
+// A PACKED packet of `count` events in the first microsecond after `after_ns`, ending at
+// `end_ns`.
+api::TrackRequest DensePacket(size_t count, int64_t after_ns, int64_t end_ns) {
+  EventBuffer events;
+  for (size_t i = 0; i < count; ++i) {
+    events.push_back({after_ns + 1 + static_cast<int64_t>(i % 1000), static_cast<uint16_t>(i % 320),
+                      static_cast<uint16_t>(i / 320 % 240), 1});
+  }
+  api::TrackRequest request;
+  api::EventPacket* packet = request.mutable_events();
+  packet->set_encoding(api::EVENT_ENCODING_PACKED);
+  packet->set_time_base_ns(after_ns);
+  packet->set_end_t_ns(end_ns);
+  packet->set_data(wire::EncodePackedEvents(events, 0, events.size(), after_ns));
+  return request;
+}
+
+// A session whose first packet keeps the worker busy (900k steps) while dense packets follow.
+std::vector<api::TrackRequest> BusyWorkerThenDensePackets(size_t packets, size_t events) {
+  std::vector<api::TrackRequest> requests{TestSessionStart()};
+  requests[0].mutable_start()->mutable_options()->set_step_rate_hz(1000);
+  int64_t end = testing::kInitialTimeNs + 900'000'000'000;
+  requests.push_back(DensePacket(events, testing::kInitialTimeNs, end));
+  for (size_t i = 0; i < packets; ++i) {
+    requests.push_back(DensePacket(events, end, end + 1'000'000));
+    end += 1'000'000;
+  }
+  return requests;
+}
+
+// Finding 2 of issue 14: the queue counted packets, not events (a packet may decode to millions):
+// it is bounded in events too.
+TEST_F(LocalizerServerTest, QueueBoundedInEventsOverflows) {
+  StartServer([](LocalizerServerOptions& options) {
+    AllowLongPackets(options);
+    options.max_packet_events = 1000;
+    options.queue_events = 2500;
+  });
+  const TrackOutcome outcome = RunTrack(*stub_, BusyWorkerThenDensePackets(10, 1000));
+  EXPECT_EQ(outcome.status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED)
+      << outcome.status.error_message();
+  EXPECT_NE(outcome.status.error_message().find("2500 events overflowed"), std::string::npos)
+      << outcome.status.error_message();
+}
+
+// Finding 2: the server's own accounting of queued decoded events refuses packets (and new
+// sessions) before the process runs out of memory.
+TEST_F(LocalizerServerTest, PacketsBeyondTheServerMemoryBudgetAreRefused) {
+  StartServer([](LocalizerServerOptions& options) {
+    AllowLongPackets(options);
+    // The queue takes 3 packets; the budget too, and the packet being tracked counts in it.
+    options.max_packet_events = 1000;
+    options.queue_events = 3000;
+    options.max_memory_bytes = 3000 * kDecodedEventBytes;
+  });
+  const TrackOutcome outcome = RunTrack(*stub_, BusyWorkerThenDensePackets(10, 1000));
+  EXPECT_EQ(outcome.status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED)
+      << outcome.status.error_message();
+  EXPECT_NE(outcome.status.error_message().find("--max-memory"), std::string::npos)
+      << outcome.status.error_message();
+  EXPECT_TRUE(Eventually([&] { return server_->counters().sessions_active == 0; }));
+}
+
+// Finding 3 of issue 14: a stream that never sent its SessionStart held a handler thread
+// forever; it is cancelled after --handshake-timeout.
+TEST_F(LocalizerServerTest, StreamWithoutSessionStartIsCancelledAfterTheHandshakeTimeout) {
+  StartServer([](LocalizerServerOptions& options) { options.handshake_timeout_s = 0.3; });
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(20));
+  auto stream = stub_->Track(&context);
+  api::TrackResponse response;
+  EXPECT_FALSE(stream->Read(&response));
+  EXPECT_EQ(stream->Finish().error_code(), grpc::StatusCode::CANCELLED);
+  EXPECT_GE(server_->counters().limited.load(), 1);
+  EXPECT_TRUE(Eventually([&] {
+    for (const std::string& line : LogLines()) {
+      if (line.find("--handshake-timeout") != std::string::npos) return true;
+    }
+    return false;
+  }));
+}
+
+// Finding 3: one peer may not hold every handler thread with streams (sessions or not).
+TEST_F(LocalizerServerTest, StreamsPerPeerAreLimited) {
+  StartServer([](LocalizerServerOptions& options) {
+    options.max_sessions = 2;
+    options.handshake_timeout_s = 30;
+  });
+  grpc::ClientContext first_context;
+  grpc::ClientContext second_context;
+  auto first = stub_->Track(&first_context);
+  auto second = stub_->Track(&second_context);
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));  // Both calls reached the server.
+  grpc::ClientContext third_context;
+  third_context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
+  auto third = stub_->Track(&third_context);
+  api::TrackResponse response;
+  EXPECT_FALSE(third->Read(&response));
+  const grpc::Status status = third->Finish();
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << status.error_message();
+  EXPECT_NE(status.error_message().find("--max-streams-per-peer"), std::string::npos);
+  first_context.TryCancel();
+  second_context.TryCancel();
+}
+
+// The health of service `name` on the test server: 1 SERVING, 2 NOT_SERVING, -1 when the call
+// failed (the status in `status`).
+int HealthOf(int port, const std::string& name, grpc::Status* status) {
+  auto channel =
+      grpc::CreateChannel("127.0.0.1:" + std::to_string(port), grpc::InsecureChannelCredentials());
+  grpc::GenericStub generic(channel);
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
+  // HealthCheckRequest{service = name}: field 1, length-delimited.
+  const std::string bytes =
+      name.empty() ? std::string() : std::string("\x0a") + static_cast<char>(name.size()) + name;
+  const grpc::Slice slice(bytes.data(), bytes.size());
+  const grpc::ByteBuffer request(&slice, 1);
+  grpc::ByteBuffer response;
+  std::promise<grpc::Status> done;
+  generic.UnaryCall(&context, "/grpc.health.v1.Health/Check", grpc::StubOptions(), &request,
+                    &response, [&done](grpc::Status result) { done.set_value(result); });
+  *status = done.get_future().get();
+  if (!status->ok()) return -1;
+  std::vector<grpc::Slice> slices;
+  if (!response.Dump(&slices).ok()) return -1;
+  std::string answer;
+  for (const auto& part : slices) {
+    answer.append(reinterpret_cast<const char*>(part.begin()), part.size());
+  }
+  return answer.size() == 2 && answer[0] == '\x08' ? answer[1] : -1;
+}
+
+constexpr int kServing = 1;
+constexpr int kNotServing = 2;
+
+// Finding 3: health stayed SERVING while the server could admit nothing; the Localizer
+// service's health (what readiness asks) now follows admission, the overall health (liveness)
+// stays SERVING.
+TEST_F(LocalizerServerTest, LocalizerHealthIsNotServingWhileNoSessionCanBeAdmitted) {
+  StartServer([](LocalizerServerOptions& options) { options.max_sessions = 1; });
+  const std::string service = api::Localizer::service_full_name();
+  grpc::Status status;
+  EXPECT_EQ(HealthOf(server_->port(), service, &status), kServing) << status.error_message();
+  grpc::ClientContext context;
+  auto stream = stub_->Track(&context);
+  ASSERT_TRUE(stream->Write(TestSessionStart()));
+  api::TrackResponse response;
+  ASSERT_TRUE(stream->Read(&response));
+  EXPECT_EQ(HealthOf(server_->port(), service, &status), kNotServing);
+  EXPECT_EQ(HealthOf(server_->port(), "", &status), kServing);
+  stream->WritesDone();
+  while (stream->Read(&response)) {
+  }
+  EXPECT_TRUE(stream->Finish().ok());
+  EXPECT_TRUE(Eventually([&] { return HealthOf(server_->port(), service, &status) == kServing; }));
+}
+
+// Finding 3: sessions per token are limited (--max-sessions-per-token, the per-token hook).
+TEST_F(LocalizerServerTest, SessionsPerTokenAreLimited) {
+  const auto tokens = folder_.path() / "tokens.txt";
+  std::ofstream(tokens) << "alpha\nbeta\n";
+  StartServer([&](LocalizerServerOptions& options) {
+    options.auth_tokens_file = tokens;
+    options.max_sessions_per_token = 1;
+  });
+  grpc::ClientContext context;
+  context.AddMetadata("authorization", "Bearer alpha");
+  auto first = stub_->Track(&context);
+  ASSERT_TRUE(first->Write(TestSessionStart()));
+  api::TrackResponse response;
+  ASSERT_TRUE(first->Read(&response));
+  ASSERT_TRUE(response.has_started());
+  const auto requests = ShortSession();
+  const grpc::Status refused = RunTrack(*stub_, requests, "alpha").status;
+  EXPECT_EQ(refused.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
+  EXPECT_NE(refused.error_message().find("--max-sessions-per-token"), std::string::npos)
+      << refused.error_message();
+  EXPECT_TRUE(RunTrack(*stub_, requests, "beta").status.ok());
+  first->WritesDone();
+  while (first->Read(&response)) {
+  }
+  EXPECT_TRUE(first->Finish().ok());
+  EXPECT_TRUE(RunTrack(*stub_, requests, "alpha").status.ok());
+}
+
+// Finding 3: a connection has a maximum age (GOAWAY, then its streams are cut after the
+// grace): a session on it ends, and a new one (a new connection) is served.
+TEST_F(LocalizerServerTest, ConnectionsOlderThanTheMaximumAgeAreClosed) {
+  StartServer([](LocalizerServerOptions& options) {
+    options.max_connection_age_s = 0.3;
+    options.max_connection_age_grace_s = 0.3;
+  });
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(30));
+  auto stream = stub_->Track(&context);
+  ASSERT_TRUE(stream->Write(TestSessionStart()));
+  api::TrackResponse response;
+  ASSERT_TRUE(stream->Read(&response));
+  // Keep the session busy with empty packets (time passes) until the server cuts the stream.
+  std::thread reader([&] {
+    while (stream->Read(&response)) {
+    }
+  });
+  const auto start = std::chrono::steady_clock::now();
+  int64_t end_t_ns = testing::kInitialTimeNs;
+  while (std::chrono::steady_clock::now() - start < std::chrono::seconds(10)) {
+    api::TrackRequest packet;
+    end_t_ns += 1'000'000;
+    packet.mutable_events()->set_end_t_ns(end_t_ns);
+    if (!stream->Write(packet)) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  const auto cut = std::chrono::steady_clock::now() - start;
+  stream->WritesDone();
+  reader.join();
+  const grpc::Status status = stream->Finish();
+  EXPECT_FALSE(status.ok());
+  EXPECT_LT(cut, std::chrono::seconds(5));
+  EXPECT_TRUE(Eventually([&] { return server_->counters().sessions_active == 0; }));
+}
+
+// Finding 13 of issue 14: a newline in client_name forged log lines.
+TEST_F(LocalizerServerTest, ClientNameCannotForgeLogLines) {
+  StartServer();
+  auto requests = ShortSession();
+  requests[0].mutable_start()->set_client_name("replay\nsession 99 end: OK; forged" +
+                                               std::string(1000, 'x'));
+  EXPECT_TRUE(RunTrack(*stub_, requests).status.ok());
+  bool logged = false;
+  for (const std::string& line : LogLines()) {
+    EXPECT_EQ(line.find('\n'), std::string::npos) << line;
+    EXPECT_LT(line.size(), 800u) << line;
+    logged |= line.find("replay\\x0asession 99") != std::string::npos;
+  }
+  EXPECT_TRUE(logged);
+}
+
+// Finding 13: statuses carried absolute server paths (the map folder, a map file).
+TEST_F(LocalizerServerTest, StatusesCarryNoServerPaths) {
+  StartServer();
+  std::filesystem::create_directories(folder_.path() / "broken");
+  std::ofstream(folder_.path() / "broken" / "map.evmap") << "not a map";
+  const std::string folder = folder_.path().string();
+  {
+    grpc::ClientContext context;
+    api::GetMapRequest request;
+    request.set_name("broken");
+    api::MapDescription description;
+    const grpc::Status status = stub_->GetMap(&context, request, &description);
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::FAILED_PRECONDITION);
+    EXPECT_EQ(status.error_message().find(folder), std::string::npos) << status.error_message();
+    EXPECT_EQ(status.error_message().find("/tmp"), std::string::npos) << status.error_message();
+  }
+  for (const std::string name : {"broken", "absent"}) {
+    auto requests = ShortSession();
+    requests[0].mutable_start()->set_map_name(name);
+    const grpc::Status status = RunTrack(*stub_, requests).status;
+    EXPECT_FALSE(status.ok());
+    EXPECT_EQ(status.error_message().find(folder), std::string::npos) << status.error_message();
+    EXPECT_EQ(status.error_message().find("/tmp"), std::string::npos) << status.error_message();
+  }
 }
 
 TEST_F(LocalizerServerTest, OverflowingSessionIsToldThenStopped) {

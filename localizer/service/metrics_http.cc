@@ -4,9 +4,9 @@
 #include <netinet/in.h>
 #include <poll.h>
 #include <sys/socket.h>
-#include <sys/time.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cstring>
 
@@ -15,8 +15,12 @@
 
 namespace evloc::service {
 
-MetricsHttpServer::MetricsHttpServer(const std::string& address, BodyFunction body)
-    : body_(std::move(body)) {
+MetricsHttpServer::MetricsHttpServer(const std::string& address, BodyFunction body,
+                                     double connection_deadline_s)
+    : body_(std::move(body)), connection_deadline_s_(connection_deadline_s) {
+  if (!(connection_deadline_s_ > 0)) {
+    throw InvalidArgumentError("metrics server: the connection deadline must be positive");
+  }
   const size_t colon = address.rfind(':');
   if (colon == std::string::npos) {
     throw InvalidArgumentError("--metrics expects IPV4:PORT (e.g. 127.0.0.1:9464), got '" +
@@ -65,15 +69,31 @@ void MetricsHttpServer::Serve() {
   }
 }
 
+bool MetricsHttpServer::WaitFor(int connection, short events) const {
+  while (!stop_) {
+    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
+        deadline_ - std::chrono::steady_clock::now());
+    if (left.count() <= 0) return false;
+    pollfd descriptor{connection, events, 0};
+    const int ready =
+        ::poll(&descriptor, 1, static_cast<int>(std::min<int64_t>(left.count(), 100)));
+    if (ready > 0) return true;
+    if (ready < 0 && errno != EINTR) return false;
+  }
+  return false;
+}
+
 void MetricsHttpServer::Answer(int connection) {
-  // A slow or silent client gets one second.
-  timeval timeout{1, 0};
-  ::setsockopt(connection, SOL_SOCKET, SO_RCVTIMEO, &timeout, sizeof(timeout));
-  ::setsockopt(connection, SOL_SOCKET, SO_SNDTIMEO, &timeout, sizeof(timeout));
+  // One absolute deadline for the whole exchange: a client trickling bytes cannot extend it.
+  deadline_ = std::chrono::steady_clock::now() +
+              std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                  std::chrono::duration<double>(connection_deadline_s_));
   std::string request;
   char buffer[1024];
   while (request.find("\r\n\r\n") == std::string::npos && request.size() < 8192) {
-    const ssize_t received = ::recv(connection, buffer, sizeof(buffer), 0);
+    if (!WaitFor(connection, POLLIN)) return;
+    const ssize_t received = ::recv(connection, buffer, sizeof(buffer), MSG_DONTWAIT);
+    if (received < 0 && (errno == EAGAIN || errno == EWOULDBLOCK || errno == EINTR)) continue;
     if (received <= 0) break;
     request.append(buffer, static_cast<size_t>(received));
   }
@@ -90,8 +110,10 @@ void MetricsHttpServer::Answer(int connection) {
                                std::to_string(body.size()) + "\r\nConnection: close\r\n\r\n" + body;
   size_t sent = 0;
   while (sent < response.size()) {
-    const ssize_t count =
-        ::send(connection, response.data() + sent, response.size() - sent, MSG_NOSIGNAL);
+    if (!WaitFor(connection, POLLOUT)) return;
+    const ssize_t count = ::send(connection, response.data() + sent, response.size() - sent,
+                                 MSG_NOSIGNAL | MSG_DONTWAIT);
+    if (count < 0 && (errno == EAGAIN || errno == EWOULDBLOCK || errno == EINTR)) continue;
     if (count <= 0) break;
     sent += static_cast<size_t>(count);
   }

@@ -26,7 +26,28 @@ Options:
                              4194304; a session's memory grows with it)
   --max-packet-span SECONDS  most a packet's end_t_ns (or a pose hint) may lie after the session
                              time: bounds the steps one request runs (default 1)
-  --max-rate HZ              highest step rate a session may ask for (default 10000)
+  --max-rate HZ              highest step rate a session may ask for (default 2000)
+  --max-points-limit N       most map points per step a session may ask for (default 10000)
+  --max-steps-per-request N  most tracking steps one event packet may complete (default 1000)
+  --max-packet-events N      most events one packet may decode to (default 1048576)
+  --queue-events N           decoded events a session may have waiting (default 2097152)
+  --max-memory BYTES         server-wide budget of queued decoded events (13 bytes each) and
+                             of gRPC's buffers (default 1073741824); no new session while 3/4
+                             of it is used
+  --session-cpu-budget X     CPU seconds a session may use per second of session time tracked,
+                             after the grace (default 8)
+  --session-cpu-grace S      CPU seconds a session may use before its budget applies (default 10)
+  --handshake-timeout S      cancel a stream whose SessionStart has not come after S (default 5)
+  --max-streams-per-peer N   most Track streams from one address at once (default 0:
+                             max-sessions; raise it behind a proxy)
+  --max-sessions-per-peer N  most sessions from one address at once (default 0: max-sessions)
+  --max-sessions-per-token N most sessions per bearer token at once (default 0: no limit)
+  --max-streams-per-connection N  most concurrent streams per HTTP/2 connection (default 16)
+  --max-connection-age S     send GOAWAY to a connection after S (default 3600; 0: never)
+  --max-connection-age-grace S  then cut its streams after S more (default 300)
+  --drain-timeout S          on SIGTERM: sessions stop within a step and end UNAVAILABLE
+                             "draining"; calls still open after S are cancelled (default 10:
+                             Kubernetes' grace of 20 s also covers the 5 s preStop sleep)
   --auth-tokens FILE         bearer tokens, one per line: TOKEN [map1,map2]
   --metrics IPV4:PORT        serve Prometheus metrics at http://IPV4:PORT/metrics (e.g.
                              127.0.0.1:9464): sessions, events, poses, LOST, rejections,
@@ -82,6 +103,36 @@ ServeCommand ParseServeCommandLine(const std::vector<std::string>& arguments) {
       server.max_packet_span_s = ParseDoubleFlag(flag, value);
     } else if (flag == "--max-rate") {
       server.max_step_rate_hz = ParseDoubleFlag(flag, value);
+    } else if (flag == "--max-points-limit") {
+      server.max_points_limit = static_cast<int>(ParseIntegerFlag(flag, value));
+    } else if (flag == "--max-steps-per-request") {
+      server.max_steps_per_request = ParseIntegerFlag(flag, value);
+    } else if (flag == "--max-packet-events") {
+      server.max_packet_events = ParseIntegerFlag(flag, value);
+    } else if (flag == "--queue-events") {
+      server.queue_events = ParseIntegerFlag(flag, value);
+    } else if (flag == "--max-memory") {
+      server.max_memory_bytes = ParseIntegerFlag(flag, value);
+    } else if (flag == "--session-cpu-budget") {
+      server.session_cpu_per_second = ParseDoubleFlag(flag, value);
+    } else if (flag == "--session-cpu-grace") {
+      server.session_cpu_grace_s = ParseDoubleFlag(flag, value);
+    } else if (flag == "--handshake-timeout") {
+      server.handshake_timeout_s = ParseDoubleFlag(flag, value);
+    } else if (flag == "--max-streams-per-peer") {
+      server.max_streams_per_peer = static_cast<int>(ParseIntegerFlag(flag, value));
+    } else if (flag == "--max-sessions-per-peer") {
+      server.max_sessions_per_peer = static_cast<int>(ParseIntegerFlag(flag, value));
+    } else if (flag == "--max-sessions-per-token") {
+      server.max_sessions_per_token = static_cast<int>(ParseIntegerFlag(flag, value));
+    } else if (flag == "--max-streams-per-connection") {
+      server.max_streams_per_connection = static_cast<int>(ParseIntegerFlag(flag, value));
+    } else if (flag == "--max-connection-age") {
+      server.max_connection_age_s = ParseDoubleFlag(flag, value);
+    } else if (flag == "--max-connection-age-grace") {
+      server.max_connection_age_grace_s = ParseDoubleFlag(flag, value);
+    } else if (flag == "--drain-timeout") {
+      server.drain_timeout_s = ParseDoubleFlag(flag, value);
     } else if (flag == "--auth-tokens") {
       server.auth_tokens_file = value;
     } else if (flag == "--metrics") {

@@ -50,7 +50,37 @@ TEST(ServeCommand, EveryFlagReachesItsOption) {
                                               "--tls-key",
                                               "k.pem",
                                               "--auth-tokens",
-                                              "tokens.txt"};
+                                              "tokens.txt",
+                                              "--max-points-limit",
+                                              "5000",
+                                              "--max-steps-per-request",
+                                              "400",
+                                              "--max-packet-events",
+                                              "100000",
+                                              "--queue-events",
+                                              "200000",
+                                              "--max-memory",
+                                              "100000000",
+                                              "--session-cpu-budget",
+                                              "3",
+                                              "--session-cpu-grace",
+                                              "4",
+                                              "--handshake-timeout",
+                                              "2",
+                                              "--max-streams-per-peer",
+                                              "6",
+                                              "--max-sessions-per-peer",
+                                              "2",
+                                              "--max-sessions-per-token",
+                                              "1",
+                                              "--max-streams-per-connection",
+                                              "8",
+                                              "--max-connection-age",
+                                              "600",
+                                              "--max-connection-age-grace",
+                                              "60",
+                                              "--drain-timeout",
+                                              "7"};
   const ServeCommand command = ParseServeCommandLine(arguments);
   const LocalizerServerOptions& server = command.server;
   EXPECT_EQ(server.maps_dir, folder.path());
@@ -73,7 +103,24 @@ TEST(ServeCommand, EveryFlagReachesItsOption) {
   EXPECT_EQ(server.tls_cert_file, "c.pem");
   EXPECT_EQ(server.tls_key_file, "k.pem");
   EXPECT_EQ(server.auth_tokens_file, "tokens.txt");
+  EXPECT_EQ(server.max_points_limit, 5000);
+  EXPECT_EQ(server.session_limits().max_points_limit, 5000);
+  EXPECT_EQ(server.session_limits().max_steps_per_request, 400);
+  EXPECT_EQ(server.session_limits().max_packet_events, 100000);
+  EXPECT_EQ(server.queue_events, 200000);
+  EXPECT_EQ(server.max_memory_bytes, 100000000);
+  EXPECT_EQ(server.session_cpu_per_second, 3);
+  EXPECT_EQ(server.session_cpu_grace_s, 4);
+  EXPECT_EQ(server.handshake_timeout_s, 2);
+  EXPECT_EQ(server.max_streams_per_peer, 6);
+  EXPECT_EQ(server.max_sessions_per_peer, 2);
+  EXPECT_EQ(server.max_sessions_per_token, 1);
+  EXPECT_EQ(server.max_streams_per_connection, 8);
+  EXPECT_EQ(server.max_connection_age_s, 600);
+  EXPECT_EQ(server.max_connection_age_grace_s, 60);
+  EXPECT_EQ(server.drain_timeout_s, 7);
   EXPECT_NE(server.Describe().find("max-sessions: 3"), std::string::npos);
+  EXPECT_NE(server.Describe().find("drain-timeout: 7 s"), std::string::npos);
 }
 
 TEST(ServeCommand, BadCommandLinesAreRejectedWithTheFlag) {

@@ -1,5 +1,6 @@
 #include "localizer/service/session.h"
 
+#include <algorithm>
 #include <cstring>
 #include <string>
 
@@ -123,6 +124,15 @@ void SessionLimits::Check() const {
     throw InvalidArgumentError("--rate " + std::to_string(tracker.step_rate_hz) +
                                " exceeds --max-rate " + std::to_string(max_step_rate_hz));
   }
+  if (max_points_limit < 1) throw InvalidArgumentError("--max-points-limit must be positive");
+  if (tracker.max_points > max_points_limit) {
+    throw InvalidArgumentError("--max-points " + std::to_string(tracker.max_points) +
+                               " exceeds --max-points-limit " + std::to_string(max_points_limit));
+  }
+  if (max_steps_per_request < 1) {
+    throw InvalidArgumentError("--max-steps-per-request must be positive");
+  }
+  if (max_packet_events < 1) throw InvalidArgumentError("--max-packet-events must be positive");
 }
 
 SessionSettings SessionSettingsFromProto(const api::SessionStart& start,
@@ -156,8 +166,11 @@ SessionSettings SessionSettingsFromProto(const api::SessionStart& start,
     }
     if (options.step_rate_hz() != 0) settings.tracker.step_rate_hz = options.step_rate_hz();
     if (options.max_points() != 0) {
-      if (options.max_points() > 1'000'000) {
-        throw InvalidArgumentError("max_points must be at most 1000000");
+      if (options.max_points() > static_cast<uint64_t>(limits.max_points_limit)) {
+        throw InvalidArgumentError("max_points " + std::to_string(options.max_points()) +
+                                   " exceeds this server's limit of " +
+                                   std::to_string(limits.max_points_limit) +
+                                   " (evloc-localizer --max-points-limit)");
       }
       settings.tracker.max_points = static_cast<int>(options.max_points());
     }
@@ -178,9 +191,13 @@ SessionSettings SessionSettingsFromProto(const api::SessionStart& start,
   return settings;
 }
 
-PacketDecoder::PacketDecoder(SensorSize sensor_size, int64_t sensor_time_offset_ns)
-    : sensor_size_(sensor_size), sensor_time_offset_ns_(sensor_time_offset_ns) {
+PacketDecoder::PacketDecoder(SensorSize sensor_size, int64_t sensor_time_offset_ns,
+                             int64_t max_events)
+    : sensor_size_(sensor_size),
+      sensor_time_offset_ns_(sensor_time_offset_ns),
+      max_events_(max_events) {
   sensor_size_.Check();
+  if (max_events_ < 1) throw InvalidArgumentError("PacketDecoder: max_events must be positive");
 }
 
 void PacketDecoder::Decode(const api::EventPacket& packet, EventBuffer* out) {
@@ -205,7 +222,17 @@ void PacketDecoder::Decode(const api::EventPacket& packet, EventBuffer* out) {
     encoding_ = packet.encoding();
   }
   const auto* bytes = reinterpret_cast<const uint8_t*>(data.data());
+  const auto too_many_events = [&](const std::string& count) {
+    return InvalidArgumentError(PacketName(index) + ": " + count +
+                                " events exceed this server's limit of " +
+                                std::to_string(max_events_) +
+                                " per packet (evloc-localizer --max-packet-events): send shorter "
+                                "packets");
+  };
   if (encoding_ == api::EVENT_ENCODING_PACKED && !data.empty()) {
+    if (data.size() / wire::kPackedEventBytes > static_cast<uint64_t>(max_events_)) {
+      throw too_many_events(std::to_string(data.size() / wire::kPackedEventBytes));
+    }
     CheckSessionTime(packet.time_base_ns(), PacketName(index) + ": time_base_ns");
     try {
       wire::DecodePackedEvents(data, packet.time_base_ns(), out);
@@ -223,7 +250,13 @@ void PacketDecoder::Decode(const api::EventPacket& packet, EventBuffer* out) {
       }
     }
     try {
-      raw_decoder_->Decode(bytes, data.size(), out);
+      for (size_t offset = 0; offset < data.size(); offset += kRawDecodeChunkBytes) {
+        raw_decoder_->Decode(bytes + offset, std::min(kRawDecodeChunkBytes, data.size() - offset),
+                             out);
+        if (out->size() > static_cast<size_t>(max_events_)) {
+          throw too_many_events("more than " + std::to_string(out->size()));
+        }
+      }
     } catch (const ParseError& error) {
       throw InvalidArgumentError(PacketName(index) + ": malformed raw data: " + error.what());
     }
@@ -284,9 +317,11 @@ RequestValidator::RequestValidator(const SessionSettings& settings, const Sessio
     : camera_(settings.camera),
       takes_frames_(settings.tracker.input == tracking::TrackerInput::kFrames),
       max_packet_span_ns_(limits.max_packet_span_ns),
+      step_rate_hz_(settings.tracker.step_rate_hz),
+      max_steps_per_request_(limits.max_steps_per_request),
       session_t_ns_(settings.initial_t_ns),
       decoder_(SensorSize{settings.camera.width, settings.camera.height},
-               settings.sensor_time_offset_ns) {}
+               settings.sensor_time_offset_ns, limits.max_packet_events) {}
 
 grpc::Status RequestValidator::Accept(const api::TrackRequest& request, SessionItem* item) {
   try {
@@ -302,6 +337,7 @@ grpc::Status RequestValidator::Accept(const api::TrackRequest& request, SessionI
         item->kind = SessionItem::Kind::kEvents;
         CheckSpan(request.events().end_t_ns(),
                   ("event packet " + std::to_string(decoder_.packets()) + ": end_t_ns").c_str());
+        CheckSteps(request.events().end_t_ns());
         decoder_.Decode(request.events(), &item->events);
         item->t_ns = request.events().end_t_ns();
         session_t_ns_ = std::max(session_t_ns_, item->t_ns);
@@ -360,12 +396,28 @@ void RequestValidator::CheckSpan(int64_t t_ns, const char* what) const {
   }
 }
 
+void RequestValidator::CheckSteps(int64_t end_t_ns) const {
+  // Steps this packet completes: the session time only moves forward, and CheckSpan bounds the
+  // difference (no overflow).
+  if (end_t_ns <= session_t_ns_) return;
+  const double steps = static_cast<double>(end_t_ns - session_t_ns_) * 1e-9 * step_rate_hz_;
+  if (steps > static_cast<double>(max_steps_per_request_)) {
+    throw InvalidArgumentError(
+        "event packet " + std::to_string(decoder_.packets()) + ": end_t_ns " +
+        std::to_string(end_t_ns) + " ns would complete " +
+        std::to_string(static_cast<int64_t>(steps)) + " steps at " + std::to_string(step_rate_hz_) +
+        " Hz; one request may complete at most " + std::to_string(max_steps_per_request_) +
+        " (evloc-localizer --max-steps-per-request): send shorter packets");
+  }
+}
+
 SessionTracker::SessionTracker(std::shared_ptr<const LoadedMap> map,
                                const SessionSettings& settings)
     : map_(std::move(map)),
       settings_(settings),
       tracker_(map_->map, map_->visibility.get(), settings.camera, settings.tracker),
-      takes_frames_(settings.tracker.input == tracking::TrackerInput::kFrames) {
+      takes_frames_(settings.tracker.input == tracking::TrackerInput::kFrames),
+      advanced_t_ns_(settings.initial_t_ns) {
   if (takes_frames_) StartTracker();
 }
 
@@ -384,12 +436,19 @@ void SessionTracker::StartTracker() {
   started_ = true;
 }
 
-std::vector<tracking::PoseEstimate> SessionTracker::Process(const SessionItem& item) {
+std::vector<tracking::PoseEstimate> SessionTracker::Process(const SessionItem& item,
+                                                            const StopFunction& stop) {
+  if (stopped_) return {};
   switch (item.kind) {
     case SessionItem::Kind::kEvents:
-      return AddEvents(item.events, item.t_ns);
+      return AddEvents(item.events, item.t_ns, stop);
     case SessionItem::Kind::kFrame: {
       std::vector<tracking::PoseEstimate> estimates;
+      if (stop && stop()) {
+        stopped_ = true;
+        return estimates;
+      }
+      advanced_t_ns_ = std::max(advanced_t_ns_, item.t_ns);
       if (item.t_ns <= settings_.initial_t_ns) return estimates;
       if (auto estimate = tracker_.AddFrame(item.t_ns, item.gray)) {
         estimates.push_back(std::move(*estimate));
@@ -399,13 +458,15 @@ std::vector<tracking::PoseEstimate> SessionTracker::Process(const SessionItem& i
     case SessionItem::Kind::kPoseHint:
       tracker_.Reset(item.world_from_cam, item.t_ns);
       started_ = true;
+      advanced_t_ns_ = std::max(advanced_t_ns_, item.t_ns);
       return {};
   }
   return {};
 }
 
 std::vector<tracking::PoseEstimate> SessionTracker::AddEvents(const EventBuffer& events,
-                                                              int64_t end_t_ns) {
+                                                              int64_t end_t_ns,
+                                                              const StopFunction& stop) {
   std::vector<tracking::PoseEstimate> estimates;
   const EventBuffer* tracked = &events;
   if (!started_) {
@@ -433,11 +494,48 @@ std::vector<tracking::PoseEstimate> SessionTracker::AddEvents(const EventBuffer&
     }
     StartTracker();
   }
-  if (tracked && !tracked->empty()) estimates = tracker_.AddEvents(*tracked);
-  for (tracking::PoseEstimate& estimate : tracker_.AdvanceTo(end_t_ns)) {
-    estimates.push_back(std::move(estimate));
-  }
+  static const EventBuffer kNoEvents;
+  TrackInPeriods(tracked ? *tracked : kNoEvents, end_t_ns, stop, &estimates);
   return estimates;
+}
+
+void SessionTracker::TrackInPeriods(const EventBuffer& events, int64_t end_t_ns,
+                                    const StopFunction& stop,
+                                    std::vector<tracking::PoseEstimate>* estimates) {
+  // One step period per slice (at least 1 ns): each slice completes at most about one step.
+  const auto period_ns = static_cast<int64_t>(std::max(1.0, 1e9 / settings_.tracker.step_rate_hz));
+  const size_t count = events.size();
+  size_t next = 0;
+  int64_t bound = advanced_t_ns_;
+  while (true) {
+    if (stop && stop()) {
+      stopped_ = true;
+      return;
+    }
+    // |times| <= 2^62 and period_ns <= 1e9: no overflow.
+    const int64_t slice_end = end_t_ns - bound <= period_ns ? end_t_ns : bound + period_ns;
+    size_t stop_index = next;
+    while (stop_index < count && events.t_ns[stop_index] <= slice_end) ++stop_index;
+    if (stop_index > next) {
+      const EventBuffer* slice = &events;
+      if (next > 0 || stop_index < count) {
+        slice_.clear();
+        slice_.Append(events.t_ns.data() + next, events.x.data() + next, events.y.data() + next,
+                      events.polarity.data() + next, stop_index - next);
+        slice = &slice_;
+      }
+      for (tracking::PoseEstimate& estimate : tracker_.AddEvents(*slice)) {
+        estimates->push_back(std::move(estimate));
+      }
+      next = stop_index;
+    }
+    for (tracking::PoseEstimate& estimate : tracker_.AdvanceTo(slice_end)) {
+      estimates->push_back(std::move(estimate));
+    }
+    bound = std::max(bound, slice_end);
+    advanced_t_ns_ = bound;
+    if (slice_end >= end_t_ns) return;
+  }
 }
 
 grpc::Status OpenSession(const api::SessionStart& start, MapRegistry& registry,

@@ -7,6 +7,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <string>
@@ -74,7 +75,17 @@ struct SessionLimits {
   // (--max-packet-span).
   int64_t max_packet_span_ns = 1'000'000'000;
   // Highest step rate a session may ask for, Hz (--max-rate).
-  double max_step_rate_hz = 10'000;
+  double max_step_rate_hz = 2'000;
+  // Most map points per step a session may ask for (TrackingOptions.max_points); the cost of a
+  // step grows with it (--max-points-limit).
+  int max_points_limit = 10'000;
+  // Most tracking steps one EventPacket may complete: (end_t_ns - session time) * step rate is
+  // refused above this, so one request costs at most this many steps (--max-steps-per-request).
+  int64_t max_steps_per_request = 1'000;
+  // Most events one EventPacket may decode to: EVT 3.0 vector words expand about 75x in memory
+  // (a 4 MiB message would be ~24M events); raw packets are decoded in chunks and refused once
+  // they pass this (--max-packet-events).
+  int64_t max_packet_events = int64_t{1} << 20;
 
   // Throws InvalidArgumentError naming the first invalid field.
   void Check() const;
@@ -93,6 +104,14 @@ SessionSettings SessionSettingsFromProto(const api::SessionStart& start,
 // microsecond will follow a packet.
 inline constexpr int64_t kMaxRawTimeAdjustmentNs = 1'000'000;
 
+// Raw (EVT3 / EVT2) packets are decoded this many bytes at a time, the event cap checked after
+// each chunk (at most ~6 events per byte: 400k events, ~5 MB, past the cap).
+inline constexpr size_t kRawDecodeChunkBytes = 64 << 10;
+
+// Bytes a decoded event takes in an EventBuffer (time, x, y, polarity): what the server's memory
+// accounting charges per queued event.
+inline constexpr int64_t kDecodedEventBytes = 8 + 2 + 2 + 1;
+
 // Validates and decodes the EventPackets of one session, in order. Every event must lie on the
 // sensor, after the previous packet's end and at or before its packet's end, in time order;
 // packet ends must not decrease; the encoding must not change. Raw (EVT3 / EVT2) events up to
@@ -100,12 +119,16 @@ inline constexpr int64_t kMaxRawTimeAdjustmentNs = 1'000'000;
 // previous event's time, or the previous end + 1 ns) and counted. Not thread-safe.
 class PacketDecoder {
  public:
-  // Events must lie inside `sensor_size`; raw packets get `sensor_time_offset_ns` added.
-  PacketDecoder(SensorSize sensor_size, int64_t sensor_time_offset_ns);
+  // Events must lie inside `sensor_size`; raw packets get `sensor_time_offset_ns` added; a packet
+  // may hold at most `max_events` events.
+  PacketDecoder(SensorSize sensor_size, int64_t sensor_time_offset_ns,
+                int64_t max_events = SessionLimits{}.max_packet_events);
 
   // Appends the events of `packet` to `out` (cleared first). Throws InvalidArgumentError (with
-  // the packet number) for a malformed or out-of-order packet; the session cannot continue after
-  // that.
+  // the packet number) for a malformed or out-of-order packet, or one of more than `max_events`
+  // events (raw data is decoded in chunks of kRawDecodeChunkBytes and refused as soon as the
+  // count passes the cap, so a packet never holds more than the cap plus one chunk's events);
+  // the session cannot continue after that.
   void Decode(const api::EventPacket& packet, EventBuffer* out);
 
   // End time of the last packet, ns (nullopt before the first).
@@ -122,6 +145,7 @@ class PacketDecoder {
 
   SensorSize sensor_size_;
   int64_t sensor_time_offset_ns_;
+  int64_t max_events_;
   api::EventEncoding encoding_ = api::EVENT_ENCODING_UNSPECIFIED;
   std::unique_ptr<EventStreamDecoder> raw_decoder_;
   EventBuffer raw_events_;
@@ -167,7 +191,8 @@ class RequestValidator {
   // anything else that is wrong (malformed or out-of-order packet, event outside the sensor, time
   // going back, a Frame in an event session or events in a frame session, a bad pose, an empty
   // request, a packet end or hint time more than limits.max_packet_span_ns after the session
-  // time). The session cannot continue after an error.
+  // time, a packet that would complete more than limits.max_steps_per_request steps or decodes to
+  // more than limits.max_packet_events events). The session cannot continue after an error.
   grpc::Status Accept(const api::TrackRequest& request, SessionItem* item);
 
   // The packet decoder (packet count and last end time).
@@ -178,10 +203,16 @@ class RequestValidator {
  private:
   // Throws InvalidArgumentError when `t_ns` lies more than the span limit after the session time.
   void CheckSpan(int64_t t_ns, const char* what) const;
+  // Throws InvalidArgumentError when a packet ending at `end_t_ns` would complete more than
+  // max_steps_per_request_ steps.
+  void CheckSteps(int64_t end_t_ns) const;
 
   Camera camera_;
   bool takes_frames_ = false;
   int64_t max_packet_span_ns_;
+  // The session's step rate, Hz, and the most steps one packet may complete.
+  double step_rate_hz_;
+  int64_t max_steps_per_request_;
   // The latest of the initial time, the packet ends and the hint times, ns.
   int64_t session_t_ns_;
   PacketDecoder decoder_;
@@ -198,17 +229,34 @@ class SessionTracker {
   // camera or the options.
   SessionTracker(std::shared_ptr<const LoadedMap> map, const SessionSettings& settings);
 
+  // Asked between steps whether to stop (cancellation, shutdown, CPU budget): true makes Process
+  // return the poses of the steps run so far and the session end.
+  using StopFunction = std::function<bool()>;
+
   // Tracks one item that RequestValidator accepted and returns the steps that ran. An EventPacket
-  // runs every step up to its end_t_ns at once (Tracker::AdvanceTo), so the pose of step t is
-  // ready after the packet whose end_t_ns >= t, without waiting for a later packet. Throws only
-  // on a bug (the server reports INTERNAL).
-  std::vector<tracking::PoseEstimate> Process(const SessionItem& item);
+  // runs every step up to its end_t_ns (Tracker::AdvanceTo), so the pose of step t is ready after
+  // the packet whose end_t_ns >= t, without waiting for a later packet. The packet is fed one
+  // step period at a time (the tracker's poses do not depend on how events are split), and
+  // `stop` (when set) is asked before each period: a stop takes effect within one step. After a
+  // stop, stopped() is true and the tracker must not be used again. Throws only on a bug (the
+  // server reports INTERNAL).
+  std::vector<tracking::PoseEstimate> Process(const SessionItem& item,
+                                              const StopFunction& stop = {});
 
   // True when the session tracks frames.
   bool takes_frames() const { return takes_frames_; }
+  // True once `stop` ended a Process call early.
+  bool stopped() const { return stopped_; }
+  // Session time the tracker has been advanced to (steps ran up to it), ns.
+  int64_t advanced_t_ns() const { return advanced_t_ns_; }
 
  private:
-  std::vector<tracking::PoseEstimate> AddEvents(const EventBuffer& events, int64_t end_t_ns);
+  std::vector<tracking::PoseEstimate> AddEvents(const EventBuffer& events, int64_t end_t_ns,
+                                                const StopFunction& stop);
+  // Feeds `events` (all after advanced_t_ns_) and advances to `end_t_ns`, one step period at a
+  // time, asking `stop` before each period; appends the poses to `estimates`.
+  void TrackInPeriods(const EventBuffer& events, int64_t end_t_ns, const StopFunction& stop,
+                      std::vector<tracking::PoseEstimate>* estimates);
   // Starts the tracker at the initial pose and time, or without a pose (it searches the map);
   // throws InvalidArgumentError for a frame session without a pose.
   void StartTracker();
@@ -218,8 +266,11 @@ class SessionTracker {
   tracking::Tracker tracker_;
   bool takes_frames_ = false;
   bool started_ = false;
+  bool stopped_ = false;
+  int64_t advanced_t_ns_ = 0;
   EventBuffer head_;
   EventBuffer tail_;
+  EventBuffer slice_;
 };
 
 // A session admitted from its SessionStart: the map version it tracks against, its settings and

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <fstream>
+#include <functional>
 #include <iterator>
 
 #include "core/common/error.h"
@@ -191,10 +192,13 @@ TEST(PacketDecoder, RealEvt2RecordingStreamsThrough) {
   ExpectRawRecordingStreams(path, api::EVENT_ENCODING_EVT2);
 }
 
-// The session path (RequestValidator, SessionTracker) gives the offline tracker's poses, and
-// every packet runs the steps up to its end at once.
-TEST(SessionTracker, PacketsGiveTheOfflinePosesWithoutWaitingForTheNextPacket) {
-  const EventBuffer events = testing::TestEvents(120'000'000);
+// Serves `events` in PACKED packets of `packet_ns` through RequestValidator and SessionTracker
+// (fed with a stop function that never stops) and expects the offline tracker's poses bit for
+// bit; `after_packet` sees each packet's item and every pose served so far.
+void ExpectSessionGivesOfflinePoses(
+    const EventBuffer& events, int64_t packet_ns, size_t min_steps,
+    const std::function<void(const SessionItem&, const std::vector<tracking::PoseEstimate>&)>&
+        after_packet = {}) {
   auto map = std::make_shared<LoadedMap>();
   map->map = testing::TestMap();
   map->visibility = std::make_unique<VisibilityIndex>(map->map);
@@ -204,15 +208,13 @@ TEST(SessionTracker, PacketsGiveTheOfflinePosesWithoutWaitingForTheNextPacket) {
   RequestValidator validator(settings, SessionLimits{});
   std::vector<tracking::PoseEstimate> served;
   SessionItem item;
-  for (const api::TrackRequest& packet : testing::PackedPackets(events, 1'000'000)) {
+  for (const api::TrackRequest& packet : testing::PackedPackets(events, packet_ns)) {
     ASSERT_TRUE(validator.Accept(packet, &item).ok());
-    for (auto& estimate : tracker.Process(item)) {
+    for (auto& estimate : tracker.Process(item, [] { return false; })) {
       EXPECT_LE(estimate.t_ns, item.t_ns);
       served.push_back(estimate);
     }
-    if (!served.empty() && served.back().t_ns > testing::kInitialTimeNs) {
-      EXPECT_GT(served.back().t_ns + 5'000'000, item.t_ns) << "a step up to the end is missing";
-    }
+    if (after_packet) after_packet(item, served);
   }
   tracking::OfflineTrackingOptions options;
   options.tracker = settings.tracker;
@@ -220,14 +222,29 @@ TEST(SessionTracker, PacketsGiveTheOfflinePosesWithoutWaitingForTheNextPacket) {
   const auto offline =
       tracking::TrackEventStream(reader, map->map, map->visibility.get(), settings.camera,
                                  *settings.initial_world_from_cam, settings.initial_t_ns, options);
-  ASSERT_GE(offline.steps.size(), 15u);
+  ASSERT_GE(offline.steps.size(), min_steps);
   ASSERT_GE(served.size(), offline.steps.size());
   for (size_t i = 0; i < offline.steps.size(); ++i) {
     EXPECT_EQ(served[i].t_ns, offline.steps[i].t_ns);
     EXPECT_EQ(served[i].world_from_cam.translation, offline.steps[i].world_from_cam.translation)
         << "step " << i;
+    EXPECT_EQ(served[i].world_from_cam.rotation.coeffs(),
+              offline.steps[i].world_from_cam.rotation.coeffs())
+        << "step " << i;
     EXPECT_EQ(served[i].covariance, offline.steps[i].covariance) << "step " << i;
   }
+}
+
+// The session path (RequestValidator, SessionTracker) gives the offline tracker's poses, and
+// every packet runs the steps up to its end at once.
+TEST(SessionTracker, PacketsGiveTheOfflinePosesWithoutWaitingForTheNextPacket) {
+  ExpectSessionGivesOfflinePoses(
+      testing::TestEvents(120'000'000), 1'000'000, 15,
+      [](const SessionItem& item, const std::vector<tracking::PoseEstimate>& served) {
+        if (!served.empty() && served.back().t_ns > testing::kInitialTimeNs) {
+          EXPECT_GT(served.back().t_ns + 5'000'000, item.t_ns) << "a step up to the end is missing";
+        }
+      });
 }
 
 TEST(SessionSettings, RejectsInvalidCamerasAndOptions) {
@@ -331,6 +348,124 @@ TEST(SessionTracker, StartsWithoutAPoseAndFindsItselfInTheMap) {
   } catch (const InvalidArgumentError& error) {
     EXPECT_NE(std::string(error.what()).find("Locate"), std::string::npos) << error.what();
   }
+}
+
+}  // namespace
+}  // namespace evloc::service
+
+namespace evloc::service {
+namespace {
+
+// Finding 1 of issue 14: a client could ask for up to 1M points per step.
+TEST(SessionSettings, MaxPointsAboveTheServerLimitIsRefused) {
+  api::SessionStart start = testing::TestSessionStart().start();
+  SessionLimits limits;
+  start.mutable_options()->set_max_points(static_cast<uint32_t>(limits.max_points_limit));
+  EXPECT_EQ(SessionSettingsFromProto(start, limits).tracker.max_points, limits.max_points_limit);
+  start.mutable_options()->set_max_points(static_cast<uint32_t>(limits.max_points_limit) + 1);
+  try {
+    SessionSettingsFromProto(start, limits);
+    FAIL() << "expected the max_points limit";
+  } catch (const InvalidArgumentError& error) {
+    EXPECT_NE(std::string(error.what()).find("--max-points-limit"), std::string::npos);
+  }
+}
+
+// Finding 1: a packet whose end lies 1 s after the session time at a high rate made one request
+// run thousands of steps; the server caps the steps one packet may complete.
+TEST(RequestValidator, PacketCompletingMoreStepsThanTheLimitIsRefused) {
+  const api::TrackRequest start = testing::TestSessionStart();
+  SessionLimits limits;
+  limits.max_steps_per_request = 100;
+  const SessionSettings settings = SessionSettingsFromProto(start.start(), limits);
+  ASSERT_EQ(settings.tracker.step_rate_hz, 200);
+  RequestValidator validator(settings, limits);
+  SessionItem item;
+  api::TrackRequest packet;
+  // 100 steps at 200 Hz: 0.5 s.
+  packet.mutable_events()->set_end_t_ns(testing::kInitialTimeNs + 500'000'000);
+  EXPECT_TRUE(validator.Accept(packet, &item).ok());
+  packet.mutable_events()->set_end_t_ns(testing::kInitialTimeNs + 500'000'000 + 505'000'000);
+  const grpc::Status status = validator.Accept(packet, &item);
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_NE(status.error_message().find("--max-steps-per-request"), std::string::npos)
+      << status.error_message();
+}
+
+// Finding 1: Process could not be interrupted; a stop asked between steps ends it within one
+// step, with the poses of the steps that ran.
+TEST(SessionTracker, StopEndsProcessWithinOneStep) {
+  auto map = std::make_shared<LoadedMap>();
+  map->map = testing::TestMap();
+  const api::TrackRequest start = testing::TestSessionStart();
+  const SessionSettings settings = SessionSettingsFromProto(start.start(), SessionLimits{});
+  SessionTracker tracker(map, settings);
+  RequestValidator validator(settings, SessionLimits{});
+  SessionItem item;
+  api::TrackRequest packet;
+  packet.mutable_events()->set_end_t_ns(testing::kInitialTimeNs + 500'000'000);  // 100 steps
+  ASSERT_TRUE(validator.Accept(packet, &item).ok());
+  int asked = 0;
+  const auto estimates = tracker.Process(item, [&asked] { return ++asked > 3; });
+  EXPECT_EQ(asked, 4);
+  EXPECT_LE(estimates.size(), 4u);
+  EXPECT_GE(estimates.size(), 2u);
+  EXPECT_TRUE(tracker.stopped());
+  EXPECT_TRUE(tracker.Process(item).empty());
+}
+
+// Packets longer than a step period are fed one period at a time (so that a stop takes effect
+// within a step): the poses stay the offline tracker's, bit for bit.
+TEST(SessionTracker, LongPacketsFedOneStepAtATimeGiveTheOfflinePoses) {
+  // 37 ms packets: about 7 steps each, ends between step times.
+  ExpectSessionGivesOfflinePoses(testing::TestEvents(150'000'000), 37'000'000, 20);
+}
+
+// Finding 2 of issue 14: PACKED packets above the event cap are refused before decoding.
+TEST(PacketDecoder, PackedPacketAboveTheEventCapIsRefused) {
+  PacketDecoder decoder({320, 240}, 0, 2);
+  EventBuffer decoded;
+  try {
+    decoder.Decode(Packed(ThreeEvents(), 500, 2'000), &decoded);
+    FAIL() << "expected the event cap";
+  } catch (const InvalidArgumentError& error) {
+    EXPECT_NE(std::string(error.what()).find("--max-packet-events"), std::string::npos);
+  }
+  EXPECT_TRUE(decoded.empty());
+}
+
+// Finding 2: EVT 3.0 vector words expand ~75x when decoded (12 events per 2-byte word); a raw
+// packet is decoded in chunks and refused as soon as it passes the cap, never held whole.
+TEST(PacketDecoder, RawEvt3PacketExpandingPastTheCapIsRefusedWhileDecoding) {
+  const auto word = [](uint16_t type, uint16_t payload) {
+    const uint16_t value = static_cast<uint16_t>(type << 12 | payload);
+    return std::string{static_cast<char>(value & 0xff), static_cast<char>(value >> 8)};
+  };
+  std::string data = word(0x8, 0) + word(0x6, 0) + word(0x0, 5);  // time 0, row 5
+  std::string row = word(0x3, 0);                                 // vector base x = 0
+  for (int i = 0; i < 26; ++i) row += word(0x4, 0xfff);           // 26 x 12 events
+  while (data.size() < (4u << 20)) data += row;                   // 4 MiB: ~24M events
+  api::EventPacket packet;
+  packet.set_encoding(api::EVENT_ENCODING_EVT3);
+  packet.set_data(data);
+  packet.set_end_t_ns(1'000);
+  const int64_t cap = 100'000;
+  PacketDecoder decoder({320, 240}, 0, cap);
+  EventBuffer decoded;
+  try {
+    decoder.Decode(packet, &decoded);
+    FAIL() << "expected the event cap";
+  } catch (const InvalidArgumentError& error) {
+    EXPECT_NE(std::string(error.what()).find("--max-packet-events"), std::string::npos);
+  }
+  // At most one chunk past the cap was decoded (a 2-byte word gives at most 12 events).
+  EXPECT_LE(decoded.size(), static_cast<size_t>(cap) + kRawDecodeChunkBytes / 2 * 12);
+  // The same data within the cap decodes whole.
+  PacketDecoder roomy({320, 240}, 0, int64_t{1} << 26);
+  api::EventPacket small = packet;
+  small.set_data(data.substr(0, 6 + row.size() * 10));
+  EXPECT_NO_THROW(roomy.Decode(small, &decoded));
+  EXPECT_EQ(decoded.size(), 26u * 12 * 10);
 }
 
 }  // namespace

@@ -317,8 +317,8 @@ TEST_F(ReplayTest, HealthCheckReportsServingUntilTheServerStops) {
   EXPECT_THROW(CheckHealth(options, 1.0), Error);
 }
 
-// Shuts `server` down (gracefully: 1 s for running calls, then they are cancelled, as on
-// SIGTERM) once it has sent `poses` more poses.
+// Shuts `server` down (gracefully, as on SIGTERM: running sessions stop within a step and end
+// UNAVAILABLE "draining") once it has sent `poses` more poses.
 std::thread ShutDownAfterPoses(service::LocalizerServer& server, int64_t poses) {
   const int64_t target = server.counters().poses + poses;
   return std::thread([&server, target] {
@@ -344,12 +344,13 @@ TEST_F(ReplayTest, ReconnectsToAnotherServerAndResumesFromTheLastPose) {
   // the channel moves to the second.
   options.server = "ipv4:127.0.0.1:" + std::to_string(server_->port()) +
                    ",127.0.0.1:" + std::to_string(second.port());
-  // Slower than real time, so that the first server's 1 s grace ends mid-stream.
+  // Slower than real time; the drain stops the first session within a step of the shutdown,
+  // which comes after 25 poses: mid-stream, past the first steps.
   options.speed = 0.15;
   options.reconnect = 3;
   options.reconnect_backoff_ms = 20;
   options.report = folder_.path() / "report.json";
-  std::thread stopper = ShutDownAfterPoses(*server_, 10);
+  std::thread stopper = ShutDownAfterPoses(*server_, 25);
   std::ostringstream log;
   const ReplayResult result = RunReplay(options, log);
   stopper.join();
