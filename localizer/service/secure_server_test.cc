@@ -16,6 +16,7 @@
 #include "localizer/service/localizer_server.h"
 #include "localizer/service/serve_command.h"
 #include "localizer/service/testing/service_fixture.h"
+#include "localizer/service/testing/test_pki.h"
 
 namespace evloc::service {
 namespace {
@@ -41,52 +42,9 @@ bool Eventually(const std::function<bool()>& condition, int seconds) {
   return condition();
 }
 
-bool HaveOpenssl() { return std::system("openssl version > /dev/null 2>&1") == 0; }
-
-// Runs a shell command quietly; true when it succeeded.
-bool Run(const std::string& command) {
-  return std::system((command + " > /dev/null 2>&1").c_str()) == 0;
-}
-
-// Test certificates under one folder, made with the openssl command (P-256 keys, valid one day).
-class TestPki {
- public:
-  explicit TestPki(std::filesystem::path folder) : folder_(std::move(folder)) {}
-
-  // A self-signed CA: NAME.crt, NAME.key.
-  bool MakeCa(const std::string& name) {
-    return Run(
-        "openssl req -x509 -newkey ec -pkeyopt ec_paramgen_curve:prime256v1 -nodes -days 1 "
-        "-subj /CN=" +
-        name + " -keyout '" + Key(name).string() + "' -out '" + Cert(name).string() + "'");
-  }
-
-  // A leaf certificate NAME.crt/NAME.key for localhost and 127.0.0.1, signed by CA `ca`.
-  bool MakeLeaf(const std::string& name, const std::string& ca) {
-    const auto csr = folder_ / (name + ".csr");
-    const auto extensions = folder_ / (name + ".ext");
-    {
-      std::ofstream file(extensions);
-      file << "subjectAltName=DNS:localhost,IP:127.0.0.1\n";
-    }
-    return Run("openssl req -newkey ec -pkeyopt ec_paramgen_curve:prime256v1 -nodes -subj "
-               "/CN=localhost -keyout '" +
-               Key(name).string() + "' -out '" + csr.string() + "'") &&
-           Run("openssl x509 -req -days 1 -in '" + csr.string() + "' -CA '" + Cert(ca).string() +
-               "' -CAkey '" + Key(ca).string() + "' -CAcreateserial -extfile '" +
-               extensions.string() + "' -out '" + Cert(name).string() + "'");
-  }
-
-  std::filesystem::path Cert(const std::string& name) const { return folder_ / (name + ".crt"); }
-  std::filesystem::path Key(const std::string& name) const { return folder_ / (name + ".key"); }
-
- private:
-  std::filesystem::path folder_;
-};
-
 // ListMaps over TLS trusting only `ca`, presenting `client` (a TestPki leaf name) when not
 // empty; the status.
-grpc::Status ListMapsOverTls(int port, const TestPki& pki, const std::string& ca,
+grpc::Status ListMapsOverTls(int port, const testing::TestPki& pki, const std::string& ca,
                              const std::string& client = "") {
   grpc::SslCredentialsOptions ssl;
   ssl.pem_root_certs = ReadFileToString(pki.Cert(ca));
@@ -231,8 +189,8 @@ TEST_F(SecureServerTest, TheTokenFileIsReadAgainWhenItChanges) {
 }
 
 TEST_F(SecureServerTest, CertificatesAreReadAgainWhenTheyChange) {
-  if (!HaveOpenssl()) GTEST_SKIP() << "the openssl command is not installed";
-  TestPki pki(files_.path());
+  if (!testing::HaveOpenssl()) GTEST_SKIP() << "the openssl command is not installed";
+  testing::TestPki pki(files_.path());
   ASSERT_TRUE(pki.MakeCa("old-ca") && pki.MakeLeaf("old-server", "old-ca"));
   ASSERT_TRUE(pki.MakeCa("new-ca") && pki.MakeLeaf("new-server", "new-ca"));
   const auto cert = files_.path() / "server.crt";
@@ -256,8 +214,8 @@ TEST_F(SecureServerTest, CertificatesAreReadAgainWhenTheyChange) {
 }
 
 TEST_F(SecureServerTest, MutualTlsRefusesClientsWithoutACertificateOfTheClientCa) {
-  if (!HaveOpenssl()) GTEST_SKIP() << "the openssl command is not installed";
-  TestPki pki(files_.path());
+  if (!testing::HaveOpenssl()) GTEST_SKIP() << "the openssl command is not installed";
+  testing::TestPki pki(files_.path());
   ASSERT_TRUE(pki.MakeCa("server-ca") && pki.MakeLeaf("server", "server-ca"));
   ASSERT_TRUE(pki.MakeCa("client-ca") && pki.MakeLeaf("camera", "client-ca"));
   ASSERT_TRUE(pki.MakeCa("rogue-ca") && pki.MakeLeaf("rogue", "rogue-ca"));
@@ -274,8 +232,8 @@ TEST_F(SecureServerTest, MutualTlsRefusesClientsWithoutACertificateOfTheClientCa
 }
 
 TEST_F(SecureServerTest, MismatchedOrMalformedTlsFilesStopTheServerFromStarting) {
-  if (!HaveOpenssl()) GTEST_SKIP() << "the openssl command is not installed";
-  TestPki pki(files_.path());
+  if (!testing::HaveOpenssl()) GTEST_SKIP() << "the openssl command is not installed";
+  testing::TestPki pki(files_.path());
   ASSERT_TRUE(pki.MakeCa("ca") && pki.MakeLeaf("one", "ca") && pki.MakeLeaf("two", "ca"));
   LocalizerServerOptions options = Options();
   options.tls_cert_file = pki.Cert("one");
