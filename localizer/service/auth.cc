@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cctype>
+#include <cstdlib>
+#include <fstream>
 #include <map>
 #include <sstream>
 
@@ -12,6 +14,7 @@
 #include <netinet/in.h>
 #include <openssl/bio.h>
 #include <openssl/crypto.h>
+#include <openssl/err.h>
 #include <openssl/evp.h>
 #include <openssl/pem.h>
 #include <openssl/x509.h>
@@ -243,18 +246,25 @@ int64_t TokenFile::reloads() const {
 // ---------------------------------------------------------------------------------------------
 // TLS files and listen addresses.
 
-void CheckTlsFiles(const std::filesystem::path& cert_file, const std::filesystem::path& key_file,
-                   const std::optional<std::filesystem::path>& client_ca_file) {
-  const std::string cert_pem = ReadFileToString(cert_file);
-  const std::string key_pem = ReadFileToString(key_file);
+TlsPem ReadTlsFiles(const std::filesystem::path& cert_file, const std::filesystem::path& key_file,
+                    const std::optional<std::filesystem::path>& client_ca_file) {
+  // OpenSSL keeps failures in a per-thread queue, and with an old failure queued the PEM readers
+  // of OpenSSL 3.0 fail on valid input too: start (and end, below) with an empty queue.
+  ERR_clear_error();
+  struct ClearErrors {
+    ~ClearErrors() { ERR_clear_error(); }
+  } clear_errors;
+  TlsPem pem;
+  pem.cert = ReadFileToString(cert_file);
+  pem.key = ReadFileToString(key_file);
   const std::unique_ptr<X509, X509Free> certificate(
-      PEM_read_bio_X509(MemoryBio(cert_pem).get(), nullptr, nullptr, nullptr));
+      PEM_read_bio_X509(MemoryBio(pem.cert).get(), nullptr, nullptr, nullptr));
   if (!certificate) {
     throw InvalidArgumentError("--tls-cert: '" + cert_file.string() +
                                "' holds no PEM certificate (expected -----BEGIN CERTIFICATE-----)");
   }
   const std::unique_ptr<EVP_PKEY, KeyFree> key(
-      PEM_read_bio_PrivateKey(MemoryBio(key_pem).get(), nullptr, nullptr, nullptr));
+      PEM_read_bio_PrivateKey(MemoryBio(pem.key).get(), nullptr, nullptr, nullptr));
   if (!key) {
     throw InvalidArgumentError("--tls-key: '" + key_file.string() +
                                "' holds no unencrypted PEM private key");
@@ -265,41 +275,147 @@ void CheckTlsFiles(const std::filesystem::path& cert_file, const std::filesystem
                                "' (give the pair the certificate was issued for)");
   }
   if (client_ca_file) {
-    const std::string ca_pem = ReadFileToString(*client_ca_file);
+    pem.client_ca = ReadFileToString(*client_ca_file);
     const std::unique_ptr<X509, X509Free> ca(
-        PEM_read_bio_X509(MemoryBio(ca_pem).get(), nullptr, nullptr, nullptr));
+        PEM_read_bio_X509(MemoryBio(pem.client_ca).get(), nullptr, nullptr, nullptr));
     if (!ca) {
       throw InvalidArgumentError("--tls-client-ca: '" + client_ca_file->string() +
                                  "' holds no PEM certificate (the CA that issues client "
                                  "certificates)");
     }
   }
+  return pem;
 }
 
-std::shared_ptr<grpc::ServerCredentials> MakeServerCredentials(
-    const std::optional<std::filesystem::path>& cert_file,
-    const std::optional<std::filesystem::path>& key_file,
-    const std::optional<std::filesystem::path>& client_ca_file, int reload_interval_s) {
-  if (!cert_file) return grpc::InsecureServerCredentials();
-  if (!key_file) throw InvalidArgumentError("--tls-cert and --tls-key go together");
-  if (reload_interval_s < 1) throw InvalidArgumentError("--reload-interval must be at least 1 s");
-  CheckTlsFiles(*cert_file, *key_file, client_ca_file);
-  const auto interval = static_cast<unsigned int>(reload_interval_s);
+// ---------------------------------------------------------------------------------------------
+// ServerTlsFiles.
+
+namespace {
+
+constexpr char kCurrent[] = "current";
+
+// Writes `content` to `path`, readable by the owner only.
+void WritePrivateFile(const std::filesystem::path& path, const std::string& content) {
+  {
+    std::ofstream file(path, std::ios::binary | std::ios::trunc);
+    file << content;
+    file.close();
+    if (!file) throw IoError("cannot write '" + path.string() + "' (the TLS files' private copy)");
+  }
+  std::filesystem::permissions(
+      path, std::filesystem::perms::owner_read | std::filesystem::perms::owner_write);
+}
+
+}  // namespace
+
+ServerTlsFiles::ServerTlsFiles(std::filesystem::path cert_file, std::filesystem::path key_file,
+                               std::optional<std::filesystem::path> client_ca_file,
+                               int reload_interval_s, LogFunction log)
+    : cert_file_(std::move(cert_file)),
+      key_file_(std::move(key_file)),
+      client_ca_file_(std::move(client_ca_file)),
+      interval_(std::max(1, reload_interval_s)),
+      log_(std::move(log)) {
+  published_ = ReadTlsFiles(cert_file_, key_file_, client_ca_file_);
+  std::string pattern = (std::filesystem::temp_directory_path() / "evloc-tls-XXXXXX").string();
+  if (::mkdtemp(pattern.data()) == nullptr) {
+    throw IoError("cannot make a private folder for the TLS files under '" +
+                  std::filesystem::temp_directory_path().string() +
+                  "' (set TMPDIR to a writable folder; in Kubernetes mount an emptyDir at /tmp)");
+  }
+  folder_ = pattern;
+  try {
+    Publish(published_);
+  } catch (...) {
+    std::error_code ignored;
+    std::filesystem::remove_all(folder_, ignored);
+    throw;
+  }
+  const std::filesystem::path current = folder_ / kCurrent;
+  const auto interval = static_cast<unsigned int>(interval_.count());
   auto provider =
-      client_ca_file
+      client_ca_file_
           ? std::make_shared<grpc::experimental::FileWatcherCertificateProvider>(
-                key_file->string(), cert_file->string(), client_ca_file->string(), interval)
+                (current / "tls.key").string(), (current / "tls.crt").string(),
+                (current / "ca.crt").string(), interval)
           : std::make_shared<grpc::experimental::FileWatcherCertificateProvider>(
-                key_file->string(), cert_file->string(), interval);
+                (current / "tls.key").string(), (current / "tls.crt").string(), interval);
   grpc::experimental::TlsServerCredentialsOptions options(provider);
   options.watch_identity_key_cert_pairs();
-  if (client_ca_file) {
+  if (client_ca_file_) {
     options.watch_root_certs();
     options.set_cert_request_type(GRPC_SSL_REQUEST_AND_REQUIRE_CLIENT_CERTIFICATE_AND_VERIFY);
   } else {
     options.set_cert_request_type(GRPC_SSL_DONT_REQUEST_CLIENT_CERTIFICATE);
   }
-  return grpc::experimental::TlsServerCredentials(options);
+  credentials_ = grpc::experimental::TlsServerCredentials(options);
+  watcher_ = std::thread([this] { WatchLoop(); });
+}
+
+ServerTlsFiles::~ServerTlsFiles() {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    stop_ = true;
+  }
+  stop_cv_.notify_all();
+  watcher_.join();
+  credentials_.reset();
+  std::error_code ignored;
+  std::filesystem::remove_all(folder_, ignored);
+}
+
+int64_t ServerTlsFiles::reloads() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return reloads_;
+}
+
+void ServerTlsFiles::Publish(const TlsPem& pem) {
+  ++generation_;
+  const std::string name = "gen-" + std::to_string(generation_);
+  const std::filesystem::path generation = folder_ / name;
+  std::filesystem::create_directory(generation);
+  WritePrivateFile(generation / "tls.crt", pem.cert);
+  WritePrivateFile(generation / "tls.key", pem.key);
+  if (client_ca_file_) WritePrivateFile(generation / "ca.crt", pem.client_ca);
+  // Swap the link atomically: a new link under a temporary name renamed over the old one.
+  const std::filesystem::path link = folder_ / (std::string(kCurrent) + ".new");
+  std::error_code ignored;
+  std::filesystem::remove(link, ignored);
+  std::filesystem::create_directory_symlink(name, link);
+  std::filesystem::rename(link, folder_ / kCurrent);
+  if (generation_ > 2) {
+    std::filesystem::remove_all(folder_ / ("gen-" + std::to_string(generation_ - 2)), ignored);
+  }
+}
+
+void ServerTlsFiles::WatchLoop() {
+  std::optional<std::string> last_error;
+  std::unique_lock<std::mutex> lock(mutex_);
+  while (!stop_cv_.wait_for(lock, interval_, [this] { return stop_; })) {
+    lock.unlock();
+    try {
+      const TlsPem pem = ReadTlsFiles(cert_file_, key_file_, client_ca_file_);
+      last_error.reset();
+      if (!(pem == published_)) {
+        Publish(pem);
+        published_ = pem;
+        lock.lock();
+        ++reloads_;
+        lock.unlock();
+        if (log_) log_("TLS files changed: the new certificate is in force for new connections");
+      }
+    } catch (const std::exception& error) {
+      // Reported once per distinct problem (a file being replaced may fail one check).
+      if (last_error != error.what()) {
+        last_error = error.what();
+        if (log_) {
+          log_(std::string("TLS files changed but are not valid: ") + error.what() +
+               "; the previous certificate stays in force");
+        }
+      }
+    }
+    lock.lock();
+  }
 }
 
 bool IsLoopbackListenAddress(const std::string& address) {

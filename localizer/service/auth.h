@@ -7,6 +7,7 @@
 
 #include <array>
 #include <chrono>
+#include <condition_variable>
 #include <cstdint>
 #include <filesystem>
 #include <functional>
@@ -16,6 +17,7 @@
 #include <set>
 #include <string>
 #include <string_view>
+#include <thread>
 #include <vector>
 
 namespace grpc {
@@ -116,22 +118,78 @@ class TokenFile {
   int64_t reloads_ = 0;
 };
 
-// Checks the server's TLS files before the server starts: the certificate chain and the private
-// key are readable PEM and belong together, and the client CA (when given) holds at least one
-// certificate. Throws IoError for an unreadable file, InvalidArgumentError naming the file (and
-// the flag) for a malformed one.
-void CheckTlsFiles(const std::filesystem::path& cert_file, const std::filesystem::path& key_file,
-                   const std::optional<std::filesystem::path>& client_ca_file);
+// The server's TLS material as PEM text.
+struct TlsPem {
+  // Certificate chain.
+  std::string cert;
+  // Private key.
+  std::string key;
+  // Client CA certificate(s); empty without mutual TLS.
+  std::string client_ca;
+  bool operator==(const TlsPem& other) const {
+    return cert == other.cert && key == other.key && client_ca == other.client_ca;
+  }
+};
 
-// The server credentials: plaintext without `cert_file`; else TLS with the certificate chain and
-// key read from the files and read again when they change (checked every `reload_interval_s`
-// seconds; gRPC's FileWatcherCertificateProvider), and with `client_ca_file` mutual TLS: every
-// client must present a certificate signed by that CA (also read again when it changes). Checks
-// the files first (CheckTlsFiles).
-std::shared_ptr<grpc::ServerCredentials> MakeServerCredentials(
-    const std::optional<std::filesystem::path>& cert_file,
-    const std::optional<std::filesystem::path>& key_file,
-    const std::optional<std::filesystem::path>& client_ca_file, int reload_interval_s);
+// Reads the server's TLS files and checks them: the certificate chain and the private key are
+// PEM and belong together, and the client CA (when given) holds a certificate. Throws IoError
+// for an unreadable file, InvalidArgumentError naming the file (and its flag) for a bad one.
+TlsPem ReadTlsFiles(const std::filesystem::path& cert_file, const std::filesystem::path& key_file,
+                    const std::optional<std::filesystem::path>& client_ca_file);
+
+// The server's TLS credentials, read again when the files change, without a restart. gRPC 1.51's
+// FileWatcherCertificateProvider alone installs whatever it reads: while a certificate is
+// half-written, or a key and certificate are replaced one after the other (a key that does not
+// belong to the certificate), every new handshake fails (SecureServerTest shows it). So the
+// operator's files are not given to gRPC directly: this object checks them (ReadTlsFiles) every
+// `reload_interval_s` seconds on its own thread and publishes only a valid, matching set into a
+// private folder (mode 0700 under the temporary directory, $TMPDIR or /tmp), one generation
+// folder per version behind a symbolic link that is swapped atomically; gRPC's provider watches
+// that folder. A set that is not valid is logged (once per problem) and the previous certificate
+// stays in force. With a client CA, every client must present a certificate signed by it
+// (mutual TLS).
+class ServerTlsFiles {
+ public:
+  // A report line (no trailing newline); called from the watcher thread.
+  using LogFunction = std::function<void(const std::string& line)>;
+
+  // Reads and checks the files (throws like ReadTlsFiles), publishes them and starts watching.
+  // Throws IoError when the private folder cannot be made.
+  ServerTlsFiles(std::filesystem::path cert_file, std::filesystem::path key_file,
+                 std::optional<std::filesystem::path> client_ca_file, int reload_interval_s,
+                 LogFunction log = {});
+  // Stops watching and removes the private folder.
+  ~ServerTlsFiles();
+  ServerTlsFiles(const ServerTlsFiles&) = delete;
+  ServerTlsFiles& operator=(const ServerTlsFiles&) = delete;
+
+  // The credentials to listen with.
+  std::shared_ptr<grpc::ServerCredentials> credentials() const { return credentials_; }
+  // Number of new versions published after the first.
+  int64_t reloads() const;
+
+ private:
+  // Writes `pem` as a new generation and points the link at it; drops generations older than
+  // the previous one (gRPC may still be reading that).
+  void Publish(const TlsPem& pem);
+  // Until stopped: checks the files every interval and publishes a changed, valid set.
+  void WatchLoop();
+
+  const std::filesystem::path cert_file_;
+  const std::filesystem::path key_file_;
+  const std::optional<std::filesystem::path> client_ca_file_;
+  const std::chrono::seconds interval_;
+  const LogFunction log_;
+  std::filesystem::path folder_;
+  int64_t generation_ = 0;
+  TlsPem published_;
+  std::shared_ptr<grpc::ServerCredentials> credentials_;
+  mutable std::mutex mutex_;
+  std::condition_variable stop_cv_;
+  bool stop_ = false;
+  int64_t reloads_ = 0;
+  std::thread watcher_;
+};
 
 // What protects a listening server.
 struct ListenSecurity {

@@ -678,9 +678,14 @@ LocalizerServer::LocalizerServer(const LocalizerServerOptions& options, LogFunct
   grpc::EnableDefaultHealthCheckService(true);
   grpc::reflection::InitProtoReflectionServerBuilderPlugin();
   grpc::ServerBuilder builder;
-  const std::shared_ptr<grpc::ServerCredentials> credentials =
-      MakeServerCredentials(options.tls_cert_file, options.tls_key_file, options.tls_client_ca_file,
-                            options.reload_interval_s);
+  std::shared_ptr<grpc::ServerCredentials> credentials = grpc::InsecureServerCredentials();
+  if (options.tls_cert_file) {
+    tls_files_ = std::make_unique<ServerTlsFiles>(
+        *options.tls_cert_file, *options.tls_key_file, options.tls_client_ca_file,
+        options.reload_interval_s,
+        [service = service_.get()](const std::string& line) { service->Log(line); });
+    credentials = tls_files_->credentials();
+  }
   builder.AddListeningPort(options.listen_address, credentials, &port_);
   builder.RegisterService(service_.get());
   builder.SetMaxReceiveMessageSize(options.max_message_bytes);

@@ -150,6 +150,8 @@ class LocalizerServer {
 
  private:
   std::unique_ptr<Service> service_;
+  // The TLS files, read again when they change (null without TLS); outlives server_.
+  std::unique_ptr<ServerTlsFiles> tls_files_;
   std::unique_ptr<grpc::Server> server_;
   std::unique_ptr<MetricsHttpServer> metrics_;
   int port_ = 0;

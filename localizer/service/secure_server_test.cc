@@ -213,6 +213,44 @@ TEST_F(SecureServerTest, CertificatesAreReadAgainWhenTheyChange) {
   EXPECT_FALSE(ListMapsOverTls(port, pki, "old-ca").ok());
 }
 
+TEST_F(SecureServerTest, InvalidNewTlsFilesKeepThePreviousCertificateInForce) {
+  if (!testing::HaveOpenssl()) GTEST_SKIP() << "the openssl command is not installed";
+  testing::TestPki pki(files_.path());
+  ASSERT_TRUE(pki.MakeCa("ca") && pki.MakeLeaf("leaf", "ca"));
+  ASSERT_TRUE(pki.MakeCa("other-ca") && pki.MakeLeaf("other", "other-ca"));
+  const auto cert = files_.path() / "server.crt";
+  const auto key = files_.path() / "server.key";
+  ReplaceFile(cert, ReadFileToString(pki.Cert("leaf")));
+  ReplaceFile(key, ReadFileToString(pki.Key("leaf")));
+  LocalizerServerOptions options = Options();
+  options.tls_cert_file = cert;
+  options.tls_key_file = key;
+  Start(options);
+  const int port = server_->port();
+  ASSERT_TRUE(ListMapsOverTls(port, pki, "ca").ok());
+  // A certificate that is not PEM (a half-written file), then a key that does not belong to
+  // the certificate (a pair replaced one file at a time): gRPC's file watcher alone installs
+  // either, and every handshake fails while the files are so (ServerTlsFiles in auth.h).
+  ReplaceFile(cert, "not a certificate\n");
+  std::this_thread::sleep_for(std::chrono::milliseconds(3500));
+  const grpc::Status garbage = ListMapsOverTls(port, pki, "ca");
+  EXPECT_TRUE(garbage.ok()) << garbage.error_message();
+  ReplaceFile(cert, ReadFileToString(pki.Cert("leaf")));
+  ReplaceFile(key, ReadFileToString(pki.Key("other")));
+  std::this_thread::sleep_for(std::chrono::milliseconds(3500));
+  const grpc::Status mismatched = ListMapsOverTls(port, pki, "ca");
+  EXPECT_TRUE(mismatched.ok()) << mismatched.error_message();
+  ReplaceFile(key, ReadFileToString(pki.Key("leaf")));
+  std::this_thread::sleep_for(std::chrono::milliseconds(3500));
+  const grpc::Status restored = ListMapsOverTls(port, pki, "ca");
+  EXPECT_TRUE(restored.ok()) << restored.error_message();
+  // Each bad version was reported once; none was published.
+  std::lock_guard<std::mutex> lock(log_mutex_);
+  int reports = 0;
+  for (const std::string& line : log_) reports += line.find("are not valid") != std::string::npos;
+  EXPECT_EQ(reports, 2);
+}
+
 TEST_F(SecureServerTest, MutualTlsRefusesClientsWithoutACertificateOfTheClientCa) {
   if (!testing::HaveOpenssl()) GTEST_SKIP() << "the openssl command is not installed";
   testing::TestPki pki(files_.path());
