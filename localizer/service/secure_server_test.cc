@@ -91,8 +91,21 @@ class SecureServerTest : public ::testing::Test {
     });
   }
 
+  // Starts a TLS server whose files (cert_, key_) hold a copy of the TestPki pair `leaf`.
+  void StartTlsWithCopyOf(const testing::TestPki& pki, const std::string& leaf) {
+    ReplaceFile(cert_, ReadFileToString(pki.Cert(leaf)));
+    ReplaceFile(key_, ReadFileToString(pki.Key(leaf)));
+    LocalizerServerOptions options = Options();
+    options.tls_cert_file = cert_;
+    options.tls_key_file = key_;
+    Start(options);
+  }
+
   testing::TemporaryFolder maps_;
   testing::TemporaryFolder files_;
+  // The server's certificate and key files (the TLS tests replace them while it runs).
+  const std::filesystem::path cert_ = files_.path() / "server.crt";
+  const std::filesystem::path key_ = files_.path() / "server.key";
   std::mutex log_mutex_;
   std::vector<std::string> log_;
   std::unique_ptr<LocalizerServer> server_;
@@ -193,21 +206,14 @@ TEST_F(SecureServerTest, CertificatesAreReadAgainWhenTheyChange) {
   testing::TestPki pki(files_.path());
   ASSERT_TRUE(pki.MakeCa("old-ca") && pki.MakeLeaf("old-server", "old-ca"));
   ASSERT_TRUE(pki.MakeCa("new-ca") && pki.MakeLeaf("new-server", "new-ca"));
-  const auto cert = files_.path() / "server.crt";
-  const auto key = files_.path() / "server.key";
-  ReplaceFile(cert, ReadFileToString(pki.Cert("old-server")));
-  ReplaceFile(key, ReadFileToString(pki.Key("old-server")));
-  LocalizerServerOptions options = Options();
-  options.tls_cert_file = cert;
-  options.tls_key_file = key;
-  Start(options);
+  StartTlsWithCopyOf(pki, "old-server");
   const int port = server_->port();
   const grpc::Status old_status = ListMapsOverTls(port, pki, "old-ca");
   EXPECT_TRUE(old_status.ok()) << old_status.error_message();
   EXPECT_FALSE(ListMapsOverTls(port, pki, "new-ca").ok());
 
-  ReplaceFile(key, ReadFileToString(pki.Key("new-server")));
-  ReplaceFile(cert, ReadFileToString(pki.Cert("new-server")));
+  ReplaceFile(key_, ReadFileToString(pki.Key("new-server")));
+  ReplaceFile(cert_, ReadFileToString(pki.Cert("new-server")));
   EXPECT_TRUE(Eventually([&] { return ListMapsOverTls(port, pki, "new-ca").ok(); }, 15))
       << "a client trusting only the new CA cannot connect after the certificate changed";
   EXPECT_FALSE(ListMapsOverTls(port, pki, "old-ca").ok());
@@ -218,29 +224,22 @@ TEST_F(SecureServerTest, InvalidNewTlsFilesKeepThePreviousCertificateInForce) {
   testing::TestPki pki(files_.path());
   ASSERT_TRUE(pki.MakeCa("ca") && pki.MakeLeaf("leaf", "ca"));
   ASSERT_TRUE(pki.MakeCa("other-ca") && pki.MakeLeaf("other", "other-ca"));
-  const auto cert = files_.path() / "server.crt";
-  const auto key = files_.path() / "server.key";
-  ReplaceFile(cert, ReadFileToString(pki.Cert("leaf")));
-  ReplaceFile(key, ReadFileToString(pki.Key("leaf")));
-  LocalizerServerOptions options = Options();
-  options.tls_cert_file = cert;
-  options.tls_key_file = key;
-  Start(options);
+  StartTlsWithCopyOf(pki, "leaf");
   const int port = server_->port();
   ASSERT_TRUE(ListMapsOverTls(port, pki, "ca").ok());
   // A certificate that is not PEM (a half-written file), then a key that does not belong to
   // the certificate (a pair replaced one file at a time): gRPC's file watcher alone installs
   // either, and every handshake fails while the files are so (ServerTlsFiles in auth.h).
-  ReplaceFile(cert, "not a certificate\n");
+  ReplaceFile(cert_, "not a certificate\n");
   std::this_thread::sleep_for(std::chrono::milliseconds(3500));
   const grpc::Status garbage = ListMapsOverTls(port, pki, "ca");
   EXPECT_TRUE(garbage.ok()) << garbage.error_message();
-  ReplaceFile(cert, ReadFileToString(pki.Cert("leaf")));
-  ReplaceFile(key, ReadFileToString(pki.Key("other")));
+  ReplaceFile(cert_, ReadFileToString(pki.Cert("leaf")));
+  ReplaceFile(key_, ReadFileToString(pki.Key("other")));
   std::this_thread::sleep_for(std::chrono::milliseconds(3500));
   const grpc::Status mismatched = ListMapsOverTls(port, pki, "ca");
   EXPECT_TRUE(mismatched.ok()) << mismatched.error_message();
-  ReplaceFile(key, ReadFileToString(pki.Key("leaf")));
+  ReplaceFile(key_, ReadFileToString(pki.Key("leaf")));
   std::this_thread::sleep_for(std::chrono::milliseconds(3500));
   const grpc::Status restored = ListMapsOverTls(port, pki, "ca");
   EXPECT_TRUE(restored.ok()) << restored.error_message();
