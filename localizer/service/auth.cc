@@ -317,10 +317,11 @@ ServerTlsFiles::ServerTlsFiles(std::filesystem::path cert_file, std::filesystem:
       interval_(std::max(1, reload_interval_s)),
       log_(std::move(log)) {
   published_ = ReadTlsFiles(cert_file_, key_file_, client_ca_file_);
-  std::string pattern = (std::filesystem::temp_directory_path() / "evloc-tls-XXXXXX").string();
-  if (::mkdtemp(pattern.data()) == nullptr) {
-    throw IoError("cannot make a private folder for the TLS files under '" +
-                  std::filesystem::temp_directory_path().string() +
+  std::error_code no_temp;
+  const std::filesystem::path temp = std::filesystem::temp_directory_path(no_temp);
+  std::string pattern = (temp / "evloc-tls-XXXXXX").string();
+  if (no_temp || ::mkdtemp(pattern.data()) == nullptr) {
+    throw IoError("cannot make a private folder for the TLS files under '" + temp.string() +
                   "' (set TMPDIR to a writable folder; in Kubernetes mount an emptyDir at /tmp)");
   }
   folder_ = pattern;

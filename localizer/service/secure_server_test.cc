@@ -268,6 +268,29 @@ TEST_F(SecureServerTest, MutualTlsRefusesClientsWithoutACertificateOfTheClientCa
   EXPECT_FALSE(ListMapsOverTls(port, pki, "server-ca", "rogue").ok());
 }
 
+TEST_F(SecureServerTest, AnUnwritableTemporaryFolderIsAClearError) {
+  if (!testing::HaveOpenssl()) GTEST_SKIP() << "the openssl command is not installed";
+  testing::TestPki pki(files_.path());
+  ASSERT_TRUE(pki.MakeCa("ca") && pki.MakeLeaf("leaf", "ca"));
+  LocalizerServerOptions options = Options();
+  options.tls_cert_file = pki.Cert("leaf");
+  options.tls_key_file = pki.Key("leaf");
+  const char* previous = std::getenv("TMPDIR");
+  const std::string saved = previous != nullptr ? previous : "";
+  ::setenv("TMPDIR", (files_.path() / "missing").c_str(), 1);
+  try {
+    Start(options);
+    ADD_FAILURE() << "expected an IoError";
+  } catch (const IoError& error) {
+    EXPECT_NE(std::string(error.what()).find("TMPDIR"), std::string::npos) << error.what();
+  }
+  if (previous != nullptr) {
+    ::setenv("TMPDIR", saved.c_str(), 1);
+  } else {
+    ::unsetenv("TMPDIR");
+  }
+}
+
 TEST_F(SecureServerTest, MismatchedOrMalformedTlsFilesStopTheServerFromStarting) {
   if (!testing::HaveOpenssl()) GTEST_SKIP() << "the openssl command is not installed";
   testing::TestPki pki(files_.path());
