@@ -13,6 +13,8 @@ PACKAGES=(
   colmap libceres-dev libpcl-dev
   # service
   libgrpc++-dev libprotobuf-dev protobuf-compiler protobuf-compiler-grpc
+  # token digests (SHA-256, CRYPTO_memcmp) and TLS file checks: OpenSSL libcrypto
+  libssl-dev
   # tests and benchmarks
   libgtest-dev libgmock-dev libbenchmark-dev
   # python client example and its test

@@ -2,7 +2,9 @@
 # Local scale-out test (docs/deploy.md, "Scale-out test"): three evloc-localizer replicas on
 # loopback behind HAProxy (deploy/haproxy/evloc-localizer.cfg: HTTP/2, one Track stream per
 # request, leastconn), CLIENTS evloc-replay clients streaming one dataset through the proxy with
-# --reconnect, and one replica killed mid-run. The clients that were on it must reconnect through
+# --reconnect, and one replica killed mid-run. As deployed: TLS from the clients to the proxy
+# and from the proxy to the replicas (a test CA and certificate made here with openssl), and a
+# bearer token (in a file) on every session. The clients that were on it must reconnect through
 # the proxy to a live replica and resume at their last pose; every client must finish. Prints
 # how many sessions were affected, how long they took to resume (distribution), and the accuracy
 # of the affected and unaffected trajectories (evloc-eval against ground truth).
@@ -19,7 +21,8 @@
 #                      NOT_SERVING, 1 s for running calls, then they are cancelled) (default KILL)
 #   --kill-at F        kill when this fraction of all expected poses has been sent (default 0.33)
 #   --base-port P      proxy on P, replicas on P+1..P+3, their metrics on P+11..P+13 (default 50160)
-# Exit status: 0 passed, 1 failed, 2 bad usage, 77 haproxy or a binary is missing (skipped).
+# Exit status: 0 passed, 1 failed, 2 bad usage, 77 haproxy, openssl or a binary is missing
+# (skipped).
 set -euo pipefail
 
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
@@ -63,6 +66,8 @@ for binary in "$LOCALIZER" "$REPLAY" "$EVAL"; do
 done
 command -v haproxy >/dev/null 2>&1 ||
   { echo "scale-out: SKIPPED: haproxy is not installed (scripts/install-deploy-tools.sh)" >&2; exit 77; }
+command -v openssl >/dev/null 2>&1 ||
+  { echo "scale-out: SKIPPED: openssl is not installed (scripts/install-deps.sh)" >&2; exit 77; }
 
 rm -rf "$OUT/run"
 mkdir -p "$OUT/run/maps/room"
@@ -95,16 +100,36 @@ cleanup() {
 }
 trap cleanup EXIT
 
+# A test CA, one certificate for localhost / 127.0.0.1 (replicas and proxy), the token files.
+TLS="$RUN/tls"
+mkdir -p "$TLS"
+openssl req -x509 -newkey ec -pkeyopt ec_paramgen_curve:prime256v1 -nodes -days 1 \
+  -subj /CN=evloc-scale-out-ca -keyout "$TLS/ca.key" -out "$TLS/ca.crt" > /dev/null 2>&1
+openssl req -newkey ec -pkeyopt ec_paramgen_curve:prime256v1 -nodes -subj /CN=localhost \
+  -keyout "$TLS/server.key" -out "$TLS/server.csr" > /dev/null 2>&1
+printf 'subjectAltName=DNS:localhost,IP:127.0.0.1\n' > "$TLS/server.ext"
+openssl x509 -req -days 1 -in "$TLS/server.csr" -CA "$TLS/ca.crt" -CAkey "$TLS/ca.key" \
+  -CAcreateserial -extfile "$TLS/server.ext" -out "$TLS/server.crt" > /dev/null 2>&1
+cat "$TLS/server.crt" "$TLS/server.key" > "$TLS/proxy.pem"
+token=$(openssl rand -hex 24)
+printf '%s room\n' "$token" > "$RUN/tokens.txt"
+printf '%s\n' "$token" > "$RUN/client-token"
+TLS_CLIENT=(--tls-ca "$TLS/ca.crt" --tls-server-name localhost)
+
 # Three replicas and the proxy.
 server_pid=()
 for i in 1 2 3; do
   "$LOCALIZER" serve --maps "$RUN/maps" --listen "127.0.0.1:$((BASE_PORT + i))" \
+    --tls-cert "$TLS/server.crt" --tls-key "$TLS/server.key" --auth-tokens "$RUN/tokens.txt" \
     --metrics "127.0.0.1:$((BASE_PORT + 10 + i))" --max-sessions 8 --rate "$RATE_HZ" \
     > "$RUN/server$i.log" 2>&1 &
   server_pid[i]=$!
   PIDS+=("$!")
 done
 export EVLOC_PROXY_BIND="127.0.0.1:$BASE_PORT"
+export EVLOC_PROXY_CERT="$TLS/proxy.pem"
+export EVLOC_BACKEND_CA="$TLS/ca.crt"
+export EVLOC_BACKEND_SERVER_NAME=localhost
 export EVLOC_BACKEND_1="127.0.0.1:$((BASE_PORT + 1))"
 export EVLOC_BACKEND_2="127.0.0.1:$((BASE_PORT + 2))"
 export EVLOC_BACKEND_3="127.0.0.1:$((BASE_PORT + 3))"
@@ -114,7 +139,8 @@ for address in "127.0.0.1:$((BASE_PORT + 1))" "127.0.0.1:$((BASE_PORT + 2))" \
                "127.0.0.1:$((BASE_PORT + 3))" "127.0.0.1:$BASE_PORT"; do
   ready=false
   for _ in $(seq 1 50); do
-    if "$REPLAY" --health-check --server "$address" --health-timeout 1 > /dev/null 2>&1; then
+    if "$REPLAY" --health-check --server "$address" "${TLS_CLIENT[@]}" --health-timeout 1 \
+         > /dev/null 2>&1; then
       ready=true
       break
     fi
@@ -150,7 +176,8 @@ for c in $(seq 1 "$CLIENTS"); do
   mkdir -p "$RUN/client$c"
   "$REPLAY" --server "127.0.0.1:$BASE_PORT" --map room --dataset "$DATASET" \
     --out "$RUN/client$c/trajectory.txt" --report "$RUN/client$c/report.json" \
-    --speed "$SPEED" --reconnect 10 > "$RUN/client$c/replay.log" 2>&1 &
+    --speed "$SPEED" --reconnect 10 "${TLS_CLIENT[@]}" --token-file "$RUN/client-token" \
+    > "$RUN/client$c/replay.log" 2>&1 &
   client_pid[c]=$!
   PIDS+=("$!")
 done

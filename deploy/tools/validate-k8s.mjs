@@ -6,8 +6,18 @@
 // checked against the models' type declarations). Kustomize files are skipped here: kubectl
 // kustomize checks them by rendering.
 //
-// Usage: node validate-k8s.mjs FILE... ("-" reads standard input, e.g. kubectl kustomize output)
-// Exit status: 0 all valid, 1 invalid documents (each error on stderr), 2 bad usage.
+// With --policy secure|dev-insecure, the documents (one kustomization's rendered output, or the
+// files of deploy/k8s/base) are also checked against the security rules of docs/deploy.md
+// ("Secure defaults"): every container running `evloc-localizer serve` on a non-loopback address
+// has TLS (--tls-cert, --tls-key) and authentication (--auth-tokens or --tls-client-ca) and no
+// --insecure (secure), or says --insecure explicitly (dev-insecure, the overlay of that name
+// only); a NetworkPolicy selects its pods, limits ingress to named ports and denies egress; and
+// metrics on a non-loopback address are only on a port that policy restricts.
+//
+// Usage: node validate-k8s.mjs [--policy secure|dev-insecure] FILE...
+//   ("-" reads standard input, e.g. kubectl kustomize output)
+// Exit status: 0 all valid, 1 invalid documents or policy violations (each on stderr), 2 bad
+// usage.
 import fs from "node:fs";
 import path from "node:path";
 import { fileURLToPath } from "node:url";
@@ -252,11 +262,116 @@ async function validateDocument(object, source) {
   return errors;
 }
 
-async function main(files) {
+// ---- Security policy ------------------------------------------------------------------------
+
+// True for a listen address that only this machine reaches (as IsLoopbackListenAddress in
+// localizer/service/auth.cc, for the forms a manifest uses).
+function isLoopback(address) {
+  const host = address.replace(/^ipv[46]:/, "").replace(/:[^:]*$/, "").replace(/^\[(.*)\]$/, "$1");
+  return address.startsWith("unix:") || host === "localhost" || host === "::1" || /^127\./.test(host);
+}
+
+// The value of each `--flag value` in args (flags without a value map to true).
+function flagsOf(args) {
+  const flags = new Map();
+  for (let i = 0; i < args.length; i++) {
+    const arg = String(args[i]);
+    if (!arg.startsWith("--")) continue;
+    const value = args[i + 1];
+    if (value === undefined || String(value).startsWith("--")) {
+      flags.set(arg, true);
+    } else {
+      flags.set(arg, String(value));
+      i++;
+    }
+  }
+  return flags;
+}
+
+// True when every label of `selector` (a matchLabels map) is on `labels`.
+function selects(selector, labels) {
+  return Object.entries(selector ?? {}).every(([key, value]) => labels?.[key] === value);
+}
+
+function checkPolicy(objects, policy) {
+  const errors = [];
+  const policies = objects.filter((o) => o?.kind === "NetworkPolicy");
+  let servers = 0;
+  for (const object of objects) {
+    const template = object?.spec?.template;
+    if (!template?.spec?.containers) continue;
+    const name = `${object.kind} ${object.metadata?.name}`;
+    const labels = template.metadata?.labels ?? {};
+    for (const container of template.spec.containers) {
+      const args = (container.args ?? []).map(String);
+      if (args[0] !== "serve" || !String(container.image ?? "").includes("evloc-localizer")) continue;
+      servers++;
+      const where = `${name}, container ${container.name}`;
+      const flags = flagsOf(args);
+      const listen = flags.get("--listen") ?? "127.0.0.1:50051";
+      const tls = flags.has("--tls-cert") && flags.has("--tls-key");
+      const auth = flags.has("--auth-tokens") || flags.has("--tls-client-ca");
+      const insecure = flags.has("--insecure");
+      if (policy === "secure") {
+        if (insecure) errors.push(`${where}: --insecure outside overlays/dev-insecure`);
+        if (!isLoopback(listen) && !tls) errors.push(`${where}: listens on ${listen} without TLS (--tls-cert, --tls-key)`);
+        if (!isLoopback(listen) && !auth) errors.push(`${where}: listens on ${listen} without --auth-tokens or --tls-client-ca`);
+        for (const probe of ["startupProbe", "readinessProbe", "livenessProbe"]) {
+          if (tls && container[probe]?.grpc) {
+            errors.push(`${where}: ${probe} is a native gRPC probe (plaintext only) on a TLS server`);
+          }
+        }
+      } else if (!insecure && !(tls && auth)) {
+        errors.push(`${where}: a plaintext server must say --insecure explicitly`);
+      }
+      const matching = policies.filter((p) => selects(p.spec?.podSelector?.matchLabels, labels));
+      if (matching.length === 0) {
+        errors.push(`${where}: no NetworkPolicy selects its pods (labels ${JSON.stringify(labels)})`);
+        continue;
+      }
+      const ingressPorts = new Set();
+      let openIngress = false;
+      let egressDenied = false;
+      for (const networkPolicy of matching) {
+        const types = networkPolicy.spec?.policyTypes ?? [];
+        if (types.includes("Egress") && (networkPolicy.spec?.egress ?? []).length === 0) egressDenied = true;
+        if (!types.includes("Ingress")) continue;
+        for (const rule of networkPolicy.spec?.ingress ?? []) {
+          if (!rule.ports || rule.ports.length === 0 || !rule.from || rule.from.length === 0) openIngress = true;
+          for (const port of rule.ports ?? []) ingressPorts.add(String(port.port));
+        }
+      }
+      if (openIngress) errors.push(`${where}: a NetworkPolicy ingress rule without 'from' or 'ports' lets everything in`);
+      if (!egressDenied) errors.push(`${where}: no NetworkPolicy denies its egress (it opens no connection)`);
+      const metrics = flags.get("--metrics");
+      if (typeof metrics === "string" && metrics.includes(":") && !isLoopback(metrics)) {
+        const port = metrics.replace(/^.*:/, "");
+        const named = (container.ports ?? []).find((p) => String(p.containerPort) === port)?.name;
+        if (!ingressPorts.has(port) && !(named && ingressPorts.has(named))) {
+          errors.push(`${where}: metrics on ${metrics} but no NetworkPolicy ingress rule restricts port ${port}`);
+        }
+      }
+    }
+  }
+  return { errors, servers };
+}
+
+async function main(argv) {
+  let policy = null;
+  const files = [...argv];
+  if (files[0] === "--policy") {
+    policy = files[1];
+    files.splice(0, 2);
+    if (policy !== "secure" && policy !== "dev-insecure") {
+      console.error(`validate-k8s: --policy expects secure or dev-insecure, got '${policy}'`);
+      return 2;
+    }
+  }
   if (files.length === 0) {
-    console.error("usage: node validate-k8s.mjs FILE... ('-' for standard input)");
+    console.error("usage: node validate-k8s.mjs [--policy secure|dev-insecure] FILE... ('-' for standard input)");
     return 2;
   }
+  const objects = [];
   let failures = 0;
   let checked = 0;
   for (const file of files) {
@@ -270,6 +385,7 @@ async function main(files) {
         failures++;
         continue;
       }
+      objects.push(document.toJS());
       const errors = await validateDocument(document.toJS(), where);
       if (errors === null) continue;
       checked++;
@@ -278,6 +394,12 @@ async function main(files) {
     }
   }
   console.log(`validate-k8s: ${checked} objects checked, ${failures} invalid`);
+  if (policy) {
+    const { errors, servers } = checkPolicy(objects, policy);
+    for (const error of errors) console.error(`policy ${policy}: ${error}`);
+    console.log(`validate-k8s: policy ${policy}: ${servers} localizer containers, ${errors.length} violations`);
+    if (errors.length > 0) failures++;
+  }
   return failures > 0 ? 1 : 0;
 }
 

@@ -106,7 +106,10 @@ def main():
     parser.add_argument("--protoc", default="protoc", help="protoc used to generate the stubs")
     parser.add_argument("--packet-us", type=int, default=1000, help="packet window, microseconds")
     parser.add_argument("--rate", type=float, default=0, help="tracking steps per second")
-    parser.add_argument("--token", help="bearer token")
+    parser.add_argument("--token-file",
+                        help="file holding the bearer token (one line); preferred to --token")
+    parser.add_argument("--token", help="bearer token (visible in the process list: deprecated, "
+                        "use --token-file)")
     parser.add_argument("--quiet", action="store_true", help="print only the totals")
     args = parser.parse_args()
 
@@ -159,7 +162,18 @@ def main():
 
     channel = grpc.insecure_channel(args.server)
     stub = api_grpc.LocalizerStub(channel)
-    metadata = [("authorization", "Bearer " + args.token)] if args.token else None
+    token = args.token
+    if args.token and args.token_file:
+        parser.error("--token and --token-file exclude each other")
+    if args.token:
+        print("localizer_client: warning: --token shows the secret in the process list; "
+              "use --token-file", file=sys.stderr)
+    if args.token_file:
+        with open(args.token_file, encoding="utf-8") as file:
+            token = file.read().strip()
+        if not token or any(c.isspace() for c in token):
+            parser.error(f"--token-file {args.token_file}: expected one token on one line")
+    metadata = [("authorization", "Bearer " + token)] if token else None
     poses = 0
     searching = 0
     try:

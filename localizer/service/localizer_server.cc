@@ -37,13 +37,6 @@ double MicrosecondsSince(Clock::time_point start) {
   return std::chrono::duration<double, std::micro>(Clock::now() - start).count();
 }
 
-std::string Trim(const std::string& text) {
-  const size_t begin = text.find_first_not_of(" \t\r");
-  if (begin == std::string::npos) return "";
-  const size_t end = text.find_last_not_of(" \t\r");
-  return text.substr(begin, end - begin + 1);
-}
-
 // An item from the stream reader to the tracking worker.
 struct InboundItem {
   // The validated request.
@@ -113,7 +106,19 @@ void LocalizerServerOptions::Check() const {
   if (!(drain_timeout_s >= 0) || drain_timeout_s > 3600) {
     throw InvalidArgumentError("--drain-timeout must be in [0, 3600] s");
   }
+  if (tls_client_ca_file && !tls_cert_file) {
+    throw InvalidArgumentError(
+        "--tls-client-ca needs --tls-cert and --tls-key (client "
+        "certificates are checked in the TLS handshake)");
+  }
+  if (reload_interval_s < 1) throw InvalidArgumentError("--reload-interval must be at least 1 s");
+  CheckListenSecurity(listen_address, listen_security());
   session_limits().Check();
+}
+
+ListenSecurity LocalizerServerOptions::listen_security() const {
+  return {tls_cert_file.has_value(), auth_tokens_file.has_value(), tls_client_ca_file.has_value(),
+          insecure};
 }
 
 SessionLimits LocalizerServerOptions::session_limits() const {
@@ -213,52 +218,13 @@ std::string LocalizerServerOptions::Describe() const {
                          : std::string("off (plaintext)"))
        << "\n"
        << "auth-tokens: " << (auth_tokens_file ? auth_tokens_file->string() : "none (open)") << "\n"
+       << "tls-client-ca: "
+       << (tls_client_ca_file ? tls_client_ca_file->string() : std::string("none")) << "\n"
+       << "reload-interval: " << reload_interval_s << " s\n"
+       << "security: " << DescribeListenSecurity(listen_address, listen_security()) << "\n"
        << "tracker: variant " << tracker.VariantName() << ", " << tracker.step_rate_hz
        << " Hz, max-points " << tracker.max_points << ", tau " << tracker.decay_time_s << " s\n";
   return text.str();
-}
-
-TokenTable TokenTable::Read(const std::filesystem::path& path) {
-  std::ifstream file(path);
-  if (!file) {
-    throw IoError("cannot read the token file '" + path.string() +
-                  "' (check the path given to --auth-tokens)");
-  }
-  TokenTable table;
-  std::string line;
-  int64_t line_number = 0;
-  while (std::getline(file, line)) {
-    ++line_number;
-    const size_t comment = line.find('#');
-    if (comment != std::string::npos) line.resize(comment);
-    line = Trim(line);
-    if (line.empty()) continue;
-    std::istringstream fields(line);
-    std::string token;
-    std::string maps;
-    std::string extra;
-    fields >> token >> maps >> extra;
-    if (!extra.empty()) {
-      throw ParseError::AtLine(path.string(), line_number,
-                               "expected `TOKEN [map1,map2,...]`, got more fields");
-    }
-    std::set<std::string> allowed;
-    std::istringstream names(maps);
-    std::string name;
-    while (std::getline(names, name, ',')) {
-      if (!name.empty()) allowed.insert(name);
-    }
-    if (!table.maps_.emplace(token, std::move(allowed)).second) {
-      throw ParseError::AtLine(path.string(), line_number, "token listed twice");
-    }
-  }
-  return table;
-}
-
-bool TokenTable::Allows(const std::string& token, const std::string& map_name) const {
-  const auto found = maps_.find(token);
-  if (found == maps_.end()) return false;
-  return found->second.empty() || found->second.count(map_name) > 0;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -272,7 +238,11 @@ class LocalizerServer::Service final : public api::Localizer::Service {
         log_(std::move(log)),
         registry_(MapRegistryOptions{options.maps_dir}),
         memory_(options.max_memory_bytes) {
-    if (options.auth_tokens_file) tokens_ = TokenTable::Read(*options.auth_tokens_file);
+    if (options.auth_tokens_file) {
+      tokens_ = std::make_unique<TokenFile>(*options.auth_tokens_file,
+                                            std::chrono::seconds(options.reload_interval_s),
+                                            [this](const std::string& line) { Log(line); });
+    }
   }
 
   // The health service to keep up to date (set once the server runs).
@@ -528,7 +498,7 @@ class LocalizerServer::Service final : public api::Localizer::Service {
   SessionLimits session_limits_;
   LogFunction log_;
   MapRegistry registry_;
-  std::optional<TokenTable> tokens_;
+  std::unique_ptr<TokenFile> tokens_;
   ServerCounters counters_;
   std::atomic<uint64_t> last_session_id_{0};
   MemoryBudget memory_;
@@ -1111,10 +1081,11 @@ LocalizerServer::LocalizerServer(const LocalizerServerOptions& options, LogFunct
   grpc::ServerBuilder builder;
   std::shared_ptr<grpc::ServerCredentials> credentials = grpc::InsecureServerCredentials();
   if (options.tls_cert_file) {
-    grpc::SslServerCredentialsOptions ssl;
-    ssl.pem_key_cert_pairs.push_back(
-        {ReadFileToString(*options.tls_key_file), ReadFileToString(*options.tls_cert_file)});
-    credentials = grpc::SslServerCredentials(ssl);
+    tls_files_ = std::make_unique<ServerTlsFiles>(
+        *options.tls_cert_file, *options.tls_key_file, options.tls_client_ca_file,
+        options.reload_interval_s,
+        [service = service_.get()](const std::string& line) { service->Log(line); });
+    credentials = tls_files_->credentials();
   }
   builder.AddListeningPort(options.listen_address, credentials, &port_);
   builder.RegisterService(service_.get());

@@ -14,6 +14,7 @@
 #include <set>
 #include <string>
 
+#include "localizer/service/auth.h"
 #include "localizer/service/map_registry.h"
 #include "localizer/service/session.h"
 #include "localizer/tracking/tracker_options.h"
@@ -48,8 +49,9 @@ struct LocalizerServerOptions {
   // A Backpressure notice is sent when the queue holds at least this fraction of its capacity
   // (--backpressure-fraction).
   double backpressure_fraction = 0.5;
-  // File of bearer tokens, one per line: `TOKEN` (every map) or `TOKEN map1,map2` (those maps
-  // only); '#' starts a comment. Unset: no authentication (--auth-tokens).
+  // File of bearer tokens, one per line: `TOKEN *` (every map) or `TOKEN map1,map2` (those maps
+  // only); '#' starts a comment (format: TokenTable in auth.h). Read again when it changes.
+  // Unset: no token authentication (--auth-tokens).
   std::optional<std::filesystem::path> auth_tokens_file;
   // Serve Prometheus metrics over HTTP at this IPV4:PORT (GET /metrics); unset: none
   // (--metrics).
@@ -58,6 +60,16 @@ struct LocalizerServerOptions {
   std::optional<std::filesystem::path> tls_cert_file;
   // PEM private key for TLS (--tls-key).
   std::optional<std::filesystem::path> tls_key_file;
+  // PEM certificate(s) of the CA that issues client certificates: when set, every client must
+  // present a certificate that this CA signed (mutual TLS); needs tls_cert_file. Unset: clients
+  // are not asked for a certificate (--tls-client-ca).
+  std::optional<std::filesystem::path> tls_client_ca_file;
+  // How often the TLS files and the token file are checked for changes, seconds; a change takes
+  // effect without a restart (--reload-interval).
+  int reload_interval_s = 10;
+  // Serve on a non-loopback address without TLS or without authentication (tokens or client
+  // certificates). False: such a configuration is refused by Check() (--insecure).
+  bool insecure = false;
   // Largest camera a session may declare, width * height pixels (--max-camera-pixels).
   int64_t max_camera_pixels = SessionLimits{}.max_camera_pixels;
   // Most a packet's end (or a PoseHint) may lie after the session time, seconds
@@ -118,6 +130,8 @@ struct LocalizerServerOptions {
 
   // Throws InvalidArgumentError naming the first invalid field.
   void Check() const;
+  // What secures the listen address (TLS, tokens, client certificates, --insecure).
+  ListenSecurity listen_security() const;
   // What every session is checked against (tracker defaults, camera size).
   SessionLimits session_limits() const;
   // The effective configuration, one "key: value" line per option.
@@ -155,24 +169,6 @@ struct ServerCounters {
   std::string PrometheusText() const;
 };
 
-// Bearer tokens and the maps each may use.
-class TokenTable {
- public:
-  // Reads a token file (format in LocalizerServerOptions::auth_tokens_file). Throws IoError when
-  // it cannot be read, ParseError naming the line for a malformed line.
-  static TokenTable Read(const std::filesystem::path& path);
-  // True when `token` is known.
-  bool Knows(const std::string& token) const { return maps_.count(token) > 0; }
-  // True when `token` is known and may use `map_name`.
-  bool Allows(const std::string& token, const std::string& map_name) const;
-  // Number of tokens.
-  size_t size() const { return maps_.size(); }
-
- private:
-  // Token -> allowed maps (empty: every map).
-  std::map<std::string, std::set<std::string>> maps_;
-};
-
 // A running localizer server.
 class LocalizerServer {
  public:
@@ -208,6 +204,8 @@ class LocalizerServer {
 
  private:
   std::unique_ptr<Service> service_;
+  // The TLS files, read again when they change (null without TLS); outlives server_.
+  std::unique_ptr<ServerTlsFiles> tls_files_;
   std::unique_ptr<grpc::Server> server_;
   std::unique_ptr<MetricsHttpServer> metrics_;
   int port_ = 0;

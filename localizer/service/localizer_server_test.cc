@@ -762,7 +762,7 @@ TEST_F(LocalizerServerTest, BearerTokensGuardMaps) {
   const auto tokens = folder_.path() / "tokens.txt";
   {
     std::ofstream file(tokens);
-    file << "# tokens\nalpha\nbeta other_map,third_map  # limited\n";
+    file << "# tokens\nalpha *\nbeta other_map,third_map  # limited\n";
   }
   StartServer([&](LocalizerServerOptions& options) { options.auth_tokens_file = tokens; });
   const auto requests = ShortSession();

@@ -48,12 +48,19 @@ Options:
   --drain-timeout S          on SIGTERM: sessions stop within a step and end UNAVAILABLE
                              "draining"; calls still open after S are cancelled (default 10:
                              Kubernetes' grace of 20 s also covers the 5 s preStop sleep)
-  --auth-tokens FILE         bearer tokens, one per line: TOKEN [map1,map2]
-  --metrics IPV4:PORT        serve Prometheus metrics at http://IPV4:PORT/metrics (e.g.
-                             127.0.0.1:9464): sessions, events, poses, LOST, rejections,
-                             latency histogram
+  --auth-tokens FILE         bearer tokens, one per line: TOKEN * (every map) or TOKEN map1,map2;
+                             read again when it changes (docs/api.md, "Authentication")
+  --metrics [IPV4:]PORT      serve Prometheus metrics at http://IPV4:PORT/metrics; a bare PORT
+                             listens on 127.0.0.1 only: sessions, events, poses, LOST,
+                             rejections, latency histogram (default: no metrics)
   --tls-cert PEM             TLS certificate chain (with --tls-key); default plaintext
   --tls-key PEM              TLS private key
+  --tls-client-ca PEM        mutual TLS: require client certificates signed by this CA
+  --reload-interval SECONDS  check the TLS files and the token file for changes this often;
+                             changes apply without a restart (default 10)
+  --insecure                 allow a non-loopback --listen without TLS or without
+                             authentication (tokens or client certificates); without it such a
+                             server refuses to start (docs/deploy.md, "Secure defaults")
   --rate HZ                  default tracking steps per second (default 300)
   --variant NAME             default variant: EVT, EVT-PR, EVT-OH or EVT-- (default EVT)
   --max-points N             default map points per step (default 2500)
@@ -78,6 +85,10 @@ ServeCommand ParseServeCommandLine(const std::vector<std::string>& arguments) {
     }
     if (first == 0) {
       throw InvalidArgumentError("the first argument must be the command 'serve' (see --help)");
+    }
+    if (flag == "--insecure") {
+      command.server.insecure = true;
+      continue;
     }
     const std::string& value = TakeFlagValue(arguments, &i);
     LocalizerServerOptions& server = command.server;
@@ -136,11 +147,16 @@ ServeCommand ParseServeCommandLine(const std::vector<std::string>& arguments) {
     } else if (flag == "--auth-tokens") {
       server.auth_tokens_file = value;
     } else if (flag == "--metrics") {
-      server.metrics_address = value;
+      // A bare port listens on loopback only.
+      server.metrics_address = value.find(':') == std::string::npos ? "127.0.0.1:" + value : value;
     } else if (flag == "--tls-cert") {
       server.tls_cert_file = value;
     } else if (flag == "--tls-key") {
       server.tls_key_file = value;
+    } else if (flag == "--tls-client-ca") {
+      server.tls_client_ca_file = value;
+    } else if (flag == "--reload-interval") {
+      server.reload_interval_s = static_cast<int>(ParseIntegerFlag(flag, value));
     } else if (flag == "--rate") {
       server.tracker.step_rate_hz = ParseDoubleFlag(flag, value);
     } else if (flag == "--variant") {

@@ -8,6 +8,8 @@
 #include <future>
 #include <limits>
 #include <mutex>
+#include <random>
+#include <sstream>
 #include <thread>
 
 #include <grpcpp/generic/generic_stub.h>
@@ -63,6 +65,15 @@ void CheckServerOptions(const ReplayOptions& options) {
   if (options.tls_server_name && !options.tls_ca_file) {
     throw InvalidArgumentError("--tls-server-name needs --tls-ca");
   }
+  if (options.token && options.token_file) {
+    throw InvalidArgumentError("--token and --token-file exclude each other");
+  }
+  if (options.tls_cert_file.has_value() != options.tls_key_file.has_value()) {
+    throw InvalidArgumentError("--tls-cert and --tls-key go together (the client certificate)");
+  }
+  if (options.tls_cert_file && !options.tls_ca_file) {
+    throw InvalidArgumentError("--tls-cert needs --tls-ca (a client certificate is sent over TLS)");
+  }
   if (!options.lb_policy.empty() && options.lb_policy != "pick_first" &&
       options.lb_policy != "round_robin") {
     throw InvalidArgumentError("--lb expects pick_first or round_robin, got '" + options.lb_policy +
@@ -88,6 +99,10 @@ std::shared_ptr<grpc::Channel> MakeChannel(const ReplayOptions& options) {
   if (options.tls_ca_file) {
     grpc::SslCredentialsOptions ssl;
     ssl.pem_root_certs = ReadFileToString(*options.tls_ca_file);
+    if (options.tls_cert_file) {
+      ssl.pem_cert_chain = ReadFileToString(*options.tls_cert_file);
+      ssl.pem_private_key = ReadFileToString(*options.tls_key_file);
+    }
     credentials = grpc::SslCredentials(ssl);
     if (options.tls_server_name) arguments.SetSslTargetNameOverride(*options.tls_server_name);
   }
@@ -743,8 +758,39 @@ void ReplayOptions::Check() const {
 
 ReplayResult RunReplay(const ReplayOptions& options, std::ostream& log) {
   options.Check();
-  Replayer replayer(options, log);
+  ReplayOptions resolved = options;
+  if (options.token_file) resolved.token = ReadTokenFile(*options.token_file);
+  Replayer replayer(resolved, log);
   return replayer.Run();
+}
+
+std::string ReadTokenFile(const std::filesystem::path& path) {
+  std::string text;
+  try {
+    text = ReadFileToString(path);
+  } catch (const IoError&) {
+    throw IoError("cannot read the token file '" + path.string() + "' (--token-file)");
+  }
+  std::istringstream lines(text);
+  std::string line;
+  std::string token;
+  int64_t line_number = 0;
+  while (std::getline(lines, line)) {
+    ++line_number;
+    const size_t begin = line.find_first_not_of(" \t\r");
+    if (begin == std::string::npos) continue;
+    const size_t end = line.find_last_not_of(" \t\r");
+    if (!token.empty()) {
+      throw ParseError::AtLine(path.string(), line_number,
+                               "a token file holds one token on one line");
+    }
+    token = line.substr(begin, end - begin + 1);
+    if (token.find_first_of(" \t") != std::string::npos) {
+      throw ParseError::AtLine(path.string(), line_number, "the token has white space inside");
+    }
+  }
+  if (token.empty()) throw ParseError(path.string(), "line 1", "the token file is empty");
+  return token;
 }
 
 void WriteReplayReport(const std::filesystem::path& path, const ReplayResult& result) {
@@ -822,7 +868,8 @@ std::string CheckHealth(const ReplayOptions& options, double timeout_s) {
 
 std::string ReplayUsage() {
   return R"(Usage: evloc-replay --server HOST:PORT --map NAME --dataset DIR --out TRAJ.txt [options]
-       evloc-replay --health-check --server HOST:PORT [--tls-ca PEM] [--health-timeout S]
+       evloc-replay --health-check --server HOST:PORT [--tls-ca PEM [--tls-cert PEM --tls-key PEM]]
+                    [--health-timeout S]
 
 Streams a dataset's events to an evloc localizer (docs/api.md) as a live camera would, writes
 the poses it gets back as a TUM trajectory, and prints events sent, poses received and the
@@ -844,8 +891,13 @@ Options:
                          the server keeps up
   --encoding packed|evt3 wire encoding (default packed; evt3 rounds times up to microseconds)
   --packet-us N          time window per packet, microseconds (default 1000)
-  --token T              bearer token (sent as 'authorization: Bearer T')
+  --token-file FILE      file holding the bearer token (sent as 'authorization: Bearer T')
+  --token T              the bearer token itself: visible to every user in the process list;
+                         deprecated, use --token-file
   --tls-ca PEM           use TLS, trusting these root certificates (default plaintext)
+  --tls-cert PEM         client certificate chain, for a server that requires one (mutual TLS;
+                         with --tls-key and --tls-ca)
+  --tls-key PEM          private key of --tls-cert
   --tls-server-name NAME host name in the server's certificate, when not --server's host
   --init-pose "tx ty tz qx qy qz qw"|none
                          initial world_from_cam (default: first ground-truth pose); none: start
@@ -915,8 +967,14 @@ ReplayCommand ParseReplayCommandLine(const std::vector<std::string>& arguments) 
       options.packet_us = ParseIntegerFlag(flag, value);
     } else if (flag == "--token") {
       options.token = value;
+    } else if (flag == "--token-file") {
+      options.token_file = value;
     } else if (flag == "--tls-ca") {
       options.tls_ca_file = value;
+    } else if (flag == "--tls-cert") {
+      options.tls_cert_file = value;
+    } else if (flag == "--tls-key") {
+      options.tls_key_file = value;
     } else if (flag == "--tls-server-name") {
       options.tls_server_name = value;
     } else if (flag == "--init-pose") {

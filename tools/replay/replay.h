@@ -40,10 +40,19 @@ struct ReplayOptions {
   WireEncoding encoding = WireEncoding::kPacked;
   // Length of the time window of one packet, microseconds (--packet-us).
   int64_t packet_us = 1000;
-  // Bearer token sent as `authorization: Bearer T` (--token).
+  // Bearer token sent as `authorization: Bearer T` (--token). Visible in the process list and
+  // the shell history: prefer token_file.
   std::optional<std::string> token;
+  // File holding the bearer token (one line; ReadTokenFile), read when the replay starts
+  // (--token-file). Not with `token`.
+  std::optional<std::filesystem::path> token_file;
   // PEM root certificate(s) to verify a TLS server with; unset: plaintext (--tls-ca).
   std::optional<std::filesystem::path> tls_ca_file;
+  // PEM client certificate chain for a server that requires one (mutual TLS, the server's
+  // --tls-client-ca); with tls_key_file and tls_ca_file (--tls-cert).
+  std::optional<std::filesystem::path> tls_cert_file;
+  // PEM private key of tls_cert_file (--tls-key).
+  std::optional<std::filesystem::path> tls_key_file;
   // Host name expected in the server's certificate when it differs from --server's host
   // (--tls-server-name).
   std::optional<std::string> tls_server_name;
@@ -97,6 +106,11 @@ struct ReplayOptions {
   // Throws InvalidArgumentError naming the first invalid field.
   void Check() const;
 };
+
+// Reads a bearer token file: the token on its first non-empty line, surrounding white space
+// (and the line end) removed. Throws IoError when the file cannot be read, ParseError when it
+// holds no token, a token with white space inside, or more than one line.
+std::string ReadTokenFile(const std::filesystem::path& path);
 
 // One stream failure the replay recovered from.
 struct Outage {

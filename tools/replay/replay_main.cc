@@ -9,6 +9,11 @@ int main(int argc, char** argv) {
   return evloc::RunCommandTool(
       "evloc-replay", argc, argv, evloc::replay::ParseReplayCommandLine, evloc::replay::ReplayUsage,
       [](const evloc::replay::ReplayCommand& command) {
+        if (command.options.token) {
+          std::cerr << "evloc-replay: warning: --token shows the secret to every user of this "
+                       "machine (ps, /proc/PID/cmdline) and keeps it in the shell history; use "
+                       "--token-file FILE\n";
+        }
         if (command.health_check) {
           const std::string status =
               evloc::replay::CheckHealth(command.options, command.health_timeout_s);
