@@ -617,7 +617,7 @@ TEST_F(LocalizerServerTest, LocalizerHealthIsNotServingWhileNoSessionCanBeAdmitt
 // Finding 3: sessions per token are limited (--max-sessions-per-token, the per-token hook).
 TEST_F(LocalizerServerTest, SessionsPerTokenAreLimited) {
   const auto tokens = folder_.path() / "tokens.txt";
-  std::ofstream(tokens) << "alpha\nbeta\n";
+  std::ofstream(tokens) << "alpha *\nbeta *\n";
   StartServer([&](LocalizerServerOptions& options) {
     options.auth_tokens_file = tokens;
     options.max_sessions_per_token = 1;
