@@ -48,6 +48,12 @@ while [[ $# -gt 0 ]]; do
   esac
 done
 
+# The server's own memory budget (--max-memory: queued decoded events and gRPC's buffers) is half
+# the RSS budget unless given: the rest holds the code, the map and the sessions' trackers.
+if [[ " ${SERVER_ARGS[*]-} " != *"--server-arg=--max-memory"* ]]; then
+  SERVER_ARGS+=("--server-arg=--max-memory" "--server-arg=$((RSS_BUDGET_MIB * 1048576 / 2))")
+fi
+
 LOCALIZER="$BUILD/localizer/service/evloc-localizer"
 REPLAY="$BUILD/tools/replay/evloc-replay"
 SIM="$BUILD/tools/sim/evloc-sim"

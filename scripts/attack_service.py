@@ -460,7 +460,7 @@ class Attacks:
         code, details = stream.wait(STATUS_WAIT_S)
         return ("%s (sent 2 x %.1f MB, ~%.0f M events)" %
                 (describe(code, details, 50), len(body) / 1e6, events / 1e6),
-                code == SC.RESOURCE_EXHAUSTED)
+                code in (SC.INVALID_ARGUMENT, SC.RESOURCE_EXHAUSTED))
 
     def a3_silent_streams(self):
         """40 Track streams that never send a SessionStart (4 connections of 10); then health
@@ -702,7 +702,8 @@ class Attacks:
 # Expected results (issue 14; docs/reliability.md "Attack suite").
 EXPECTED = {
     "1": "INVALID_ARGUMENT or RESOURCE_EXHAUSTED within 10 s (caps on max_points, steps, CPU)",
-    "2": "RESOURCE_EXHAUSTED (events-per-packet cap, memory budget)",
+    "2": "INVALID_ARGUMENT (--max-packet-events, docs/api.md \"Limits\") or RESOURCE_EXHAUSTED "
+         "(memory budget)",
     "3": "each stream DEADLINE_EXCEEDED (handshake timeout) or RESOURCE_EXHAUSTED (per-peer "
          "limit) within 13 s; a new session started in 3 s or health NOT_SERVING",
     "5": "FAILED_PRECONDITION without server paths; ListMaps OK; the replaced map keeps its "
