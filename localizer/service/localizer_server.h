@@ -58,6 +58,9 @@ struct LocalizerServerOptions {
   std::optional<std::filesystem::path> tls_cert_file;
   // PEM private key for TLS (--tls-key).
   std::optional<std::filesystem::path> tls_key_file;
+  // Budget of the loaded-map cache, bytes; least recently used maps beyond it are dropped
+  // (--max-map-memory, in MiB).
+  uint64_t max_map_memory_bytes = MapRegistryOptions{}.max_map_memory_bytes;
   // Largest camera a session may declare, width * height pixels (--max-camera-pixels).
   int64_t max_camera_pixels = SessionLimits{}.max_camera_pixels;
   // Most a packet's end (or a PoseHint) may lie after the session time, seconds
