@@ -501,7 +501,10 @@ MapFileSummary ReadMapFileSummary(const std::filesystem::path& path) {
     } else if (field == 7 && wire_type == WireFormat::WIRETYPE_FIXED32) {
       read = in.ReadLittleEndian32(&summary.info.content_crc32c);
     } else {
-      if (field == 8) summary.info.has_relocalization = true;
+      // As protobuf: a known field with another wire type is an unknown field.
+      if (field == 8 && wire_type == WireFormat::WIRETYPE_LENGTH_DELIMITED) {
+        summary.info.has_relocalization = true;
+      }
       read = WireFormat::SkipField(&in, tag);
     }
     if (!read) throw invalid("truncated field " + std::to_string(field));

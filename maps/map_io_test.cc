@@ -341,6 +341,16 @@ TEST_F(MapIoTest, SummaryWithoutLoadingMatchesTheLoadedMap) {
     EXPECT_EQ(summary.info.format_version, info.format_version);
     EXPECT_EQ(summary.file_bytes, std::filesystem::file_size(path_));
   }
+  // Found by evloc_map_loader_crc_fuzzer: field 8 (relocalization) with the fixed64 wire type is
+  // an unknown field to protobuf, so the map has no relocalization data.
+  SaveMap(path_, MakeMap());
+  std::string bytes = ReadFileToString(path_);
+  const std::string wrong_wire_type = testing::EditMapPayload(bytes, [](map_format::MapFile& file) {
+    file.GetReflection()->MutableUnknownFields(&file)->AddFixed64(8, 0x0909098634a61aull);
+  });
+  const std::filesystem::path unknown = WriteVariant(wrong_wire_type, "unknown8.evmap");
+  EXPECT_FALSE(SummarizeMap(LoadMap(unknown)).has_relocalization);
+  EXPECT_FALSE(ReadMapFileSummary(unknown).info.has_relocalization);
   const std::filesystem::path v1 = testing::SourceDir() / "maps/testdata/v1_small.evmap";
   EXPECT_EQ(ReadMapFileSummary(v1).info.content_crc32c, SummarizeMap(LoadMap(v1)).content_crc32c);
   std::string truncated = ReadFileToString(path_);

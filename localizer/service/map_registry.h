@@ -84,7 +84,7 @@ struct MapRegistryOptions {
   // Budget of the loaded-map cache, bytes (MapMemoryBytes of each map): beyond it the least
   // recently used maps are dropped from the cache (sessions keep theirs). The most recently
   // used map always stays, even when it alone is larger.
-  uint64_t max_map_memory_bytes = uint64_t{4} << 30;
+  uint64_t max_map_memory_bytes = uint64_t{1} << 30;
 
   // Throws InvalidArgumentError when maps_dir is empty or not a directory, or the budget is 0.
   void Check() const;

@@ -23,7 +23,7 @@ Options:
   --queue-packets N          packets a session may have waiting (default 256)
   --backpressure-fraction F  queue fill that triggers a Backpressure notice (default 0.5)
   --max-map-memory MIB       memory budget of the loaded maps; least recently used maps beyond
-                             it are unloaded, sessions keep theirs (default 4096)
+                             it are unloaded, sessions keep theirs (default 1024)
   --max-camera-pixels N      largest camera a session may declare, width * height (default
                              4194304; a session's memory grows with it)
   --max-packet-span SECONDS  most a packet's end_t_ns (or a pose hint) may lie after the session

@@ -142,6 +142,7 @@ for ((run = 1; run <= runs; ++run)); do
     failures=$((failures + 1))
     echo "run $run: writer $writer killed at call $n of ${calls[$writer]}: $result (crc $crc, exit $status, entries: $visible)" >&2
   fi
+  ((run % 100 == 0)) && echo "run $run: $(($(date +%s) - start)) s, $failures failures so far"
   if ((run % 10 == 0)); then
     run_writer "$writer" "$folder" > /dev/null
     leftovers=$(find "$folder" -name '*.staging-*' -o -name '*.tmp-*' | wc -l)
