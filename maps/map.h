@@ -239,6 +239,25 @@ struct MapInfo {
 // Summarises a map.
 MapInfo SummarizeMap(const Map& map);
 
+// What ReadMapFileSummary reads of a .evmap file without loading its points.
+struct MapFileSummary {
+  // The file's header.
+  MapFileHeader header;
+  // Size of the file, bytes.
+  uint64_t file_bytes = 0;
+  // As SummarizeMap gives them: num_points, num_keyframes, the bounding box, content_crc32c (the
+  // checksum the file declares), has_relocalization and format_version; the rest is left unset.
+  MapInfo info;
+};
+
+// Reads what describes a map (header, point and keyframe counts, bounding box, content checksum)
+// streaming through the payload with constant memory: the positions are read for the bounding
+// box, every other field (keyframe contents, the other per-point arrays, relocalization data) is
+// skipped. Checks the header like ReadMapFileHeader and the structure of the fields it reads,
+// but not the payload checksum nor the values: a file that summarises may still fail LoadMap.
+// Throws IoError when the file cannot be read and ParseError when it is not a valid map.
+MapFileSummary ReadMapFileSummary(const std::filesystem::path& path);
+
 // A readable multi-line description of `info`, for the CLI and logs.
 std::string FormatMapInfo(const MapInfo& info);
 

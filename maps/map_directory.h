@@ -25,11 +25,20 @@ struct MapDirectoryWriteOptions {
   bool write_ply = true;
 };
 
+// The lock file that serialises the writers of map directory `directory`: ".NAME.lock" next to
+// it in its parent (hidden, so map folders ignore it).
+std::filesystem::path MapDirectoryLockFile(const std::filesystem::path& directory);
+
 // Writes `map` into `directory` (created when missing, with its parents) as map.evmap and
-// map.ply. Every file is first written in full under a temporary name and only then renamed in
-// place, map.evmap last, so an error leaves no half-written or partial map: a directory the call
-// created is removed again. Throws InvalidArgumentError when the map is invalid or the directory
-// already holds a map and `overwrite` is false, IoError when writing fails.
+// map.ply, holding an exclusive flock on MapDirectoryLockFile(directory) so that concurrent
+// writers (threads or processes) of one map run one after the other. Every file is first written
+// in full and fsync'ed under a staging name unique to the call, then renamed in place, map.evmap
+// last, and the directory is fsync'ed: a crash or an error leaves either the old or the new map,
+// never a partial one. On error the call removes only what it made (its staging files; the
+// directory and its files only when this call created the directory). Staging files of writers
+// that were killed (their process is gone) are removed by the next write. Throws
+// InvalidArgumentError when the map is invalid or the directory already holds a map and
+// `overwrite` is false, IoError when writing fails.
 void WriteMapDirectory(const std::filesystem::path& directory, const Map& map,
                        const MapDirectoryWriteOptions& options = {});
 

@@ -3,7 +3,16 @@
 #include <cerrno>
 #include <cstring>
 #include <fstream>
+#include <limits>
+#include <optional>
 #include <string_view>
+
+#include <fcntl.h>
+#include <google/protobuf/io/coded_stream.h>
+#include <google/protobuf/io/zero_copy_stream_impl.h>
+#include <google/protobuf/wire_format_lite.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
 #include "core/common/error.h"
 #include "core/common/file_util.h"
@@ -204,16 +213,22 @@ pb::MapFile ToProto(const Map& map) {
   return file;
 }
 
-// Copies a packed field into a vector of `count` elements; false when the sizes disagree.
+// a * b, or nullopt when the product does not fit in 64 bits (a forged count).
+std::optional<uint64_t> CheckedMultiply(uint64_t a, uint64_t b) {
+  uint64_t product = 0;
+  if (__builtin_mul_overflow(a, b, &product)) return std::nullopt;
+  return product;
+}
+
+// Copies a packed field into a vector of `count` elements; false when the sizes disagree. The
+// element count is checked against the values the field holds (so against the bytes that were
+// read) before anything is allocated, with a multiplication that cannot wrap.
 template <typename Element, typename Value>
 bool CopyFromRepeated(const google::protobuf::RepeatedField<Value>& field, uint64_t count,
                       std::vector<Element>* values) {
   constexpr size_t kValuesPerElement = sizeof(Element) / sizeof(Value);
-  // The first test keeps count * kValuesPerElement from overflowing for a forged count.
-  if (count > static_cast<uint64_t>(field.size()) ||
-      static_cast<uint64_t>(field.size()) != count * kValuesPerElement) {
-    return false;
-  }
+  const std::optional<uint64_t> expected = CheckedMultiply(count, kValuesPerElement);
+  if (!expected || *expected != static_cast<uint64_t>(field.size())) return false;
   values->resize(count);
   if (count > 0)
     std::memcpy(static_cast<void*>(values->data()), field.data(), count * sizeof(Element));
@@ -246,7 +261,9 @@ RelocalizationData RelocalizationFromProto(const pb::Relocalization& in,
     }
     const uint64_t count = static_cast<uint64_t>(features.keypoints_size()) / 2;
     CopyFromRepeated(features.keypoints(), count, &out.keypoints);
-    if (features.descriptors().size() != count * kRelocalizationDescriptorBytes) {
+    const std::optional<uint64_t> descriptor_bytes =
+        CheckedMultiply(count, kRelocalizationDescriptorBytes);
+    if (!descriptor_bytes || features.descriptors().size() != *descriptor_bytes) {
       throw payload_error("relocalization." + name + "descriptors has " +
                           std::to_string(features.descriptors().size()) + " bytes; expected " +
                           std::to_string(kRelocalizationDescriptorBytes) + " x " +
@@ -401,6 +418,107 @@ uint64_t EncodedRelocalizationBytes(const RelocalizationData& data) {
 MapFileHeader ReadMapFileHeader(const std::filesystem::path& path) {
   std::ifstream stream;
   return ReadAndCheckHeader(path, stream);
+}
+
+MapFileSummary ReadMapFileSummary(const std::filesystem::path& path) {
+  namespace io = ::google::protobuf::io;
+  using WireFormat = ::google::protobuf::internal::WireFormatLite;
+  const std::string source = path.string();
+  MapFileSummary summary;
+  std::ifstream stream;
+  summary.header = ReadAndCheckHeader(path, stream);
+  summary.file_bytes = kMapFileHeaderSize + summary.header.payload_length;
+  summary.info.format_version = summary.header.format_version;
+  stream.close();
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) throw IoError("cannot open map '" + source + "': " + std::strerror(errno));
+  io::FileInputStream file(fd);
+  file.SetCloseOnDelete(true);
+  if (!file.Skip(static_cast<int>(kMapFileHeaderSize))) {
+    throw IoError("cannot read map '" + source + "': read error after the header");
+  }
+  io::LimitingInputStream payload(&file, static_cast<int64_t>(summary.header.payload_length));
+  io::CodedInputStream in(&payload);
+  const auto invalid = [&source](const std::string& what) {
+    return ParseError::AtByte(source, kMapFileHeaderSize, "invalid evloc map payload: " + what);
+  };
+  uint64_t position_values = 0;
+  Eigen::Vector3f position = Eigen::Vector3f::Zero();
+  // One position value (x, y or z by its index) into the bounding box.
+  const auto add_value = [&](uint32_t bits) {
+    float value;
+    std::memcpy(&value, &bits, sizeof(value));
+    const int axis = static_cast<int>(position_values % 3);
+    position[axis] = value;
+    if (axis == 2) {
+      if (position_values == 2) {
+        summary.info.bounding_box_min = summary.info.bounding_box_max = position;
+      } else {
+        summary.info.bounding_box_min = summary.info.bounding_box_min.cwiseMin(position);
+        summary.info.bounding_box_max = summary.info.bounding_box_max.cwiseMax(position);
+      }
+    }
+    ++position_values;
+  };
+  const auto read_length = [&](const char* field) {
+    uint32_t length = 0;
+    if (!in.ReadVarint32(&length)) throw invalid(std::string("truncated ") + field);
+    return static_cast<int>(length);
+  };
+  while (const uint32_t tag = in.ReadTag()) {
+    const int field = WireFormat::GetTagFieldNumber(tag);
+    const auto wire_type = WireFormat::GetTagWireType(tag);
+    bool read = false;
+    if (field == 5 && wire_type == WireFormat::WIRETYPE_LENGTH_DELIMITED) {
+      ++summary.info.num_keyframes;
+      read = in.Skip(read_length("keyframe"));
+    } else if (field == 6 && wire_type == WireFormat::WIRETYPE_LENGTH_DELIMITED) {
+      const io::CodedInputStream::Limit points = in.PushLimit(read_length("points"));
+      while (const uint32_t point_tag = in.ReadTag()) {
+        const int point_field = WireFormat::GetTagFieldNumber(point_tag);
+        const auto point_wire_type = WireFormat::GetTagWireType(point_tag);
+        if (point_field == 1 && point_wire_type == WireFormat::WIRETYPE_VARINT) {
+          if (!in.ReadVarint64(&summary.info.num_points)) throw invalid("truncated points.count");
+        } else if (point_field == 2 && point_wire_type == WireFormat::WIRETYPE_LENGTH_DELIMITED) {
+          const int length = read_length("points.positions");
+          if (length % 4 != 0) throw invalid("points.positions is not a whole number of floats");
+          for (int i = 0; i < length / 4; ++i) {
+            uint32_t bits = 0;
+            if (!in.ReadLittleEndian32(&bits)) throw invalid("truncated points.positions");
+            add_value(bits);
+          }
+        } else if (point_field == 2 && point_wire_type == WireFormat::WIRETYPE_FIXED32) {
+          uint32_t bits = 0;
+          if (!in.ReadLittleEndian32(&bits)) throw invalid("truncated points.positions");
+          add_value(bits);
+        } else if (!WireFormat::SkipField(&in, point_tag)) {
+          throw invalid("truncated points field " + std::to_string(point_field));
+        }
+      }
+      if (!in.ConsumedEntireMessage()) throw invalid("malformed points message");
+      in.PopLimit(points);
+      read = true;
+    } else if (field == 7 && wire_type == WireFormat::WIRETYPE_FIXED32) {
+      read = in.ReadLittleEndian32(&summary.info.content_crc32c);
+    } else {
+      // As protobuf: a known field with another wire type is an unknown field.
+      if (field == 8 && wire_type == WireFormat::WIRETYPE_LENGTH_DELIMITED) {
+        summary.info.has_relocalization = true;
+      }
+      read = WireFormat::SkipField(&in, tag);
+    }
+    if (!read) throw invalid("truncated field " + std::to_string(field));
+  }
+  if (!in.ConsumedEntireMessage() ||
+      payload.ByteCount() != static_cast<int64_t>(summary.header.payload_length)) {
+    throw invalid("not a valid MapFile protobuf");
+  }
+  const std::optional<uint64_t> expected_values = CheckedMultiply(summary.info.num_points, 3);
+  if (!expected_values || *expected_values != position_values) {
+    throw invalid("positions has " + std::to_string(position_values) + " values; expected 3 x " +
+                  std::to_string(summary.info.num_points) + " points");
+  }
+  return summary;
 }
 
 Map LoadMap(const std::filesystem::path& path) {

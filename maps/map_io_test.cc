@@ -305,6 +305,60 @@ TEST_F(MapIoTest, CorruptedRelocalizationFieldsAreRefused) {
   EXPECT_FALSE(std::filesystem::exists(directory_ / "bad.evmap"));
 }
 
+// Finding 5 of issue 14: counts whose product with the values per element wraps around 64 bits
+// (0x5555555555555556 x 3 = 2) are refused as ParseErrors naming the field.
+TEST_F(MapIoTest, ForgedCountsWhoseSizeWrapsAreParseErrors) {
+  constexpr uint64_t kWrapsToTwo = 0x5555555555555556ull;
+  auto path = WriteEditedPayload(
+      [](map_format::MapFile& file) {
+        file.mutable_points()->set_count(kWrapsToTwo);
+        file.mutable_points()->mutable_positions()->Resize(2, 0.0f);
+      },
+      "points.evmap");
+  ExpectParseError([&] { LoadMap(path); }, {"points.evmap", "positions has 2 values"});
+  ExpectParseError([&] { ReadMapFileSummary(path); }, {"points.evmap", "positions has 2 values"});
+  path = WriteEditedPayload(
+      [](map_format::MapFile& file) {
+        file.mutable_relocalization()->set_landmark_count(kWrapsToTwo);
+        file.mutable_relocalization()->mutable_landmarks()->Resize(2, 0.0f);
+      },
+      "landmarks.evmap", MakeRelocalizationMap());
+  ExpectParseError([&] { LoadMap(path); }, {"landmarks.evmap", "relocalization.landmarks"});
+}
+
+// ReadMapFileSummary gives what SummarizeMap gives of the loaded map, for v1 and v2 files.
+TEST_F(MapIoTest, SummaryWithoutLoadingMatchesTheLoadedMap) {
+  for (const Map& map : {MakeMap(), MakeRelocalizationMap(), Map()}) {
+    SaveMap(path_, map);
+    const MapFileSummary summary = ReadMapFileSummary(path_);
+    const MapInfo info = SummarizeMap(LoadMap(path_));
+    EXPECT_EQ(summary.info.num_points, info.num_points);
+    EXPECT_EQ(summary.info.num_keyframes, info.num_keyframes);
+    EXPECT_EQ(summary.info.bounding_box_min, info.bounding_box_min);
+    EXPECT_EQ(summary.info.bounding_box_max, info.bounding_box_max);
+    EXPECT_EQ(summary.info.content_crc32c, info.content_crc32c);
+    EXPECT_EQ(summary.info.has_relocalization, info.has_relocalization);
+    EXPECT_EQ(summary.info.format_version, info.format_version);
+    EXPECT_EQ(summary.file_bytes, std::filesystem::file_size(path_));
+  }
+  // Found by evloc_map_loader_crc_fuzzer: field 8 (relocalization) with the fixed64 wire type is
+  // an unknown field to protobuf, so the map has no relocalization data.
+  SaveMap(path_, MakeMap());
+  std::string bytes = ReadFileToString(path_);
+  const std::string wrong_wire_type = testing::EditMapPayload(bytes, [](map_format::MapFile& file) {
+    file.GetReflection()->MutableUnknownFields(&file)->AddFixed64(8, 0x0909098634a61aull);
+  });
+  const std::filesystem::path unknown = WriteVariant(wrong_wire_type, "unknown8.evmap");
+  EXPECT_FALSE(SummarizeMap(LoadMap(unknown)).has_relocalization);
+  EXPECT_FALSE(ReadMapFileSummary(unknown).info.has_relocalization);
+  const std::filesystem::path v1 = testing::SourceDir() / "maps/testdata/v1_small.evmap";
+  EXPECT_EQ(ReadMapFileSummary(v1).info.content_crc32c, SummarizeMap(LoadMap(v1)).content_crc32c);
+  std::string truncated = ReadFileToString(path_);
+  truncated.resize(truncated.size() - 1);
+  ExpectParseError([&] { ReadMapFileSummary(WriteVariant(truncated, "short.evmap")); },
+                   {"short.evmap", "truncated"});
+}
+
 TEST_F(MapIoTest, EmptyMapRoundTrips) {
   SaveMap(path_, Map());
   const Map loaded = LoadMap(path_);

@@ -1,8 +1,10 @@
 #include "core/common/file_util.h"
 
 #include <fcntl.h>
+#include <sys/file.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <cerrno>
 #include <cstring>
 #include <fstream>
@@ -14,31 +16,50 @@
 namespace evloc {
 namespace {
 
-std::filesystem::path TemporaryNameFor(const std::filesystem::path& path) {
-  std::random_device device;
-  std::ostringstream name;
-  name << "." << path.filename().string() << ".tmp-" << ::getpid() << "-" << std::hex << device();
-  return path.parent_path() / name.str();
-}
+std::string ErrnoText() { return std::strerror(errno); }
 
-void SyncFile(const std::filesystem::path& path) {
-  const int fd = ::open(path.c_str(), O_RDONLY);
-  if (fd >= 0) {
-    ::fsync(fd);
-    ::close(fd);
+// Closes `fd`, throwing IoError naming `path` when close fails (NFS and some file systems report
+// write errors only there).
+void CloseOrThrow(int fd, const std::filesystem::path& path) {
+  if (::close(fd) != 0) {
+    throw IoError("cannot close '" + path.string() + "': " + ErrnoText() +
+                  " (the data may not be on disk; check the file system)");
   }
 }
 
 }  // namespace
 
+std::filesystem::path UniqueSiblingName(const std::filesystem::path& path, std::string_view tag) {
+  static std::atomic<uint64_t> counter{0};
+  std::random_device device;
+  std::ostringstream name;
+  name << "." << path.filename().string() << "." << tag << "-" << ::getpid() << "-"
+       << counter.fetch_add(1) << "-" << std::hex << device();
+  return path.parent_path() / name.str();
+}
+
+void SyncPath(const std::filesystem::path& path) {
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) {
+    throw IoError("cannot open '" + path.string() + "' to sync it: " + ErrnoText());
+  }
+  if (::fsync(fd) != 0) {
+    const std::string reason = ErrnoText();
+    ::close(fd);
+    throw IoError("cannot fsync '" + path.string() + "': " + reason +
+                  " (the data may not be on disk; check the file system)");
+  }
+  CloseOrThrow(fd, path);
+}
+
 void WriteFileAtomically(const std::filesystem::path& path,
                          const std::function<void(std::ostream&)>& write) {
-  const std::filesystem::path temporary = TemporaryNameFor(path);
+  const std::filesystem::path temporary = UniqueSiblingName(path, "tmp");
   try {
     {
       std::ofstream stream(temporary, std::ios::binary | std::ios::trunc);
       if (!stream) {
-        throw IoError("cannot create '" + temporary.string() + "': " + std::strerror(errno) +
+        throw IoError("cannot create '" + temporary.string() + "': " + ErrnoText() +
                       " (does the directory exist and is it writable?)");
       }
       write(stream);
@@ -46,8 +67,12 @@ void WriteFileAtomically(const std::filesystem::path& path,
       if (!stream) {
         throw IoError("cannot write '" + temporary.string() + "' (disk full?)");
       }
+      stream.close();
+      if (!stream) {
+        throw IoError("cannot close '" + temporary.string() + "' (disk full?)");
+      }
     }
-    SyncFile(temporary);
+    SyncPath(temporary);
     std::error_code error;
     std::filesystem::rename(temporary, path, error);
     if (error) {
@@ -59,6 +84,8 @@ void WriteFileAtomically(const std::filesystem::path& path,
     std::filesystem::remove(temporary, ignored);
     throw;
   }
+  const std::filesystem::path parent = path.parent_path();
+  SyncPath(parent.empty() ? std::filesystem::path(".") : parent);
 }
 
 void WriteFileAtomically(const std::filesystem::path& path, std::string_view content) {
@@ -70,7 +97,7 @@ void WriteFileAtomically(const std::filesystem::path& path, std::string_view con
 std::string ReadFileToString(const std::filesystem::path& path) {
   std::ifstream stream(path, std::ios::binary);
   if (!stream) {
-    throw IoError("cannot open '" + path.string() + "': " + std::strerror(errno));
+    throw IoError("cannot open '" + path.string() + "': " + ErrnoText());
   }
   std::ostringstream content;
   content << stream.rdbuf();
@@ -78,6 +105,27 @@ std::string ReadFileToString(const std::filesystem::path& path) {
     throw IoError("cannot read '" + path.string() + "'");
   }
   return content.str();
+}
+
+ScopedFileLock::ScopedFileLock(const std::filesystem::path& path) {
+  fd_ = ::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+  if (fd_ < 0) {
+    throw IoError("cannot create the lock file '" + path.string() + "': " + ErrnoText() +
+                  " (is the directory writable?)");
+  }
+  int result;
+  do {
+    result = ::flock(fd_, LOCK_EX);
+  } while (result != 0 && errno == EINTR);
+  if (result != 0) {
+    const std::string reason = ErrnoText();
+    ::close(fd_);
+    throw IoError("cannot lock '" + path.string() + "': " + reason);
+  }
+}
+
+ScopedFileLock::~ScopedFileLock() {
+  if (fd_ >= 0) ::close(fd_);  // Closing the last descriptor releases the flock.
 }
 
 }  // namespace evloc

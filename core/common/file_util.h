@@ -9,16 +9,39 @@
 
 namespace evloc {
 
-// Writes a file atomically: `write` fills a stream on a temporary file next to `path`, which is
-// flushed, synced and renamed over `path` only if `write` returns without throwing. A crash or an
-// error never leaves a half-written `path`. Throws IoError when the file cannot be written.
+// Writes a file atomically and durably: `write` fills a stream on a temporary file next to
+// `path` (a name unique to this process and call), which is flushed, closed, fsync'ed and renamed
+// over `path` only if `write` returns without throwing; the parent directory is then fsync'ed so
+// that the rename survives a power loss. A crash or an error never leaves a half-written `path`.
+// Throws IoError naming the file when any write, close, fsync or rename fails.
 void WriteFileAtomically(const std::filesystem::path& path,
                          const std::function<void(std::ostream&)>& write);
 
 // Same, for content already in memory.
 void WriteFileAtomically(const std::filesystem::path& path, std::string_view content);
 
+// A name for a temporary file next to `path`: ".NAME.<tag>-<pid>-<counter>-<random>", unique
+// among the calls of every process on the host.
+std::filesystem::path UniqueSiblingName(const std::filesystem::path& path, std::string_view tag);
+
+// fsyncs a file or directory. Throws IoError naming it when it cannot be opened or synced.
+void SyncPath(const std::filesystem::path& path);
+
 // Reads a whole (small) file into a string. Throws IoError when it cannot.
 std::string ReadFileToString(const std::filesystem::path& path);
+
+// An exclusive advisory lock (flock) on `path`, created when missing, held until destruction.
+// Serialises writers of the same file across processes and threads (each lock opens its own
+// file description). Throws IoError when the lock file cannot be created or locked.
+class ScopedFileLock {
+ public:
+  explicit ScopedFileLock(const std::filesystem::path& path);
+  ~ScopedFileLock();
+  ScopedFileLock(const ScopedFileLock&) = delete;
+  ScopedFileLock& operator=(const ScopedFileLock&) = delete;
+
+ private:
+  int fd_ = -1;
+};
 
 }  // namespace evloc

@@ -53,7 +53,7 @@ struct InboundItem {
 // Options and tokens.
 
 void LocalizerServerOptions::Check() const {
-  MapRegistryOptions{maps_dir}.Check();
+  MapRegistryOptions{maps_dir, max_map_memory_bytes}.Check();
   if (listen_address.empty()) throw InvalidArgumentError("--listen: the address is empty");
   if (max_sessions < 1) throw InvalidArgumentError("--max-sessions must be at least 1");
   if (threads != 0 && threads < max_sessions + 2) {
@@ -189,6 +189,7 @@ std::string LocalizerServerOptions::Describe() const {
        << "idle-timeout: " << idle_timeout_s << " s\n"
        << "queue-packets: " << queue_packets << "\n"
        << "backpressure-fraction: " << backpressure_fraction << "\n"
+       << "max-map-memory: " << (max_map_memory_bytes >> 20) << " MiB\n"
        << "max-camera-pixels: " << max_camera_pixels << "\n"
        << "max-packet-span: " << max_packet_span_s << " s\n"
        << "max-rate: " << max_step_rate_hz << " Hz\n"
@@ -236,7 +237,7 @@ class LocalizerServer::Service final : public api::Localizer::Service {
       : options_(options),
         session_limits_(options.session_limits()),
         log_(std::move(log)),
-        registry_(MapRegistryOptions{options.maps_dir}),
+        registry_(MapRegistryOptions{options.maps_dir, options.max_map_memory_bytes}),
         memory_(options.max_memory_bytes) {
     if (options.auth_tokens_file) {
       tokens_ = std::make_unique<TokenFile>(*options.auth_tokens_file,
@@ -397,7 +398,7 @@ class LocalizerServer::Service final : public api::Localizer::Service {
     for (const std::string& name : registry_.ListNames()) {
       if (tokens_ && !tokens_->Allows(*token, name)) continue;
       try {
-        *response->add_maps() = DescribeMap(*registry_.Get(name));
+        *response->add_maps() = DescribeMap(registry_.Describe(name));
       } catch (const Error& error) {
         Log("ListMaps: skipping map '" + EscapeForLog(name) +
             "': " + EscapeForLog(error.what(), 1024));

@@ -70,6 +70,9 @@ struct LocalizerServerOptions {
   // Serve on a non-loopback address without TLS or without authentication (tokens or client
   // certificates). False: such a configuration is refused by Check() (--insecure).
   bool insecure = false;
+  // Budget of the loaded-map cache, bytes; least recently used maps beyond it are dropped
+  // (--max-map-memory, in MiB).
+  uint64_t max_map_memory_bytes = MapRegistryOptions{}.max_map_memory_bytes;
   // Largest camera a session may declare, width * height pixels (--max-camera-pixels).
   int64_t max_camera_pixels = SessionLimits{}.max_camera_pixels;
   // Most a packet's end (or a PoseHint) may lie after the session time, seconds

@@ -1,11 +1,22 @@
 #include "localizer/service/map_registry.h"
 
+#include <algorithm>
 #include <cstdio>
+#include <future>
+#include <new>
 #include <system_error>
 
 #include "maps/map_directory.h"
 
 namespace evloc::service {
+
+struct MapRegistry::Load {
+  // The file version being (or that was) loaded.
+  FileStamp stamp;
+  // The loaded map, or the load's evloc Error (the negative cache when kept in the entry).
+  std::shared_future<std::shared_ptr<const LoadedMap>> result;
+};
+
 namespace {
 
 // A map name is one path component: no separators, not "." or "..", not hidden.
@@ -14,12 +25,78 @@ bool IsValidMapName(const std::string& name) {
   return name.find('/') == std::string::npos && name.find('\\') == std::string::npos;
 }
 
+template <typename T>
+uint64_t VectorBytes(const std::vector<T>& values) {
+  return values.capacity() * sizeof(T);
+}
+
+// Runs `read` (which reads map `name`), letting evloc Errors through and turning anything else
+// (std::bad_alloc from a forged size, an unexpected exception) into a MapLoadError.
+template <typename Read>
+auto WithTypedErrors(const std::string& name, const Read& read) -> decltype(read()) {
+  try {
+    return read();
+  } catch (const Error&) {
+    throw;
+  } catch (const std::bad_alloc&) {
+    throw MapLoadError("not enough memory to load map '" + name +
+                       "'; check the file (it may be corrupt) or give the server more memory");
+  } catch (const std::exception& error) {
+    throw MapLoadError("cannot load map '" + name + "': " + error.what());
+  } catch (...) {
+    throw MapLoadError("cannot load map '" + name + "': unknown error");
+  }
+}
+
+// True when `load` finished with an error (the negative cache).
+bool Failed(const std::shared_future<std::shared_ptr<const LoadedMap>>& result) {
+  if (result.wait_for(std::chrono::seconds(0)) != std::future_status::ready) return false;
+  try {
+    result.get();
+    return false;
+  } catch (...) {
+    return true;
+  }
+}
+
 }  // namespace
+
+MapDescriptionData DescribeLoadedMap(const LoadedMap& map) {
+  MapDescriptionData description;
+  description.name = map.name;
+  description.version = map.version;
+  description.summary.file_bytes = map.file_bytes;
+  description.summary.info = map.info;
+  return description;
+}
 
 std::string MapVersionString(uint32_t content_crc32c) {
   char text[16];
   std::snprintf(text, sizeof(text), "%08x", content_crc32c);
   return text;
+}
+
+uint64_t MapMemoryBytes(const Map& map) {
+  uint64_t bytes = sizeof(Map) + VectorBytes(map.positions) + VectorBytes(map.gradients) +
+                   VectorBytes(map.inverse_depth_sigma) + VectorBytes(map.gradient_magnitude) +
+                   VectorBytes(map.source_keyframe) + VectorBytes(map.cameras);
+  for (const Keyframe& keyframe : map.keyframes) {
+    bytes +=
+        sizeof(Keyframe) + keyframe.image_name.capacity() + VectorBytes(keyframe.visible_points);
+  }
+  if (map.relocalization) {
+    bytes +=
+        VectorBytes(map.relocalization->landmarks) + VectorBytes(map.relocalization->vocabulary);
+    for (const KeyframeFeatures& features : map.relocalization->keyframes) {
+      bytes += sizeof(KeyframeFeatures) + VectorBytes(features.keypoints) +
+               VectorBytes(features.descriptors) + VectorBytes(features.landmarks) +
+               VectorBytes(features.global_descriptor);
+    }
+  }
+  // The visibility index: one point index per point (voxel order or per source keyframe), one
+  // voxel record at most per point, and a centre and an axis per keyframe.
+  bytes += map.size() * (sizeof(uint32_t) + 32) + map.keyframes.size() * 48;
+  return bytes;
 }
 
 void MapRegistryOptions::Check() const {
@@ -30,6 +107,10 @@ void MapRegistryOptions::Check() const {
                                "' is not a directory (give a folder with one subdirectory per "
                                "map, each holding map.evmap)");
   }
+  if (max_map_memory_bytes == 0) {
+    throw InvalidArgumentError(
+        "map registry: the map memory budget is 0 bytes; give at least the size of one map");
+  }
 }
 
 MapRegistry::MapRegistry(MapRegistryOptions options) : options_(std::move(options)) {
@@ -39,11 +120,12 @@ MapRegistry::MapRegistry(MapRegistryOptions options) : options_(std::move(option
 std::vector<std::string> MapRegistry::ListNames() const {
   std::vector<std::string> names;
   std::error_code error;
-  for (const auto& entry : std::filesystem::directory_iterator(options_.maps_dir, error)) {
-    const std::string name = entry.path().filename().string();
+  for (auto it = std::filesystem::directory_iterator(options_.maps_dir, error);
+       !error && it != std::filesystem::directory_iterator(); it.increment(error)) {
+    const std::string name = it->path().filename().string();
     if (!IsValidMapName(name)) continue;
     std::error_code file_error;
-    if (std::filesystem::is_regular_file(entry.path() / kMapFileName, file_error)) {
+    if (std::filesystem::is_regular_file(it->path() / kMapFileName, file_error)) {
       names.push_back(name);
     }
   }
@@ -51,55 +133,186 @@ std::vector<std::string> MapRegistry::ListNames() const {
   return names;
 }
 
+std::optional<MapRegistry::FileStamp> MapRegistry::Stamp(const std::string& name) const {
+  const std::filesystem::path file = options_.maps_dir / name / kMapFileName;
+  std::error_code error;
+  FileStamp stamp;
+  stamp.bytes = std::filesystem::file_size(file, error);
+  if (error) return std::nullopt;
+  stamp.time = std::filesystem::last_write_time(file, error);
+  if (error) return std::nullopt;
+  return stamp;
+}
+
+std::shared_ptr<const LoadedMap> MapRegistry::LoadVersion(const std::string& name,
+                                                          const FileStamp& stamp) const {
+  return WithTypedErrors(name, [&] {
+    auto loaded = std::make_shared<LoadedMap>();
+    loaded->name = name;
+    loaded->map = LoadMap(options_.maps_dir / name / kMapFileName);
+    loaded->info = SummarizeMap(loaded->map);
+    loaded->content_crc32c = loaded->info.content_crc32c;
+    loaded->version = MapVersionString(loaded->content_crc32c);
+    loaded->file_bytes = stamp.bytes;
+    loaded->file_time = stamp.time;
+    loaded->visibility = std::make_unique<VisibilityIndex>(loaded->map);
+    loaded->memory_bytes = MapMemoryBytes(loaded->map);
+    return std::shared_ptr<const LoadedMap>(std::move(loaded));
+  });
+}
+
+void MapRegistry::InsertLocked(Entry& entry, std::shared_ptr<const LoadedMap> map) {
+  if (entry.current) {
+    cached_bytes_ -= entry.current->memory_bytes;
+    --cached_maps_;
+    lru_.erase(entry.lru_position);
+  }
+  cached_bytes_ += map->memory_bytes;
+  ++cached_maps_;
+  lru_.push_front(map->name);
+  entry.lru_position = lru_.begin();
+  entry.current = std::move(map);
+  while (cached_bytes_ > options_.max_map_memory_bytes && lru_.size() > 1) {
+    Entry& oldest = entries_[lru_.back()];
+    cached_bytes_ -= oldest.current->memory_bytes;
+    --cached_maps_;
+    oldest.current.reset();  // Sessions holding it keep it alive.
+    lru_.pop_back();
+  }
+}
+
 std::shared_ptr<const LoadedMap> MapRegistry::Get(const std::string& name,
                                                   const std::optional<std::string>& version) {
   if (!IsValidMapName(name)) {
     throw MapNotFoundError("no map named '" + name + "' (see ListMaps)");
   }
-  const std::filesystem::path file = options_.maps_dir / name / kMapFileName;
-  std::error_code error;
-  const uint64_t file_bytes = std::filesystem::file_size(file, error);
-  const bool exists = !error;
-  const auto file_time =
-      exists ? std::filesystem::last_write_time(file, error) : std::filesystem::file_time_type();
-
-  std::lock_guard<std::mutex> lock(mutex_);
-  auto found = current_.find(name);
-  if (!exists && found == current_.end()) {
-    throw MapNotFoundError("no map named '" + name + "' in " + options_.maps_dir.string() +
-                           " (see ListMaps)");
-  }
-  const bool changed =
-      found == current_.end() || (exists && (found->second->file_bytes != file_bytes ||
-                                             found->second->file_time != file_time));
-  if (changed && exists) {
-    try {
-      auto loaded = std::make_shared<LoadedMap>();
-      loaded->name = name;
-      loaded->map = LoadMap(file);
-      loaded->info = SummarizeMap(loaded->map);
-      loaded->content_crc32c = loaded->info.content_crc32c;
-      loaded->version = MapVersionString(loaded->content_crc32c);
-      loaded->file_bytes = file_bytes;
-      loaded->file_time = file_time;
-      loaded->visibility = std::make_unique<VisibilityIndex>(loaded->map);
-      ++loads_;
-      found = current_.insert_or_assign(name, std::move(loaded)).first;
-    } catch (const Error&) {
-      if (found == current_.end()) throw;
-      // Keep serving the version already loaded.
+  const std::optional<FileStamp> stamp = Stamp(name);
+  const auto check_version = [&](std::shared_ptr<const LoadedMap> map) {
+    if (version && !version->empty() && *version != map->version) {
+      throw MapNotFoundError("map '" + name + "' has no version '" + *version +
+                             "' (current version " + map->version + ")");
+    }
+    return map;
+  };
+  std::shared_ptr<Load> load;
+  std::promise<std::shared_ptr<const LoadedMap>> promise;
+  bool loader = false;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    const auto found = entries_.find(name);
+    Entry* entry = found == entries_.end() ? nullptr : &found->second;
+    if (!stamp) {
+      if (entry == nullptr || !entry->current) {
+        throw MapNotFoundError("no map named '" + name + "' in " + options_.maps_dir.string() +
+                               " (see ListMaps)");
+      }
+      lru_.splice(lru_.begin(), lru_, entry->lru_position);
+      return check_version(entry->current);
+    }
+    if (entry == nullptr) entry = &entries_[name];
+    if (entry->current && entry->current->file_bytes == stamp->bytes &&
+        entry->current->file_time == stamp->time) {
+      lru_.splice(lru_.begin(), lru_, entry->lru_position);
+      return check_version(entry->current);
+    }
+    if (entry->load && entry->load->stamp == *stamp) {
+      load = entry->load;  // Being loaded by another request, or failed (negative cache).
+    } else {
+      load = std::make_shared<Load>();
+      load->stamp = *stamp;
+      load->result = promise.get_future().share();
+      entry->load = load;
+      loader = true;
+      ++load_attempts_;
     }
   }
-  if (version && !version->empty() && *version != found->second->version) {
-    throw MapNotFoundError("map '" + name + "' has no version '" + *version +
-                           "' (current version " + found->second->version + ")");
+  if (loader) {
+    // File I/O and parsing without the registry's lock.
+    try {
+      std::shared_ptr<const LoadedMap> map = LoadVersion(name, load->stamp);
+      {
+        std::lock_guard<std::mutex> lock(mutex_);
+        ++loads_;
+        Entry& entry = entries_[name];
+        InsertLocked(entry, map);
+        if (entry.load == load) entry.load.reset();  // Only failures stay as a negative cache.
+      }
+      promise.set_value(std::move(map));
+    } catch (...) {
+      promise.set_exception(std::current_exception());
+    }
   }
-  return found->second;
+  try {
+    return check_version(load->result.get());
+  } catch (const MapNotFoundError&) {
+    throw;
+  } catch (const Error&) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    Entry& entry = entries_[name];
+    if (!entry.current) throw;
+    // Keep serving the version already loaded.
+    lru_.splice(lru_.begin(), lru_, entry.lru_position);
+    return check_version(entry.current);
+  }
+}
+
+MapDescriptionData MapRegistry::Describe(const std::string& name) {
+  if (!IsValidMapName(name)) {
+    throw MapNotFoundError("no map named '" + name + "' (see ListMaps)");
+  }
+  const std::optional<FileStamp> stamp = Stamp(name);
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    const auto found = entries_.find(name);
+    const Entry* entry = found == entries_.end() ? nullptr : &found->second;
+    if (entry != nullptr && entry->current &&
+        (!stamp || (entry->current->file_bytes == stamp->bytes &&
+                    entry->current->file_time == stamp->time))) {
+      return DescribeLoadedMap(*entry->current);
+    }
+    if (!stamp) {
+      throw MapNotFoundError("no map named '" + name + "' in " + options_.maps_dir.string() +
+                             " (see ListMaps)");
+    }
+    if (entry != nullptr && entry->load && entry->load->stamp == *stamp &&
+        Failed(entry->load->result)) {
+      if (entry->current) return DescribeLoadedMap(*entry->current);
+      entry->load->result.get();  // Throws the load's error.
+    }
+    if (entry != nullptr && entry->description && entry->described == *stamp) {
+      return *entry->description;
+    }
+  }
+  MapDescriptionData description;
+  description.name = name;
+  description.summary = WithTypedErrors(
+      name, [&] { return ReadMapFileSummary(options_.maps_dir / name / kMapFileName); });
+  description.version = MapVersionString(description.summary.info.content_crc32c);
+  std::lock_guard<std::mutex> lock(mutex_);
+  Entry& entry = entries_[name];
+  entry.description = description;
+  entry.described = *stamp;
+  return description;
 }
 
 int64_t MapRegistry::loads() const {
   std::lock_guard<std::mutex> lock(mutex_);
   return loads_;
+}
+
+int64_t MapRegistry::load_attempts() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return load_attempts_;
+}
+
+uint64_t MapRegistry::cached_bytes() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return cached_bytes_;
+}
+
+size_t MapRegistry::cached_maps() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return cached_maps_;
 }
 
 }  // namespace evloc::service

@@ -2,10 +2,18 @@
 // name being the directory name). Maps are loaded on first use and shared read-only with every
 // session; a new file dropped into the folder (atomically, as WriteMapDirectory does) is picked
 // up by the next session while running sessions keep the version they started with.
+//
+// Bounded: the loaded maps are an LRU cache with a byte budget (max_map_memory_bytes); a map
+// dropped from the cache stays alive as long as a session holds it (shared_ptr). Concurrent: the
+// registry's lock only guards its tables, never file I/O; each (map, file version) is loaded
+// once, by the first request, while the others wait for that load only. A load that fails is
+// remembered for that file version (size and modification time): the file is not read again
+// until it changes.
 #pragma once
 
 #include <cstdint>
 #include <filesystem>
+#include <list>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -21,6 +29,13 @@ namespace evloc::service {
 
 // A requested map (or map version) does not exist.
 class MapNotFoundError : public Error {
+ public:
+  using Error::Error;
+};
+
+// A map file exists but cannot be loaded for a reason that is not one of the typed errors of its
+// reader (out of memory, an unexpected exception); the message names the map.
+class MapLoadError : public Error {
  public:
   using Error::Error;
 };
@@ -44,16 +59,39 @@ struct LoadedMap {
   MapInfo info;
   // Visibility index built on `map`.
   std::unique_ptr<VisibilityIndex> visibility;
+  // Estimated memory of the map and its index, bytes (what counts against the cache budget).
+  uint64_t memory_bytes = 0;
 };
+
+// What ListMaps says about a map, read from the loaded map or from the file's header and
+// summary fields (ReadMapFileSummary) without loading it.
+struct MapDescriptionData {
+  // Map name (its directory name).
+  std::string name;
+  // Version: the content checksum as 8 lowercase hex digits.
+  std::string version;
+  // Counts, bounding box, content checksum and file size (header: unset when from a loaded map).
+  MapFileSummary summary;
+};
+
+// The description of a loaded map (its MapInfo and file size).
+MapDescriptionData DescribeLoadedMap(const LoadedMap& map);
 
 // Options of the registry.
 struct MapRegistryOptions {
   // Folder holding one subdirectory per map.
   std::filesystem::path maps_dir;
+  // Budget of the loaded-map cache, bytes (MapMemoryBytes of each map): beyond it the least
+  // recently used maps are dropped from the cache (sessions keep theirs). The most recently
+  // used map always stays, even when it alone is larger.
+  uint64_t max_map_memory_bytes = uint64_t{1} << 30;
 
-  // Throws InvalidArgumentError when maps_dir is empty or not a directory.
+  // Throws InvalidArgumentError when maps_dir is empty or not a directory, or the budget is 0.
   void Check() const;
 };
+
+// Estimated memory of `map` with a visibility index, bytes: its arrays plus the index's.
+uint64_t MapMemoryBytes(const Map& map);
 
 // Thread-safe registry of the maps in a folder.
 class MapRegistry {
@@ -66,20 +104,70 @@ class MapRegistry {
 
   // The current version of map `name`: loaded on first use, and reloaded when map.evmap changed
   // (size or modification time) since it was loaded. When a reload fails (e.g. a file copied in
-  // place non-atomically) the previous version keeps being served. `version`, when given, must
-  // equal the current version. Throws MapNotFoundError when there is no such map or version,
-  // IoError / ParseError when a map that was never loaded cannot be loaded.
+  // place non-atomically, or a crafted one) the previous version keeps being served while it is
+  // in the cache. `version`, when given, must equal the current version. Throws MapNotFoundError
+  // when there is no such map or version; IoError, ParseError or MapLoadError (never anything
+  // else) when the map cannot be loaded and no earlier version is in the cache.
   std::shared_ptr<const LoadedMap> Get(const std::string& name,
                                        const std::optional<std::string>& version = std::nullopt);
 
+  // What describes the version Get(name) would serve, without loading the map: from the cache
+  // when it holds it, else from the file's summary fields (ReadMapFileSummary, constant memory).
+  // A file version whose load failed is not described (the last good version is, when cached).
+  // Throws like Get.
+  MapDescriptionData Describe(const std::string& name);
+
   // Number of map versions loaded since construction (reloads included).
   int64_t loads() const;
+  // Number of times a map file was read by a load (successful or not) since construction.
+  int64_t load_attempts() const;
+  // Bytes of the maps in the cache (MapMemoryBytes).
+  uint64_t cached_bytes() const;
+  // Number of maps in the cache.
+  size_t cached_maps() const;
 
  private:
+  // Size and modification time of a map file: a file version.
+  struct FileStamp {
+    uint64_t bytes = 0;
+    std::filesystem::file_time_type time;
+    bool operator==(const FileStamp& other) const {
+      return bytes == other.bytes && time == other.time;
+    }
+  };
+  // One load of one file version; the first requester loads, the others wait on `done`.
+  struct Load;
+  // Everything the registry knows about one map name.
+  struct Entry {
+    // The newest version loaded successfully, while it is in the cache.
+    std::shared_ptr<const LoadedMap> current;
+    // Where `current` is in lru_ (valid when current is set).
+    std::list<std::string>::iterator lru_position;
+    // The load in progress or the last one (its result is the negative cache when it failed).
+    std::shared_ptr<Load> load;
+    // Description of the file version `described`, read without loading.
+    std::optional<MapDescriptionData> description;
+    // File version of `description`.
+    FileStamp described;
+  };
+
+  // The file version of `name`'s map.evmap; nullopt when it does not exist.
+  std::optional<FileStamp> Stamp(const std::string& name) const;
+  // Loads `name` at `stamp`, converting every exception to an evloc Error.
+  std::shared_ptr<const LoadedMap> LoadVersion(const std::string& name,
+                                               const FileStamp& stamp) const;
+  // Makes `map` the current version of `entry` and evicts beyond the budget. Needs mutex_.
+  void InsertLocked(Entry& entry, std::shared_ptr<const LoadedMap> map);
+
   MapRegistryOptions options_;
   mutable std::mutex mutex_;
-  std::map<std::string, std::shared_ptr<const LoadedMap>> current_;
+  std::map<std::string, Entry> entries_;
+  // Names of the cached maps, most recently used first.
+  std::list<std::string> lru_;
+  uint64_t cached_bytes_ = 0;
+  size_t cached_maps_ = 0;
   int64_t loads_ = 0;
+  int64_t load_attempts_ = 0;
 };
 
 // Formats a content checksum as a version string (8 lowercase hex digits).

@@ -1,9 +1,18 @@
 #include "localizer/service/map_registry.h"
 
 #include <gtest/gtest.h>
+#include <sys/resource.h>
+#include <unistd.h>
 
+#include <cstring>
+#include <fstream>
+#include <thread>
+
+#include "core/common/file_util.h"
 #include "localizer/service/testing/service_fixture.h"
 #include "localizer/tracking/testing/synthetic_scene.h"
+#include "maps/crc32c.h"
+#include "maps/map_directory.h"
 
 namespace evloc::service {
 namespace {
@@ -58,6 +67,144 @@ TEST(MapRegistry, NewVersionServesNewSessionsAndKeepsTheOldOneAlive) {
   // A broken file dropped in place does not stop the service: the last good version stays.
   std::filesystem::resize_file(folder.path() / "room" / "map.evmap", 100);
   EXPECT_EQ(registry.Get("room")->version, new_version->version);
+}
+
+// Rewrites the header of map `name` in `folder` to declare a payload of `payload_bytes` (with a
+// valid header checksum) and extends the file sparsely to match: a crafted map whose header
+// passes every check and whose load asks for that much memory.
+void CraftHugePayloadMap(const std::filesystem::path& folder, const std::string& name,
+                         uint64_t payload_bytes) {
+  const std::filesystem::path file = folder / name / kMapFileName;
+  std::string header = ReadFileToString(file).substr(0, kMapFileHeaderSize);
+  std::memcpy(header.data() + 16, &payload_bytes, sizeof(payload_bytes));
+  const uint32_t header_crc = Crc32c(std::string_view(header).substr(0, 24));
+  std::memcpy(header.data() + 24, &header_crc, sizeof(header_crc));
+  const std::filesystem::path staging = folder / name / ".crafted";
+  {
+    std::ofstream out(staging, std::ios::binary);
+    out.write(header.data(), static_cast<std::streamsize>(header.size()));
+  }
+  std::filesystem::resize_file(staging, kMapFileHeaderSize + payload_bytes);
+  std::filesystem::rename(staging, file);
+}
+
+// Finding 5 of issue 14: a crafted map whose load throws something other than an evloc Error
+// (here std::bad_alloc: 1.5 GiB asked under a 1 GiB address-space limit) must come out of the
+// registry as a typed Error, and must not stop the last good version from being served. Run in
+// a child process (the limit is per process). Exit codes: 0 good, 1 an untyped exception
+// escaped, 2 the last good version was not served, 3 no error.
+TEST(MapRegistryDeathTest, CraftedMapThatExhaustsMemoryIsATypedErrorAndTheLastGoodVersionStays) {
+  ::testing::GTEST_FLAG(death_test_style) = "threadsafe";
+  testing::TemporaryFolder folder;
+  testing::WriteTestMap(folder.path(), "room", testing::TestMap());
+  testing::WriteTestMap(folder.path(), "hall", testing::TestMap());
+  CraftHugePayloadMap(folder.path(), "hall", uint64_t{3} << 29);
+  const auto run = [&] {
+    MapRegistry registry(MapRegistryOptions{folder.path()});
+    const auto good = registry.Get("room");
+    const rlimit limit{rlim_t{1} << 30, rlim_t{1} << 30};
+    if (setrlimit(RLIMIT_AS, &limit) != 0) _exit(4);
+    try {
+      registry.Get("hall");
+      _exit(3);
+    } catch (const MapLoadError&) {
+    } catch (...) {
+      _exit(1);
+    }
+    CraftHugePayloadMap(folder.path(), "room", uint64_t{3} << 29);
+    try {
+      if (registry.Get("room").get() != good.get()) _exit(2);
+    } catch (...) {
+      _exit(1);
+    }
+    _exit(0);
+  };
+  EXPECT_EXIT(run(), ::testing::ExitedWithCode(0), "");
+}
+
+// Finding 7: a file whose load failed is not read again until it changes.
+TEST(MapRegistry, FailedLoadIsNotRetriedUntilTheFileChanges) {
+  testing::TemporaryFolder folder;
+  testing::WriteTestMap(folder.path(), "room", testing::TestMap());
+  const std::filesystem::path file = folder.path() / "room" / kMapFileName;
+  std::string bytes = ReadFileToString(file);
+  bytes[bytes.size() / 2] ^= 0x55;  // Payload checksum mismatch.
+  WriteFileAtomically(file, bytes);
+  MapRegistry registry(MapRegistryOptions{folder.path()});
+  for (int i = 0; i < 3; ++i) EXPECT_THROW(registry.Get("room"), ParseError);
+  EXPECT_THROW(registry.Describe("room"), ParseError);
+  EXPECT_EQ(registry.load_attempts(), 1);
+  EXPECT_EQ(registry.loads(), 0);
+  testing::WriteTestMap(folder.path(), "room", testing::TestMap());
+  EXPECT_EQ(registry.Get("room")->map.size(), testing::TestMap().size());
+  EXPECT_EQ(registry.load_attempts(), 2);
+}
+
+// Finding 7: concurrent requests for one map version load it once and share it.
+TEST(MapRegistry, ConcurrentRequestsLoadAVersionOnce) {
+  testing::TemporaryFolder folder;
+  testing::WriteTestMap(folder.path(), "room", testing::TestMap());
+  MapRegistry registry(MapRegistryOptions{folder.path()});
+  std::vector<std::shared_ptr<const LoadedMap>> maps(8);
+  std::vector<std::thread> threads;
+  for (size_t i = 0; i < maps.size(); ++i) {
+    threads.emplace_back([&, i] { maps[i] = registry.Get("room"); });
+  }
+  for (std::thread& thread : threads) thread.join();
+  for (const auto& map : maps) EXPECT_EQ(map.get(), maps[0].get());
+  EXPECT_EQ(registry.loads(), 1);
+  EXPECT_EQ(registry.load_attempts(), 1);
+}
+
+// Finding 6: the cache keeps the maps within the budget, least recently used out first, and a
+// map dropped from it stays valid for whoever holds it.
+TEST(MapRegistry, CacheEvictsLeastRecentlyUsedBeyondTheBudget) {
+  testing::TemporaryFolder folder;
+  const Map map = testing::TestMap();
+  for (const char* name : {"a", "b", "c"}) testing::WriteTestMap(folder.path(), name, map);
+  MapRegistryOptions options{folder.path()};
+  options.max_map_memory_bytes = 2 * MapMemoryBytes(LoadMap(folder.path() / "a" / kMapFileName));
+  MapRegistry registry(options);
+  const auto a = registry.Get("a");
+  EXPECT_EQ(a->memory_bytes, MapMemoryBytes(a->map));
+  registry.Get("b");
+  EXPECT_EQ(registry.cached_maps(), 2u);
+  registry.Get("a");  // a is now the most recently used: c evicts b.
+  registry.Get("c");
+  EXPECT_EQ(registry.cached_maps(), 2u);
+  EXPECT_LE(registry.cached_bytes(), options.max_map_memory_bytes);
+  EXPECT_EQ(registry.loads(), 3);
+  EXPECT_EQ(registry.Get("a").get(), a.get());
+  EXPECT_EQ(registry.loads(), 3);
+  registry.Get("b");  // Reloaded: evicts c.
+  EXPECT_EQ(registry.loads(), 4);
+  registry.Get("c");  // Reloaded: evicts a, which its holder keeps.
+  EXPECT_EQ(registry.loads(), 5);
+  EXPECT_EQ(a->map.size(), map.size());
+  EXPECT_NE(registry.Get("a").get(), a.get());
+  MapRegistryOptions zero{folder.path()};
+  zero.max_map_memory_bytes = 0;
+  EXPECT_THROW(zero.Check(), InvalidArgumentError);
+}
+
+// Finding 6: ListMaps' descriptions come from the file's summary without loading the map, and
+// equal the loaded map's.
+TEST(MapRegistry, DescribesAMapWithoutLoadingIt) {
+  testing::TemporaryFolder folder;
+  testing::WriteTestMap(folder.path(), "room", testing::TestMap());
+  MapRegistry registry(MapRegistryOptions{folder.path()});
+  const MapDescriptionData described = registry.Describe("room");
+  EXPECT_EQ(registry.loads(), 0);
+  EXPECT_EQ(registry.load_attempts(), 0);
+  const auto loaded = registry.Get("room");
+  EXPECT_EQ(described.version, loaded->version);
+  EXPECT_EQ(described.summary.info.content_crc32c, loaded->content_crc32c);
+  EXPECT_EQ(described.summary.file_bytes, loaded->file_bytes);
+  EXPECT_EQ(described.summary.info.num_points, loaded->info.num_points);
+  EXPECT_EQ(described.summary.info.num_keyframes, loaded->info.num_keyframes);
+  EXPECT_EQ(described.summary.info.bounding_box_min, loaded->info.bounding_box_min);
+  EXPECT_EQ(described.summary.info.bounding_box_max, loaded->info.bounding_box_max);
+  EXPECT_THROW(registry.Describe("hall"), MapNotFoundError);
 }
 
 }  // namespace

@@ -22,6 +22,8 @@ Options:
   --idle-timeout SECONDS     cancel a session that sends nothing this long (default 30)
   --queue-packets N          packets a session may have waiting (default 256)
   --backpressure-fraction F  queue fill that triggers a Backpressure notice (default 0.5)
+  --max-map-memory MIB       memory budget of the loaded maps; least recently used maps beyond
+                             it are unloaded, sessions keep theirs (default 1024)
   --max-camera-pixels N      largest camera a session may declare, width * height (default
                              4194304; a session's memory grows with it)
   --max-packet-span SECONDS  most a packet's end_t_ns (or a pose hint) may lie after the session
@@ -108,6 +110,12 @@ ServeCommand ParseServeCommandLine(const std::vector<std::string>& arguments) {
       server.queue_packets = static_cast<int>(ParseIntegerFlag(flag, value));
     } else if (flag == "--backpressure-fraction") {
       server.backpressure_fraction = ParseDoubleFlag(flag, value);
+    } else if (flag == "--max-map-memory") {
+      const int64_t mib = ParseIntegerFlag(flag, value);
+      if (mib < 1 || mib > (int64_t{1} << 40)) {
+        throw InvalidArgumentError("--max-map-memory must be 1 .. 2^40 MiB, got " + value);
+      }
+      server.max_map_memory_bytes = static_cast<uint64_t>(mib) << 20;
     } else if (flag == "--max-camera-pixels") {
       server.max_camera_pixels = ParseIntegerFlag(flag, value);
     } else if (flag == "--max-packet-span") {

@@ -27,23 +27,28 @@ grpc::Status InvalidArgument(const std::string& message) {
 
 }  // namespace
 
-api::MapDescription DescribeMap(const LoadedMap& map) {
+api::MapDescription DescribeMap(const MapDescriptionData& map) {
+  const MapInfo& info = map.summary.info;
   api::MapDescription description;
   description.set_name(map.name);
   description.set_version(map.version);
-  description.set_num_points(map.info.num_points);
-  description.set_num_keyframes(map.info.num_keyframes);
+  description.set_num_points(info.num_points);
+  description.set_num_keyframes(info.num_keyframes);
   auto* low = description.mutable_bounding_box_min();
-  low->set_x(map.info.bounding_box_min.x());
-  low->set_y(map.info.bounding_box_min.y());
-  low->set_z(map.info.bounding_box_min.z());
+  low->set_x(info.bounding_box_min.x());
+  low->set_y(info.bounding_box_min.y());
+  low->set_z(info.bounding_box_min.z());
   auto* high = description.mutable_bounding_box_max();
-  high->set_x(map.info.bounding_box_max.x());
-  high->set_y(map.info.bounding_box_max.y());
-  high->set_z(map.info.bounding_box_max.z());
-  description.set_content_crc32c(map.content_crc32c);
-  description.set_file_bytes(map.file_bytes);
+  high->set_x(info.bounding_box_max.x());
+  high->set_y(info.bounding_box_max.y());
+  high->set_z(info.bounding_box_max.z());
+  description.set_content_crc32c(info.content_crc32c);
+  description.set_file_bytes(map.summary.file_bytes);
   return description;
+}
+
+api::MapDescription DescribeMap(const LoadedMap& map) {
+  return DescribeMap(DescribeLoadedMap(map));
 }
 
 api::PoseUpdate PoseUpdateFromEstimate(const tracking::PoseEstimate& estimate) {

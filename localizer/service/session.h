@@ -28,6 +28,8 @@ namespace evloc::service {
 
 // Describes a loaded map for clients.
 api::MapDescription DescribeMap(const LoadedMap& map);
+// Describes a map from what the registry read of it (ListMaps, without loading it).
+api::MapDescription DescribeMap(const MapDescriptionData& map);
 // A PoseUpdate for a tracker step (latency_us left at 0: set when handed to the transport).
 api::PoseUpdate PoseUpdateFromEstimate(const tracking::PoseEstimate& estimate);
 
