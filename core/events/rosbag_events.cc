@@ -169,7 +169,8 @@ void RosbagEventReader::Initialise(const RosbagEventOptions& options) {
   const auto connections = bag_->ConnectionsOf(options.topic);
   if (connections.empty()) {
     throw InvalidArgumentError(bag_->source() + " has no topic '" + options.topic +
-                               "'; its topics are: " + bag_->DescribeTopics());
+                               "'; its topics are: " + bag_->DescribeTopics() +
+                               " (name the events topic: --events-topic)");
   }
   for (const RosbagConnection* connection : connections) {
     if (!IsRosbagEventType(connection->type)) {

@@ -3,11 +3,11 @@
 // generator is missing).
 #include <gtest/gtest.h>
 
-#include <cstdio>
 #include <fstream>
 
 #include <nlohmann/json.hpp>
 
+#include "core/common/test_data.h"
 #include "localizer/service/localizer_server.h"
 #include "localizer/service/testing/service_fixture.h"
 #include "localizer/tracking/testing/synthetic_scene.h"
@@ -18,20 +18,10 @@ namespace {
 constexpr char kPython[] = "/usr/bin/python3";
 constexpr char kPlugin[] = "/usr/bin/grpc_python_plugin";
 
-// Runs a shell command and returns its exit status and standard output.
-int RunShell(const std::string& command, std::string* output) {
-  FILE* pipe = ::popen(command.c_str(), "r");
-  if (!pipe) return -1;
-  char buffer[4096];
-  size_t count = 0;
-  while ((count = std::fread(buffer, 1, sizeof(buffer), pipe)) > 0) output->append(buffer, count);
-  return ::pclose(pipe);
-}
-
 TEST(PythonClientExample, StreamsEventsAndPrintsPoses) {
   std::string ignored;
-  if (RunShell(std::string(kPython) + " -c 'import grpc, google.protobuf, numpy' 2>&1", &ignored) !=
-      0) {
+  if (::evloc::testing::RunShellCommand(
+          std::string(kPython) + " -c 'import grpc, google.protobuf, numpy' 2>&1", &ignored) != 0) {
     GTEST_SKIP() << kPython << " lacks grpcio, protobuf or numpy (Debian: python3-grpcio "
                  << "python3-protobuf python3-numpy): " << ignored;
   }
@@ -74,7 +64,7 @@ TEST(PythonClientExample, StreamsEventsAndPrintsPoses) {
       " --map " + testing::kTestMapName + " --session '" +
       (folder.path() / "session.json").string() + "' --events '" +
       (folder.path() / "events.txt").string() + "' --rate 200 --protoc '" EVLOC_PROTOC "' 2>&1";
-  ASSERT_EQ(RunShell(command, &output), 0) << output;
+  ASSERT_EQ(::evloc::testing::RunShellCommand(command, &output), 0) << output;
   EXPECT_NE(output.find("session 1: map rectangles"), std::string::npos) << output;
   EXPECT_NE(output.find("end: " + std::to_string(events.size()) + " events"), std::string::npos)
       << output;

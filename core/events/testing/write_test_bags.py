@@ -6,6 +6,8 @@ Usage: write_test_bags.py OUT_DIR
        write_test_bags.py --bench EVENTS OUT_DIR   (bench_none.bag and bench_lz4.bag for
        bench/events_benchmark.cc: EVENTS DAVIS240-like events on /dvs/events in messages of
        1,000; payloads packed with numpy, written raw by rosbag)
+       write_test_bags.py --small OUT_DIR   (the same topics with at most 8 events per message,
+       two messages per topic and no images: fuzzing seeds of 2-4 KB, test_<compression>.bag)
 
 Message classes come from genpy.dynamic (the ROS message generator, fed the message
 definitions below), so the payload serialization is genpy's, not evloc's. Writes, for each
@@ -118,7 +120,9 @@ def main():
     if sys.argv[1] == "--bench":
         write_bench_bags(int(sys.argv[2]), sys.argv[3])
         return
-    out = sys.argv[1]
+    small = sys.argv[1] == "--small"
+    out = sys.argv[2] if small else sys.argv[1]
+    limit = (lambda count, most: min(count, most)) if small else (lambda count, most: count)
     rng = random.Random(15)
     dvs = classes("dvs_msgs/EventArray")
     pro = classes("prophesee_event_msgs/EventArray")
@@ -130,9 +134,9 @@ def main():
     expected = {name: [] for name in ("dvs", "prophesee", "mono", "evt3", "poses", "images")}
 
     t = T0_NS
-    for m in range(12):
+    for m in range(limit(12, 2)):
         events = []
-        for _ in range(rng.randint(0 if m == 3 else 1, 400)):
+        for _ in range(limit(rng.randint(0 if m == 3 else 1, 400), 8)):
             t += rng.randint(0, 20000)
             x, y, p = rng.randrange(240), rng.randrange(180), rng.random() < 0.5
             events.append(dvs["dvs_msgs/Event"](x=x, y=y, ts=ros_time(t), polarity=p))
@@ -141,9 +145,9 @@ def main():
             header=header(dvs, m, t), height=180, width=240, events=events)))
 
     t = T0_NS + 5_000_000
-    for m in range(5):
+    for m in range(limit(5, 2)):
         events = []
-        for _ in range(rng.randint(1, 300)):
+        for _ in range(limit(rng.randint(1, 300), 8)):
             t += rng.randint(1, 3000)
             x, y, p = rng.randrange(640), rng.randrange(480), rng.random() < 0.5
             events.append(pro["prophesee_event_msgs/Event"](x=x, y=y, ts=ros_time(t), polarity=p))
@@ -152,11 +156,11 @@ def main():
             header=header(pro, m, t), height=480, width=640, events=events)))
 
     t_us = 3_000_000
-    for m in range(6):
+    for m in range(limit(6, 2)):
         stamp = T0_NS + 10_000_000 * (m + 1)
         words = b""
         evt3 = []
-        for _ in range(rng.randint(1, 200)):
+        for _ in range(limit(rng.randint(1, 200), 8)):
             dt = rng.randrange(1 << 20)
             x, y, p = rng.randrange(1280), rng.randrange(720), rng.random() < 0.5
             words += struct.pack("<Q", (int(p) << 63) | (y << 48) | (x << 32) | dt)
@@ -169,7 +173,7 @@ def main():
                 header=header(pkt, m, stamp), height=720, width=1280, seq=m, time_base=0,
                 encoding=encoding, is_bigendian=False, events=data)))
 
-    for m in range(4):
+    for m in range(limit(4, 0)):
         stamp = T0_NS + 25_000_000 * m + 1234
         data = bytes(rng.randrange(256) for _ in range(240 * 180))
         messages.append((stamp, "/dvs/image_raw", img["sensor_msgs/Image"](
@@ -185,7 +189,7 @@ def main():
         binning_x=0, binning_y=0, roi=cam["sensor_msgs/RegionOfInterest"]())
     messages.append((T0_NS, "/dvs/camera_info", info))
 
-    for m in range(30):
+    for m in range(limit(30, 2)):
         stamp = T0_NS + 4_000_000 * m + 17
         x, y, z = 0.1 * m, -0.05 * m, 1.0 + 0.01 * m
         qx, qy, qz, qw = 0.0, 0.0, 0.0998334166, 0.9950041653  # 0.2 rad about z
