@@ -23,7 +23,7 @@ namespace {
 // The shared real-data folder: $EVLOC_DATA_DIR, else ../shared/data beside the source tree.
 std::filesystem::path SharedDataDir() {
   if (const char* from_environment = std::getenv("EVLOC_DATA_DIR")) return from_environment;
-  return std::filesystem::path(__FILE__).parent_path().parent_path() / ".." / "shared" / "data";
+  return std::filesystem::path(EVLOC_SOURCE_DIR) / ".." / "shared" / "data";
 }
 
 // The payload of a Prophesee .raw file (after its `% ` header lines); empty if absent.
@@ -180,8 +180,8 @@ std::filesystem::path BenchBagsDir() {
     const auto folder = std::filesystem::temp_directory_path() / "evloc-events-benchmark-bags";
     std::filesystem::remove_all(folder);
     std::filesystem::create_directories(folder);
-    const auto script = std::filesystem::path(__FILE__).parent_path().parent_path() / "core" /
-                        "events" / "testing" / "write_test_bags.py";
+    const auto script = std::filesystem::path(EVLOC_SOURCE_DIR) / "core" / "events" / "testing" /
+                        "write_test_bags.py";
     const std::string command = "/usr/bin/python3 '" + script.string() + "' --bench " +
                                 std::to_string(4 << 20) + " '" + folder.string() + "'";
     return std::system(command.c_str()) == 0 ? folder : std::filesystem::path();
