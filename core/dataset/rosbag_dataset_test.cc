@@ -33,6 +33,24 @@ void ExpectGroundTruthAsWritten(const Trajectory& trajectory, const std::filesys
   }
 }
 
+TEST(RosbagTopics, EachFlagSetsItsTopicAndOtherFlagsAreLeftToTheCaller) {
+  RosbagTopics topics;
+  EXPECT_EQ(topics.events, "/dvs/events");
+  EXPECT_TRUE(ApplyRosbagTopicFlag("--events-topic", "/e", &topics));
+  EXPECT_TRUE(ApplyRosbagTopicFlag("--image-topic", "/i", &topics));
+  EXPECT_TRUE(ApplyRosbagTopicFlag("--camera-info-topic", "/c", &topics));
+  EXPECT_TRUE(ApplyRosbagTopicFlag("--groundtruth-topic", "/g", &topics));
+  EXPECT_FALSE(ApplyRosbagTopicFlag("--topic", "/x", &topics));
+  EXPECT_EQ(topics.events, "/e");
+  EXPECT_EQ(topics.image, "/i");
+  EXPECT_EQ(topics.camera_info, "/c");
+  EXPECT_EQ(topics.groundtruth, "/g");
+  for (const char* flag : {"--events-topic", "--image-topic", "--camera-info-topic",
+                           "--groundtruth-topic"}) {
+    EXPECT_NE(std::string(kRosbagTopicFlagsUsage).find(flag), std::string::npos) << flag;
+  }
+}
+
 TEST(RosbagDataset, ReadsTheCameraGroundTruthAndEventsOfABag) {
   EVLOC_REQUIRE_TEST_BAGS(dir);
   for (const char* compression : {"none", "bz2", "lz4"}) {

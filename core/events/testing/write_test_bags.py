@@ -8,6 +8,9 @@ Usage: write_test_bags.py OUT_DIR
        1,000; payloads packed with numpy, written raw by rosbag)
        write_test_bags.py --small OUT_DIR   (the same topics with at most 8 events per message,
        two messages per topic and no images: fuzzing seeds of 2-4 KB, test_<compression>.bag)
+       write_test_bags.py --from-dataset DIR OUT.bag   (an lz4 bag of a dataset folder with
+       events.txt, calib.yaml (pinhole or radtan) and groundtruth.txt: /dvs/events in messages
+       of 1 ms, /dvs/camera_info, /optitrack/davis; for tests/end_to_end_test.cc)
 
 Message classes come from genpy.dynamic (the ROS message generator, fed the message
 definitions below), so the payload serialization is genpy's, not evloc's. Writes, for each
@@ -116,7 +119,72 @@ def write_bench_bags(count, out):
                           t=ros_time(stamp), raw=True)
 
 
+def write_dataset_bag(folder, out):
+    import yaml
+
+    dvs = classes("dvs_msgs/EventArray")
+    cam = classes("sensor_msgs/CameraInfo")
+    pose = classes("geometry_msgs/PoseStamped")
+    with open(folder + "/calib.yaml") as handle:
+        calib = yaml.safe_load(handle)
+    messages = []
+    # The camera: evloc's calib.yaml keys (docs/camera.md).
+    distortion = [float(value) for value in calib.get("distortion", [])]
+    model = {"pinhole": "plumb_bob", "radtan": "plumb_bob", "equidistant": "equidistant"}
+    fx, fy, cx, cy = (float(value) for value in calib["intrinsics"])
+    messages.append((0, "/dvs/camera_info", lambda t: cam["sensor_msgs/CameraInfo"](
+        header=header(cam, 0, t), height=int(calib["height"]), width=int(calib["width"]),
+        distortion_model=model[calib["model"]], D=distortion or [0.0] * 5,
+        K=[fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0], R=[1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0],
+        P=[fx, 0, cx, 0, 0, fy, cy, 0, 0, 0, 1, 0], binning_x=0, binning_y=0,
+        roi=cam["sensor_msgs/RegionOfInterest"]())))
+    seconds_to_ns = lambda text: int(text.split(".")[0]) * 1_000_000_000 + int(
+        (text.split(".") + [""])[1].ljust(9, "0")[:9])
+    with open(folder + "/groundtruth.txt") as handle:
+        for m, line in enumerate(l for l in handle if l.strip() and not l.startswith("#")):
+            t, x, y, z, qx, qy, qz, qw = line.split()
+            t_ns = seconds_to_ns(t)
+            messages.append((t_ns, "/optitrack/davis", pose["geometry_msgs/PoseStamped"](
+                header=header(pose, m, t_ns), pose=pose["geometry_msgs/Pose"](
+                    position=pose["geometry_msgs/Point"](x=float(x), y=float(y), z=float(z)),
+                    orientation=pose["geometry_msgs/Quaternion"](
+                        x=float(qx), y=float(qy), z=float(qz), w=float(qw))))))
+    block, block_start = [], None
+
+    def flush():
+        t_ns = block[-1].ts.to_nsec()
+        messages.append((t_ns, "/dvs/events", dvs["dvs_msgs/EventArray"](
+            header=header(dvs, len(messages), t_ns), height=int(calib["height"]),
+            width=int(calib["width"]), events=list(block))))
+
+    with open(folder + "/events.txt") as handle:
+        for line in handle:
+            if not line.strip() or line.startswith("#"):
+                continue
+            t, x, y, p = line.split()
+            t_ns = seconds_to_ns(t)
+            if block and t_ns - block_start >= 1_000_000:
+                flush()
+                block = []
+            if not block:
+                block_start = t_ns
+            block.append(dvs["dvs_msgs/Event"](x=int(x), y=int(y), ts=ros_time(t_ns),
+                                               polarity=p == "1"))
+    if block:
+        flush()
+    first = min(t for t, topic, _ in messages if topic != "/dvs/camera_info")
+    with rosbag.Bag(out, "w", compression="lz4") as bag:
+        for t_ns, topic, message in sorted(messages, key=lambda item: item[0]):
+            if callable(message):
+                message = message(first)
+                t_ns = first
+            bag.write(topic, message, t=ros_time(max(t_ns, first)))
+
+
 def main():
+    if sys.argv[1] == "--from-dataset":
+        write_dataset_bag(sys.argv[2], sys.argv[3])
+        return
     if sys.argv[1] == "--bench":
         write_bench_bags(int(sys.argv[2]), sys.argv[3])
         return
