@@ -45,8 +45,8 @@ TEST(RosbagTopics, EachFlagSetsItsTopicAndOtherFlagsAreLeftToTheCaller) {
   EXPECT_EQ(topics.image, "/i");
   EXPECT_EQ(topics.camera_info, "/c");
   EXPECT_EQ(topics.groundtruth, "/g");
-  for (const char* flag : {"--events-topic", "--image-topic", "--camera-info-topic",
-                           "--groundtruth-topic"}) {
+  for (const char* flag :
+       {"--events-topic", "--image-topic", "--camera-info-topic", "--groundtruth-topic"}) {
     EXPECT_NE(std::string(kRosbagTopicFlagsUsage).find(flag), std::string::npos) << flag;
   }
 }
