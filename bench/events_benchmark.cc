@@ -15,6 +15,7 @@
 #include "core/events/evb.h"
 #include "core/events/event.h"
 #include "core/events/prophesee_decoder.h"
+#include "core/events/rosbag_events.h"
 
 namespace evloc {
 namespace {
@@ -22,7 +23,7 @@ namespace {
 // The shared real-data folder: $EVLOC_DATA_DIR, else ../shared/data beside the source tree.
 std::filesystem::path SharedDataDir() {
   if (const char* from_environment = std::getenv("EVLOC_DATA_DIR")) return from_environment;
-  return std::filesystem::path(__FILE__).parent_path().parent_path() / ".." / "shared" / "data";
+  return std::filesystem::path(EVLOC_SOURCE_DIR) / ".." / "shared" / "data";
 }
 
 // The payload of a Prophesee .raw file (after its `% ` header lines); empty if absent.
@@ -171,6 +172,53 @@ void BM_EvbRead(benchmark::State& state) {
   std::filesystem::remove_all(directory);
 }
 BENCHMARK(BM_EvbRead)->Unit(benchmark::kMillisecond);
+
+// The dvs_msgs bags of 2^22 events (messages of 1,000) written by Debian's python3-rosbag with
+// core/events/testing/write_test_bags.py --bench, once per process; empty when it cannot run.
+std::filesystem::path BenchBagsDir() {
+  static const std::filesystem::path dir = [] {
+    const auto folder = std::filesystem::temp_directory_path() / "evloc-events-benchmark-bags";
+    std::filesystem::remove_all(folder);
+    std::filesystem::create_directories(folder);
+    const auto script = std::filesystem::path(EVLOC_SOURCE_DIR) / "core" / "events" / "testing" /
+                        "write_test_bags.py";
+    const std::string command = "/usr/bin/python3 '" + script.string() + "' --bench " +
+                                std::to_string(4 << 20) + " '" + folder.string() + "'";
+    return std::system(command.c_str()) == 0 ? folder : std::filesystem::path();
+  }();
+  return dir;
+}
+
+// Reads the events of a dvs_msgs/EventArray bag (`compression` none or lz4) in 2^16-event calls.
+void RosbagDvsRead(benchmark::State& state, const char* compression) {
+  const std::filesystem::path dir = BenchBagsDir();
+  if (dir.empty()) {
+    state.SkipWithError("write_test_bags.py --bench failed (needs python3-rosbag, python3-numpy)");
+    return;
+  }
+  const auto path = dir / (std::string("bench_") + compression + ".bag");
+  uint64_t total = 0;
+  EventBuffer read;
+  for (auto _ : state) {
+    RosbagEventReader reader(path);
+    read.clear();
+    while (reader.Read(1 << 16, &read) > 0) {
+    }
+    if (read.size() != (4u << 20)) {
+      state.SkipWithError("the bench bag does not hold 2^22 events");
+      return;
+    }
+    total += read.size();
+  }
+  state.counters["Mev/s"] =
+      benchmark::Counter(static_cast<double>(total) / 1e6, benchmark::Counter::kIsRate);
+}
+
+void BM_RosbagDvsReadUncompressed(benchmark::State& state) { RosbagDvsRead(state, "none"); }
+BENCHMARK(BM_RosbagDvsReadUncompressed)->Unit(benchmark::kMillisecond);
+
+void BM_RosbagDvsReadLz4(benchmark::State& state) { RosbagDvsRead(state, "lz4"); }
+BENCHMARK(BM_RosbagDvsReadLz4)->Unit(benchmark::kMillisecond);
 
 }  // namespace
 }  // namespace evloc

@@ -9,6 +9,8 @@ PACKAGES=(
   build-essential cmake ninja-build pkg-config ccache git clang clang-format libclang-rt-14-dev
   # core libraries
   libeigen3-dev libopencv-dev libyaml-cpp-dev nlohmann-json3-dev libhdf5-dev libsqlite3-dev
+  # ROS1 bag chunks (bz2, lz4)
+  libbz2-dev liblz4-dev
   # mapping
   colmap libceres-dev libpcl-dev
   # service
@@ -19,6 +21,8 @@ PACKAGES=(
   libgtest-dev libgmock-dev libbenchmark-dev
   # python client example and its test
   python3 python3-grpcio python3-protobuf python3-numpy
+  # the independent writer of the bag tests (core/events/testing/write_test_bags.py)
+  python3-rosbag python3-roslz4
   # TLS test certificates
   openssl
 )

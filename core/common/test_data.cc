@@ -3,11 +3,21 @@
 #include <unistd.h>
 
 #include <atomic>
+#include <cstdio>
 #include <cstdlib>
 
 namespace evloc::testing {
 
 std::filesystem::path SourceDir() { return EVLOC_SOURCE_DIR; }
+
+int RunShellCommand(const std::string& command, std::string* output) {
+  FILE* pipe = ::popen(command.c_str(), "r");
+  if (!pipe) return -1;
+  char buffer[4096];
+  size_t count = 0;
+  while ((count = std::fread(buffer, 1, sizeof(buffer), pipe)) > 0) output->append(buffer, count);
+  return ::pclose(pipe);
+}
 
 std::optional<std::filesystem::path> SharedDataDir() {
   if (const char* from_environment = std::getenv("EVLOC_DATA_DIR")) {

@@ -21,6 +21,10 @@ std::string MissingDataReason(const std::string& relative);
 // The project's source directory (for files committed under tests/data).
 std::filesystem::path SourceDir();
 
+// Runs `command` with /bin/sh, appends its standard output to `*output` and returns its exit
+// status as pclose() gives it (0 on success, -1 when it could not be started).
+int RunShellCommand(const std::string& command, std::string* output);
+
 // A fresh, empty temporary directory unique to the calling test; removed by the caller if wanted.
 std::filesystem::path MakeTempDir(const std::string& prefix);
 

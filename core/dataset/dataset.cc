@@ -10,6 +10,9 @@
 
 #include "core/common/error.h"
 #include "core/common/file_util.h"
+#include "core/dataset/rosbag_dataset.h"
+#include "core/events/rosbag.h"
+#include "core/events/rosbag_events.h"
 #include "core/trajectory/tum_io.h"
 
 namespace evloc {
@@ -153,10 +156,55 @@ void DatasetWriter::Commit() {
   committed_ = true;
 }
 
+void RosbagTopics::Check() const {
+  if (events.empty() || image.empty() || camera_info.empty() || groundtruth.empty()) {
+    throw InvalidArgumentError(
+        "The bag topics (events, image, camera info, ground truth) must "
+        "not be empty.");
+  }
+}
+
+bool ApplyRosbagTopicFlag(const std::string& flag, const std::string& value, RosbagTopics* topics) {
+  if (flag == "--events-topic") {
+    topics->events = value;
+  } else if (flag == "--image-topic") {
+    topics->image = value;
+  } else if (flag == "--camera-info-topic") {
+    topics->camera_info = value;
+  } else if (flag == "--groundtruth-topic") {
+    topics->groundtruth = value;
+  } else {
+    return false;
+  }
+  return true;
+}
+
+const char kRosbagTopicFlagsUsage[] =
+    "  --events-topic T       bag topic of the events (default /dvs/events)\n"
+    "  --image-topic T        bag topic of the images (default /dvs/image_raw)\n"
+    "  --camera-info-topic T  bag topic of the calibration (default /dvs/camera_info)\n"
+    "  --groundtruth-topic T  bag topic of the ground-truth PoseStamped (default "
+    "/optitrack/davis)\n";
+
 void DatasetReaderOptions::Check() const {
   if (ecd_width <= 0 || ecd_height <= 0) {
     throw InvalidArgumentError("The ECD sensor size must be positive.");
   }
+  bag_topics.Check();
+}
+
+std::unique_ptr<EventReader> OpenDatasetEvents(const Dataset& dataset) {
+  if (dataset.bag) {
+    RosbagEventOptions options;
+    options.topic = dataset.bag->topics.events;
+    if (!dataset.events_path) throw InvalidArgumentError("a bag dataset without its bag path");
+    return std::make_unique<RosbagEventReader>(*dataset.events_path, options);
+  }
+  if (!dataset.events_path) {
+    throw InvalidArgumentError("dataset '" + dataset.root.string() +
+                               "' has no events.evb or events.txt");
+  }
+  return OpenEventFile(*dataset.events_path);
 }
 
 std::vector<TimedFile> ReadTimedFileList(const fs::path& list_path, const fs::path& root) {
@@ -197,6 +245,9 @@ std::vector<TimedFile> ReadTimedFileList(const fs::path& list_path, const fs::pa
 Dataset ReadDataset(const fs::path& root, const DatasetReaderOptions& options) {
   options.Check();
   std::error_code error;
+  if (fs::is_regular_file(root, error) && IsRosbagFile(root)) {
+    return ReadRosbagDataset(root, options);
+  }
   if (!fs::is_directory(root, error)) {
     throw IoError("dataset folder '" + root.string() + "' does not exist.");
   }
@@ -258,6 +309,13 @@ TimedPose ResolveInitialPose(const Dataset& dataset,
                              const std::optional<Rigid3d>& initial_world_from_cam,
                              int64_t fallback_t_ns) {
   const bool has_ground_truth = dataset.ground_truth && !dataset.ground_truth->empty();
+  if (!initial_world_from_cam && !has_ground_truth && dataset.bag) {
+    throw InvalidArgumentError("bag '" + dataset.root.string() + "' has no ground-truth topic '" +
+                               dataset.bag->topics.groundtruth +
+                               "' (its topics: " + dataset.bag->topic_list +
+                               "): name it (--groundtruth-topic) or give the initial pose with "
+                               "--init-pose");
+  }
   if (!initial_world_from_cam && !has_ground_truth) {
     throw InvalidArgumentError("dataset '" + dataset.root.string() +
                                "' has no groundtruth.txt: give the initial pose with --init-pose");

@@ -15,6 +15,7 @@
 #include <opencv2/core.hpp>
 
 #include "core/camera/camera.h"
+#include "core/events/event_reader.h"
 #include "core/trajectory/trajectory.h"
 
 namespace evloc {
@@ -105,15 +106,52 @@ class DatasetWriter {
   bool committed_ = false;
 };
 
+// The topics of a ROS1 bag read as a dataset (docs/event-formats.md, section 7). Defaults: the
+// rpg_dvs_ros driver's topics and the Event Camera Dataset's motion-capture pose.
+struct RosbagTopics {
+  // Events: dvs_msgs/EventArray, prophesee_event_msgs/EventArray or event_camera_msgs/EventPacket.
+  // Required when events are read (OpenDatasetEvents).
+  std::string events = "/dvs/events";
+  // Images, sensor_msgs/Image; when absent the dataset has no images.
+  std::string image = "/dvs/image_raw";
+  // Calibration, sensor_msgs/CameraInfo (the first message); required.
+  std::string camera_info = "/dvs/camera_info";
+  // Ground truth world_from_cam, geometry_msgs/PoseStamped; when absent, no ground truth.
+  std::string groundtruth = "/optitrack/davis";
+
+  // Throws InvalidArgumentError when a topic is empty.
+  void Check() const;
+};
+
+// The command-line flags of RosbagTopics, shared by evloc-track and evloc-replay: sets the topic
+// of `flag` (--events-topic, --image-topic, --camera-info-topic, --groundtruth-topic) to `value`
+// and returns true, or returns false for any other flag.
+bool ApplyRosbagTopicFlag(const std::string& flag, const std::string& value, RosbagTopics* topics);
+
+// The help text of those flags (one line each, indented as the tools' usage).
+extern const char kRosbagTopicFlagsUsage[];
+
 // Options of the dataset reader.
 struct DatasetReaderOptions {
   // Sensor width used with an ECD calib.txt (which has no size); DAVIS240C: 240.
   int ecd_width = 240;
   // Sensor height used with an ECD calib.txt; DAVIS240C: 180.
   int ecd_height = 180;
+  // The topics used when the dataset is a ROS1 bag.
+  RosbagTopics bag_topics;
 
-  // Throws InvalidArgumentError unless both sizes are positive.
+  // Throws InvalidArgumentError unless both sizes are positive and the topics are valid.
   void Check() const;
+};
+
+// What a dataset read from a ROS1 bag holds besides the Dataset fields.
+struct RosbagDatasetSource {
+  // The topics it was read with.
+  RosbagTopics topics;
+  // Every topic of the bag with its type, for error messages.
+  std::string topic_list;
+  // Messages on the image topic (images are decoded by the converter, ConvertRosbagToDataset).
+  uint64_t image_messages = 0;
 };
 
 // A loaded dataset: its calibration, the lists of images and depth maps, ground truth and where
@@ -136,12 +174,19 @@ struct Dataset {
   std::optional<std::filesystem::path> ground_truth_map_path;
   // info.json, when present (evloc-sim output).
   std::optional<nlohmann::json> info;
+  // Set when the dataset is a ROS1 bag (`root` is then the bag file and `events_path` too).
+  std::optional<RosbagDatasetSource> bag;
 };
 
-// Loads a dataset folder. Throws IoError when the folder or a listed file is missing, ParseError
-// naming the file and line for malformed lists, InvalidArgumentError when the folder has neither
-// calib.yaml nor calib.txt, or is an unfinished OUT.partial.
+// Loads a dataset folder, or a ROS1 bag file (see ReadRosbagDataset in rosbag_dataset.h).
+// Throws IoError when the folder or a listed file is missing, ParseError naming the file and line
+// for malformed lists, InvalidArgumentError when the folder has neither calib.yaml nor calib.txt,
+// or is an unfinished OUT.partial.
 Dataset ReadDataset(const std::filesystem::path& root, const DatasetReaderOptions& options = {});
+
+// Opens the events of a dataset: its event file, or the events topic of a bag. Throws
+// InvalidArgumentError when the dataset has no events (for a bag: naming the topics present).
+std::unique_ptr<EventReader> OpenDatasetEvents(const Dataset& dataset);
 
 // The pose a run over `dataset` starts from: `initial_world_from_cam` when given, else the first
 // ground-truth pose; at the ground truth's start time when there is ground truth, else at

@@ -32,6 +32,11 @@ void EventBuffer::Append(const EventBuffer& other) {
   Append(other.t_ns.data(), other.x.data(), other.y.data(), other.polarity.data(), other.size());
 }
 
+void EventBuffer::Append(const EventBuffer& other, size_t begin, size_t count) {
+  Append(other.t_ns.data() + begin, other.x.data() + begin, other.y.data() + begin,
+         other.polarity.data() + begin, count);
+}
+
 void EventBuffer::Append(const int64_t* t_ns_values, const uint16_t* x_values,
                          const uint16_t* y_values, const int8_t* polarity_values, size_t count) {
   t_ns.insert(t_ns.end(), t_ns_values, t_ns_values + count);

@@ -73,6 +73,8 @@ class EventBuffer {
   }
   // Appends every event of `other`.
   void Append(const EventBuffer& other);
+  // Appends events [begin, begin + count) of `other` (unchecked).
+  void Append(const EventBuffer& other, size_t begin, size_t count);
   // Appends `count` events given as parallel arrays.
   void Append(const int64_t* t_ns_values, const uint16_t* x_values, const uint16_t* y_values,
               const int8_t* polarity_values, size_t count);

@@ -10,6 +10,7 @@
 #include "core/events/ecd_text.h"
 #include "core/events/evb.h"
 #include "core/events/prophesee_raw.h"
+#include "core/events/rosbag_events.h"
 
 namespace evloc {
 
@@ -23,6 +24,8 @@ const char* EventFileFormatName(EventFileFormat format) {
       return "DSEC HDF5";
     case EventFileFormat::kEvb:
       return "evloc .evb";
+    case EventFileFormat::kRosbag:
+      return "ROS1 bag";
   }
   return "unknown";
 }
@@ -37,6 +40,7 @@ EventFileFormat DetectEventFileFormat(const std::filesystem::path& path) {
   if (size == 8 && std::memcmp(start, "\x89HDF\r\n\x1a\n", 8) == 0) {
     return EventFileFormat::kDsecHdf5;
   }
+  if (size == 8 && std::memcmp(start, "#ROSBAG ", 8) == 0) return EventFileFormat::kRosbag;
   if (size >= 2 && start[0] == '%' && start[1] == ' ') return EventFileFormat::kPropheseeRaw;
   std::string extension = path.extension().string();
   std::transform(extension.begin(), extension.end(), extension.begin(),
@@ -44,6 +48,7 @@ EventFileFormat DetectEventFileFormat(const std::filesystem::path& path) {
   if (extension == ".raw") return EventFileFormat::kPropheseeRaw;
   if (extension == ".h5" || extension == ".hdf5") return EventFileFormat::kDsecHdf5;
   if (extension == ".evb") return EventFileFormat::kEvb;
+  if (extension == ".bag") return EventFileFormat::kRosbag;
   // ECD text: a digit, '#' or blank line first.
   if (extension == ".txt" ||
       (size > 0 && (std::isdigit(static_cast<unsigned char>(start[0])) || start[0] == '#'))) {
@@ -51,7 +56,7 @@ EventFileFormat DetectEventFileFormat(const std::filesystem::path& path) {
   }
   throw ParseError::AtByte(path.string(), 0,
                            "unknown event file format (evloc reads .evb, Prophesee .raw with a "
-                           "'% ' header, DSEC HDF5 .h5 and ECD text 't x y p')");
+                           "'% ' header, DSEC HDF5 .h5, ROS1 bags and ECD text 't x y p')");
 }
 
 std::unique_ptr<EventReader> OpenEventFile(const std::filesystem::path& path) {
@@ -64,6 +69,8 @@ std::unique_ptr<EventReader> OpenEventFile(const std::filesystem::path& path) {
       return std::make_unique<DsecHdf5Reader>(path);
     case EventFileFormat::kEvb:
       return std::make_unique<EvbReader>(path);
+    case EventFileFormat::kRosbag:
+      return std::make_unique<RosbagEventReader>(path);
   }
   throw InvalidArgumentError("OpenEventFile: unhandled format");
 }

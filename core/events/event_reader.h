@@ -38,6 +38,8 @@ enum class EventFileFormat {
   kDsecHdf5,
   // evloc's compact binary format (.evb).
   kEvb,
+  // ROS1 bag (format 2.0) with event messages on /dvs/events (see rosbag_events.h).
+  kRosbag,
 };
 
 // Human-readable name of a format ("ECD text", ...).

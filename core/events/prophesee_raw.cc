@@ -203,9 +203,7 @@ size_t PropheseeRawReader::Read(size_t max_events, EventBuffer* out) {
       continue;
     }
     const size_t count = std::min(max_events - appended, pending_.size() - pending_position_);
-    out->Append(pending_.t_ns.data() + pending_position_, pending_.x.data() + pending_position_,
-                pending_.y.data() + pending_position_, pending_.polarity.data() + pending_position_,
-                count);
+    out->Append(pending_, pending_position_, count);
     pending_position_ += count;
     appended += count;
   }

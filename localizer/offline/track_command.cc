@@ -107,7 +107,8 @@ Tracks a recorded sequence against a map, offline, with the tracker the localize
 
 Options:
   --map PATH             map directory (holding map.evmap) or .evmap file (required)
-  --dataset DIR          dataset folder, evloc or Event Camera Dataset layout (required)
+  --dataset DIR|FILE.bag dataset folder, evloc or Event Camera Dataset layout, or a ROS1 bag
+                         (required)
   --out PATH             output TUM trajectory (required)
   --init-pose "tx ty tz qx qy qz qw" | none
                          initial world_from_cam; default: the dataset's first ground-truth pose
@@ -157,7 +158,8 @@ Options:
                          predicted gradient and flow)
   --debug-every N        one debug picture every N steps (default 30)
   --ecd-size WxH         sensor size for ECD folders with calib.txt only (default 240x180)
-  --quiet                no progress output
+)" + std::string(kRosbagTopicFlagsUsage) +
+         R"(  --quiet                no progress output
   --help                 print this help
 
 Exit codes: 0 success, 1 bad input or failure, 2 bad command line.
@@ -263,6 +265,7 @@ TrackCommandOptions ParseTrackCommandLine(const std::vector<std::string>& argume
       options.debug_every_steps = static_cast<int>(ParseIntegerFlag(flag, value));
     } else if (flag == "--ecd-size") {
       ParseSizeFlag(flag, value, &options.ecd_width, &options.ecd_height);
+    } else if (ApplyRosbagTopicFlag(flag, value, &options.bag_topics)) {
     } else {
       throw InvalidArgumentError("unknown flag '" + flag + "' (see --help)");
     }
@@ -276,6 +279,7 @@ OfflineTrackingResult RunTrackCommand(const TrackCommandOptions& options, std::o
   DatasetReaderOptions reader_options;
   reader_options.ecd_width = options.ecd_width;
   reader_options.ecd_height = options.ecd_height;
+  reader_options.bag_topics = options.bag_topics;
   const Dataset dataset = ReadDataset(options.dataset_path, reader_options);
   const bool events_mode = options.tracking.tracker.input == TrackerInput::kEvents;
 
@@ -283,7 +287,7 @@ OfflineTrackingResult RunTrackCommand(const TrackCommandOptions& options, std::o
   int64_t first_t_ns = 0;
   if (events_mode && dataset.events_path) {
     EventBuffer first;
-    if (OpenEventFile(*dataset.events_path)->Read(1, &first) == 1) first_t_ns = first.t_ns[0];
+    if (OpenDatasetEvents(dataset)->Read(1, &first) == 1) first_t_ns = first.t_ns[0];
   } else if (!events_mode && !dataset.images.empty()) {
     first_t_ns = dataset.images.front().t_ns;
   }
@@ -358,7 +362,7 @@ OfflineTrackingResult RunTrackCommand(const TrackCommandOptions& options, std::o
                                  "' has no events.evb or events.txt (use --mode frames for "
                                  "images)");
     }
-    const auto reader = OpenEventFile(*dataset.events_path);
+    const auto reader = OpenDatasetEvents(dataset);
     result = TrackEventStream(*reader, map, &visibility, dataset.camera, initial_world_from_cam,
                               initial_t_ns, tracking, on_step);
   } else {

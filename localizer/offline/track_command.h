@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "core/dataset/dataset.h"
 #include "core/geometry/rigid3.h"
 #include "localizer/offline/offline_tracking.h"
 
@@ -16,8 +17,11 @@ namespace evloc::tracking {
 struct TrackCommandOptions {
   // Map directory or .evmap file (--map).
   std::filesystem::path map_path;
-  // Dataset folder in the evloc/ECD layout (--dataset).
+  // Dataset folder in the evloc/ECD layout, or a ROS1 bag (--dataset).
   std::filesystem::path dataset_path;
+  // The topics when the dataset is a bag (--events-topic, --image-topic, --camera-info-topic,
+  // --groundtruth-topic).
+  RosbagTopics bag_topics;
   // Output TUM trajectory, world_from_cam at every step (--out).
   std::filesystem::path output_path;
   // Initial pose (--init-pose "tx ty tz qx qy qz qw"); defaults to the first ground-truth pose

@@ -4,7 +4,6 @@
 // shared data's temple photos).
 #include <gtest/gtest.h>
 
-#include <cstdio>
 #include <fstream>
 
 #include <nlohmann/json.hpp>
@@ -24,21 +23,11 @@ namespace {
 constexpr char kPython[] = "/usr/bin/python3";
 constexpr char kPlugin[] = "/usr/bin/grpc_python_plugin";
 
-// Runs a shell command and returns its exit status and standard output.
-int RunShell(const std::string& command, std::string* output) {
-  FILE* pipe = ::popen(command.c_str(), "r");
-  if (!pipe) return -1;
-  char buffer[4096];
-  size_t count = 0;
-  while ((count = std::fread(buffer, 1, sizeof(buffer), pipe)) > 0) output->append(buffer, count);
-  return ::pclose(pipe);
-}
-
 // The reason the Python examples cannot run here, or "" when they can.
 std::string MissingPython() {
   std::string output;
-  if (RunShell(std::string(kPython) + " -c 'import grpc, google.protobuf, numpy' 2>&1", &output) !=
-      0) {
+  if (::evloc::testing::RunShellCommand(
+          std::string(kPython) + " -c 'import grpc, google.protobuf, numpy' 2>&1", &output) != 0) {
     return std::string(kPython) + " lacks grpcio, protobuf or numpy (Debian: python3-grpcio " +
            "python3-protobuf python3-numpy): " + output;
   }
@@ -83,7 +72,7 @@ int RunLocalizerClient(const std::filesystem::path& folder, const LocalizerServe
       " examples/python/localizer_client.py --server 127.0.0.1:" + std::to_string(server.port()) +
       " --map " + map_name + " --session '" + (folder / "session.json").string() + "' --events '" +
       (folder / "events.txt").string() + "' --rate 200 --protoc '" EVLOC_PROTOC "' 2>&1";
-  return RunShell(command, output);
+  return ::evloc::testing::RunShellCommand(command, output);
 }
 
 TEST(PythonClientExample, StreamsEventsAndPrintsPoses) {
@@ -143,12 +132,12 @@ TEST(PythonLocateExample, FindsAHeldOutViewAndNotAnotherScene) {
       << nlohmann::json{{"camera", CameraJson(temple->temple.camera)}}.dump();
   cv::imwrite((folder.path() / "query.png").string(), temple->temple.images[7]);
   const auto locate = [&](const std::filesystem::path& image, std::string* output) {
-    return RunShell(std::string(kPython) + " examples/python/locate_client.py --server 127.0.0.1:" +
-                        std::to_string(server.port()) + " --map temple --image '" + image.string() +
-                        "' --camera '" + (folder.path() / "camera.json").string() +
-                        "' --write-session '" + (folder.path() / "session.json").string() +
-                        "' --protoc '" EVLOC_PROTOC "' 2>&1",
-                    output);
+    return ::evloc::testing::RunShellCommand(
+        std::string(kPython) + " examples/python/locate_client.py --server 127.0.0.1:" +
+            std::to_string(server.port()) + " --map temple --image '" + image.string() +
+            "' --camera '" + (folder.path() / "camera.json").string() + "' --write-session '" +
+            (folder.path() / "session.json").string() + "' --protoc '" EVLOC_PROTOC "' 2>&1",
+        output);
   };
   std::string output;
   ASSERT_EQ(WEXITSTATUS(locate(folder.path() / "query.png", &output)), 0) << output;

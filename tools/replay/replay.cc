@@ -237,12 +237,9 @@ class Replayer {
     DatasetReaderOptions reader_options;
     reader_options.ecd_width = options.ecd_width;
     reader_options.ecd_height = options.ecd_height;
+    reader_options.bag_topics = options.bag_topics;
     dataset_ = ReadDataset(options.dataset, reader_options);
-    if (!dataset_.events_path) {
-      throw InvalidArgumentError("dataset '" + options.dataset.string() +
-                                 "' has no events.evb or events.txt");
-    }
-    reader_ = OpenEventFile(*dataset_.events_path);
+    reader_ = OpenDatasetEvents(dataset_);
     source_ = std::make_unique<EventSource>(*reader_);
     if (!source_->has_event()) {
       throw InvalidArgumentError("dataset '" + options.dataset.string() + "' has no events");
@@ -885,7 +882,8 @@ Options:
   --server TARGET        localizer address: HOST:PORT, or a gRPC target such as
                          ipv4:HOST:PORT,HOST:PORT or dns:///NAME:PORT (required)
   --map NAME             map name on the server (required)
-  --dataset DIR          dataset folder, evloc or Event Camera Dataset layout (required)
+  --dataset DIR|FILE.bag dataset folder, evloc or Event Camera Dataset layout, or a ROS1 bag
+                         (required)
   --out PATH             output TUM trajectory (required)
   --speed S|max          playback speed relative to real time (default 1), or max: as fast as
                          the server keeps up
@@ -907,7 +905,8 @@ Options:
   --max-lead-ms MS       with --speed max: session time sent ahead of the last pose (default 50)
   --duration S           stop after S seconds of session time after the initial pose
   --ecd-size WxH         sensor size for ECD folders with calib.txt only (default 240x180)
-  --reconnect N          reconnect attempts of one outage (default 0: fail at once)
+)" + std::string(kRosbagTopicFlagsUsage) +
+         R"(  --reconnect N          reconnect attempts of one outage (default 0: fail at once)
   --reconnect-backoff-ms MS
                          delay ceiling of the first attempt, doubled per attempt (default 100)
   --reconnect-backoff-max-ms MS
@@ -991,6 +990,7 @@ ReplayCommand ParseReplayCommandLine(const std::vector<std::string>& arguments) 
       options.duration_s = ParseDoubleFlag(flag, value);
     } else if (flag == "--ecd-size") {
       ParseSizeFlag(flag, value, &options.ecd_width, &options.ecd_height);
+    } else if (ApplyRosbagTopicFlag(flag, value, &options.bag_topics)) {
     } else if (flag == "--reconnect") {
       options.reconnect = ParseIntFlag(flag, value);
     } else if (flag == "--reconnect-backoff-ms") {

@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "core/dataset/dataset.h"
 #include "core/geometry/rigid3.h"
 #include "core/trajectory/trajectory.h"
 
@@ -29,8 +30,11 @@ struct ReplayOptions {
   std::string server;
   // Map name on the server (--map).
   std::string map_name;
-  // Dataset folder (core/dataset/dataset.h layout) (--dataset).
+  // Dataset folder (core/dataset/dataset.h layout) or ROS1 bag (--dataset).
   std::filesystem::path dataset;
+  // The topics when the dataset is a bag (--events-topic, --image-topic, --camera-info-topic,
+  // --groundtruth-topic).
+  RosbagTopics bag_topics;
   // Output TUM trajectory of the received poses (--out).
   std::filesystem::path output;
   // Playback speed relative to real time; nullopt: as fast as the server keeps up (--speed 1 |

@@ -1,0 +1,77 @@
+// Events from ROS1 bags: dvs_msgs/EventArray, prophesee_event_msgs/EventArray and
+// event_camera_msgs/EventPacket (EVT 3.0 and mono encodings), decoded from their ROS
+// serialization (docs/event-formats.md, section 7).
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <istream>
+#include <memory>
+#include <optional>
+#include <string>
+
+#include "core/events/event_reader.h"
+#include "core/events/prophesee_decoder.h"
+#include "core/events/rosbag.h"
+
+namespace evloc {
+
+// The default events topic (rpg_dvs_ros, the Event Camera Dataset).
+inline constexpr char kDefaultRosbagEventsTopic[] = "/dvs/events";
+
+// True when `type` is a message type RosbagEventReader decodes.
+bool IsRosbagEventType(const std::string& type);
+
+// Options of the bag event reader.
+struct RosbagEventOptions {
+  // The topic whose messages hold the events.
+  std::string topic = kDefaultRosbagEventsTopic;
+
+  // Throws InvalidArgumentError when the topic is empty.
+  void Check() const;
+};
+
+// Decodes the events of one message (any of the supported types) and appends them to `out`.
+// `sensor_size` receives the message's width and height when both are non-zero. Events outside
+// that size are dropped and counted in `*dropped`. EventPacket EVT 3.0 payloads go through
+// `evt3` (one decoder per stream: its time base carries over between messages).
+// Throws ParseError naming the message's byte position and the field that was expected.
+void DecodeRosEventMessage(const RosbagMessage& message, const std::string& source,
+                           EventBuffer* out, std::optional<SensorSize>* sensor_size,
+                           uint64_t* dropped, std::unique_ptr<Evt3Decoder>* evt3);
+
+// Streams the events of one topic of a bag, message by message.
+class RosbagEventReader final : public EventReader {
+ public:
+  // Opens the bag. Throws IoError / ParseError for the file, InvalidArgumentError when the topic
+  // is missing (the message lists the bag's topics) or its type is not an event type.
+  RosbagEventReader(const std::filesystem::path& path, const RosbagEventOptions& options = {});
+  // Reads from a seekable stream; `source` names it in errors.
+  RosbagEventReader(std::unique_ptr<std::istream> stream, std::string source,
+                    const RosbagEventOptions& options = {});
+
+  size_t Read(size_t max_events, EventBuffer* out) override;
+  // The width and height of the first message (dvs_msgs and prophesee_event_msgs state them).
+  std::optional<SensorSize> sensor_size() const override { return sensor_size_; }
+  uint64_t dropped_event_count() const override { return dropped_; }
+
+  // The bag underneath (topics, connections).
+  const RosbagReader& bag() const { return *bag_; }
+  // Messages decoded so far.
+  uint64_t messages() const { return messages_; }
+
+ private:
+  void Initialise(const RosbagEventOptions& options);
+  // Decodes the next message into pending_; false at the end.
+  bool DecodeNextMessage();
+
+  std::unique_ptr<RosbagReader> bag_;
+  std::optional<SensorSize> sensor_size_;
+  std::unique_ptr<Evt3Decoder> evt3_;
+  EventBuffer pending_;
+  size_t pending_position_ = 0;
+  uint64_t dropped_ = 0;
+  uint64_t messages_ = 0;
+};
+
+}  // namespace evloc

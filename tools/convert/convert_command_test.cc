@@ -1,0 +1,51 @@
+#include "tools/convert/convert_command.h"
+
+#include <gtest/gtest.h>
+
+#include <sstream>
+
+#include "core/common/cli.h"
+#include "core/common/error.h"
+#include "core/common/test_data.h"
+#include "core/events/testing/test_bags.h"
+
+namespace evloc {
+namespace {
+
+TEST(ConvertCommand, ParsesEveryFlagIntoItsOption) {
+  const ConvertCommandOptions options = ParseConvertCommandLine(
+      {"--bag", "a.bag", "--out", "d", "--events-topic", "/e", "--image-topic", "/i",
+       "--camera-info-topic", "/c", "--groundtruth-topic", "/g", "--force"});
+  EXPECT_EQ(options.bag_path, "a.bag");
+  EXPECT_EQ(options.out_dir, "d");
+  EXPECT_EQ(options.topics.events, "/e");
+  EXPECT_EQ(options.topics.image, "/i");
+  EXPECT_EQ(options.topics.camera_info, "/c");
+  EXPECT_EQ(options.topics.groundtruth, "/g");
+  EXPECT_TRUE(options.force);
+  EXPECT_THROW(ParseConvertCommandLine({"--bag", "a.bag"}), InvalidArgumentError);
+  EXPECT_THROW(ParseConvertCommandLine({"--bag", "a.bag", "--out", "d", "--topic", "x"}),
+               UsageError);
+  EXPECT_NE(ConvertCommandUsage().find("--groundtruth-topic"), std::string::npos);
+}
+
+TEST(ConvertCommand, WritesADatasetFolderAndSaysWhatItWrote) {
+  EVLOC_REQUIRE_TEST_BAGS(dir);
+  const auto out = testing::MakeTempDir("convert") / "dataset";
+  std::ostringstream log;
+  const auto summary = RunConvertCommand(
+      ParseConvertCommandLine({"--bag", (dir / "test_lz4.bag").string(), "--out", out.string()}),
+      log);
+  EXPECT_EQ(summary.events, testing::ReadExpectedEvents(dir, "dvs").size());
+  EXPECT_NE(log.str().find(std::to_string(summary.events) + " events (0 dropped"),
+            std::string::npos)
+      << log.str();
+  const Dataset dataset = ReadDataset(out);
+  EXPECT_EQ(dataset.images.size(), 4u);
+  ASSERT_TRUE(dataset.info);
+  EXPECT_EQ((*dataset.info)["topics"]["events"], "/dvs/events");
+  std::filesystem::remove_all(out.parent_path());
+}
+
+}  // namespace
+}  // namespace evloc
