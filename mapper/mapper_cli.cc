@@ -121,6 +121,11 @@ int Upgrade(const std::vector<std::string>& arguments, const std::string& comman
   }
   namespace fs = std::filesystem;
   const fs::path source = ResolveMapFile(options.map);
+  // An in-place upgrade reads, extends and replaces the map: it holds the map's writer lock
+  // (the one evloc-mapper build and import-pcd take) throughout, so that a concurrent writer's
+  // map is neither lost nor mixed in.
+  std::optional<ScopedFileLock> lock;
+  if (options.out.empty()) lock.emplace(MapDirectoryLockFile(fs::absolute(source).parent_path()));
   const MapFileHeader header = ReadMapFileHeader(source);
   Map map = LoadMap(source);
   if (map.relocalization && !options.force) {

@@ -3,11 +3,15 @@
 #include <gtest/gtest.h>
 
 #include <sys/wait.h>
+
+#include <atomic>
+#include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "core/common/error.h"
@@ -16,6 +20,7 @@
 #include "mapper/relocalization_data.h"
 #include "mapper/testing/middlebury_map.h"
 #include "maps/map.h"
+#include "maps/map_directory.h"
 #include "maps/testing/map_file_editing.h"
 
 namespace evloc {
@@ -280,6 +285,34 @@ TEST_F(MapperCliTest, UpgradeAddsRelocalizationDataToAVersion1Map) {
   EXPECT_EQ(RunCli({"upgrade", "--map", v1_copy.string()}).exit_code, 2);
   EXPECT_EQ(RunCli({"upgrade", "--images", images}).exit_code, 2);
   EXPECT_EQ(RunCli({"upgrade", "--help"}).exit_code, 0);
+}
+
+// An in-place upgrade takes the map's writer lock (the one WriteMapDirectory takes): while
+// another writer holds it, the upgrade waits and the map is not touched.
+TEST_F(MapperCliTest, InPlaceUpgradeWaitsForTheMapsWriterLock) {
+  EVLOC_REQUIRE_SHARED_DATA(parameters, "middlebury/templeSparseRing/templeSR_par.txt");
+  std::vector<testing::MiddleburyView> views = testing::ReadMiddleburyParameters(parameters);
+  views.resize(8);
+  Map map = testing::MiddleburyKeyframeMap(views);
+  map.AddPoint(Eigen::Vector3f(0.0f, 0.1f, 0.02f), Eigen::Vector3f::UnitX(), 0.1f, 0.2f, 0);
+  const std::filesystem::path map_dir = directory_ / "locked";
+  std::filesystem::create_directories(map_dir);
+  SaveAsVersion1(map_dir / "map.evmap", map);
+  auto lock = std::make_unique<ScopedFileLock>(MapDirectoryLockFile(map_dir));
+  std::atomic<bool> done{false};
+  CliResult result;
+  std::thread upgrade([&] {
+    result = RunCli(
+        {"upgrade", "--map", map_dir.string(), "--images", parameters.parent_path().string()});
+    done = true;
+  });
+  std::this_thread::sleep_for(std::chrono::seconds(2));
+  EXPECT_FALSE(done) << "the upgrade did not wait for the lock";
+  EXPECT_EQ(ReadMapFileHeader(map_dir / "map.evmap").format_version, 1u);
+  lock.reset();
+  upgrade.join();
+  EXPECT_EQ(result.exit_code, 0) << result.err;
+  EXPECT_EQ(ReadMapFileHeader(map_dir / "map.evmap").format_version, 2u);
 }
 
 TEST(MapperCliRealData, ImportsTheCannyEvtMap) {

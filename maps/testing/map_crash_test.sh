@@ -113,6 +113,9 @@ for ((n = 1; n <= fsyncs; ++n)); do
 done
 echo "fsync failures: $fsyncs fsyncs per import, each made to fail: $failures not reported"
 
+# The non-hidden entries of a map folder and its map directory, one per line, sorted.
+visible_entries() { (cd "$1" && find . -mindepth 1 -not -path '*/.*' | sort); }
+
 RANDOM=$seed
 declare -A outcome
 start=$(date +%s)
@@ -130,17 +133,16 @@ for ((run = 1; run <= runs; ++run)); do
   elif [[ $crc == "$new" ]]; then result=new
   else result=broken
   fi
-  # What a map folder reader sees: non-hidden entries of the folder and of the map directory.
-  visible=$(cd "$folder" && find . -mindepth 1 -not -path '*/.*' | sort | tr '\n' ' ')
-  case $visible in
-    "./m ./m/map.evmap ./m/map.ply " | "./m ./m/map.evmap " | "./m ./m/map.evmap ./m/map.evmap.v"[12]".bak ") ;;
-    *) result=polluted ;;
-  esac
+  # What a map folder reader sees: the non-hidden entries of the folder and of the map
+  # directory must be those of the folder before the write (a built map also holds colmap/,
+  # preview.png, report.json), plus the backup an in-place upgrade keeps.
+  visible=$(visible_entries "$folder" | grep -v '^\./m/map\.evmap\.v[12]\.bak$' || true)
+  [[ $visible == "$(visible_entries "$work/pristine_$writer")" ]] || result=polluted
   [[ $status == 137 ]] || result="$result-not-killed"
   outcome["$writer $result"]=$((${outcome["$writer $result"]:-0} + 1))
   if [[ $result != old && $result != new ]]; then
     failures=$((failures + 1))
-    echo "run $run: writer $writer killed at call $n of ${calls[$writer]}: $result (crc $crc, exit $status, entries: $visible)" >&2
+    echo "run $run: writer $writer killed at call $n of ${calls[$writer]}: $result (crc $crc, exit $status, entries: ${visible//$'\n'/ })" >&2
   fi
   ((run % 100 == 0)) && echo "run $run: $(($(date +%s) - start)) s, $failures failures so far"
   if ((run % 10 == 0)); then
