@@ -126,26 +126,6 @@ Options:
   --search-grid R        hypotheses on a grid within R metres of each map viewpoint (default 0.2)
   --search-grid-step S   spacing of that grid, metres (default 0.2)
   --search-candidates N  hypotheses refined per search round (default 12)
-  --search-turn DEG      each hypothesis also turned by this much about the camera x and y axes
-                         (default 8)
-  --search-keep-orientation on|off
-                         grid positions also tried with their viewpoint's own orientation
-  --search-orientation-bins N
-                         oriented-chamfer pre-score with N edge-orientation bins (0: plain)
-  --search-prescores N   hypotheses pre-scored per searching step (default 400)
-  --search-nearest-viewpoint on|off
-                         each grid position searched from its nearest viewpoint only
-  --search-min-alignment A
-                         a searched pose needs this alignment too (default 0: the tracking's)
-  --search-min-used F    and registers this fraction of its selected points (default 0)
-  --search-truncation PX truncation of the search's coarse chamfer field (default 24)
-  --search-points N      map points per pre-scored hypothesis (default 300)
-  --search-roll DEG      each hypothesis also rolled by this much (default 0)
-  --search-shift DEG     pre-score: the best image shift within this turn (default 0)
-  --search-density-window PX
-                         pre-score normalised by the local mean distance over PX x PX (0: off)
-  --search-position-samples on|off
-                         each search position pre-scores the map points in its own view
   --search-margin A      alignment margin over the best distinct hypothesis (default 0.15)
   --give-up S            a search episode that found nothing in S seconds ends "not_found" and a
                          new one starts (default 0: never)
@@ -235,32 +215,6 @@ TrackCommandOptions ParseTrackCommandLine(const std::vector<std::string>& argume
       tracker.relocalization_grid_step_m = ParseDoubleFlag(flag, value);
     } else if (flag == "--search-candidates") {
       tracker.relocalization_candidates = static_cast<int>(ParseIntegerFlag(flag, value));
-    } else if (flag == "--search-turn") {
-      tracker.relocalization_perturbation_deg = ParseDoubleFlag(flag, value);
-    } else if (flag == "--search-keep-orientation") {
-      tracker.relocalization_keep_orientation = ParseSwitchFlag(flag, value);
-    } else if (flag == "--search-orientation-bins") {
-      tracker.relocalization_orientation_bins = static_cast<int>(ParseIntegerFlag(flag, value));
-    } else if (flag == "--search-nearest-viewpoint") {
-      tracker.relocalization_nearest_viewpoint_only = ParseSwitchFlag(flag, value);
-    } else if (flag == "--search-min-alignment") {
-      tracker.relocalization_min_alignment = ParseDoubleFlag(flag, value);
-    } else if (flag == "--search-min-used") {
-      tracker.relocalization_min_used_fraction = ParseDoubleFlag(flag, value);
-    } else if (flag == "--search-truncation") {
-      tracker.relocalization_chamfer_truncation_px = ParseDoubleFlag(flag, value);
-    } else if (flag == "--search-points") {
-      tracker.relocalization_prescore_points = static_cast<int>(ParseIntegerFlag(flag, value));
-    } else if (flag == "--search-roll") {
-      tracker.relocalization_roll_deg = ParseDoubleFlag(flag, value);
-    } else if (flag == "--search-shift") {
-      tracker.relocalization_prescore_shift_deg = ParseDoubleFlag(flag, value);
-    } else if (flag == "--search-density-window") {
-      tracker.relocalization_density_window_px = static_cast<int>(ParseIntegerFlag(flag, value));
-    } else if (flag == "--search-position-samples") {
-      tracker.relocalization_position_samples = ParseSwitchFlag(flag, value);
-    } else if (flag == "--search-prescores") {
-      tracker.relocalization_prescores_per_step = static_cast<int>(ParseIntegerFlag(flag, value));
     } else if (flag == "--search-margin") {
       tracker.relocalization_min_alignment_margin = ParseDoubleFlag(flag, value);
     } else if (flag == "--mode") {

@@ -19,7 +19,6 @@
 #include "localizer/tracking/map_source.h"
 #include "localizer/tracking/motion_model.h"
 #include "localizer/tracking/occlusion.h"
-#include "localizer/tracking/oriented_chamfer.h"
 #include "localizer/tracking/polarity.h"
 #include "localizer/tracking/potential_field.h"
 #include "localizer/tracking/registration.h"
@@ -57,8 +56,7 @@ struct SearchProgress {
   int64_t episode = 0;
   // Rounds (hypotheses generated, pre-scored, the best refined, judged) of this episode so far.
   int round = 0;
-  // Pre-score work in this step: hypotheses pre-scored, plus the drawing of search positions'
-  // points (relocalization_position_samples) in pre-score units (pool points / pre-score points).
+  // Hypotheses pre-scored in this step.
   int prescored = 0;
   // Hypotheses aligned on the chamfer field with their pre-score points in this step.
   int coarse = 0;
@@ -242,8 +240,6 @@ class Tracker {
     double prescore = 1;
     // After CoarseAlign: on-edge minus chance fraction of the pre-score points (higher is better).
     double coarse_score = -1;
-    // The pre-score points: position_points_[sample], or the viewpoint's when negative.
-    int sample = -1;
   };
   // A refined hypothesis: the registered pose at its step and its quality.
   struct Refinement {
@@ -268,34 +264,16 @@ class Tracker {
   // Starts the hypotheses of a new round: the source's viewpoints (and the last good pose when
   // relocalizing) once per episode, and the grid of offsets around them.
   void GenerateHypotheses();
-  // Pre-scores every hypothesis at one search position (search_positions_[position]: looking at
-  // its viewpoint's target and, when relocalization_keep_orientation, with the viewpoint's own
-  // orientation, each turned) and keeps the best relocalization_coarse_candidates of the round;
-  // returns how many were scored (at most MaxHypothesesPerPosition()).
-  int PrescorePosition(size_t position);
-  // The most hypotheses one search position gives (orientations x turns).
-  int MaxHypothesesPerPosition() const;
+  // Pre-scores every hypothesis of one base viewpoint (its grid positions looking at its target,
+  // each turned) and keeps the best relocalization_candidates of the round; returns how many
+  // were scored.
+  int PrescoreViewpoint(size_t viewpoint);
   // Samples the pre-score points of a base viewpoint (once per episode): up to
   // relocalization_prescore_points of the points visible from it.
   void SampleViewpointPoints(size_t viewpoint);
-  // Replaces `inside` with the candidates that project within the depth range into the image
-  // shrunk by the margins (pixels) from `world_from_cam`.
-  void PointsInView(const std::vector<uint32_t>& candidates, const Rigid3d& world_from_cam,
-                    double margin_x, double margin_y, std::vector<uint32_t>* inside) const;
-  // The pre-score points of a hypothesis.
-  const std::vector<uint32_t>& HypothesisPoints(const Hypothesis& hypothesis) const;
-  // Samples the pre-score points of a search position seen with `world_from_cam` (once per
-  // episode) into position_points_[sample]: up to relocalization_prescore_points of the pool's
-  // points that project inside the image shrunk by the turn's margin; returns the work done in
-  // pre-score units (pool points / pre-score points).
-  int SamplePositionPoints(size_t sample, const Rigid3d& world_from_cam);
   // The chamfer pre-score of a hypothesis: mean truncated distance of its viewpoint's sample
-  // points to the nearest active pixel (with relocalization_orientation_bins, the nearest active
-  // pixel whose edge normal has the orientation of the point's projected 3D gradient), 0..1,
-  // lower is better.
-  // With relocalization_prescore_shift_deg, the best score over image shifts within that turn,
-  // and the hypothesis is turned so that its image moves by the best shift.
-  double Prescore(Hypothesis* hypothesis);
+  // points to the nearest active pixel, 0..1, lower is better.
+  double Prescore(const Hypothesis& hypothesis) const;
   // Registers a hypothesis' pre-score points against the chamfer fields and scores the result
   // (Hypothesis::coarse_score); moves the hypothesis to the aligned pose.
   void CoarseAlign(Hypothesis* hypothesis);
@@ -304,9 +282,6 @@ class Tracker {
   Refinement Refine(const Rigid3d& start_world_from_cam, int64_t t_ns);
   // Registers the current selection against `field` (no culling) from `start`.
   RegistrationResult RegisterSelection(PotentialField* field, const Rigid3d& start_world_from_cam);
-  // The search's own acceptance on top of IsGood: relocalization_min_alignment and
-  // relocalization_min_used_fraction.
-  bool SearchGood(const TrackingQuality& quality) const;
   // True when two poses are farther apart than relocalization_distinct_m / _deg.
   bool Distinct(const Rigid3d& a, const Rigid3d& b) const;
   // Keeps the best distinct refinements of the round (relocalization_rivals) for the next one.
@@ -365,20 +340,7 @@ class Tracker {
   // Median depth of each viewpoint's sampled points, metres (its look-at distance).
   std::vector<double> viewpoint_depth_m_;
   std::vector<Eigen::Vector3d> grid_offsets_;
-  // The positions searched in a round (once per episode): a viewpoint and a grid offset from it,
-  // kept only when no other viewpoint is nearer to the position (the grids of neighbouring
-  // viewpoints do not overlap), ordered by viewpoint, then by distance.
-  struct SearchPosition {
-    size_t viewpoint = 0;
-    Eigen::Vector3d offset = Eigen::Vector3d::Zero();
-  };
-  std::vector<SearchPosition> search_positions_;
-  // With relocalization_position_samples: every k-th map point (the pool each position's sample
-  // is drawn from) and the sample of each (position, orientation), 2 per position.
-  std::vector<uint32_t> search_pool_;
-  std::vector<std::vector<uint32_t>> position_points_;
-  std::vector<uint8_t> position_sampled_;
-  size_t next_position_ = 0;
+  size_t next_viewpoint_ = 0;
   size_t next_coarse_ = 0;
   std::vector<uint32_t> scratch_group_indices_;
   std::vector<int64_t> scratch_ages_;
@@ -390,21 +352,6 @@ class Tracker {
   cv::Mat chamfer_distance_px_;
   DenseField chamfer_coarse_;
   DenseField chamfer_fine_;
-  // The chamfer distance truncated at relocalization_chamfer_truncation_px.
-  cv::Mat chamfer_truncated_px_;
-  // A projected pre-score point: its pixel and the distance field (and local mean) it reads.
-  struct PrescorePoint {
-    int x = 0;
-    int y = 0;
-    const cv::Mat* distance = nullptr;
-    const cv::Mat* mean = nullptr;
-  };
-  std::vector<PrescorePoint> scratch_prescore_points_;
-  // The local mean of the truncated chamfer distance (relocalization_density_window_px > 0).
-  cv::Mat chamfer_mean_px_;
-  // Per orientation bin, the distance to the nearest active pixel of that edge orientation
-  // (built with the chamfer fields when relocalization_orientation_bins > 0).
-  OrientedChamferField oriented_chamfer_;
   int64_t step_t_ns_ = 0;
 
   // Selection state.

@@ -85,26 +85,8 @@ void TrackerOptions::Check() const {
               relocalization_perturbation_deg < 90,
           "relocalization_perturbation_deg must be in [0, 90).");
   Require(relocalization_prescore_points >= 10, "relocalization_prescore_points must be >= 10.");
-  Require(relocalization_sample_pool_points >= relocalization_prescore_points,
-          "relocalization_sample_pool_points must be at least relocalization_prescore_points.");
-  Require(std::isfinite(relocalization_roll_deg) && relocalization_roll_deg >= 0 &&
-              relocalization_roll_deg < 90,
-          "relocalization_roll_deg must be in [0, 90).");
-  Require(std::isfinite(relocalization_prescore_shift_deg) &&
-              relocalization_prescore_shift_deg >= 0 && relocalization_prescore_shift_deg < 45,
-          "relocalization_prescore_shift_deg must be in [0, 45).");
-  Require(relocalization_density_window_px >= 0 && relocalization_density_window_px <= 1000,
-          "relocalization_density_window_px must be in [0, 1000].");
-  Require(relocalization_orientation_bins == 0 ||
-              (relocalization_orientation_bins >= 3 && relocalization_orientation_bins <= 64),
-          "relocalization_orientation_bins must be 0 or in [3, 64].");
-  Require(std::isfinite(relocalization_orientation_min_coherence) &&
-              relocalization_orientation_min_coherence >= 0 &&
-              relocalization_orientation_min_coherence < 1,
-          "relocalization_orientation_min_coherence must be in [0, 1).");
-  Require(
-      relocalization_prescores_per_step >= 10,
-      "relocalization_prescores_per_step must be at least 10 (the hypotheses of one position).");
+  Require(relocalization_prescores_per_step >= 1,
+          "relocalization_prescores_per_step must be at least 1.");
   Require(relocalization_candidates >= 1, "relocalization_candidates must be at least 1.");
   Require(relocalization_coarse_candidates >= relocalization_candidates,
           "relocalization_coarse_candidates must be at least relocalization_candidates.");
@@ -122,12 +104,6 @@ void TrackerOptions::Check() const {
           "relocalization_min_alignment_margin must be in [0, 1].");
   Require(Positive(relocalization_distinct_m), "relocalization_distinct_m must be positive.");
   Require(Positive(relocalization_distinct_deg), "relocalization_distinct_deg must be positive.");
-  Require(std::isfinite(relocalization_min_alignment) && relocalization_min_alignment >= 0 &&
-              relocalization_min_alignment <= 1,
-          "relocalization_min_alignment must be in [0, 1].");
-  Require(std::isfinite(relocalization_min_used_fraction) &&
-              relocalization_min_used_fraction >= 0 && relocalization_min_used_fraction <= 1,
-          "relocalization_min_used_fraction must be in [0, 1].");
   Require(relocalization_verify_steps >= 1, "relocalization_verify_steps must be at least 1.");
   Require(std::isfinite(relocalization_active_fraction) && relocalization_active_fraction > 0 &&
               relocalization_active_fraction <= 1,

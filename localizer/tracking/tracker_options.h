@@ -172,37 +172,6 @@ struct TrackerOptions {
   // Every position is also tried turned by this much about the camera x and y axes (both
   // signs), degrees (0: no turned copies).
   double relocalization_perturbation_deg = 8.0;
-  // Every hypothesis (and turned copy) is also tried rolled by this much about the camera z
-  // axis (both signs), degrees (0: no rolled copies).
-  double relocalization_roll_deg = 0.0;
-  // The pre-score of a hypothesis is the best over image shifts within this turn about the
-  // camera x and y axes (a 7 x 7 grid of shifts, then the 8 around the best at half the step),
-  // and the hypothesis is turned accordingly, degrees (0: no shifts).
-  double relocalization_prescore_shift_deg = 0.0;
-  // Each grid position is searched from the nearest viewpoint only (neighbouring viewpoints'
-  // grids would otherwise score the same places again).
-  bool relocalization_nearest_viewpoint_only = false;
-  // Grid positions away from a base viewpoint are also tried with the viewpoint's own
-  // orientation (a parallel path), besides looking at its target (each turned as above).
-  bool relocalization_keep_orientation = false;
-  // Each search position draws its own pre-score points (those of a pool of the map's points
-  // that project into its view), instead of using its base viewpoint's: a position a metre from
-  // the viewpoint sees other points.
-  bool relocalization_position_samples = false;
-  // Size of that pool (every k-th map point), points.
-  int relocalization_sample_pool_points = 4000;
-  // Orientation bins (over 180 degrees) of the pre-score's oriented chamfer: a point counts the
-  // distance to the nearest active pixel whose edge normal has the orientation of its projected
-  // 3D gradient (0: the plain distance to any active pixel).
-  int relocalization_orientation_bins = 0;
-  // When > 0, the pre-score is normalised by the density of the events: the sum of the points'
-  // truncated distances divided by the sum of the local means of the distance field over a
-  // square window of this side (pixels) at the same pixels (1: no better than points dropped at
-  // random there; dense texture no longer scores well by itself).
-  int relocalization_density_window_px = 0;
-  // Active pixels whose structure-tensor coherence is below this have no orientation (they count
-  // in no bin of the oriented chamfer).
-  double relocalization_orientation_min_coherence = 0.3;
   // Map points projected per hypothesis by the pre-score (orientation-aware chamfer).
   int relocalization_prescore_points = 300;
   // Hypotheses pre-scored per step (bounds the work of a searching step); whole viewpoints are
@@ -230,13 +199,6 @@ struct TrackerOptions {
   double relocalization_distinct_m = 0.05;
   // Or rotated by more than this, degrees.
   double relocalization_distinct_deg = 3.0;
-  // A searched pose (the accepted refinement and every step of its verification) must also
-  // reach this chance-corrected alignment, stricter than min_alignment: a wider search meets
-  // more wrong poses that pass the tracking thresholds on a dense event image.
-  double relocalization_min_alignment = 0.0;
-  // And register at least this fraction of its selected points (after occlusion culling): a
-  // wrong pose keeps few of them.
-  double relocalization_min_used_fraction = 0.0;
   // Consecutive good steps, tracked from the accepted hypothesis, before the status becomes
   // TRACKING (the first TRACKING pose is the last of them).
   int relocalization_verify_steps = 10;

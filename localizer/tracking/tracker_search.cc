@@ -135,22 +135,6 @@ double Tracker::BuildChamferFields(int64_t t_ns) {
   cv::min(chamfer_distance_px_, fine, fine_values);
   chamfer_coarse_ = DenseField(coarse_values / coarse);
   chamfer_fine_ = DenseField(fine_values / fine);
-  if (options_.relocalization_orientation_bins > 0) {
-    cv::Mat active_pixels;
-    cv::bitwise_not(not_active, active_pixels);
-    OrientedChamferOptions oriented;
-    oriented.bins = options_.relocalization_orientation_bins;
-    oriented.min_coherence = options_.relocalization_orientation_min_coherence;
-    oriented.truncation_px = coarse;
-    oriented.mean_window_px = options_.relocalization_density_window_px;
-    oriented_chamfer_.Build(active_pixels, oriented);
-  }
-  chamfer_truncated_px_ = coarse_values;
-  if (options_.relocalization_density_window_px > 0) {
-    const int window = options_.relocalization_density_window_px;
-    cv::blur(coarse_values, chamfer_mean_px_, cv::Size(window, window), cv::Point(-1, -1),
-             cv::BORDER_REFLECT);
-  }
   return static_cast<double>(active) / (static_cast<double>(width) * height);
 }
 
@@ -186,55 +170,12 @@ void Tracker::GenerateHypotheses() {
     std::stable_sort(
         grid_offsets_.begin(), grid_offsets_.end(),
         [](const Eigen::Vector3d& a, const Eigen::Vector3d& b) { return a.norm() < b.norm(); });
-    // With relocalization_nearest_viewpoint_only a position belongs to the nearest viewpoint
-    // only (ties to the first): neighbouring viewpoints' grids would otherwise score the same
-    // places again.
-    search_positions_.clear();
-    for (size_t v = 0; v < viewpoints_.size(); ++v) {
-      for (const Eigen::Vector3d& offset : grid_offsets_) {
-        const Eigen::Vector3d position = viewpoints_[v].translation + offset;
-        const double own = offset.squaredNorm();
-        bool nearest = true;
-        for (size_t u = 0;
-             options_.relocalization_nearest_viewpoint_only && u < viewpoints_.size() && nearest;
-             ++u) {
-          if (u == v) continue;
-          const double other = (position - viewpoints_[u].translation).squaredNorm();
-          nearest = other > own || (other == own && u > v);
-        }
-        if (nearest) search_positions_.push_back({v, offset});
-      }
-    }
-    search_pool_.clear();
-    position_points_.clear();
-    position_sampled_.clear();
-    if (options_.relocalization_position_samples) {
-      const size_t pool = static_cast<size_t>(options_.relocalization_sample_pool_points);
-      const size_t stride = std::max<size_t>(1, (points_.size() + pool - 1) / pool);
-      for (size_t i = 0; i < points_.size(); i += stride) {
-        search_pool_.push_back(static_cast<uint32_t>(i));
-      }
-      position_points_.assign(2 * search_positions_.size(), {});
-      position_sampled_.assign(2 * search_positions_.size(), 0);
-    }
   }
   hypotheses_.clear();
-  next_position_ = 0;
+  next_viewpoint_ = 0;
 }
 
-int Tracker::MaxHypothesesPerPosition() const {
-  const int orientations = options_.relocalization_keep_orientation ? 2 : 1;
-  const int sampling =
-      options_.relocalization_position_samples
-          ? options_.relocalization_sample_pool_points / options_.relocalization_prescore_points
-          : 0;
-  return orientations * ((options_.relocalization_perturbation_deg > 0 ? 5 : 1) *
-                             (options_.relocalization_roll_deg > 0 ? 3 : 1) +
-                         sampling);
-}
-
-int Tracker::PrescorePosition(size_t position_index) {
-  const size_t viewpoint = search_positions_[position_index].viewpoint;
+int Tracker::PrescoreViewpoint(size_t viewpoint) {
   SampleViewpointPoints(viewpoint);
   if (viewpoint_points_[viewpoint].empty()) return 0;
   const Rigid3d& base = viewpoints_[viewpoint];
@@ -245,38 +186,20 @@ int Tracker::PrescorePosition(size_t position_index) {
   const auto worse = [](const Hypothesis& a, const Hypothesis& b) {
     return a.prescore < b.prescore;
   };
-  const Eigen::Vector3d position = base.translation + search_positions_[position_index].offset;
-  const Eigen::Vector3d towards = target - position;
-  if (towards.norm() < options_.min_depth_m) return 0;
-  // Turn the base orientation so that it looks at the same target (the roll is kept); away from
-  // the viewpoint, optionally its own orientation too (a parallel path).
-  const Eigen::Quaterniond turn = Eigen::Quaterniond::FromTwoVectors(axis, towards);
-  Rigid3d orientations[2] = {Rigid3d((turn * base.rotation).normalized(), position),
-                             Rigid3d(base.rotation, position)};
-  const int count = options_.relocalization_keep_orientation &&
-                            AngleBetween(orientations[0].rotation, base.rotation) > 0.5 * r
-                        ? 2
-                        : 1;
   int scored = 0;
-  for (int o = 0; o < count; ++o) {
-    int sample = -1;
-    if (options_.relocalization_position_samples) {
-      sample = static_cast<int>(2 * position_index + o);
-      scored += SamplePositionPoints(sample, orientations[o]);
-      if (position_points_[sample].empty()) continue;
-    }
-    const double roll = options_.relocalization_roll_deg * kRadiansPerDegree;
-    for (int variant = 0; variant < 15; ++variant) {
-      const int turn = variant % 5;
-      const int rolled = variant / 5;
-      if ((turn > 0 && r <= 0) || (rolled > 0 && roll <= 0)) continue;
+  for (const Eigen::Vector3d& offset : grid_offsets_) {
+    const Eigen::Vector3d position = base.translation + offset;
+    const Eigen::Vector3d towards = target - position;
+    if (towards.norm() < options_.min_depth_m) continue;
+    // Turn the base orientation so that it looks at the same target (the roll is kept).
+    const Eigen::Quaterniond turn = Eigen::Quaterniond::FromTwoVectors(axis, towards);
+    const Rigid3d looking((turn * base.rotation).normalized(), position);
+    for (int variant = 0; variant < 5; ++variant) {
+      if (variant > 0 && r <= 0) break;
       Vector6d perturbation = Vector6d::Zero();
-      if (turn > 0) perturbation(3 + (turn - 1) / 2) = (turn % 2 == 1 ? 1 : -1) * r;
-      if (rolled > 0) perturbation(5) = (rolled == 1 ? 1 : -1) * roll;
-      Hypothesis hypothesis{variant == 0 ? orientations[o] : orientations[o] * ExpSE3(perturbation),
-                            viewpoint, 1};
-      hypothesis.sample = sample;
-      hypothesis.prescore = Prescore(&hypothesis);
+      if (variant > 0) perturbation(3 + (variant - 1) / 2) = (variant % 2 == 1 ? 1 : -1) * r;
+      Hypothesis hypothesis{variant == 0 ? looking : looking * ExpSE3(perturbation), viewpoint, 1};
+      hypothesis.prescore = Prescore(hypothesis);
       ++scored;
       // Keep the best `keep` in a max-heap on the pre-score.
       if (hypotheses_.size() < keep) {
@@ -306,7 +229,17 @@ void Tracker::SampleViewpointPoints(size_t viewpoint) {
   const Rigid3d cam_from_world = viewpoints_[viewpoint].Inverse();
   const Eigen::Matrix3d rotation = cam_from_world.RotationMatrix();
   std::vector<uint32_t>& inside = scratch_group_indices_;
-  PointsInView(candidates_, viewpoints_[viewpoint], 0, 0, &inside);
+  inside.clear();
+  for (const uint32_t index : candidates_) {
+    const Eigen::Vector3d point_in_cam =
+        rotation * points_.positions[index].cast<double>() + cam_from_world.translation;
+    Eigen::Vector2d pixel;
+    if (point_in_cam.z() < options_.min_depth_m || point_in_cam.z() > options_.max_depth_m ||
+        !intrinsics_.Project(point_in_cam, &pixel) || !InsideImage(pixel)) {
+      continue;
+    }
+    inside.push_back(index);
+  }
   std::vector<uint32_t>& sample = viewpoint_points_[viewpoint];
   sample.clear();
   const size_t wanted = static_cast<size_t>(options_.relocalization_prescore_points);
@@ -326,167 +259,35 @@ void Tracker::SampleViewpointPoints(size_t viewpoint) {
   }
 }
 
-void Tracker::PointsInView(const std::vector<uint32_t>& candidates, const Rigid3d& world_from_cam,
-                           double margin_x, double margin_y, std::vector<uint32_t>* inside) const {
-  const Rigid3d cam_from_world = world_from_cam.Inverse();
-  const Eigen::Matrix3d rotation = cam_from_world.RotationMatrix();
-  const double right = surface_.width() - 1 - margin_x;
-  const double bottom = surface_.height() - 1 - margin_y;
-  inside->clear();
-  for (const uint32_t index : candidates) {
-    const Eigen::Vector3d point_in_cam =
-        rotation * points_.positions[index].cast<double>() + cam_from_world.translation;
-    Eigen::Vector2d pixel;
-    if (point_in_cam.z() < options_.min_depth_m || point_in_cam.z() > options_.max_depth_m ||
-        !intrinsics_.Project(point_in_cam, &pixel) || pixel.x() < margin_x ||
-        pixel.y() < margin_y || pixel.x() > right || pixel.y() > bottom) {
-      continue;
-    }
-    inside->push_back(index);
-  }
-}
-
-const std::vector<uint32_t>& Tracker::HypothesisPoints(const Hypothesis& hypothesis) const {
-  return hypothesis.sample >= 0 ? position_points_[hypothesis.sample]
-                                : viewpoint_points_[hypothesis.viewpoint];
-}
-
-int Tracker::SamplePositionPoints(size_t sample, const Rigid3d& world_from_cam) {
-  if (position_sampled_[sample]) return 0;
-  position_sampled_[sample] = 1;
-  // Inside the image shrunk by the pixels a turn moves the centre, so that the turned copies of
-  // the hypothesis still see the sample (within a quarter of the image).
-  const double turn = options_.relocalization_perturbation_deg * kRadiansPerDegree;
-  const int width = surface_.width();
-  const int height = surface_.height();
-  const double margin_x = std::min(intrinsics_.fx * std::tan(turn), 0.25 * width);
-  const double margin_y = std::min(intrinsics_.fy * std::tan(turn), 0.25 * height);
-  std::vector<uint32_t>& inside = scratch_group_indices_;
-  PointsInView(search_pool_, world_from_cam, margin_x, margin_y, &inside);
-  std::vector<uint32_t>& points = position_points_[sample];
-  points.clear();
-  const size_t wanted = static_cast<size_t>(options_.relocalization_prescore_points);
-  if (inside.size() >= static_cast<size_t>(options_.min_points)) {
-    const double stride = std::max(1.0, static_cast<double>(inside.size()) / wanted);
-    for (double k = 0; k < static_cast<double>(inside.size()) && points.size() < wanted;
-         k += stride) {
-      points.push_back(inside[static_cast<size_t>(k)]);
-    }
-  }
-  return static_cast<int>(search_pool_.size() / wanted);
-}
-
-double Tracker::Prescore(Hypothesis* hypothesis) {
-  const std::vector<uint32_t>& sample = HypothesisPoints(*hypothesis);
-  if (sample.empty()) return 1;
-  const Rigid3d cam_from_world = hypothesis->world_from_cam.Inverse();
+double Tracker::Prescore(const Hypothesis& hypothesis) const {
+  if (viewpoint_points_[hypothesis.viewpoint].empty()) return 1;
+  const Rigid3d cam_from_world = hypothesis.world_from_cam.Inverse();
   const Eigen::Matrix3d rotation = cam_from_world.RotationMatrix();
   const double truncation = options_.relocalization_chamfer_truncation_px;
   const int width = chamfer_distance_px_.cols;
   const int height = chamfer_distance_px_.rows;
-  const bool oriented = options_.relocalization_orientation_bins > 0;
-  const bool normalised = options_.relocalization_density_window_px > 0;
-  // Project once: each point's pixel and the field it is scored on (the oriented chamfer of its
-  // projected gradient's bin, or the plain one).
-  std::vector<PrescorePoint>& projected = scratch_prescore_points_;
-  projected.clear();
-  int outside = 0;
-  for (const uint32_t index : sample) {
+  double cost = 0;
+  int count = 0;
+  for (const uint32_t index : viewpoint_points_[hypothesis.viewpoint]) {
+    ++count;
     Eigen::Vector2d pixel;
     const Eigen::Vector3d point_in_cam =
         rotation * points_.positions[index].cast<double>() + cam_from_world.translation;
     int x;
     int y;
     if (!intrinsics_.Project(point_in_cam, &pixel) ||
-        !NearestEdgeField::RoundToPixel(pixel, &x, &y)) {
-      ++outside;
+        !NearestEdgeField::RoundToPixel(pixel, &x, &y) || x < 0 || y < 0 || x >= width ||
+        y >= height) {
+      cost += 1;
       continue;
     }
-    PrescorePoint point{x, y, &chamfer_truncated_px_, &chamfer_mean_px_};
-    if (oriented) {
-      // The image direction of the 3D gradient at the point: the derivative of the projection
-      // of P + s g at s = 0, (fx (gx - u gz), fy (gy - v gz)) / z with (u, v) = (x/z, y/z).
-      const Eigen::Vector3d gradient = rotation * points_.gradients[index].cast<double>();
-      const double u = point_in_cam.x() / point_in_cam.z();
-      const double v = point_in_cam.y() / point_in_cam.z();
-      const double dx = intrinsics_.fx * (gradient.x() - u * gradient.z());
-      const double dy = intrinsics_.fy * (gradient.y() - v * gradient.z());
-      // A gradient along the viewing ray has no image direction: the plain distance then.
-      if (dx * dx + dy * dy > 1e-2 * intrinsics_.fx * intrinsics_.fx) {
-        const int bin = oriented_chamfer_.Bin(dx, dy);
-        point.distance = &oriented_chamfer_.distances(bin);
-        point.mean = normalised ? &oriented_chamfer_.means(bin) : nullptr;
-      }
-    }
-    projected.push_back(point);
+    cost += std::min<double>(chamfer_distance_px_.ptr<float>(y)[x], truncation) / truncation;
   }
-  // The score of the points shifted by (sx, sy) pixels; points leaving the image count as the
-  // truncation (for the normalisation, as chance too).
-  const auto score = [&](int sx, int sy) {
-    double cost = outside * truncation;
-    double chance = outside * truncation;
-    for (const PrescorePoint& point : projected) {
-      const int x = point.x + sx;
-      const int y = point.y + sy;
-      if (x < 0 || y < 0 || x >= width || y >= height) {
-        cost += truncation;
-        chance += truncation;
-        continue;
-      }
-      cost += point.distance->ptr<float>(y)[x];
-      if (normalised) chance += point.mean->ptr<float>(y)[x];
-    }
-    if (normalised) return chance > 0 ? cost / chance : 1.0;
-    return cost / (truncation * static_cast<double>(sample.size()));
-  };
-  // The best image shift on a grid of a third of the range, then around it at half that step: a
-  // small turn about the camera x and y axes moves the image about so.
-  const double range_px =
-      intrinsics_.fx * std::tan(options_.relocalization_prescore_shift_deg * kRadiansPerDegree);
-  const int step = static_cast<int>(std::lround(range_px / 3));
-  int best_x = 0;
-  int best_y = 0;
-  double best = score(0, 0);
-  if (step >= 2) {
-    for (int i = -3; i <= 3; ++i) {
-      for (int j = -3; j <= 3; ++j) {
-        if (i == 0 && j == 0) continue;
-        const double value = score(i * step, j * step);
-        if (value < best) {
-          best = value;
-          best_x = i * step;
-          best_y = j * step;
-        }
-      }
-    }
-    const int half = step / 2;
-    const int centre_x = best_x;
-    const int centre_y = best_y;
-    for (int i = -1; i <= 1; ++i) {
-      for (int j = -1; j <= 1; ++j) {
-        if (i == 0 && j == 0) continue;
-        const double value = score(centre_x + i * half, centre_y + j * half);
-        if (value < best) {
-          best = value;
-          best_x = centre_x + i * half;
-          best_y = centre_y + j * half;
-        }
-      }
-    }
-  }
-  if (best_x != 0 || best_y != 0) {
-    // Turn the camera so that the image moves by the shift: about y by -atan(sx / fx), about x by
-    // atan(sy / fy).
-    Vector6d turn = Vector6d::Zero();
-    turn(3) = std::atan(best_y / intrinsics_.fy);
-    turn(4) = -std::atan(best_x / intrinsics_.fx);
-    hypothesis->world_from_cam = hypothesis->world_from_cam * ExpSE3(turn);
-  }
-  return best;
+  return count > 0 ? cost / count : 1;
 }
 
 void Tracker::CoarseAlign(Hypothesis* hypothesis) {
-  const std::vector<uint32_t>& sample = HypothesisPoints(*hypothesis);
+  const std::vector<uint32_t>& sample = viewpoint_points_[hypothesis->viewpoint];
   Rigid3d pose = hypothesis->world_from_cam;
   for (DenseField* field : {&chamfer_coarse_, &chamfer_fine_}) {
     scratch_points_.clear();
@@ -560,13 +361,8 @@ Tracker::Refinement Tracker::Refine(const Rigid3d& start_world_from_cam, int64_t
   refinement.world_from_cam = attempt.registration.cam_from_world.Inverse();
   refinement.alignment = attempt.quality.alignment;
   refinement.points_used = attempt.quality.points_used;
-  refinement.good = attempt.good && SearchGood(attempt.quality);
+  refinement.good = attempt.good;
   return refinement;
-}
-
-bool Tracker::SearchGood(const TrackingQuality& quality) const {
-  return quality.alignment >= options_.relocalization_min_alignment &&
-         quality.points_used >= options_.relocalization_min_used_fraction * quality.points_selected;
 }
 
 bool Tracker::Distinct(const Rigid3d& a, const Rigid3d& b) const {
@@ -642,7 +438,7 @@ void Tracker::SearchStep(int64_t t_ns, PoseEstimate* estimate) {
     const Attempt attempt = Solve(predicted, nullptr);
     estimate->quality = attempt.quality;
     estimate->quality.decay_time_ms = decay_.decay_time_ns * 1e-6;
-    if (attempt.good && SearchGood(attempt.quality)) {
+    if (attempt.good) {
       const Rigid3d pose = attempt.registration.cam_from_world.Inverse();
       motion_.Update(pose, t_ns);
       ++progress.verified_steps;
@@ -681,13 +477,15 @@ void Tracker::SearchStep(int64_t t_ns, PoseEstimate* estimate) {
     }
   }
   if (search_phase_ == SearchPhase::kPrescore) {
-    // Whole positions (their orientations and turns) while the step's budget allows.
-    const int per_position = MaxHypothesesPerPosition();
-    while (next_position_ < search_positions_.size() &&
-           progress.prescored + per_position <= options_.relocalization_prescores_per_step) {
-      progress.prescored += PrescorePosition(next_position_++);
+    // Whole viewpoints (their grid and turns) while the step's budget allows (at least one).
+    const int per_viewpoint = static_cast<int>(grid_offsets_.size()) *
+                              (options_.relocalization_perturbation_deg > 0 ? 5 : 1);
+    while (next_viewpoint_ < viewpoints_.size() &&
+           (progress.prescored == 0 ||
+            progress.prescored + per_viewpoint <= options_.relocalization_prescores_per_step)) {
+      progress.prescored += PrescoreViewpoint(next_viewpoint_++);
     }
-    if (next_position_ == search_positions_.size()) {
+    if (next_viewpoint_ == viewpoints_.size()) {
       std::sort_heap(
           hypotheses_.begin(), hypotheses_.end(),
           [](const Hypothesis& a, const Hypothesis& b) { return a.prescore < b.prescore; });

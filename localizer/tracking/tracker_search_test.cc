@@ -73,20 +73,6 @@ int64_t CheckEstimates(const std::vector<PoseEstimate>& estimates, const Tracker
   return first_tracking_ns;
 }
 
-// Another layout of rectangles: different sizes and places.
-std::vector<testing::Rectangle> OtherLayout() {
-  std::vector<testing::Rectangle> other;
-  for (const testing::Rectangle& rectangle : testing::DefaultRectangles()) {
-    testing::Rectangle moved = rectangle;
-    moved.centre = Eigen::Vector3d(-rectangle.centre.y(), rectangle.centre.x() * 0.8,
-                                   rectangle.centre.z() + 0.4);
-    moved.half_u = rectangle.half_v * 1.3;
-    moved.half_v = rectangle.half_u * 0.7;
-    other.push_back(moved);
-  }
-  return other;
-}
-
 TEST(TrackerSearch, FindsItselfFromNoPoseAndEveryTrackingPoseIsRight) {
   const EventBuffer events = SceneEvents(600'000'000);
   TrackerOptions options;
@@ -116,7 +102,16 @@ TEST(TrackerSearch, FindsItselfFromNoPoseAndEveryTrackingPoseIsRight) {
 
 TEST(TrackerSearch, NeverTracksEventsOfAnUnrelatedSceneOrNoise) {
   // Another layout of rectangles (different sizes and places) seen along the same motion.
-  const Map other_map = testing::MakeRectangleMap(OtherLayout(), 0.004);
+  std::vector<testing::Rectangle> other;
+  for (const testing::Rectangle& rectangle : testing::DefaultRectangles()) {
+    testing::Rectangle moved = rectangle;
+    moved.centre = Eigen::Vector3d(-rectangle.centre.y(), rectangle.centre.x() * 0.8,
+                                   rectangle.centre.z() + 0.4);
+    moved.half_u = rectangle.half_v * 1.3;
+    moved.half_v = rectangle.half_u * 0.7;
+    other.push_back(moved);
+  }
+  const Map other_map = testing::MakeRectangleMap(other, 0.004);
   EventBuffer unrelated = testing::SimulateEdgeEvents(
       other_map, kCamera, [](int64_t t_ns) { return testing::SmoothMotion(t_ns); }, 0, 900'000'000);
   // Uniform noise: 2 M events per second over the sensor.
@@ -142,56 +137,6 @@ TEST(TrackerSearch, NeverTracksEventsOfAnUnrelatedSceneOrNoise) {
     // It kept searching (several rounds), and found nothing.
     EXPECT_GE(rounds, 3);
   }
-}
-
-// The wide search's options (docs/relocalization.md, "What was tried"): positions on a grid
-// farther from the viewpoints, each drawing its own pre-score points, the oriented chamfer, the
-// pre-score's image shifts, rolled and parallel copies.
-TrackerOptions WideSearchOptions() {
-  TrackerOptions options;
-  options.relocalization_grid_radius_m = 0.4;
-  options.relocalization_grid_step_m = 0.2;
-  options.relocalization_keep_orientation = true;
-  options.relocalization_nearest_viewpoint_only = true;
-  options.relocalization_min_alignment = 0.3;
-  options.relocalization_roll_deg = 5;
-  options.relocalization_prescore_shift_deg = 5;
-  options.relocalization_position_samples = true;
-  options.relocalization_orientation_bins = 8;
-  options.relocalization_prescore_points = 100;
-  options.relocalization_sample_pool_points = 2000;
-  return options;
-}
-
-TEST(TrackerSearch, WideSearchFindsItselfWithinThePerStepBounds) {
-  const EventBuffer events = SceneEvents(600'000'000);
-  const TrackerOptions options = WideSearchOptions();
-  Tracker tracker(SceneMap(), nullptr, kCamera, options);
-  tracker.StartWithoutPose(0);
-  const std::vector<PoseEstimate> estimates = tracker.AddEvents(events);
-  // CheckEstimates asserts the pre-score bound (hypotheses plus the drawing of positions'
-  // points) and every TRACKING pose within 5 cm / 3 degrees.
-  const int64_t first_tracking_ns = CheckEstimates(estimates, options);
-  ASSERT_GE(first_tracking_ns, 0) << "never TRACKING";
-  std::cout << "wide search: TRACKING at " << first_tracking_ns * 1e-9 << " s\n";
-  EXPECT_LT(first_tracking_ns, 300'000'000);
-}
-
-TEST(TrackerSearch, WideSearchNeverTracksEventsOfAnotherLayout) {
-  const Map other_map = testing::MakeRectangleMap(OtherLayout(), 0.004);
-  const EventBuffer unrelated = testing::SimulateEdgeEvents(
-      other_map, kCamera, [](int64_t t_ns) { return testing::SmoothMotion(t_ns); }, 0, 900'000'000);
-  const TrackerOptions options = WideSearchOptions();
-  Tracker tracker(SceneMap(), nullptr, kCamera, options);
-  tracker.StartWithoutPose(0);
-  const std::vector<PoseEstimate> estimates = tracker.AddEvents(unrelated);
-  int rounds = 0;
-  for (const PoseEstimate& estimate : estimates) {
-    EXPECT_EQ(estimate.status, TrackingStatus::kInitializing) << estimate.t_ns;
-    EXPECT_LE(estimate.search.prescored, options.relocalization_prescores_per_step);
-    rounds = std::max(rounds, estimate.search.round);
-  }
-  EXPECT_GE(rounds, 2);
 }
 
 TEST(TrackerSearch, RelocalizesOnItsOwnAfterABlackout) {
