@@ -821,7 +821,8 @@ void WriteReplayReport(const std::filesystem::path& path, const ReplayResult& re
   WriteFileAtomically(path, report.dump(2) + "\n");
 }
 
-std::string CheckHealth(const ReplayOptions& options, double timeout_s) {
+std::string CheckHealth(const ReplayOptions& options, double timeout_s,
+                        const std::string& service) {
   CheckServerOptions(options);
   CheckHealthTimeout(timeout_s);
   grpc::GenericStub generic(MakeChannel(options));
@@ -829,8 +830,18 @@ std::string CheckHealth(const ReplayOptions& options, double timeout_s) {
   context.set_deadline(std::chrono::system_clock::now() +
                        std::chrono::duration_cast<std::chrono::system_clock::duration>(
                            std::chrono::duration<double>(timeout_s)));
-  const grpc::Slice empty_request("", 0);
-  const grpc::ByteBuffer request(&empty_request, 1);  // HealthCheckRequest{service = ""}
+  // HealthCheckRequest{string service = 1}: the tag 0x0a, the length as a varint, the name.
+  std::string request_bytes;
+  if (!service.empty()) {
+    request_bytes.push_back('\x0a');
+    for (size_t length = service.size();; length >>= 7) {
+      request_bytes.push_back(static_cast<char>((length & 0x7f) | (length > 0x7f ? 0x80 : 0)));
+      if (length <= 0x7f) break;
+    }
+    request_bytes += service;
+  }
+  const grpc::Slice request_slice(request_bytes);
+  const grpc::ByteBuffer request(&request_slice, 1);
   grpc::ByteBuffer response;
   std::promise<grpc::Status> done;
   generic.UnaryCall(&context, "/grpc.health.v1.Health/Check", grpc::StubOptions(), &request,
@@ -866,7 +877,7 @@ std::string CheckHealth(const ReplayOptions& options, double timeout_s) {
 std::string ReplayUsage() {
   return R"(Usage: evloc-replay --server HOST:PORT --map NAME --dataset DIR --out TRAJ.txt [options]
        evloc-replay --health-check --server HOST:PORT [--tls-ca PEM [--tls-cert PEM --tls-key PEM]]
-                    [--health-timeout S]
+                    [--health-timeout S] [--health-service NAME]
 
 Streams a dataset's events to an evloc localizer (docs/api.md) as a live camera would, writes
 the poses it gets back as a TUM trajectory, and prints events sent, poses received and the
@@ -922,6 +933,9 @@ Options:
   --report FILE          write the figures as JSON (events, poses, outages, latency)
   --health-check         only ask the server's grpc.health.v1 service; exit 0 when SERVING
   --health-timeout S     deadline of --health-check (default 5)
+  --health-service NAME  the service --health-check asks for: "" (default) the server's overall
+                         health (liveness), evloc.api.Localizer whether it admits new sessions
+                         (readiness: NOT_SERVING while full or draining)
   --help                 print this help
 
 Exit codes: 0 success (or SERVING), 1 failure (a session the server ended with an error, a
@@ -1011,6 +1025,8 @@ ReplayCommand ParseReplayCommandLine(const std::vector<std::string>& arguments) 
       options.report = value;
     } else if (flag == "--health-timeout") {
       command.health_timeout_s = ParseDoubleFlag(flag, value);
+    } else if (flag == "--health-service") {
+      command.health_service = value;
     } else {
       throw InvalidArgumentError("unknown flag '" + flag + "' (see --help)");
     }

@@ -187,10 +187,13 @@ ReplayResult RunReplay(const ReplayOptions& options, std::ostream& log);
 void WriteReplayReport(const std::filesystem::path& path, const ReplayResult& result);
 
 // Asks the grpc.health.v1 Health/Check service of `options.server` (over TLS with
-// `options.tls_ca_file`) for the server's overall status and returns its name: SERVING,
-// NOT_SERVING, UNKNOWN or SERVICE_UNKNOWN. Throws Error with the gRPC status when the call fails
-// or takes longer than `timeout_s` (evloc-replay --health-check; a container health probe).
-std::string CheckHealth(const ReplayOptions& options, double timeout_s);
+// `options.tls_ca_file`) for the status of `service` ("": the server's overall status, what a
+// liveness probe asks; "evloc.api.Localizer": whether the server admits new sessions, what a
+// readiness probe asks) and returns its name: SERVING, NOT_SERVING, UNKNOWN or SERVICE_UNKNOWN.
+// Throws Error with the gRPC status when the call fails (NOT_FOUND for a service the server does
+// not know) or takes longer than `timeout_s` (evloc-replay --health-check; a container probe).
+std::string CheckHealth(const ReplayOptions& options, double timeout_s,
+                        const std::string& service = "");
 
 // The usage text of evloc-replay.
 std::string ReplayUsage();
@@ -203,6 +206,8 @@ struct ReplayCommand {
   bool health_check = false;
   // Deadline of the health check, seconds (--health-timeout).
   double health_timeout_s = 5.0;
+  // The service whose health is asked; "": the server's overall health (--health-service).
+  std::string health_service;
   // The replay's options (for a health check: the server and TLS fields only).
   ReplayOptions options;
 };

@@ -15,8 +15,8 @@ int main(int argc, char** argv) {
                        "--token-file FILE\n";
         }
         if (command.health_check) {
-          const std::string status =
-              evloc::replay::CheckHealth(command.options, command.health_timeout_s);
+          const std::string status = evloc::replay::CheckHealth(
+              command.options, command.health_timeout_s, command.health_service);
           std::cout << "evloc-replay: " << command.options.server << " is " << status << "\n";
           return status == "SERVING" ? evloc::kExitSuccess : evloc::kExitFailure;
         }

@@ -301,8 +301,10 @@ TEST(ReplayCommandLine, FlagsMapToOptions) {
 
   // A health check needs the server only.
   const ReplayCommand health =
-      ParseReplayCommandLine({"--health-check", "--server", "h:1", "--health-timeout", "2"});
+      ParseReplayCommandLine({"--health-check", "--server", "h:1", "--health-timeout", "2",
+                              "--health-service", "evloc.api.Localizer"});
   EXPECT_TRUE(health.health_check);
+  EXPECT_EQ(health.health_service, "evloc.api.Localizer");
   EXPECT_EQ(health.health_timeout_s, 2);
   EXPECT_THROW(ParseReplayCommandLine({"--health-check"}), InvalidArgumentError);
   EXPECT_THROW(
@@ -313,6 +315,10 @@ TEST(ReplayCommandLine, FlagsMapToOptions) {
 TEST_F(ReplayTest, HealthCheckReportsServingUntilTheServerStops) {
   ReplayOptions options = Options();
   EXPECT_EQ(CheckHealth(options, 5.0), "SERVING");
+  // Readiness: the Localizer service admits sessions; a service the server does not know is an
+  // error (NOT_FOUND), not a status.
+  EXPECT_EQ(CheckHealth(options, 5.0, "evloc.api.Localizer"), "SERVING");
+  EXPECT_THROW(CheckHealth(options, 5.0, "no.such.Service"), Error);
   server_->Shutdown();
   EXPECT_THROW(CheckHealth(options, 1.0), Error);
 }
