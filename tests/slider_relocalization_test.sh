@@ -10,28 +10,10 @@
 # Exit codes: 0 pass, 1 fail, 77 skipped (no slider_depth data, or COLMAP not installed).
 set -euo pipefail
 
-build_dir=$(cd "${1:?usage: slider_relocalization_test.sh BUILD_DIR}" && pwd)
-source_dir=$(cd "$(dirname "$0")/.." && pwd)
-data=${EVLOC_DATA_DIR:-$(dirname "$source_dir")/shared/data}/ecd/slider_depth
-if [[ ! -f "$data/images.txt" ]]; then
-  echo "SKIPPED: ECD slider_depth not found in $data (set EVLOC_DATA_DIR to the data folder)"
-  exit 77
-fi
-if ! command -v colmap >/dev/null 2>&1; then
-  echo "SKIPPED: colmap is not installed (scripts/install-deps.sh installs it)"
-  exit 77
-fi
-
-out=$(mktemp -d "${TMPDIR:-/tmp}/evloc-slider-reloc.XXXXXX")
-fail() {
-  echo "FAIL: $*; outputs kept in $out"
-  exit 1
-}
-"$build_dir/mapper/evloc-mapper" build --images "$data" --images-list "$data/images.txt" \
-  --calib "$data/calib.txt" --known-poses "$data/groundtruth.txt" --out "$out/map" --quiet ||
-  fail "evloc-mapper build"
-"$build_dir/tools/sim/evloc-sim" events-from-frames --in "$data" --out "$out/events" \
-  --contrast 0.5 --force >"$out/events.log" || fail "evloc-sim events-from-frames"
+# shellcheck source=tests/slider_common.sh
+source "$(dirname "$0")/slider_common.sh" "${1:-}" reloc
+build_slider_map "$out/map"
+make_slider_events "$out/events"
 for start in 0.5 1.5 2.5; do
   "$build_dir/localizer/offline/evloc-track" --map "$out/map" --dataset "$out/events" \
     --init-pose none --start "$start" --out "$out/est_$start.txt" --stats "$out/stats_$start.json" \

@@ -9,38 +9,20 @@
 # Exit codes: 0 pass, 1 fail, 77 skipped (no slider_depth data, or COLMAP not installed).
 set -euo pipefail
 
-build_dir=$(cd "${1:?usage: slider_reproducible_test.sh BUILD_DIR}" && pwd)
-source_dir=$(cd "$(dirname "$0")/.." && pwd)
-data=${EVLOC_DATA_DIR:-$(dirname "$source_dir")/shared/data}/ecd/slider_depth
-if [[ ! -f "$data/images.txt" ]]; then
-  echo "SKIPPED: ECD slider_depth not found in $data (set EVLOC_DATA_DIR to the data folder)"
-  exit 77
-fi
-if ! command -v colmap >/dev/null 2>&1; then
-  echo "SKIPPED: colmap is not installed (scripts/install-deps.sh installs it)"
-  exit 77
-fi
-
-out=$(mktemp -d "${TMPDIR:-/tmp}/evloc-slider-repro.XXXXXX")
-fail() {
-  echo "FAIL: $*; outputs kept in $out"
-  exit 1
-}
+# shellcheck source=tests/slider_common.sh
+source "$(dirname "$0")/slider_common.sh" "${1:-}" repro
 
 crcs=()
 for run in 1 2; do
   # Each build gets its own fresh COLMAP workspace (MAPDIR.colmap-workspace).
-  "$build_dir/mapper/evloc-mapper" build --images "$data" --images-list "$data/images.txt" \
-    --calib "$data/calib.txt" --known-poses "$data/groundtruth.txt" --out "$out/map$run" \
-    --quiet || fail "evloc-mapper build $run"
+  build_slider_map "$out/map$run"
   crcs+=("$("$build_dir/mapper/evloc-mapper" info "$out/map$run" |
     sed -n 's/^content CRC32C: *//p')")
 done
 echo "content_crc32c: ${crcs[0]} ${crcs[1]}"
 [[ -n "${crcs[0]}" && "${crcs[0]}" == "${crcs[1]}" ]] || fail "the two maps differ"
 
-"$build_dir/tools/sim/evloc-sim" events-from-frames --in "$data" --out "$out/events" \
-  --contrast 0.5 --force >"$out/events.log" || fail "evloc-sim events-from-frames"
+make_slider_events "$out/events"
 for run in 1 2; do
   "$build_dir/localizer/offline/evloc-track" --map "$out/map$run" --dataset "$out/events" \
     --out "$out/est$run.txt" --quiet || fail "evloc-track $run"

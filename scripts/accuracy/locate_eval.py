@@ -14,7 +14,6 @@ Prints one JSON line with the figures (and, with --details FILE, every answer).
 
 import argparse
 import json
-import math
 import os
 import subprocess
 import sys
@@ -22,32 +21,19 @@ import time
 
 import numpy as np
 
-
-def quaternion_angle_deg(q1, q2):
-    """Angle between two unit quaternions (x, y, z, w), degrees."""
-    dot = abs(float(np.dot(q1, q2)))
-    return math.degrees(2 * math.acos(min(1.0, dot)))
-
-
-def read_ground_truth(path):
-    table = np.loadtxt(path, comments="#", ndmin=2)
-    return table[:, 0], table[:, 1:4], table[:, 4:8]
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from relocalization_eval import lookup, quat_angle_deg, read_tum  # noqa: E402
 
 
 def pose_at(ground_truth, t):
-    """Ground-truth (translation, quaternion xyzw) at time t: linear / normalised-linear."""
-    times, translations, quaternions = ground_truth
-    i = int(np.searchsorted(times, t))
-    if i <= 0:
-        return translations[0], quaternions[0]
-    if i >= len(times):
-        return translations[-1], quaternions[-1]
-    a = (t - times[i - 1]) / (times[i] - times[i - 1])
-    q0, q1 = quaternions[i - 1], quaternions[i]
-    if np.dot(q0, q1) < 0:
-        q1 = -q1
-    q = (1 - a) * q0 + a * q1
-    return (1 - a) * translations[i - 1] + a * translations[i], q / np.linalg.norm(q)
+    """Ground-truth (translation, quaternion xyzw) at time t, interpolated as
+    relocalization_eval.py does; the first or last pose outside the ground truth's span."""
+    rows, times = ground_truth
+    truth = lookup(rows, times, t)
+    if truth is None:
+        row = rows[0] if t <= times[0] else rows[-1]
+        truth = row[1:4], row[4:8]
+    return np.array(truth[0]), truth[1]
 
 
 def locate(localizer, map_path, image, calib):
@@ -78,7 +64,8 @@ def main():
     answers = []
     figures = {"label": args.label}
     if args.dataset:
-        ground_truth = read_ground_truth(os.path.join(args.dataset, "groundtruth.txt"))
+        rows = read_tum(os.path.join(args.dataset, "groundtruth.txt"))
+        ground_truth = (rows, [row[0] for row in rows])
         calib = os.path.join(args.dataset, "calib.yaml")
         with open(os.path.join(args.dataset, "images.txt"), encoding="utf-8") as file:
             frames = [line.split() for line in file if line.strip() and not line.startswith("#")]
@@ -91,7 +78,7 @@ def main():
                 truth_t, truth_q = pose_at(ground_truth, float(t))
                 pose = np.array(answer["world_from_cam"])
                 answer["error_m"] = float(np.linalg.norm(pose[:3] - truth_t))
-                answer["error_deg"] = quaternion_angle_deg(pose[3:], truth_q)
+                answer["error_deg"] = quat_angle_deg(list(pose[3:]), truth_q)
                 translation_errors.append(answer["error_m"])
                 rotation_errors.append(answer["error_deg"])
                 within += answer["error_m"] <= 0.02 and answer["error_deg"] <= 1.0
