@@ -77,6 +77,31 @@ def fill_camera(camera, message):
     message.distortion.extend(camera.get("distortion", []))
 
 
+def add_token_arguments(parser):
+    """The bearer token flags of the examples: --token-file, and the deprecated --token."""
+    parser.add_argument("--token-file",
+                        help="file holding the bearer token (one line); preferred to --token")
+    parser.add_argument("--token", help="bearer token (visible in the process list: deprecated, "
+                        "use --token-file)")
+
+
+def auth_metadata(parser, args):
+    """The call metadata for the token of --token-file or --token (None without one); a usage
+    error for both or for a file that does not hold one token on one line."""
+    token = args.token
+    if args.token and args.token_file:
+        parser.error("--token and --token-file exclude each other")
+    if args.token:
+        print(f"{parser.prog}: warning: --token shows the secret in the process list; "
+              "use --token-file", file=sys.stderr)
+    if args.token_file:
+        with open(args.token_file, encoding="utf-8") as file:
+            token = file.read().strip()
+        if not token or any(c.isspace() for c in token):
+            parser.error(f"--token-file {args.token_file}: expected one token on one line")
+    return [("authorization", "Bearer " + token)] if token else None
+
+
 def read_events(path):
     """Reads `t_ns x y polarity` lines into numpy arrays (t int64, x, y uint16, on bool)."""
     table = np.loadtxt(path, dtype=np.int64, ndmin=2)
@@ -106,10 +131,7 @@ def main():
     parser.add_argument("--protoc", default="protoc", help="protoc used to generate the stubs")
     parser.add_argument("--packet-us", type=int, default=1000, help="packet window, microseconds")
     parser.add_argument("--rate", type=float, default=0, help="tracking steps per second")
-    parser.add_argument("--token-file",
-                        help="file holding the bearer token (one line); preferred to --token")
-    parser.add_argument("--token", help="bearer token (visible in the process list: deprecated, "
-                        "use --token-file)")
+    add_token_arguments(parser)
     parser.add_argument("--quiet", action="store_true", help="print only the totals")
     args = parser.parse_args()
 
@@ -162,18 +184,7 @@ def main():
 
     channel = grpc.insecure_channel(args.server)
     stub = api_grpc.LocalizerStub(channel)
-    token = args.token
-    if args.token and args.token_file:
-        parser.error("--token and --token-file exclude each other")
-    if args.token:
-        print("localizer_client: warning: --token shows the secret in the process list; "
-              "use --token-file", file=sys.stderr)
-    if args.token_file:
-        with open(args.token_file, encoding="utf-8") as file:
-            token = file.read().strip()
-        if not token or any(c.isspace() for c in token):
-            parser.error(f"--token-file {args.token_file}: expected one token on one line")
-    metadata = [("authorization", "Bearer " + token)] if token else None
+    metadata = auth_metadata(parser, args)
     poses = 0
     searching = 0
     try:

@@ -27,7 +27,7 @@ import os
 import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from localizer_client import fill_camera, stubs  # noqa: E402
+from localizer_client import add_token_arguments, auth_metadata, fill_camera, stubs  # noqa: E402
 
 EXIT_FOUND, EXIT_FAILED, EXIT_NOT_FOUND = 0, 1, 3
 
@@ -40,7 +40,7 @@ def main():
     parser.add_argument("--camera", required=True, help="JSON file with the image's camera")
     parser.add_argument("--stubs", help="folder with the generated evloc/*_pb2*.py modules")
     parser.add_argument("--protoc", default="protoc", help="protoc used to generate the stubs")
-    parser.add_argument("--token", help="bearer token")
+    add_token_arguments(parser)
     parser.add_argument("--timeout", type=float, default=30, help="deadline of the call, seconds")
     parser.add_argument("--write-session", metavar="FILE",
                         help="when FOUND, write a localizer_client.py session JSON at the pose")
@@ -59,7 +59,7 @@ def main():
     request = api.LocateRequest(map_name=args.map, encoded=image)
     fill_camera(camera, request.camera)
     stub = api_grpc.LocalizerStub(grpc.insecure_channel(args.server))
-    metadata = [("authorization", "Bearer " + args.token)] if args.token else None
+    metadata = auth_metadata(parser, args)
     try:
         response = stub.Locate(request, metadata=metadata, timeout=args.timeout)
     except grpc.RpcError as error:
