@@ -462,6 +462,16 @@ class Attacks:
                 (describe(code, details, 50), len(body) / 1e6, events / 1e6),
                 code in (SC.INVALID_ARGUMENT, SC.RESOURCE_EXHAUSTED))
 
+    def probe_session(self, client_name):
+        """Opens an honest session on a connection of its own and ends it: (started within 3 s,
+        the final status code)."""
+        probe = Stream(pb_grpc.LocalizerStub(self.server.channel(own_connection=True)))
+        probe.send(session_start(client_name=client_name))
+        started = probe.wait_started(3.0)
+        probe.close()
+        code, _ = probe.wait(STATUS_WAIT_S)
+        return started, code
+
     def a3_silent_streams(self):
         """40 Track streams that never send a SessionStart (4 connections of 10); then health
         and a new session on another connection."""
@@ -469,13 +479,9 @@ class Attacks:
         silent = [Stream(stubs[i % 4]) for i in range(40)]
         time.sleep(1.0)
         status = health(self.server)
-        probe = Stream(pb_grpc.LocalizerStub(self.server.channel(own_connection=True)))
-        probe.send(session_start(client_name="attack-3-probe"))
         begin = time.time()
-        probe_started = probe.wait_started(3.0)
+        probe_started, probe_code = self.probe_session("attack-3-probe")
         probe_s = time.time() - begin
-        probe.close()
-        probe_code, _ = probe.wait(STATUS_WAIT_S)
         probe_text = "started in %.1f s" % probe_s if probe_started else \
             "refused %s" % name(probe_code) if probe_code is not None else "got no answer"
         deadline = begin - 1.0 + HANDSHAKE_BOUND_S
@@ -492,11 +498,7 @@ class Attacks:
         # fills also refuses the probe meanwhile (a client at another address would be
         # admitted). Once the silent streams are gone, a session from the same address must
         # start: they hold nothing after the handshake timeout.
-        after = Stream(pb_grpc.LocalizerStub(self.server.channel(own_connection=True)))
-        after.send(session_start(client_name="attack-3-after"))
-        after_started = after.wait_started(3.0)
-        after.close()
-        after.wait(STATUS_WAIT_S)
+        after_started, _ = self.probe_session("attack-3-after")
         passed = good and ended == 40 and (probe_started or status == "NOT_SERVING" or
                                            after_started)
         return ("%d/40 ended within %.0f s %s; health %s; a new session %s meanwhile, %s after" %
