@@ -154,7 +154,8 @@ uint32_t ComputeMapContentChecksum(const Map& map);
 // InvalidArgumentError) and throws IoError when the file cannot be written.
 void SaveMap(const std::filesystem::path& path, const Map& map);
 
-// Bytes the relocalization data adds to a .evmap file (its encoded protobuf field).
+// Bytes the relocalization data adds to a .evmap file (its encoded protobuf field and the
+// summary's flag that says the file has it).
 uint64_t EncodedRelocalizationBytes(const RelocalizationData& data);
 
 // Reads a .evmap file (format version 1 or 2) and verifies it: magic ("not an evloc map"), format
@@ -251,10 +252,12 @@ struct MapFileSummary {
 };
 
 // Reads what describes a map (header, point and keyframe counts, bounding box, content checksum)
-// streaming through the payload with constant memory: the positions are read for the bounding
-// box, every other field (keyframe contents, the other per-point arrays, relocalization data) is
-// skipped. Checks the header like ReadMapFileHeader and the structure of the fields it reads,
-// but not the payload checksum nor the values: a file that summarises may still fail LoadMap.
+// with constant memory. A file whose payload starts with the summary field (every file SaveMap
+// writes) is read no further than that field; otherwise (files of earlier writers) it streams
+// through the payload: the positions are read for the bounding box, every other field (keyframe
+// contents, the other per-point arrays, relocalization data) is skipped. Checks the header like
+// ReadMapFileHeader and the structure of what it reads, but not the payload checksum nor that the
+// summary agrees with the content (LoadMap does): a file that summarises may still fail LoadMap.
 // Throws IoError when the file cannot be read and ParseError when it is not a valid map.
 MapFileSummary ReadMapFileSummary(const std::filesystem::path& path);
 

@@ -3,6 +3,7 @@
 #include <cerrno>
 #include <cstring>
 #include <fstream>
+#include <functional>
 #include <limits>
 #include <optional>
 #include <string_view>
@@ -25,6 +26,7 @@ namespace evloc {
 namespace {
 
 namespace pb = ::evloc::map_format;
+using WireFormatLite = ::google::protobuf::internal::WireFormatLite;
 
 constexpr std::string_view kMagic = "EVLOCMAP";
 constexpr uint32_t kSupportedVersions[] = {1, 2};
@@ -213,6 +215,78 @@ pb::MapFile ToProto(const Map& map) {
   return file;
 }
 
+// The summary field of `file` (its own summary field is ignored), as SaveMap writes it and LoadMap
+// expects it.
+pb::Summary SummaryOf(const pb::MapFile& file) {
+  pb::Summary summary;
+  const pb::Points& points = file.points();
+  summary.set_num_points(points.count());
+  summary.set_num_keyframes(static_cast<uint64_t>(file.keyframes_size()));
+  if (points.positions_size() >= 3) {
+    Eigen::Vector3f low(points.positions(0), points.positions(1), points.positions(2));
+    Eigen::Vector3f high = low;
+    for (int i = 3; i + 2 < points.positions_size(); i += 3) {
+      const Eigen::Vector3f position(points.positions(i), points.positions(i + 1),
+                                     points.positions(i + 2));
+      low = low.cwiseMin(position);
+      high = high.cwiseMax(position);
+    }
+    for (const float value : {low.x(), low.y(), low.z(), high.x(), high.y(), high.z()}) {
+      summary.add_bounding_box(value);
+    }
+  }
+  summary.set_has_relocalization(file.has_relocalization());
+  summary.set_content_crc32c(file.content_crc32c());
+  return summary;
+}
+
+// The Summary of a payload's summary field whose tag `in` has just read; throws what
+// `invalid(problem)` returns when it is truncated, too long or malformed (SummaryFieldProblem).
+pb::Summary ReadSummaryField(::google::protobuf::io::CodedInputStream& in,
+                             const std::function<ParseError(const std::string&)>& invalid);
+
+// What a summary reader may trust of a stored summary field: the bounding box has 0 values (and
+// then no points) or 6 finite ones with min <= max. Returns the problem, empty when there is none.
+std::string SummaryFieldProblem(const pb::Summary& summary) {
+  if (summary.bounding_box_size() == 0) {
+    return summary.num_points() == 0
+               ? ""
+               : "no bounding box for " + std::to_string(summary.num_points()) + " points";
+  }
+  if (summary.bounding_box_size() != 6) {
+    return "bounding box has " + std::to_string(summary.bounding_box_size()) +
+           " values; expected 6";
+  }
+  if (summary.num_points() == 0) return "a bounding box for 0 points";
+  for (int axis = 0; axis < 3; ++axis) {
+    const float low = summary.bounding_box(axis);
+    const float high = summary.bounding_box(axis + 3);
+    if (!std::isfinite(low) || !std::isfinite(high) || low > high) {
+      return "bounding box axis " + std::to_string(axis) + " is not finite min <= max";
+    }
+  }
+  return "";
+}
+
+pb::Summary ReadSummaryField(::google::protobuf::io::CodedInputStream& in,
+                             const std::function<ParseError(const std::string&)>& invalid) {
+  constexpr uint32_t kMaxSummaryBytes = 4096;
+  uint32_t length = 0;
+  if (!in.ReadVarint32(&length)) throw invalid("truncated summary field");
+  if (length > kMaxSummaryBytes) {
+    throw invalid("summary field of " + std::to_string(length) + " bytes (at most " +
+                  std::to_string(kMaxSummaryBytes) + ")");
+  }
+  std::string bytes;
+  pb::Summary summary;
+  if (!in.ReadString(&bytes, static_cast<int>(length))) throw invalid("truncated summary field");
+  if (!summary.ParseFromString(bytes)) throw invalid("summary field is not a Summary message");
+  if (const std::string problem = SummaryFieldProblem(summary); !problem.empty()) {
+    throw invalid("summary field: " + problem);
+  }
+  return summary;
+}
+
 // a * b, or nullopt when the product does not fit in 64 bits (a forged count).
 std::optional<uint64_t> CheckedMultiply(uint64_t a, uint64_t b) {
   uint64_t product = 0;
@@ -386,6 +460,31 @@ Map ParsePayload(MapFileHeader header, std::string_view payload, const std::stri
     throw ParseError::AtByte(source, kMapFileHeaderSize,
                              std::string("invalid evloc map content: ") + error.what());
   }
+  // The summary as protobuf merges it (all occurrences of field 9) and, when the payload starts
+  // with it, that first occurrence alone (what ReadMapFileSummary reads) must both describe the
+  // content. Serialisation is deterministic for equal values: equal bytes, equal summaries.
+  if (file.has_summary()) {
+    const auto invalid = [&source](const std::string& what) {
+      return ParseError::AtByte(source, kMapFileHeaderSize, "invalid evloc map payload: " + what);
+    };
+    const std::string expected = SummaryOf(file).SerializeAsString();
+    const auto disagrees = [&](const pb::Summary& stored) {
+      return stored.SerializeAsString() != expected;
+    };
+    bool wrong = disagrees(file.summary());
+    ::google::protobuf::io::CodedInputStream in(reinterpret_cast<const uint8_t*>(payload.data()),
+                                                static_cast<int>(payload.size()));
+    const uint32_t tag = in.ReadTag();
+    if (!wrong && WireFormatLite::GetTagFieldNumber(tag) == 9 &&
+        WireFormatLite::GetTagWireType(tag) == WireFormatLite::WIRETYPE_LENGTH_DELIMITED) {
+      wrong = disagrees(ReadSummaryField(in, invalid));
+    }
+    if (wrong) {
+      throw invalid(
+          "the summary field disagrees with the map's content (counts, bounding box or "
+          "checksum); the file was edited by hand or by a broken writer: rebuild or re-save it");
+    }
+  }
   return map;
 }
 
@@ -393,8 +492,12 @@ Map ParsePayload(MapFileHeader header, std::string_view payload, const std::stri
 
 void SaveMap(const std::filesystem::path& path, const Map& map) {
   map.Check();
-  std::string payload;
-  if (!ToProto(map).SerializeToString(&payload)) {
+  // The summary first, then the map: a summary reader stops after the first field.
+  const pb::MapFile file = ToProto(map);
+  pb::MapFile summary_only;
+  *summary_only.mutable_summary() = SummaryOf(file);
+  std::string payload = summary_only.SerializeAsString();
+  if (!file.AppendToString(&payload)) {
     throw InvalidArgumentError("cannot serialise map for '" + path.string() +
                                "': the payload exceeds the protobuf limit of 2 GiB");
   }
@@ -412,7 +515,10 @@ void SaveMap(const std::filesystem::path& path, const Map& map) {
 uint64_t EncodedRelocalizationBytes(const RelocalizationData& data) {
   pb::MapFile file;
   *file.mutable_relocalization() = RelocalizationToProto(data);
-  return file.ByteSizeLong();
+  // And the summary's has_relocalization flag (the summary's own length stays one byte).
+  pb::Summary flag;
+  flag.set_has_relocalization(true);
+  return file.ByteSizeLong() + flag.ByteSizeLong();
 }
 
 MapFileHeader ReadMapFileHeader(const std::filesystem::path& path) {
@@ -422,7 +528,7 @@ MapFileHeader ReadMapFileHeader(const std::filesystem::path& path) {
 
 MapFileSummary ReadMapFileSummary(const std::filesystem::path& path) {
   namespace io = ::google::protobuf::io;
-  using WireFormat = ::google::protobuf::internal::WireFormatLite;
+  using WireFormat = WireFormatLite;
   const std::string source = path.string();
   MapFileSummary summary;
   std::ifstream stream;
@@ -465,7 +571,24 @@ MapFileSummary ReadMapFileSummary(const std::filesystem::path& path) {
     if (!in.ReadVarint32(&length)) throw invalid(std::string("truncated ") + field);
     return static_cast<int>(length);
   };
-  while (const uint32_t tag = in.ReadTag()) {
+  // A file written by SaveMap starts with its summary field: the rest is not read.
+  uint32_t tag = in.ReadTag();
+  if (WireFormat::GetTagFieldNumber(tag) == 9 &&
+      WireFormat::GetTagWireType(tag) == WireFormat::WIRETYPE_LENGTH_DELIMITED) {
+    const pb::Summary stored = ReadSummaryField(in, invalid);
+    summary.info.num_points = stored.num_points();
+    summary.info.num_keyframes = stored.num_keyframes();
+    if (stored.bounding_box_size() == 6) {
+      summary.info.bounding_box_min = {stored.bounding_box(0), stored.bounding_box(1),
+                                       stored.bounding_box(2)};
+      summary.info.bounding_box_max = {stored.bounding_box(3), stored.bounding_box(4),
+                                       stored.bounding_box(5)};
+    }
+    summary.info.has_relocalization = stored.has_relocalization();
+    summary.info.content_crc32c = stored.content_crc32c();
+    return summary;
+  }
+  for (; tag != 0; tag = in.ReadTag()) {
     const int field = WireFormat::GetTagFieldNumber(tag);
     const auto wire_type = WireFormat::GetTagWireType(tag);
     bool read = false;

@@ -311,6 +311,7 @@ TEST_F(MapIoTest, ForgedCountsWhoseSizeWrapsAreParseErrors) {
   constexpr uint64_t kWrapsToTwo = 0x5555555555555556ull;
   auto path = WriteEditedPayload(
       [](map_format::MapFile& file) {
+        file.clear_summary();  // So that ReadMapFileSummary reads the points.
         file.mutable_points()->set_count(kWrapsToTwo);
         file.mutable_points()->mutable_positions()->Resize(2, 0.0f);
       },
@@ -326,20 +327,29 @@ TEST_F(MapIoTest, ForgedCountsWhoseSizeWrapsAreParseErrors) {
   ExpectParseError([&] { LoadMap(path); }, {"landmarks.evmap", "relocalization.landmarks"});
 }
 
-// ReadMapFileSummary gives what SummarizeMap gives of the loaded map, for v1 and v2 files.
+// ReadMapFileSummary gives what SummarizeMap gives of the loaded map, for v1 and v2 files, with
+// the summary field SaveMap writes and without it (v2 files of earlier writers).
 TEST_F(MapIoTest, SummaryWithoutLoadingMatchesTheLoadedMap) {
   for (const Map& map : {MakeMap(), MakeRelocalizationMap(), Map()}) {
-    SaveMap(path_, map);
-    const MapFileSummary summary = ReadMapFileSummary(path_);
-    const MapInfo info = SummarizeMap(LoadMap(path_));
-    EXPECT_EQ(summary.info.num_points, info.num_points);
-    EXPECT_EQ(summary.info.num_keyframes, info.num_keyframes);
-    EXPECT_EQ(summary.info.bounding_box_min, info.bounding_box_min);
-    EXPECT_EQ(summary.info.bounding_box_max, info.bounding_box_max);
-    EXPECT_EQ(summary.info.content_crc32c, info.content_crc32c);
-    EXPECT_EQ(summary.info.has_relocalization, info.has_relocalization);
-    EXPECT_EQ(summary.info.format_version, info.format_version);
-    EXPECT_EQ(summary.file_bytes, std::filesystem::file_size(path_));
+    for (const bool with_summary_field : {true, false}) {
+      SaveMap(path_, map);
+      if (!with_summary_field) {
+        const std::string old_writer = testing::EditMapPayload(
+            ReadFileToString(path_), [](map_format::MapFile& file) { file.clear_summary(); });
+        ASSERT_FALSE(old_writer.empty());
+        WriteFileAtomically(path_, old_writer);
+      }
+      const MapFileSummary summary = ReadMapFileSummary(path_);
+      const MapInfo info = SummarizeMap(LoadMap(path_));
+      EXPECT_EQ(summary.info.num_points, info.num_points);
+      EXPECT_EQ(summary.info.num_keyframes, info.num_keyframes);
+      EXPECT_EQ(summary.info.bounding_box_min, info.bounding_box_min);
+      EXPECT_EQ(summary.info.bounding_box_max, info.bounding_box_max);
+      EXPECT_EQ(summary.info.content_crc32c, info.content_crc32c);
+      EXPECT_EQ(summary.info.has_relocalization, info.has_relocalization);
+      EXPECT_EQ(summary.info.format_version, info.format_version);
+      EXPECT_EQ(summary.file_bytes, std::filesystem::file_size(path_));
+    }
   }
   // Found by evloc_map_loader_crc_fuzzer: field 8 (relocalization) with the fixed64 wire type is
   // an unknown field to protobuf, so the map has no relocalization data.
@@ -353,10 +363,97 @@ TEST_F(MapIoTest, SummaryWithoutLoadingMatchesTheLoadedMap) {
   EXPECT_FALSE(ReadMapFileSummary(unknown).info.has_relocalization);
   const std::filesystem::path v1 = testing::SourceDir() / "maps/testdata/v1_small.evmap";
   EXPECT_EQ(ReadMapFileSummary(v1).info.content_crc32c, SummarizeMap(LoadMap(v1)).content_crc32c);
-  std::string truncated = ReadFileToString(path_);
+  std::string truncated = testing::EditMapPayload(
+      ReadFileToString(path_), [](map_format::MapFile& file) { file.clear_summary(); });
   truncated.resize(truncated.size() - 1);
   ExpectParseError([&] { ReadMapFileSummary(WriteVariant(truncated, "short.evmap")); },
                    {"short.evmap", "truncated"});
+}
+
+// Attack 6 of issue 14: listing maps must not read them. A file SaveMap wrote starts with its
+// summary field; ReadMapFileSummary stops there: with every byte after the field overwritten it
+// still gives the summary (LoadMap refuses the file).
+TEST_F(MapIoTest, SummaryReadsOnlyTheSummaryField) {
+  const Map map = MakeRelocalizationMap();
+  SaveMap(path_, map);
+  const MapInfo info = SummarizeMap(LoadMap(path_));
+  std::string bytes = ReadFileToString(path_);
+  map_format::MapFile payload;
+  ASSERT_TRUE(payload.ParseFromString(bytes.substr(kMapFileHeaderSize)));
+  ASSERT_TRUE(payload.has_summary());
+  map_format::MapFile summary_only;
+  *summary_only.mutable_summary() = payload.summary();
+  const size_t summary_end = kMapFileHeaderSize + summary_only.ByteSizeLong();
+  ASSERT_LT(summary_end, bytes.size() / 2);
+  std::fill(bytes.begin() + static_cast<std::ptrdiff_t>(summary_end), bytes.end(), '\xff');
+  const std::filesystem::path damaged = WriteVariant(bytes, "damaged.evmap");
+  const MapFileSummary summary = ReadMapFileSummary(damaged);
+  EXPECT_EQ(summary.info.num_points, info.num_points);
+  EXPECT_EQ(summary.info.num_keyframes, info.num_keyframes);
+  EXPECT_EQ(summary.info.bounding_box_min, info.bounding_box_min);
+  EXPECT_EQ(summary.info.bounding_box_max, info.bounding_box_max);
+  EXPECT_EQ(summary.info.content_crc32c, info.content_crc32c);
+  EXPECT_TRUE(summary.info.has_relocalization);
+  ExpectParseError([&] { LoadMap(damaged); }, {"damaged.evmap", "checksum"});
+}
+
+// A summary field that contradicts the content is refused by LoadMap; one that is malformed is
+// refused by ReadMapFileSummary, naming the problem.
+TEST_F(MapIoTest, SummaryFieldIsCheckedAgainstTheContent) {
+  const auto edited = [&](const std::function<void(map_format::Summary&)>& edit,
+                          const std::string& name) {
+    return WriteEditedPayload([&](map_format::MapFile& file) { edit(*file.mutable_summary()); },
+                              name);
+  };
+  ExpectParseError(
+      [&] { LoadMap(edited([](map_format::Summary& s) { s.set_num_points(7); }, "count.evmap")); },
+      {"count.evmap", "summary field disagrees"});
+  const std::filesystem::path box =
+      edited([](map_format::Summary& s) { s.set_bounding_box(4, 100.0f); }, "box.evmap");
+  ExpectParseError([&] { LoadMap(box); }, {"box.evmap", "summary field disagrees"});
+  EXPECT_EQ(ReadMapFileSummary(box).info.bounding_box_max.y(), 100.0f);  // Not checked: documented.
+  ExpectParseError(
+      [&] {
+        ReadMapFileSummary(edited(
+            [](map_format::Summary& s) { s.mutable_bounding_box()->RemoveLast(); }, "five.evmap"));
+      },
+      {"five.evmap", "summary field", "5 values"});
+  ExpectParseError(
+      [&] {
+        ReadMapFileSummary(edited(
+            [](map_format::Summary& s) {
+              s.set_bounding_box(0, std::numeric_limits<float>::quiet_NaN());
+            },
+            "nan.evmap"));
+      },
+      {"nan.evmap", "summary field", "not finite"});
+  ExpectParseError(
+      [&] {
+        ReadMapFileSummary(
+            edited([](map_format::Summary& s) { s.set_num_points(0); }, "zero.evmap"));
+      },
+      {"zero.evmap", "a bounding box for 0 points"});
+  // Field 9 twice: protobuf merges the occurrences (a later scalar wins) while ReadMapFileSummary
+  // reads the first alone; the merged summary is right here, the first one is not: refused.
+  SaveMap(path_, MakeMap());
+  const std::string bytes = ReadFileToString(path_);
+  map_format::MapFile payload;
+  ASSERT_TRUE(payload.ParseFromString(bytes.substr(kMapFileHeaderSize)));
+  ASSERT_GT(payload.summary().num_keyframes(), 0u);
+  map_format::MapFile first;
+  *first.mutable_summary() = payload.summary();
+  first.mutable_summary()->set_num_keyframes(payload.summary().num_keyframes() + 5);
+  map_format::MapFile second;
+  second.mutable_summary()->set_num_keyframes(payload.summary().num_keyframes());
+  payload.clear_summary();
+  const std::filesystem::path twice = WriteVariant(
+      testing::WithPayload(
+          bytes,
+          first.SerializeAsString() + payload.SerializeAsString() + second.SerializeAsString(), 0),
+      "twice.evmap");
+  EXPECT_EQ(ReadMapFileSummary(twice).info.num_keyframes,
+            payload.keyframes_size() + 5);  // What a listing shows until a load.
+  ExpectParseError([&] { LoadMap(twice); }, {"twice.evmap", "summary field disagrees"});
 }
 
 TEST_F(MapIoTest, EmptyMapRoundTrips) {

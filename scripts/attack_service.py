@@ -558,8 +558,8 @@ class Attacks:
         # From the headers: far less than one whole map file per listed map.
         passed = codes == {"OK"} and slowest < 1.0 and rss_growth_mib < 64 and \
             read_mb < 24 * map_mb / 4
-        return ("%s, slowest %.2f s, server read %.0f MB (24 maps of %.1f MB), RSS %+.0f MiB" %
-                (",".join(sorted(codes)), slowest, read_mb, map_mb, rss_growth_mib), passed)
+        return ("%s, slowest %.2f s, server read %.0f kB (24 maps of %.1f MB), RSS %+.0f MiB" %
+                (",".join(sorted(codes)), slowest, read_mb * 1e3, map_mb, rss_growth_mib), passed)
 
     def a7_corrupt_map_rerequested(self):
         """A map with a flipped payload byte, GetMap 100 times from 4 threads: how much the
