@@ -201,6 +201,8 @@ class Tracker {
   const TimeSurface& time_surface() const { return surface_; }
   // The body-frame velocity of the motion prior, (v, omega) per second.
   const Vector6d& velocity() const { return motion_.velocity(); }
+  // The time span of the poses that velocity was measured over, ns (0 after a reset).
+  int64_t velocity_span_ns() const { return motion_.velocity_span_ns(); }
 
  private:
   // The outcome of one solve from one starting pose.

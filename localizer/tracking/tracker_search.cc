@@ -440,7 +440,15 @@ void Tracker::SearchStep(int64_t t_ns, PoseEstimate* estimate) {
     estimate->quality.decay_time_ms = decay_.decay_time_ns * 1e-6;
     if (attempt.good) {
       const Rigid3d pose = attempt.registration.cam_from_world.Inverse();
-      motion_.Update(pose, t_ns);
+      // The accepted pose only predicts the first verification step: it was refined partly on
+      // fields built when the round began, several steps ago, so a velocity measured from it
+      // over one step would carry that age (decimetres per second after a centimetre), and
+      // tracking would start from a wrong prediction. The velocity comes from tracked steps.
+      if (progress.verified_steps == 0) {
+        motion_.Reset(pose, t_ns);
+      } else {
+        motion_.Update(pose, t_ns);
+      }
       ++progress.verified_steps;
       if (progress.verified_steps >= options_.relocalization_verify_steps) {
         status_ = TrackingStatus::kTracking;

@@ -100,6 +100,40 @@ TEST(TrackerSearch, FindsItselfFromNoPoseAndEveryTrackingPoseIsRight) {
   EXPECT_EQ(tracker.status(), TrackingStatus::kTracking);
 }
 
+// At the hand-over the motion prior's velocity is measured on verified steps only, not from the
+// accepted search pose (refined partly on distance fields built steps earlier: a centimetre of
+// age over one step is decimetres per second of velocity).
+TEST(TrackerSearch, VelocityAtTheHandOverComesFromVerifiedStepsOnly) {
+  const EventBuffer events = SceneEvents(400'000'000);
+  const TrackerOptions options;
+  Tracker tracker(SceneMap(), nullptr, kCamera, options);
+  tracker.StartWithoutPose(0);
+  constexpr int64_t kChunkNs = 1'000'000;
+  const double step_ns = 1e9 / options.step_rate_hz;
+  size_t begin = 0;
+  int64_t found_ns = -1;
+  int checked = 0;
+  for (int64_t end_ns = kChunkNs; begin < events.size() && found_ns < 0; end_ns += kChunkNs) {
+    EventBuffer chunk;
+    while (begin < events.size() && events.t_ns[begin] < end_ns) chunk.push_back(events[begin++]);
+    const std::vector<PoseEstimate> estimates = tracker.AddEvents(chunk);
+    for (const PoseEstimate& estimate : estimates) {
+      if (estimate.status == TrackingStatus::kTracking) found_ns = estimate.t_ns;
+    }
+    // After a verification step (the tracker's state is that of the chunk's last estimate), the
+    // velocity spans the verified steps alone, one step apart: none after the first.
+    if (!estimates.empty() && estimates.back().status == TrackingStatus::kInitializing &&
+        estimates.back().search.verified_steps > 0) {
+      const int verified = estimates.back().search.verified_steps;
+      EXPECT_LE(tracker.velocity_span_ns(), std::llround((verified - 1) * step_ns))
+          << "after verified step " << verified;
+      ++checked;
+    }
+  }
+  ASSERT_GE(found_ns, 0) << "never TRACKING";
+  ASSERT_GT(checked, 0) << "no verification step seen";
+}
+
 TEST(TrackerSearch, NeverTracksEventsOfAnUnrelatedSceneOrNoise) {
   // Another layout of rectangles (different sizes and places) seen along the same motion.
   std::vector<testing::Rectangle> other;
