@@ -630,7 +630,7 @@ class TrackCall final : public TrackReactor,
     service_.UpdateHealth();
     NoteQueueLevel();
     Wake();
-    StartRead(&request_);
+    ReadNext();
   }
 
   void OnWriteDone(bool ok) override {
@@ -769,6 +769,13 @@ class TrackCall final : public TrackReactor,
 
   void Wake() { service_.pool().Wake(shared_from_this()); }
 
+  // Starts reading the next request unless the call is finishing (the pool may end the call
+  // while gRPC's read callback runs).
+  void ReadNext() {
+    std::lock_guard<std::recursive_mutex> lock(read_mutex_);
+    if (!finish_called_) StartRead(&request_);
+  }
+
   // The first message: a SessionStart that the token may use, and a free slot; the session is
   // then opened on the pool (it may load a map).
   void Handshake(bool received) {
@@ -839,7 +846,7 @@ class TrackCall final : public TrackReactor,
     started.mutable_started()->set_queue_capacity(static_cast<uint32_t>(inbound_.capacity()));
     Send(std::move(started));
     opened_ = true;
-    StartRead(&request_);
+    ReadNext();
   }
 
   // The reader is done (`status` OK: the client half-closed; else the status that ends the
@@ -1076,7 +1083,11 @@ class TrackCall final : public TrackReactor,
   // Ends the call with `status` (once): frees its session and stream slots, counts and logs it,
   // and finishes the stream once the responses queued before it are written.
   void FinishCall(const grpc::Status& status) {
-    if (finish_called_.exchange(true)) return;
+    {
+      // No read starts after this (ReadNext); one already started is allowed with Finish.
+      std::lock_guard<std::recursive_mutex> lock(read_mutex_);
+      if (finish_called_.exchange(true)) return;
+    }
     if (admitted_) service_.EndSession(peer_, token_);
     if (stream_open_) service_.CloseStream(peer_);
     const grpc::Status client_status = service_.ForClient(status);
@@ -1223,8 +1234,9 @@ class TrackCall final : public TrackReactor,
   std::atomic<bool> stop_requested_{false};
   // Set by the check when the server drains.
   std::atomic<bool> draining_{false};
-  // Set once FinishCall ran.
+  // Set once FinishCall ran (under read_mutex_, which ReadNext holds to start a read).
   std::atomic<bool> finish_called_{false};
+  std::recursive_mutex read_mutex_;
   // Messages read + items tracked + responses written: the idle check's sign of life.
   std::atomic<uint64_t> progress_{0};
 

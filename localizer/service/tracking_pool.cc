@@ -1,6 +1,9 @@
 #include "localizer/service/tracking_pool.h"
 
+#include <string>
 #include <utility>
+
+#include <pthread.h>
 
 #include "core/common/error.h"
 
@@ -17,7 +20,14 @@ TrackingPool::TrackingPool(int threads) {
     throw InvalidArgumentError("TrackingPool: the thread count must not be negative");
   const int count = ThreadsFor(threads);
   workers_.reserve(static_cast<size_t>(count));
-  for (int i = 0; i < count; ++i) workers_.emplace_back([this] { WorkerLoop(); });
+  for (int i = 0; i < count; ++i) {
+    workers_.emplace_back([this, i] {
+      // Named for top, perf and gdb (at most 15 characters).
+      pthread_setname_np(pthread_self(),
+                         ("evloc-track-" + std::to_string(i)).substr(0, 15).c_str());
+      WorkerLoop();
+    });
+  }
 }
 
 TrackingPool::~TrackingPool() {
@@ -87,7 +97,11 @@ void TrackingPool::WorkerLoop() {
   }
 }
 
-SharedTimer::SharedTimer() : thread_([this] { Loop(); }) {}
+SharedTimer::SharedTimer()
+    : thread_([this] {
+        pthread_setname_np(pthread_self(), "evloc-timer");
+        Loop();
+      }) {}
 
 SharedTimer::~SharedTimer() {
   {
