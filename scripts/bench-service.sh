@@ -72,11 +72,11 @@ say() { echo "$*" | tee -a "$SUMMARY"; }
 SERVER_LOG="$OUT/server.log"
 # shellcheck source=scripts/service-lib.sh
 source "$(dirname "${BASH_SOURCE[0]}")/service-lib.sh"
-SERVER_CMD=("$SERVER_BIN")
-[[ -n "$TASKSET" ]] && SERVER_CMD=(taskset -c "$TASKSET" "$SERVER_BIN")
 # shellcheck disable=SC2086  # SERVER_ARGS is a list of options
-start_localizer "$SERVER_LOG" "${SERVER_CMD[@]}" --maps "$OUT/maps" --max-sessions 64 --rate "$RATE" \
+start_localizer "$SERVER_LOG" "$SERVER_BIN" --maps "$OUT/maps" --max-sessions 64 --rate "$RATE" \
   $SERVER_ARGS
+# Every thread of the server (threads created later inherit it).
+[[ -n "$TASKSET" ]] && taskset -a -p -c "$TASKSET" "$SERVER_PID" > /dev/null
 trap 'kill "$SERVER_PID" 2>/dev/null || true; wait "$SERVER_PID" 2>/dev/null || true' EXIT
 ADDRESS="127.0.0.1:$PORT"
 
