@@ -25,6 +25,8 @@ PACKAGES=(
   python3-rosbag python3-roslz4
   # TLS test certificates
   openssl
+  # the service capacity plot (scripts/plot-capacity.py, docs/benchmarks.md)
+  python3-matplotlib
 )
 
 missing=()

@@ -1,12 +1,10 @@
 // A bounded, closable multi-producer multi-consumer queue: the hand-over between a session's
-// stream reader and its tracking worker (the reader never waits: a full queue is the session's
-// overflow); bounded in items and in weight (a session's queue: packets and events). And the
-// server-wide memory budget that queued items are charged to.
+// stream reader (gRPC's read callback) and the tracking pool (the reader never waits: a full queue
+// is the session's overflow); bounded in items and in weight (a session's queue: packets and
+// events). And the server-wide memory budget that queued items are charged to.
 #pragma once
 
 #include <atomic>
-#include <chrono>
-#include <condition_variable>
 #include <cstddef>
 #include <cstdint>
 #include <deque>
@@ -29,7 +27,8 @@ enum class PushResult {
 
 // A FIFO of at most `capacity` items whose weights sum to at most `max_weight` (an item heavier
 // than max_weight alone is queued only into an empty queue). Close() lets consumers drain what
-// is queued; Abort() drops it.
+// is queued; Abort() drops it. Nobody waits on it: the consumer is woken by other means (the
+// tracking pool).
 template <typename T>
 class BoundedQueue {
  public:
@@ -45,29 +44,29 @@ class BoundedQueue {
     if (!items_.empty() && weight > max_weight_ - weight_) return PushResult::kFull;
     items_.emplace_back(std::move(item), weight);
     weight_ += weight;
-    not_empty_.notify_one();
     return PushResult::kQueued;
   }
 
-  // The next item, waiting up to `timeout`; nullopt on timeout or when closed and drained.
-  // `timed_out` (optional) tells the two apart.
-  std::optional<T> Pop(std::chrono::steady_clock::duration timeout, bool* timed_out = nullptr) {
-    std::unique_lock<std::mutex> lock(mutex_);
-    const bool ready =
-        not_empty_.wait_for(lock, timeout, [&] { return closed_ || !items_.empty(); });
-    if (timed_out) *timed_out = !ready;
-    if (!ready || items_.empty()) return std::nullopt;
+  // The next item without waiting; nullopt when none is queued.
+  std::optional<T> TryPop() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (items_.empty()) return std::nullopt;
     T item = std::move(items_.front().first);
     weight_ -= items_.front().second;
     items_.pop_front();
     return item;
   }
 
+  // True when closed (or aborted) and nothing is left to pop.
+  bool drained() const {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return closed_ && items_.empty();
+  }
+
   // No more pushes; consumers still get what is queued.
   void Close() {
     std::lock_guard<std::mutex> lock(mutex_);
     closed_ = true;
-    not_empty_.notify_all();
   }
 
   // No more pushes, and what is queued is dropped.
@@ -76,7 +75,6 @@ class BoundedQueue {
     closed_ = true;
     items_.clear();
     weight_ = 0;
-    not_empty_.notify_all();
   }
 
   // Items queued now.
@@ -98,7 +96,6 @@ class BoundedQueue {
   const size_t capacity_;
   const uint64_t max_weight_;
   mutable std::mutex mutex_;
-  std::condition_variable not_empty_;
   std::deque<std::pair<T, uint64_t>> items_;
   uint64_t weight_ = 0;
   bool closed_ = false;

@@ -3,12 +3,12 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <condition_variable>
 #include <ctime>
+#include <deque>
 #include <fstream>
+#include <memory>
 #include <mutex>
 #include <sstream>
-#include <thread>
 #include <variant>
 #include <vector>
 
@@ -24,30 +24,11 @@
 #include "localizer/service/locate_rpc.h"
 #include "localizer/service/metrics_http.h"
 #include "localizer/service/session.h"
+#include "localizer/service/tracking_pool.h"
 #include "localizer/wire/percentile.h"
 #include "localizer/wire/status_name.h"
 
 namespace evloc::service {
-namespace {
-
-using Clock = std::chrono::steady_clock;
-using TrackServerStream = grpc::ServerReaderWriter<api::TrackResponse, api::TrackRequest>;
-
-double MicrosecondsSince(Clock::time_point start) {
-  return std::chrono::duration<double, std::micro>(Clock::now() - start).count();
-}
-
-// An item from the stream reader to the tracking worker.
-struct InboundItem {
-  // The validated request.
-  SessionItem item;
-  // When the reader received the message.
-  Clock::time_point received;
-  // Its share of the server's memory budget (released once tracked, or when dropped).
-  MemoryBudget::Reservation reservation;
-};
-
-}  // namespace
 
 // ---------------------------------------------------------------------------------------------
 // Options and tokens.
@@ -58,8 +39,10 @@ void LocalizerServerOptions::Check() const {
   if (max_sessions < 1) throw InvalidArgumentError("--max-sessions must be at least 1");
   if (threads != 0 && threads < max_sessions + 2) {
     throw InvalidArgumentError("--threads must be 0 (automatic) or at least --max-sessions + 2 (" +
-                               std::to_string(max_sessions + 2) +
-                               "): every running session holds one gRPC thread");
+                               std::to_string(max_sessions + 2) + "): the unary calls' handlers");
+  }
+  if (tracking_threads < 0 || tracking_threads > 1024) {
+    throw InvalidArgumentError("--tracking-threads must be in [0, 1024] (0: one per core)");
   }
   if (max_message_bytes < 1024) {
     throw InvalidArgumentError("--max-message-bytes must be at least 1024");
@@ -185,6 +168,8 @@ std::string LocalizerServerOptions::Describe() const {
        << "max-sessions: " << max_sessions << "\n"
        << "threads: " << (threads == 0 ? max_sessions + 8 : threads)
        << (threads == 0 ? " (automatic)" : "") << "\n"
+       << "tracking-threads: " << TrackingPool::ThreadsFor(tracking_threads)
+       << (tracking_threads == 0 ? " (one per core)" : "") << "\n"
        << "max-message-bytes: " << max_message_bytes << "\n"
        << "idle-timeout: " << idle_timeout_s << " s\n"
        << "queue-packets: " << queue_packets << "\n"
@@ -231,14 +216,16 @@ std::string LocalizerServerOptions::Describe() const {
 // ---------------------------------------------------------------------------------------------
 // The service.
 
-class LocalizerServer::Service final : public api::Localizer::Service {
+class LocalizerServer::Service final
+    : public api::Localizer::WithCallbackMethod_Track<api::Localizer::Service> {
  public:
   Service(const LocalizerServerOptions& options, LogFunction log)
       : options_(options),
         session_limits_(options.session_limits()),
         log_(std::move(log)),
         registry_(MapRegistryOptions{options.maps_dir, options.max_map_memory_bytes}),
-        memory_(options.max_memory_bytes) {
+        memory_(options.max_memory_bytes),
+        pool_(TrackingPool::ThreadsFor(options.tracking_threads)) {
     if (options.auth_tokens_file) {
       tokens_ = std::make_unique<TokenFile>(*options.auth_tokens_file,
                                             std::chrono::seconds(options.reload_interval_s),
@@ -427,7 +414,9 @@ class LocalizerServer::Service final : public api::Localizer::Service {
     return grpc::Status::OK;
   }
 
-  grpc::Status Track(grpc::ServerContext* context, TrackServerStream* stream) override;
+  // A Track stream (callback API: no thread of its own; defined below with TrackCall).
+  grpc::ServerBidiReactor<api::TrackRequest, api::TrackResponse>* Track(
+      grpc::CallbackServerContext* context) override;
 
   // Runs on the gRPC handler thread; bounded by --max-camera-pixels (HandleLocate).
   grpc::Status Locate(grpc::ServerContext* context, const api::LocateRequest* request,
@@ -457,7 +446,7 @@ class LocalizerServer::Service final : public api::Localizer::Service {
   }
 
   // Checks the bearer token when tokens are configured; `token` receives it.
-  grpc::Status Authenticate(const grpc::ServerContext& context,
+  grpc::Status Authenticate(const grpc::ServerContextBase& context,
                             std::optional<std::string>* token) const {
     if (!tokens_) return grpc::Status::OK;
     const auto& metadata = context.client_metadata();
@@ -493,6 +482,10 @@ class LocalizerServer::Service final : public api::Localizer::Service {
   const ServerCounters& counters() const { return counters_; }
   const SessionLimits& session_limits() const { return session_limits_; }
   uint64_t NextSessionId() { return ++last_session_id_; }
+  // The tracking workers every session's work runs on.
+  TrackingPool& pool() { return pool_; }
+  // The one timer of every stream's deadlines.
+  SharedTimer& timer() { return timer_; }
 
  private:
   LocalizerServerOptions options_;
@@ -513,29 +506,34 @@ class LocalizerServer::Service final : public api::Localizer::Service {
   std::map<std::string, int> streams_per_peer_;
   std::map<std::string, int> sessions_per_peer_;
   std::map<std::string, int> sessions_per_token_;
+  // Declared last, stopped first: their threads may hold the last reference to a call, whose
+  // destruction releases memory_ reservations.
+  TrackingPool pool_;
+  SharedTimer timer_;
 };
 
 namespace {
 
-// The state of one Track call: its reader (the gRPC handler thread) and its tracking worker,
-// joined by a bounded queue, and a watchdog. The worker writes each pose to the stream itself, as
-// soon as its step has run (no further thread hand-off: on a busy machine every hand-off waits
-// for a core); it is the only writer while the session runs, so the reader never waits for a
-// write (it leaves a Backpressure notice for the worker, which sends it after the item it is
-// tracking). The watchdog cancels the call when the first message does not arrive within the
-// handshake timeout, and when nothing moves (no message read, no item tracked, no response
-// written) for the idle timeout: a client that sends nothing, or that stops reading its responses
-// so that a write blocks, cannot hold a thread or a session forever. The worker asks between
-// steps whether to stop (the reader ended, the drain, the CPU budget), so no request keeps a core
-// busy after its session ended.
-class TrackStream {
+using TrackReactor = grpc::ServerBidiReactor<api::TrackRequest, api::TrackResponse>;
+
+// One Track call on gRPC's callback API: no thread of its own. gRPC's read callback validates and
+// queues each request (a bounded queue: it never waits for tracking); the call is a serial job of
+// the server's tracking pool, which runs its queued requests one per slice (never two workers at
+// once, sessions taking turns) and hands each pose to the stream as soon as its step has run;
+// writes go out one at a time from a short queue of responses (a session whose responses are not
+// being read stops being tracked until they are, so its own queue overflows or its idle timeout
+// ends it); the server's one timer thread checks the call every poll period (handshake timeout,
+// idle timeout, drain). The session opens (map load) on the pool too. Between steps the tracker
+// asks whether to stop (reader ended with an error, the drain, the CPU budget), so no request
+// keeps a core busy after its session ended.
+class TrackCall final : public TrackReactor,
+                        public TrackingPool::Job,
+                        public std::enable_shared_from_this<TrackCall> {
  public:
-  TrackStream(LocalizerServer::Service& service, grpc::ServerContext* context,
-              TrackServerStream* stream)
+  TrackCall(LocalizerServer::Service& service, grpc::CallbackServerContext* context)
       : service_(service),
         options_(service.options()),
         context_(context),
-        stream_(stream),
         inbound_(static_cast<size_t>(options_.queue_packets),
                  static_cast<uint64_t>(options_.queue_events)),
         backpressure_threshold_(
@@ -545,45 +543,201 @@ class TrackStream {
             1, static_cast<uint64_t>(options_.backpressure_fraction *
                                      static_cast<double>(options_.queue_events)))) {}
 
-  // True once the session was accepted (it then logs its own start and end).
-  bool started() const { return id_ != 0; }
-
-  // Runs the call to its end and returns its status.
-  grpc::Status Run() {
-    std::optional<std::string> token;
-    if (grpc::Status status = service_.Authenticate(*context_, &token); !status.ok()) {
-      return status;
+  // Starts the call; `self` owns it until gRPC calls OnDone.
+  void Begin(std::shared_ptr<TrackCall> self) {
+    self_ = std::move(self);
+    call_start_ = Clock::now();
+    last_change_ = call_start_;
+    if (grpc::Status status = service_.Authenticate(*context_, &token_); !status.ok()) {
+      FinishCall(status);
+      return;
     }
     peer_ = PeerHost(context_->peer());
-    if (grpc::Status status = service_.OpenStream(peer_); !status.ok()) return status;
-    struct StreamSlot {
-      LocalizerServer::Service& service;
-      const std::string& peer;
-      ~StreamSlot() { service.CloseStream(peer); }
-    } stream_slot{service_, peer_};
-    std::thread watchdog([this] { WatchdogLoop(); });
-    struct WatchdogStop {
-      TrackStream& stream;
-      std::thread& thread;
-      ~WatchdogStop() {
-        {
-          std::lock_guard<std::mutex> lock(stream.mutex_);
-          stream.session_over_ = true;
-        }
-        stream.watchdog_cv_.notify_all();
-        thread.join();
-      }
-    } watchdog_stop{*this, watchdog};
-    grpc::Status status = RunSession(token);
-    if (handshake_expired_) {
-      status = {grpc::StatusCode::CANCELLED,
-                "no SessionStart within " + std::to_string(options_.handshake_timeout_s) +
-                    " s of the call (evloc-localizer --handshake-timeout)"};
+    if (grpc::Status status = service_.OpenStream(peer_); !status.ok()) {
+      FinishCall(status);
+      return;
     }
-    return status;
+    stream_open_ = true;
+    ScheduleCheck();
+    StartRead(&request_);
+  }
+
+  void OnReadDone(bool ok) override {
+    ++progress_;
+    if (finish_called_) return;
+    if (!handshake_done_) {
+      handshake_done_ = true;
+      Handshake(ok);
+      return;
+    }
+    if (!ok) {
+      grpc::Status status;
+      if (context_->IsCancelled()) {
+        std::lock_guard<std::mutex> lock(mutex_);
+        if (!worker_status_.ok()) {
+          status = worker_status_;
+        } else if (idle_) {
+          status = IdleStatus();
+        } else {
+          status = {grpc::StatusCode::CANCELLED, "the client cancelled or went away"};
+        }
+      }
+      EndReading(status);
+      return;
+    }
+    if (service_.draining()) {
+      EndReading(DrainingStatus());
+      return;
+    }
+    InboundItem item;
+    item.received = Clock::now();
+    if (grpc::Status status = validator_->Accept(request_, &item.item); !status.ok()) {
+      EndReading(status);
+      return;
+    }
+    packets_read_ = validator_->decoder().packets();
+    raw_time_adjustments_ = validator_->decoder().raw_time_adjustments();
+    MemoryBudget& memory = service_.memory();
+    const uint64_t events = item.item.events.size();
+    const int64_t bytes = static_cast<int64_t>(events) * kDecodedEventBytes +
+                          static_cast<int64_t>(item.item.gray.total());
+    std::optional<MemoryBudget::Reservation> reservation = memory.TryReserve(bytes);
+    if (!reservation) {
+      ++service_.counters().limited;
+      EndReading({grpc::StatusCode::RESOURCE_EXHAUSTED,
+                  "the server's memory budget for queued events (" +
+                      std::to_string(memory.limit()) +
+                      " bytes, evloc-localizer --max-memory) is used up; retry later or use "
+                      "another server"});
+      return;
+    }
+    item.reservation = std::move(*reservation);
+    latest_end_t_ns_ = item.item.t_ns;
+    const PushResult pushed = inbound_.TryPush(std::move(item), events);
+    if (pushed == PushResult::kFull) {
+      EndReading(
+          {grpc::StatusCode::RESOURCE_EXHAUSTED,
+           "the session's queue of " + std::to_string(inbound_.capacity()) + " packets / " +
+               std::to_string(inbound_.max_weight()) +
+               " events overflowed: the tracker is slower than the stream; send at real "
+               "time, lower the step rate or max_points, or wait for Backpressure to clear"});
+      return;
+    }
+    if (pushed == PushResult::kClosed) {  // The worker stopped; its status follows.
+      EndReading(grpc::Status::OK);
+      return;
+    }
+    service_.UpdateHealth();
+    NoteQueueLevel();
+    Wake();
+    ReadNext();
+  }
+
+  void OnWriteDone(bool ok) override {
+    api::TrackResponse* next = nullptr;
+    bool finish = false;
+    bool wake = false;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (ok) {
+        ++progress_;
+        if (outbound_.front().pose) write_us_.Add(MicrosecondsSince(write_start_));
+        outbound_.pop_front();
+        wake = outbound_.size() + 1 == kMaxOutbound;  // A session waiting for writes may go on.
+      } else {
+        write_failed_ = true;
+        stop_requested_ = true;
+        outbound_.clear();
+        wake = true;
+      }
+      write_in_flight_ = false;
+      if (!outbound_.empty()) {
+        write_in_flight_ = true;
+        next = PrepareWrite(outbound_.front());
+      } else if (finish_pending_) {
+        finish_pending_ = false;
+        finish = true;
+      }
+    }
+    if (next) StartWrite(next);
+    if (finish) Finish(final_status_);
+    if (wake) Wake();
+  }
+
+  void OnDone() override {
+    {
+      std::lock_guard<std::recursive_mutex> lock(context_mutex_);
+      done_ = true;
+    }
+    std::shared_ptr<TrackCall> self = std::move(self_);  // May destroy the call (last owner).
+  }
+
+  // Runs on a worker of the tracking pool, never two at once: opens the session, then tracks one
+  // queued request per slice; ends the call when the session is over.
+  bool RunSlice() override {
+    if (finish_called_) return false;
+    if (!opened_) {
+      if (!open_requested_) return false;
+      Open();
+      return false;
+    }
+    if (draining_ && !worker_failed_) {
+      // The drain: a session whose client had half-closed and that has nothing left ends with its
+      // SessionEnd, every other one with UNAVAILABLE "draining" (the step it ran was its last).
+      if (!(reader_ended_ && reader_status_.ok() && inbound_.drained())) {
+        FailFromWorker(DrainingStatus());
+      }
+    }
+    if (!worker_failed_ && !write_failed_ && !stop_requested_) {
+      {
+        std::lock_guard<std::mutex> lock(mutex_);
+        if (outbound_.size() >= kMaxOutbound) return false;  // OnWriteDone wakes the job.
+      }
+      if (std::optional<InboundItem> item = inbound_.TryPop()) {
+        Track(*item);
+        return true;  // The next slice tracks the next request or ends the session.
+      }
+    }
+    if (worker_failed_ || write_failed_ || (reader_ended_ && inbound_.drained())) EndSession();
+    return false;
   }
 
  private:
+  using Clock = std::chrono::steady_clock;
+
+  // An item from the stream reader to the tracking pool.
+  struct InboundItem {
+    // The validated request.
+    SessionItem item;
+    // When the reader received the message.
+    Clock::time_point received;
+    // Its share of the server's memory budget (released once tracked, or when dropped).
+    MemoryBudget::Reservation reservation;
+  };
+
+  // A response waiting to be written.
+  struct Outbound {
+    api::TrackResponse response;
+    // A PoseUpdate: its latency is measured when its write starts.
+    bool pose = false;
+    // When its request was received and taken from the queue (poses).
+    Clock::time_point received;
+    Clock::time_point dequeued;
+    // A pose without a trusted estimate (LOST, INITIALIZING, RELOCALIZING).
+    bool no_estimate = false;
+  };
+
+  // Responses a session may have waiting for the stream; beyond it the session is not tracked
+  // until its client reads.
+  static constexpr size_t kMaxOutbound = 64;
+
+  // How long a draining session's call may stay open before it is cancelled.
+  static constexpr auto kDrainReadWait = std::chrono::seconds(1);
+
+  static double MicrosecondsSince(Clock::time_point start) {
+    return std::chrono::duration<double, std::micro>(Clock::now() - start).count();
+  }
+
   // "ipv4:1.2.3.4:5678" -> "ipv4:1.2.3.4", "ipv6:[::1]:5678" -> "ipv6:[::1]": what the per-peer
   // limits count (a client opens each connection from another port).
   static std::string PeerHost(const std::string& peer) {
@@ -599,9 +753,6 @@ class TrackStream {
     return static_cast<double>(now.tv_sec) + 1e-9 * static_cast<double>(now.tv_nsec);
   }
 
-  // How long a draining session waits for its client's next message before it is cancelled.
-  static constexpr auto kDrainReadWait = std::chrono::seconds(1);
-
   // The status of a session stopped by the drain.
   static grpc::Status DrainingStatus() {
     return {grpc::StatusCode::UNAVAILABLE,
@@ -609,229 +760,110 @@ class TrackStream {
             "the last pose received)"};
   }
 
-  // From the first message to the end of the session.
-  grpc::Status RunSession(const std::optional<std::string>& token) {
-    api::TrackRequest request;
-    const bool received = stream_->Read(&request);
-    handshake_done_ = true;
-    ++progress_;
-    if (!received) return {grpc::StatusCode::CANCELLED, "the stream ended before a SessionStart"};
-    if (!request.has_start()) {
-      return {grpc::StatusCode::FAILED_PRECONDITION,
-              "the first message of a Track stream must be a SessionStart"};
-    }
-    const api::SessionStart& start = request.start();
-    if (grpc::Status status = service_.Authorize(token, start.map_name()); !status.ok()) {
-      return status;
-    }
-    // Admission.
-    if (grpc::Status status = service_.AdmitSession(peer_, token); !status.ok()) return status;
-    struct ActiveSlot {
-      LocalizerServer::Service& service;
-      const std::string& peer;
-      const std::optional<std::string>& token;
-      ~ActiveSlot() { service.EndSession(peer, token); }
-    } slot{service_, peer_, token};
-    ServerCounters& counters = service_.counters();
-
-    const auto open_start = Clock::now();
-    OpenedSession opened;
-    if (grpc::Status status =
-            OpenSession(start, service_.registry(), service_.session_limits(), &opened);
-        !status.ok()) {
-      return status;
-    }
-    const std::shared_ptr<const LoadedMap>& map = opened.map;
-    const SessionSettings& settings = opened.settings;
-    tracker_ = std::move(opened.tracker);
-    initial_t_ns_ = settings.initial_t_ns;
-    validator_ = std::make_unique<RequestValidator>(settings, service_.session_limits());
-    id_ = service_.NextSessionId();
-    ++counters.sessions_started;
-    const auto session_start = Clock::now();
-    service_.Log(
-        "session " + std::to_string(id_) + " start: map " + map->name + " version " + map->version +
-        " (" + std::to_string(map->map.size()) + " points), client '" +
-        EscapeForLog(start.client_name()) + "' " + context_->peer() + ", camera " +
-        std::to_string(settings.camera.width) + "x" + std::to_string(settings.camera.height) +
-        ", " + (tracker_->takes_frames() ? "frames" : "events") + ", " +
-        settings.tracker.VariantName() + " at " + std::to_string(settings.tracker.step_rate_hz) +
-        " Hz, opened in " +
-        std::to_string(static_cast<int64_t>(MicrosecondsSince(open_start) / 1000)) + " ms");
-
-    api::TrackResponse started;
-    started.mutable_started()->set_session_id(id_);
-    *started.mutable_started()->mutable_map() = DescribeMap(*map);
-    started.mutable_started()->set_step_rate_hz(settings.tracker.step_rate_hz);
-    started.mutable_started()->set_variant(settings.tracker.VariantName());
-    started.mutable_started()->set_queue_capacity(static_cast<uint32_t>(inbound_.capacity()));
-    if (!stream_->Write(started)) {
-      return {grpc::StatusCode::CANCELLED, "the client went away"};
-    }
-
-    std::thread worker([this] { WorkerLoop(); });
-    grpc::Status status = ReadLoop();
-    // Let the worker track and send what is queued (after an error, a cancellation or the drain:
-    // nothing more, and the step it runs is its last; the watchdog ends a drain that makes no
-    // progress).
-    if (status.ok()) {
-      inbound_.Close();
-    } else {
-      stop_requested_ = true;
-      inbound_.Abort();
-    }
-    worker.join();
-    // A notice left by the reader goes out also when the session ends with an error (an
-    // overflow follows its notice).
-    WritePendingNotice();
-    if (status.ok()) {
-      std::lock_guard<std::mutex> lock(mutex_);
-      if (!worker_status_.ok()) status = worker_status_;
-    }
-    if (status.ok()) {
-      api::TrackResponse end;
-      api::SessionEnd* totals = end.mutable_end();
-      totals->set_packets(validator_->decoder().packets());
-      totals->set_events(events_);
-      totals->set_frames(frames_);
-      totals->set_poses(poses_);
-      totals->set_lost_poses(lost_poses_);
-      totals->set_backpressure_notices(backpressure_notices_);
-      totals->set_raw_time_adjustments(validator_->decoder().raw_time_adjustments());
-      totals->set_duration_s(std::chrono::duration<double>(Clock::now() - session_start).count());
-      totals->set_latency_p50_us(latencies_us_.Percentile(0.5));
-      totals->set_latency_p99_us(latencies_us_.Percentile(0.99));
-      Write(end);
-    }
-    {
-      std::lock_guard<std::mutex> lock(mutex_);
-      if (status.ok() && idle_) status = IdleStatus();
-    }
-    if (status.ok() && write_failed_) {
-      status = grpc::Status(grpc::StatusCode::CANCELLED, "the client went away");
-    }
-    const auto us = [](const wire::LogHistogram& histogram, double fraction) {
-      return std::to_string(static_cast<int64_t>(histogram.Percentile(fraction)));
-    };
-    service_.Log(
-        "session " + std::to_string(id_) + " end: " +
-        (status.ok() ? std::string("OK")
-                     : std::string(wire::StatusCodeName(status.error_code())) + ": " +
-                           EscapeForLog(status.error_message(), 1024)) +
-        "; " + std::to_string(validator_->decoder().packets()) + " packets, " +
-        std::to_string(events_) + " events, " + std::to_string(frames_) + " frames, " +
-        std::to_string(poses_) + " poses (" + std::to_string(lost_poses_) + " LOST), latency p50 " +
-        us(latencies_us_, 0.5) + " us p99 " + us(latencies_us_, 0.99) + " us (in the queue p50 " +
-        us(queue_us_, 0.5) + " p99 " + us(queue_us_, 0.99) + " us; stream write p50 " +
-        us(write_us_, 0.5) + " p99 " + us(write_us_, 0.99) + " us), " +
-        std::to_string(backpressure_notices_) + " backpressure notices, " +
-        std::to_string(cpu_used_s_.load()) + " CPU s, " +
-        std::to_string(std::chrono::duration<double>(Clock::now() - session_start).count()) + " s");
-    return status;
-  }
-
-  // The status of a session the watchdog cancelled.
+  // The status of a session the idle check cancelled.
   grpc::Status IdleStatus() const {
     return {grpc::StatusCode::CANCELLED,
             "nothing received, tracked or sent for " + std::to_string(options_.idle_timeout_s) +
                 " s (idle timeout: the client sent nothing or stopped reading its responses)"};
   }
 
-  // Until the call is over: cancels it (once) when the first message did not arrive within the
-  // handshake timeout, or when progress_ did not change for the idle timeout; passes the drain
-  // on to the worker (stop_requested_) and cancels a call still waiting for its first message.
-  void WatchdogLoop() {
-    const auto seconds = [](double s) {
-      return std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(s));
-    };
-    const auto limit = seconds(options_.idle_timeout_s);
-    const auto handshake_limit = seconds(options_.handshake_timeout_s);
-    const auto poll = std::min<Clock::duration>(std::min(limit, handshake_limit) / 10,
-                                                std::chrono::milliseconds(100));
-    const auto call_start = Clock::now();
-    std::optional<Clock::time_point> drain_start;
-    uint64_t last_progress = progress_.load();
-    auto last_change = Clock::now();
-    bool cancelled = false;
-    std::unique_lock<std::mutex> lock(mutex_);
-    while (!watchdog_cv_.wait_for(lock, poll, [&] { return session_over_; })) {
-      if (service_.draining()) {
-        stop_requested_ = true;
-        draining_ = true;
-        if (!drain_start) drain_start = Clock::now();
-        // A stream without a session ends at once; a session whose client sends nothing (the
-        // reader waits for its next message to answer "draining") is cancelled after 1 s.
-        if (!cancelled && (!handshake_done_ || Clock::now() - *drain_start > kDrainReadWait)) {
-          cancelled = true;
-          context_->TryCancel();
-        }
-      }
-      if (!handshake_done_) {
-        if (!cancelled && Clock::now() - call_start > handshake_limit) {
-          cancelled = true;
-          handshake_expired_ = true;
-          ++service_.counters().limited;
-          context_->TryCancel();
-        }
-        continue;
-      }
-      const uint64_t progress = progress_.load();
-      if (progress != last_progress) {
-        last_progress = progress;
-        last_change = Clock::now();
-      } else if (!idle_ && !cancelled && Clock::now() - last_change > limit) {
-        idle_ = true;
-        cancelled = true;
-        context_->TryCancel();
-      }
-    }
+  void Wake() { service_.pool().Wake(shared_from_this()); }
+
+  // Starts reading the next request unless the call is finishing (the pool may end the call
+  // while gRPC's read callback runs).
+  void ReadNext() {
+    std::lock_guard<std::recursive_mutex> lock(read_mutex_);
+    if (!finish_called_) StartRead(&request_);
   }
 
-  // Reads messages until the client half-closes (OK) or something is wrong (its status).
-  grpc::Status ReadLoop() {
-    api::TrackRequest request;
-    MemoryBudget& memory = service_.memory();
-    while (stream_->Read(&request)) {
-      ++progress_;
-      if (service_.draining()) return DrainingStatus();
-      InboundItem item;
-      item.received = Clock::now();
-      if (grpc::Status status = validator_->Accept(request, &item.item); !status.ok()) {
-        return status;
+  // The first message: a SessionStart that the token may use, and a free slot; the session is
+  // then opened on the pool (it may load a map).
+  void Handshake(bool received) {
+    if (!received) {
+      if (handshake_expired_) {
+        FinishCall({grpc::StatusCode::CANCELLED,
+                    "no SessionStart within " + std::to_string(options_.handshake_timeout_s) +
+                        " s of the call (evloc-localizer --handshake-timeout)"});
+      } else {
+        FinishCall({grpc::StatusCode::CANCELLED, "the stream ended before a SessionStart"});
       }
-      const uint64_t events = item.item.events.size();
-      const int64_t bytes = static_cast<int64_t>(events) * kDecodedEventBytes +
-                            static_cast<int64_t>(item.item.gray.total());
-      std::optional<MemoryBudget::Reservation> reservation = memory.TryReserve(bytes);
-      if (!reservation) {
-        ++service_.counters().limited;
-        return {grpc::StatusCode::RESOURCE_EXHAUSTED,
-                "the server's memory budget for queued events (" + std::to_string(memory.limit()) +
-                    " bytes, evloc-localizer --max-memory) is used up; retry later or use "
-                    "another server"};
-      }
-      item.reservation = std::move(*reservation);
-      latest_end_t_ns_ = item.item.t_ns;
-      const PushResult pushed = inbound_.TryPush(std::move(item), events);
-      if (pushed == PushResult::kFull) {
-        return {grpc::StatusCode::RESOURCE_EXHAUSTED,
-                "the session's queue of " + std::to_string(inbound_.capacity()) + " packets / " +
-                    std::to_string(inbound_.max_weight()) +
-                    " events overflowed: the tracker is slower than the stream; send at real "
-                    "time, lower the step rate or max_points, or wait for Backpressure to clear"};
-      }
-      if (pushed == PushResult::kClosed) break;  // The worker stopped; its status follows.
-      service_.UpdateHealth();
-      NoteQueueLevel();
+      return;
     }
-    if (context_->IsCancelled()) {
+    if (!request_.has_start()) {
+      FinishCall({grpc::StatusCode::FAILED_PRECONDITION,
+                  "the first message of a Track stream must be a SessionStart"});
+      return;
+    }
+    if (grpc::Status status = service_.Authorize(token_, request_.start().map_name());
+        !status.ok()) {
+      FinishCall(status);
+      return;
+    }
+    if (grpc::Status status = service_.AdmitSession(peer_, token_); !status.ok()) {
+      FinishCall(status);
+      return;
+    }
+    admitted_ = true;
+    start_ = request_.start();
+    open_requested_ = true;
+    Wake();
+  }
+
+  // Opens the session (on the pool): map, settings, tracker; sends SessionStarted and starts
+  // reading the requests.
+  void Open() {
+    const auto open_start = Clock::now();
+    OpenedSession opened;
+    if (grpc::Status status =
+            OpenSession(start_, service_.registry(), service_.session_limits(), &opened);
+        !status.ok()) {
+      FinishCall(status);
+      return;
+    }
+    ++progress_;
+    const std::shared_ptr<const LoadedMap>& map = opened.map;
+    const SessionSettings& settings = opened.settings;
+    tracker_ = std::move(opened.tracker);
+    initial_t_ns_ = settings.initial_t_ns;
+    validator_ = std::make_unique<RequestValidator>(settings, service_.session_limits());
+    id_ = service_.NextSessionId();
+    ++service_.counters().sessions_started;
+    session_start_ = Clock::now();
+    service_.Log(
+        "session " + std::to_string(id_) + " start: map " + map->name + " version " + map->version +
+        " (" + std::to_string(map->map.size()) + " points), client '" +
+        EscapeForLog(start_.client_name()) + "' " + context_->peer() + ", camera " +
+        std::to_string(settings.camera.width) + "x" + std::to_string(settings.camera.height) +
+        ", " + (tracker_->takes_frames() ? "frames" : "events") + ", " +
+        settings.tracker.VariantName() + " at " + std::to_string(settings.tracker.step_rate_hz) +
+        " Hz, opened in " +
+        std::to_string(static_cast<int64_t>(MicrosecondsSince(open_start) / 1000)) + " ms");
+    api::TrackResponse started;
+    started.mutable_started()->set_session_id(id_);
+    *started.mutable_started()->mutable_map() = DescribeMap(*map);
+    started.mutable_started()->set_step_rate_hz(settings.tracker.step_rate_hz);
+    started.mutable_started()->set_variant(settings.tracker.VariantName());
+    started.mutable_started()->set_queue_capacity(static_cast<uint32_t>(inbound_.capacity()));
+    Send(std::move(started));
+    opened_ = true;
+    ReadNext();
+  }
+
+  // The reader is done (`status` OK: the client half-closed; else the status that ends the
+  // session): what is queued is tracked (OK) or dropped, and the pool ends the session.
+  void EndReading(grpc::Status status) {
+    {
       std::lock_guard<std::mutex> lock(mutex_);
-      if (!worker_status_.ok()) return worker_status_;
-      if (idle_) return IdleStatus();
-      return {grpc::StatusCode::CANCELLED, "the client cancelled or went away"};
+      reader_status_ = std::move(status);
     }
-    std::lock_guard<std::mutex> lock(mutex_);
-    return worker_status_;
+    if (reader_status_.ok()) {
+      inbound_.Close();
+    } else {
+      stop_requested_ = true;
+      inbound_.Abort();
+    }
+    reader_ended_ = true;
+    Wake();
   }
 
   // Sends a Backpressure notice when the queue crosses the threshold, in packets or in events
@@ -855,44 +887,65 @@ class TrackStream {
     notice.mutable_backpressure()->set_queue_capacity(static_cast<uint32_t>(inbound_.capacity()));
     notice.mutable_backpressure()->set_behind_ns(latest_end_t_ns_ - tracked_end_t_ns_.load());
     ++backpressure_notices_;
-    // The reader must keep reading: the worker sends the notice after the item it is tracking.
+    // The reader must keep reading: the pool sends the notice after the request it is tracking.
     std::lock_guard<std::mutex> lock(notice_mutex_);
     pending_notice_ = std::move(notice);  // A newer notice replaces one not sent yet.
   }
 
-  // Writes a pending Backpressure notice, if any; false when the client is gone. Only one thread
-  // writes at a time: Run before the worker starts and after it joined, the worker in between.
-  bool WritePendingNotice() {
+  // Queues a pending Backpressure notice, if any, for writing.
+  void SendPendingNotice() {
     std::optional<api::TrackResponse> notice;
     {
       std::lock_guard<std::mutex> lock(notice_mutex_);
       notice.swap(pending_notice_);
     }
-    return !notice || WriteNow(*notice);
+    if (notice) Send(std::move(*notice));
   }
 
-  // Writes a pending notice, then `response`; false when the client is gone (same thread rule).
-  bool Write(const api::TrackResponse& response) {
-    return WritePendingNotice() && WriteNow(response);
-  }
-
-  // Writes `response` to the stream; false when the client is gone.
-  bool WriteNow(const api::TrackResponse& response) {
-    if (write_failed_) return false;
-    if (!stream_->Write(response)) {
-      write_failed_ = true;
-      return false;
+  // Queues `response` for writing and starts the write when none is in flight (dropped once a
+  // write failed: the client is gone). A pose carries when its request was received and taken
+  // from the queue, and whether it has no trusted pose.
+  void Send(api::TrackResponse response, bool pose = false, Clock::time_point received = {},
+            Clock::time_point dequeued = {}, bool no_estimate = false) {
+    api::TrackResponse* next = nullptr;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (write_failed_) return;
+      outbound_.push_back({std::move(response), pose, received, dequeued, no_estimate});
+      if (write_in_flight_) return;
+      write_in_flight_ = true;
+      next = PrepareWrite(outbound_.front());
     }
-    ++progress_;
-    return true;
+    // The element stays in place while others are queued behind it; only OnWriteDone of this
+    // write removes it.
+    StartWrite(next);
   }
 
-  // Asked by the tracker between steps (worker thread): true to stop (the reader ended or the
-  // drain: stop_requested_; the CPU budget: cpu_exceeded_).
+  // Just before `next` is handed to gRPC (mutex_ held): a pose gets its latency (received to
+  // handed to gRPC) and is counted. Returns the message to write.
+  api::TrackResponse* PrepareWrite(Outbound& next) {
+    if (next.pose) {
+      write_start_ = Clock::now();
+      ServerCounters& counters = service_.counters();
+      const double latency_us =
+          std::chrono::duration<double, std::micro>(write_start_ - next.received).count();
+      next.response.mutable_pose()->set_latency_us(latency_us);
+      latencies_us_.Add(latency_us);
+      queue_us_.Add(
+          std::chrono::duration<double, std::micro>(next.dequeued - next.received).count());
+      counters.RecordLatency(latency_us);
+      ++counters.poses;
+      if (next.no_estimate) ++counters.lost_poses;
+    }
+    return &next.response;
+  }
+
+  // Asked by the tracker between steps: true to stop (the reader ended with an error, the
+  // drain, a failed write: stop_requested_; the CPU budget: cpu_exceeded_).
   bool ShouldStop() {
     ++progress_;  // A step ran: the session is alive even when one packet takes long.
     if (stop_requested_) return true;
-    const double used = ThreadCpuSeconds() - worker_cpu_start_s_;
+    const double used = cpu_before_item_s_ + (ThreadCpuSeconds() - item_cpu_start_s_);
     cpu_used_s_ = used;
     const double tracked_s =
         std::max(0.0, static_cast<double>(tracker_->advanced_t_ns() - initial_t_ns_) * 1e-9);
@@ -903,172 +956,326 @@ class TrackStream {
     return false;
   }
 
-  // Ends the session from the worker with `status`: the reader stops at its next message.
+  // Ends the session from the pool with `status` (the reader stops at its next message).
   void FailFromWorker(grpc::Status status) {
     {
       std::lock_guard<std::mutex> lock(mutex_);
       worker_status_ = std::move(status);
     }
+    worker_failed_ = true;
     inbound_.Abort();
   }
 
-  // Tracks the queued items in order and writes each pose as soon as its step has run.
-  void WorkerLoop() {
+  // Tracks one queued request and queues its poses for writing.
+  void Track(InboundItem& item) {
     ServerCounters& counters = service_.counters();
-    worker_cpu_start_s_ = ThreadCpuSeconds();
-    const SessionTracker::StopFunction stop = [this] { return ShouldStop(); };
-    api::TrackResponse response;
-    while (true) {
-      bool timed_out = false;
-      std::optional<InboundItem> item = inbound_.Pop(std::chrono::seconds(1), &timed_out);
-      if (!item) {
-        if (timed_out) continue;  // The watchdog handles an idle session.
-        return;
-      }
-      const auto dequeued = Clock::now();
-      std::vector<tracking::PoseEstimate> estimates;
-      try {
-        estimates = tracker_->Process(item->item, stop);
-      } catch (const std::exception& error) {
-        service_.Log("session " + std::to_string(id_) +
-                     " tracking failed: " + EscapeForLog(error.what(), 1024));
-        FailFromWorker(grpc::Status(
-            grpc::StatusCode::INTERNAL,
-            ScrubServerPaths(std::string("tracking failed: ") + error.what(), options_.maps_dir)));
-        context_->TryCancel();
-        return;
-      }
-      item->reservation.Release();
-      service_.UpdateHealth();
-      if (item->item.kind == SessionItem::Kind::kFrame) ++frames_;
-      events_ += item->item.events.size();
-      counters.events += static_cast<int64_t>(item->item.events.size());
-      tracked_end_t_ns_ = item->item.t_ns;
-      ++progress_;
-      if (!WritePendingNotice()) {
-        inbound_.Abort();
-        return;
-      }
-      for (const tracking::PoseEstimate& estimate : estimates) {
-        *response.mutable_pose() = PoseUpdateFromEstimate(estimate);
-        ++poses_;
-        ++counters.poses;
-        if (tracking::HasNoEstimate(estimate.status)) {
-          ++lost_poses_;
-          ++counters.lost_poses;
-        }
-        queue_us_.Add(std::chrono::duration<double, std::micro>(dequeued - item->received).count());
-        const auto write_start = Clock::now();
-        const double latency_us =
-            std::chrono::duration<double, std::micro>(write_start - item->received).count();
-        response.mutable_pose()->set_latency_us(latency_us);
-        latencies_us_.Add(latency_us);
-        counters.RecordLatency(latency_us);
-        if (!Write(response)) {
-          inbound_.Abort();
-          return;
-        }
-        write_us_.Add(MicrosecondsSince(write_start));
-      }
-      if (tracker_->stopped()) {
-        if (cpu_exceeded_) {
-          ++counters.limited;
-          FailFromWorker({grpc::StatusCode::RESOURCE_EXHAUSTED,
-                          "the session used " + std::to_string(cpu_used_s_.load()) +
-                              " CPU s, over its budget of " +
-                              std::to_string(options_.session_cpu_grace_s) + " s + " +
-                              std::to_string(options_.session_cpu_per_second) +
-                              " CPU s per second of session time tracked (evloc-localizer "
-                              "--session-cpu-budget): lower the step rate or max_points"});
-        } else if (draining_) {
-          FailFromWorker(DrainingStatus());
-        } else {
-          inbound_.Abort();  // The reader ended the session; its status stands.
-        }
-        return;
+    const auto dequeued = Clock::now();
+    std::vector<tracking::PoseEstimate> estimates;
+    item_cpu_start_s_ = ThreadCpuSeconds();
+    try {
+      estimates = tracker_->Process(item.item, [this] { return ShouldStop(); });
+    } catch (const std::exception& error) {
+      service_.Log("session " + std::to_string(id_) +
+                   " tracking failed: " + EscapeForLog(error.what(), 1024));
+      FailFromWorker(grpc::Status(
+          grpc::StatusCode::INTERNAL,
+          ScrubServerPaths(std::string("tracking failed: ") + error.what(), options_.maps_dir)));
+      return;
+    }
+    cpu_before_item_s_ += ThreadCpuSeconds() - item_cpu_start_s_;
+    cpu_used_s_ = cpu_before_item_s_;
+    item.reservation.Release();
+    service_.UpdateHealth();
+    if (item.item.kind == SessionItem::Kind::kFrame) ++frames_;
+    events_ += item.item.events.size();
+    counters.events += static_cast<int64_t>(item.item.events.size());
+    tracked_end_t_ns_ = item.item.t_ns;
+    ++progress_;
+    SendPendingNotice();
+    for (const tracking::PoseEstimate& estimate : estimates) {
+      api::TrackResponse response;
+      *response.mutable_pose() = PoseUpdateFromEstimate(estimate);
+      const bool no_estimate = tracking::HasNoEstimate(estimate.status);
+      ++poses_;
+      lost_poses_ += no_estimate ? 1 : 0;
+      Send(std::move(response), true, item.received, dequeued, no_estimate);
+    }
+    if (tracker_->stopped()) {
+      if (cpu_exceeded_) {
+        ++counters.limited;
+        FailFromWorker({grpc::StatusCode::RESOURCE_EXHAUSTED,
+                        "the session used " + std::to_string(cpu_used_s_.load()) +
+                            " CPU s, over its budget of " +
+                            std::to_string(options_.session_cpu_grace_s) + " s + " +
+                            std::to_string(options_.session_cpu_per_second) +
+                            " CPU s per second of session time tracked (evloc-localizer "
+                            "--session-cpu-budget): lower the step rate or max_points"});
+      } else if (draining_) {
+        FailFromWorker(DrainingStatus());
+      } else {
+        inbound_.Abort();  // The reader ended the session (or a write failed); its status stands.
       }
     }
   }
 
+  // Ends an opened session (on the pool): its SessionEnd when it ended well, the log line, the
+  // final status.
+  void EndSession() {
+    grpc::Status status;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      status = reader_ended_ && !reader_status_.ok() ? reader_status_ : worker_status_;
+    }
+    // A notice left by the reader goes out also when the session ends with an error (an
+    // overflow follows its notice).
+    SendPendingNotice();
+    if (status.ok()) {
+      api::TrackResponse end;
+      api::SessionEnd* totals = end.mutable_end();
+      totals->set_packets(packets_read_);
+      totals->set_events(events_);
+      totals->set_frames(frames_);
+      totals->set_backpressure_notices(backpressure_notices_);
+      totals->set_raw_time_adjustments(raw_time_adjustments_);
+      totals->set_duration_s(std::chrono::duration<double>(Clock::now() - session_start_).count());
+      totals->set_poses(poses_);
+      totals->set_lost_poses(lost_poses_);
+      {
+        // Of the poses handed to gRPC so far (all but the last few queued behind a write).
+        std::lock_guard<std::mutex> lock(mutex_);
+        totals->set_latency_p50_us(latencies_us_.Percentile(0.5));
+        totals->set_latency_p99_us(latencies_us_.Percentile(0.99));
+      }
+      Send(std::move(end));
+    }
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (status.ok() && idle_) status = IdleStatus();
+      if (status.ok() && write_failed_) {
+        status = grpc::Status(grpc::StatusCode::CANCELLED, "the client went away");
+      }
+    }
+    const auto us = [](const wire::LogHistogram& histogram, double fraction) {
+      return std::to_string(static_cast<int64_t>(histogram.Percentile(fraction)));
+    };
+    std::string figures;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      figures = "latency p50 " + us(latencies_us_, 0.5) + " us p99 " + us(latencies_us_, 0.99) +
+                " us (in the queue p50 " + us(queue_us_, 0.5) + " p99 " + us(queue_us_, 0.99) +
+                " us; stream write p50 " + us(write_us_, 0.5) + " p99 " + us(write_us_, 0.99) +
+                " us)";
+    }
+    end_log_ =
+        "session " + std::to_string(id_) + " end: " +
+        (status.ok() ? std::string("OK")
+                     : std::string(wire::StatusCodeName(status.error_code())) + ": " +
+                           EscapeForLog(status.error_message(), 1024)) +
+        "; " + std::to_string(packets_read_.load()) + " packets, " + std::to_string(events_) +
+        " events, " + std::to_string(frames_) + " frames, " + std::to_string(poses_) + " poses (" +
+        std::to_string(lost_poses_) + " LOST), " + figures + ", " +
+        std::to_string(backpressure_notices_) + " backpressure notices, " +
+        std::to_string(cpu_used_s_.load()) + " CPU s, " +
+        std::to_string(std::chrono::duration<double>(Clock::now() - session_start_).count()) + " s";
+    FinishCall(status);
+  }
+
+  // Ends the call with `status` (once): frees its session and stream slots, counts and logs it,
+  // and finishes the stream once the responses queued before it are written.
+  void FinishCall(const grpc::Status& status) {
+    {
+      // No read starts after this (ReadNext); one already started is allowed with Finish.
+      std::lock_guard<std::recursive_mutex> lock(read_mutex_);
+      if (finish_called_.exchange(true)) return;
+    }
+    if (admitted_) service_.EndSession(peer_, token_);
+    if (stream_open_) service_.CloseStream(peer_);
+    const grpc::Status client_status = service_.ForClient(status);
+    if (!client_status.ok()) {
+      ++service_.counters().rejected;
+      if (id_ == 0) {
+        service_.Log("Track from " + context_->peer() +
+                     " refused: " + wire::StatusCodeName(client_status.error_code()) + ": " +
+                     EscapeForLog(client_status.error_message(), 1024));
+      }
+    }
+    if (!end_log_.empty()) service_.Log(end_log_);
+    bool finish = false;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      final_status_ = client_status;
+      if (write_in_flight_ || !outbound_.empty()) {
+        finish_pending_ = true;
+      } else {
+        finish = true;
+      }
+    }
+    if (finish) Finish(final_status_);
+  }
+
+  // Schedules the next check of the call on the server's timer.
+  void ScheduleCheck() {
+    const auto seconds = [](double s) {
+      return std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(s));
+    };
+    const auto poll = std::min<Clock::duration>(
+        std::min(seconds(options_.idle_timeout_s), seconds(options_.handshake_timeout_s)) / 10,
+        std::chrono::milliseconds(100));
+    service_.timer().Schedule(Clock::now() + poll, [weak = weak_from_this()] {
+      if (std::shared_ptr<TrackCall> call = weak.lock()) call->Check();
+    });
+  }
+
+  // On the timer thread, every poll period until the call is done: cancels the call (once) when
+  // the first message did not arrive within the handshake timeout, or when progress_ did not
+  // change for the idle timeout; passes the drain on to the session (stop_requested_) and
+  // cancels a call still waiting for its first message, or still open 1 s into the drain.
+  void Check() {
+    std::lock_guard<std::recursive_mutex> lock(context_mutex_);
+    if (done_) return;
+    const auto seconds = [](double s) {
+      return std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(s));
+    };
+    const auto now = Clock::now();
+    if (service_.draining()) {
+      if (!draining_) {
+        draining_ = true;
+        stop_requested_ = true;
+        drain_start_ = now;
+        Wake();
+      }
+      if (!cancelled_ && (!handshake_done_ || now - drain_start_ > kDrainReadWait)) {
+        cancelled_ = true;
+        context_->TryCancel();
+      }
+    }
+    if (!handshake_done_) {
+      if (!cancelled_ && now - call_start_ > seconds(options_.handshake_timeout_s)) {
+        cancelled_ = true;
+        handshake_expired_ = true;
+        ++service_.counters().limited;
+        context_->TryCancel();
+      }
+    } else {
+      const uint64_t progress = progress_.load();
+      if (progress != last_progress_) {
+        last_progress_ = progress;
+        last_change_ = now;
+      } else if (!cancelled_ && now - last_change_ > seconds(options_.idle_timeout_s)) {
+        {
+          std::lock_guard<std::mutex> state(mutex_);
+          idle_ = true;
+        }
+        cancelled_ = true;
+        context_->TryCancel();
+      }
+    }
+    ScheduleCheck();
+  }
+
   LocalizerServer::Service& service_;
   const LocalizerServerOptions& options_;
-  grpc::ServerContext* context_;
-  TrackServerStream* stream_;
-  // The peer's host (per-peer limits).
+  grpc::CallbackServerContext* context_;
+  // Owns the call from Begin until OnDone.
+  std::shared_ptr<TrackCall> self_;
+  // The bearer token (with tokens) and the peer's host (per-peer limits).
+  std::optional<std::string> token_;
   std::string peer_;
-  uint64_t id_ = 0;
+  bool stream_open_ = false;
+  std::atomic<bool> admitted_{false};
+  // The request being read (one read at a time).
+  api::TrackRequest request_;
+  // The SessionStart, for the pool to open the session.
+  api::SessionStart start_;
+  std::atomic<bool> open_requested_{false};
+  std::atomic<bool> opened_{false};
+  std::atomic<uint64_t> id_{0};
   std::unique_ptr<SessionTracker> tracker_;
   std::unique_ptr<RequestValidator> validator_;
   int64_t initial_t_ns_ = 0;
+  Clock::time_point session_start_;
   BoundedQueue<InboundItem> inbound_;
 
-  // Reader state.
+  // Reader state (gRPC's read callbacks, one at a time).
   size_t backpressure_threshold_;
   uint64_t backpressure_event_threshold_;
   bool backpressure_armed_ = true;
   int64_t latest_end_t_ns_ = 0;
-  uint64_t backpressure_notices_ = 0;
+  std::atomic<uint64_t> backpressure_notices_{0};
+  std::atomic<bool> reader_ended_{false};
+  // The decoder's figures (the pool reads them at the end, while the reader may still run).
+  std::atomic<uint64_t> packets_read_{0};
+  std::atomic<uint64_t> raw_time_adjustments_{0};
 
-  // Worker state (read by the reader after the worker joined, except tracked_end_t_ns_).
+  // Tracking state (the pool, one slice at a time).
   std::atomic<int64_t> tracked_end_t_ns_{0};
   uint64_t events_ = 0;
   uint64_t frames_ = 0;
   uint64_t poses_ = 0;
   uint64_t lost_poses_ = 0;
-  double worker_cpu_start_s_ = 0;
+  double cpu_before_item_s_ = 0;
+  double item_cpu_start_s_ = 0;
   std::atomic<double> cpu_used_s_{0};
   bool cpu_exceeded_ = false;
+  std::atomic<bool> worker_failed_{false};
+  std::string end_log_;
 
-  // Per pose: latency (received to handed to gRPC), time the packet waited in the queue, time
-  // of the stream write; microseconds, fixed-size histograms (written by the worker, read after
-  // it joined).
-  wire::LogHistogram latencies_us_;
-  wire::LogHistogram queue_us_;
-  wire::LogHistogram write_us_;
-
-  // Set when a stream write failed (the client is gone).
-  std::atomic<bool> write_failed_{false};
-  // A Backpressure notice from the reader that the worker has not sent yet (guarded by
+  // A Backpressure notice from the reader that the pool has not sent yet (guarded by
   // notice_mutex_).
   std::mutex notice_mutex_;
   std::optional<api::TrackResponse> pending_notice_;
 
   // Set once the first message arrived (or the stream ended before it).
   std::atomic<bool> handshake_done_{false};
-  // Set by the watchdog when it cancelled a call without a first message in time.
+  // Set by the check when it cancelled a call without a first message in time.
   std::atomic<bool> handshake_expired_{false};
-  // Asks the worker to stop after its current step (the reader ended with an error, the drain).
+  // Asks the tracker to stop after its current step (the reader ended with an error, the drain,
+  // a failed write).
   std::atomic<bool> stop_requested_{false};
-  // Set by the watchdog when the server drains.
+  // Set by the check when the server drains.
   std::atomic<bool> draining_{false};
-
-  // Shared between threads: messages read + items tracked + responses written (the watchdog's
-  // sign of life); the rest is guarded by mutex_.
+  // Set once FinishCall ran (under read_mutex_, which ReadNext holds to start a read).
+  std::atomic<bool> finish_called_{false};
+  std::recursive_mutex read_mutex_;
+  // Messages read + items tracked + responses written: the idle check's sign of life.
   std::atomic<uint64_t> progress_{0};
+
+  // The idle check's state (the timer thread only).
+  Clock::time_point call_start_;
+  uint64_t last_progress_ = 0;
+  Clock::time_point last_change_;
+  Clock::time_point drain_start_;
+  bool cancelled_ = false;
+
+  // Guards the context against OnDone: the check cancels only a call that is not done.
+  std::recursive_mutex context_mutex_;
+  bool done_ = false;
+
+  // The rest is guarded by mutex_: statuses, the responses waiting to be written and the
+  // per-pose figures (latency: received to handed to gRPC; time in the queue; stream write),
+  // microseconds, fixed-size histograms.
   std::mutex mutex_;
-  std::condition_variable watchdog_cv_;
+  grpc::Status reader_status_;
   grpc::Status worker_status_;
-  // Set by the watchdog when it cancelled the call.
+  grpc::Status final_status_;
   bool idle_ = false;
-  // Set by Run when the call is over (stops the watchdog).
-  bool session_over_ = false;
+  std::deque<Outbound> outbound_;
+  bool write_in_flight_ = false;
+  bool finish_pending_ = false;
+  // Set when a write failed (the client is gone); atomic for the pool's unlocked checks.
+  std::atomic<bool> write_failed_{false};
+  Clock::time_point write_start_;
+  wire::LogHistogram latencies_us_;
+  wire::LogHistogram queue_us_;
+  wire::LogHistogram write_us_;
 };
 
 }  // namespace
 
-grpc::Status LocalizerServer::Service::Track(grpc::ServerContext* context,
-                                             TrackServerStream* stream) {
-  TrackStream session(*this, context, stream);
-  grpc::Status status = ForClient(session.Run());
-  if (!status.ok()) {
-    ++counters_.rejected;
-    if (!session.started()) {
-      Log("Track from " + context->peer() +
-          " refused: " + wire::StatusCodeName(status.error_code()) + ": " +
-          EscapeForLog(status.error_message(), 1024));
-    }
-  }
-  return status;
+TrackReactor* LocalizerServer::Service::Track(grpc::CallbackServerContext* context) {
+  auto call = std::make_shared<TrackCall>(*this, context);
+  call->Begin(call);
+  return call.get();
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -1,6 +1,7 @@
 // The evloc localizer gRPC server (proto/evloc/localizer.proto, docs/api.md): the Localizer
-// service over a MapRegistry, with one TrackStream object per Track call, gRPC health checking
-// and server reflection. Library code: it logs through a callback and throws typed errors.
+// service over a MapRegistry, with one TrackCall object per Track call (gRPC's callback API, its
+// work on a fixed pool of tracking workers, its deadlines on one shared timer), gRPC health
+// checking and server reflection. Library code: it logs through a callback and throws typed errors.
 #pragma once
 
 #include <array>
@@ -35,9 +36,13 @@ struct LocalizerServerOptions {
   std::string listen_address = "127.0.0.1:50051";
   // Most Track sessions running at once; more get RESOURCE_EXHAUSTED (--max-sessions).
   int max_sessions = 8;
-  // Most threads gRPC may use for request handlers, each running Track stream holding one;
-  // 0: max_sessions + 8 (--threads). Each session also runs a tracking and a writer thread.
+  // Most threads gRPC may use for the handlers of the unary calls (ListMaps, GetMap, Locate);
+  // 0: max_sessions + 8 (--threads). Track streams hold no thread (gRPC's callback API): their
+  // work runs on the tracking pool below.
   int threads = 0;
+  // Tracking workers shared by every session (a session runs on one at a time, sessions take
+  // turns one request each); 0: one per core (--tracking-threads).
+  int tracking_threads = 0;
   // Largest request message accepted, bytes; larger ones get RESOURCE_EXHAUSTED
   // (--max-message-bytes).
   int max_message_bytes = 4 << 20;
@@ -94,7 +99,7 @@ struct LocalizerServerOptions {
   // and no session is admitted while 3/4 of it is used. gRPC's own buffers get a ResourceQuota
   // of the same size, at least 16 x max_message_bytes (--max-memory).
   int64_t max_memory_bytes = int64_t{1} << 30;
-  // CPU budget of a session's tracking thread: CPU seconds per second of session time tracked,
+  // CPU budget of a session's tracking: CPU seconds per second of session time tracked,
   // beyond session_cpu_grace_s; a session over it ends with RESOURCE_EXHAUSTED
   // (--session-cpu-budget).
   double session_cpu_per_second = 8.0;

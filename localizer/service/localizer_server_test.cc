@@ -4,8 +4,10 @@
 
 #include <chrono>
 #include <condition_variable>
+#include <filesystem>
 #include <fstream>
 #include <future>
+#include <iostream>
 #include <thread>
 
 #include <arpa/inet.h>
@@ -559,6 +561,57 @@ TEST_F(LocalizerServerTest, StreamsPerPeerAreLimited) {
   EXPECT_NE(status.error_message().find("--max-streams-per-peer"), std::string::npos);
   first_context.TryCancel();
   second_context.TryCancel();
+}
+
+// Issue 16: a stream holds no thread of the server (gRPC's callback API, the tracking pool, one
+// timer): 24 silent streams and 12 running sessions add far fewer threads to the process than
+// the 3 per session and 1 per stream of a thread-per-stream server (72 here).
+int ThreadsOfThisProcess() {
+  int count = 0;
+  for ([[maybe_unused]] const auto& entry :
+       std::filesystem::directory_iterator("/proc/self/task")) {
+    ++count;
+  }
+  return count;
+}
+
+TEST_F(LocalizerServerTest, StreamsAndSessionsHoldNoThreads) {
+  StartServer([](LocalizerServerOptions& options) {
+    options.max_sessions = 12;
+    options.max_streams_per_peer = 64;
+    options.max_streams_per_connection = 64;
+    options.handshake_timeout_s = 30;
+    options.tracking_threads = 2;
+  });
+  // A first session: gRPC's own threads and the server's first-call costs are counted before.
+  EXPECT_TRUE(RunTrack(*stub_, ShortSession()).status.ok());
+  const int before = ThreadsOfThisProcess();
+  constexpr int kSilent = 24;
+  constexpr int kSessions = 12;
+  std::vector<std::unique_ptr<grpc::ClientContext>> contexts;
+  std::vector<std::unique_ptr<grpc::ClientReaderWriter<api::TrackRequest, api::TrackResponse>>>
+      streams;
+  for (int i = 0; i < kSilent + kSessions; ++i) {
+    contexts.push_back(std::make_unique<grpc::ClientContext>());
+    contexts.back()->set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(60));
+    streams.push_back(stub_->Track(contexts.back().get()));
+  }
+  for (int i = kSilent; i < kSilent + kSessions; ++i) {
+    ASSERT_TRUE(streams[i]->Write(TestSessionStart()));
+    api::TrackResponse response;
+    ASSERT_TRUE(streams[i]->Read(&response));
+    ASSERT_TRUE(response.has_started());
+  }
+  ASSERT_TRUE(Eventually([&] { return server_->counters().sessions_active == kSessions; }));
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));  // The silent streams arrived.
+  const int during = ThreadsOfThisProcess();
+  std::cout << "threads of the test process: " << before << " before, " << during << " with "
+            << kSilent << " silent streams and " << kSessions << " sessions" << std::endl;
+  EXPECT_LT(during - before, 12) << before << " threads before, " << during << " with " << kSilent
+                                 << " silent streams and " << kSessions << " sessions";
+  for (auto& context : contexts) context->TryCancel();
+  for (auto& stream : streams) stream->Finish();
+  EXPECT_TRUE(Eventually([&] { return server_->counters().sessions_active == 0; }));
 }
 
 // The health of service `name` on the test server: 1 SERVING, 2 NOT_SERVING, -1 when the call

@@ -16,8 +16,11 @@ Options:
   --maps DIR                 folder with one subdirectory per map, NAME/map.evmap (required)
   --listen HOST:PORT         address to listen on (default 127.0.0.1:50051; port 0: any free)
   --max-sessions N           most Track sessions at once (default 8)
-  --threads N                most gRPC handler threads, >= max-sessions + 2 (default 0:
-                             max-sessions + 8)
+  --threads N                most gRPC handler threads of the unary calls (ListMaps, GetMap,
+                             Locate), >= max-sessions + 2 (default 0: max-sessions + 8); Track
+                             streams hold none
+  --tracking-threads N       tracking workers shared by every session (default 0: one per
+                             core); a session runs on one worker at a time
   --max-message-bytes N      largest request message, bytes (default 4194304)
   --idle-timeout SECONDS     cancel a session that sends nothing this long (default 30)
   --queue-packets N          packets a session may have waiting (default 256)
@@ -102,6 +105,8 @@ ServeCommand ParseServeCommandLine(const std::vector<std::string>& arguments) {
       server.max_sessions = static_cast<int>(ParseIntegerFlag(flag, value));
     } else if (flag == "--threads") {
       server.threads = static_cast<int>(ParseIntegerFlag(flag, value));
+    } else if (flag == "--tracking-threads") {
+      server.tracking_threads = static_cast<int>(ParseIntegerFlag(flag, value));
     } else if (flag == "--max-message-bytes") {
       server.max_message_bytes = static_cast<int>(ParseIntegerFlag(flag, value));
     } else if (flag == "--idle-timeout") {

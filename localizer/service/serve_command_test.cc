@@ -19,6 +19,8 @@ TEST(ServeCommand, EveryFlagReachesItsOption) {
                                               "3",
                                               "--threads",
                                               "9",
+                                              "--tracking-threads",
+                                              "3",
                                               "--max-message-bytes",
                                               "65536",
                                               "--idle-timeout",
@@ -87,6 +89,7 @@ TEST(ServeCommand, EveryFlagReachesItsOption) {
   EXPECT_EQ(server.listen_address, "127.0.0.1:0");
   EXPECT_EQ(server.max_sessions, 3);
   EXPECT_EQ(server.threads, 9);
+  EXPECT_EQ(server.tracking_threads, 3);
   EXPECT_EQ(server.max_message_bytes, 65536);
   EXPECT_EQ(server.idle_timeout_s, 2.5);
   EXPECT_EQ(server.queue_packets, 16);
@@ -134,6 +137,8 @@ TEST(ServeCommand, BadCommandLinesAreRejectedWithTheFlag) {
   EXPECT_THROW(ParseServeCommandLine({"serve", "--maps", maps, "--max-sessions", "0"}),
                InvalidArgumentError);
   EXPECT_THROW(ParseServeCommandLine({"serve", "--maps", maps, "--threads", "3"}),
+               InvalidArgumentError);
+  EXPECT_THROW(ParseServeCommandLine({"serve", "--maps", maps, "--tracking-threads", "-1"}),
                InvalidArgumentError);
   EXPECT_THROW(ParseServeCommandLine({"serve", "--maps", maps, "--max-camera-pixels", "0"}),
                InvalidArgumentError);

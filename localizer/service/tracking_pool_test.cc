@@ -1,0 +1,173 @@
+#include "localizer/service/tracking_pool.h"
+
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <chrono>
+#include <functional>
+#include <future>
+#include <string>
+#include <thread>
+#include <vector>
+
+namespace evloc::service {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+// A job that runs `slices` slices, each calling `body`, and counts how many workers run it at
+// once.
+class CountingJob : public TrackingPool::Job {
+ public:
+  CountingJob(int slices, std::function<void()> body = {})
+      : remaining_(slices), body_(std::move(body)) {}
+
+  bool RunSlice() override {
+    const int inside = ++inside_;
+    most_inside_ = std::max(most_inside_.load(), inside);
+    if (body_) body_();
+    --inside_;
+    ++ran_;
+    if (--remaining_ > 0) return true;
+    done_.set_value();
+    return false;
+  }
+
+  std::atomic<int> ran_{0};
+  std::atomic<int> most_inside_{0};
+  std::promise<void> done_;
+
+ private:
+  std::atomic<int> remaining_;
+  std::atomic<int> inside_{0};
+  std::function<void()> body_;
+};
+
+TEST(TrackingPool, AJobIsNeverRunByTwoWorkersAtOnce) {
+  TrackingPool pool(4);
+  auto job = std::make_shared<CountingJob>(
+      200, [] { std::this_thread::sleep_for(std::chrono::microseconds(200)); });
+  auto done = job->done_.get_future();
+  // Wakes from many threads while it runs: each is absorbed (queued once, or run again after
+  // the slice), never a second worker.
+  std::vector<std::thread> wakers;
+  for (int i = 0; i < 4; ++i) {
+    wakers.emplace_back([&] {
+      for (int k = 0; k < 500; ++k) pool.Wake(job);
+    });
+  }
+  for (std::thread& waker : wakers) waker.join();
+  ASSERT_EQ(done.wait_for(std::chrono::seconds(20)), std::future_status::ready);
+  EXPECT_EQ(job->most_inside_.load(), 1);
+  EXPECT_EQ(job->ran_.load(), 200);
+}
+
+TEST(TrackingPool, RunnableJobsTakeTurnsOneSliceEach) {
+  // One worker, two jobs with much work: the order of slices alternates (FIFO of runnable
+  // jobs), so neither waits for the other to finish.
+  TrackingPool pool(1);
+  std::mutex mutex;
+  std::string order;
+  std::promise<void> gate;
+  std::shared_future<void> open = gate.get_future().share();
+  auto first = std::make_shared<CountingJob>(5, [&] {
+    open.wait();
+    std::lock_guard<std::mutex> lock(mutex);
+    order += 'a';
+  });
+  auto second = std::make_shared<CountingJob>(5, [&] {
+    std::lock_guard<std::mutex> lock(mutex);
+    order += 'b';
+  });
+  auto first_done = first->done_.get_future();
+  auto second_done = second->done_.get_future();
+  pool.Wake(first);
+  pool.Wake(second);
+  gate.set_value();
+  ASSERT_EQ(first_done.wait_for(std::chrono::seconds(10)), std::future_status::ready);
+  ASSERT_EQ(second_done.wait_for(std::chrono::seconds(10)), std::future_status::ready);
+  EXPECT_EQ(order, "ababababab");
+}
+
+TEST(TrackingPool, AWakeDuringASliceRunsTheJobAgain) {
+  TrackingPool pool(2);
+  std::atomic<int> slices{0};
+  std::promise<void> in_slice;
+  std::promise<void> release;
+  std::shared_future<void> released = release.get_future().share();
+  struct Job : TrackingPool::Job {
+    std::function<bool()> body;
+    bool RunSlice() override { return body(); }
+  };
+  auto job = std::make_shared<Job>();
+  job->body = [&] {
+    if (++slices == 1) {
+      in_slice.set_value();
+      released.wait();
+    }
+    return false;  // Nothing more by itself: only the wake below runs it again.
+  };
+  pool.Wake(job);
+  in_slice.get_future().wait();
+  pool.Wake(job);  // While it runs.
+  release.set_value();
+  const auto deadline = Clock::now() + std::chrono::seconds(10);
+  while (slices.load() < 2 && Clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  EXPECT_EQ(slices.load(), 2);
+}
+
+TEST(TrackingPool, ZeroThreadsMeansOnePerCore) {
+  TrackingPool pool(0);
+  EXPECT_EQ(pool.threads(), TrackingPool::ThreadsFor(0));
+  EXPECT_GE(pool.threads(), 1);
+  EXPECT_EQ(TrackingPool::ThreadsFor(3), 3);
+}
+
+TEST(SharedTimer, RunsCallbacksInDeadlineOrderAndCancelDropsThem) {
+  SharedTimer timer;
+  std::mutex mutex;
+  std::vector<int> order;
+  std::promise<void> last;
+  const auto now = Clock::now();
+  const auto note = [&](int value) {
+    std::lock_guard<std::mutex> lock(mutex);
+    order.push_back(value);
+  };
+  timer.Schedule(now + std::chrono::milliseconds(60), [&] {
+    note(3);
+    last.set_value();
+  });
+  timer.Schedule(now + std::chrono::milliseconds(20), [&] { note(1); });
+  const uint64_t dropped = timer.Schedule(now + std::chrono::milliseconds(30), [&] { note(99); });
+  timer.Schedule(now + std::chrono::milliseconds(40), [&] { note(2); });
+  EXPECT_TRUE(timer.Cancel(dropped));
+  EXPECT_FALSE(timer.Cancel(dropped));
+  ASSERT_EQ(last.get_future().wait_for(std::chrono::seconds(10)), std::future_status::ready);
+  EXPECT_GE(Clock::now() - now, std::chrono::milliseconds(60));
+  std::lock_guard<std::mutex> lock(mutex);
+  EXPECT_EQ(order, (std::vector<int>{1, 2, 3}));
+  EXPECT_EQ(timer.pending(), 0u);
+}
+
+TEST(SharedTimer, ACallbackMayScheduleTheNextOne) {
+  // The watchdog pattern: each check schedules the next.
+  SharedTimer timer;
+  std::atomic<int> checks{0};
+  std::promise<void> done;
+  std::function<void()> check = [&] {
+    if (++checks == 5) {
+      done.set_value();
+      return;
+    }
+    timer.Schedule(Clock::now() + std::chrono::milliseconds(2), check);
+  };
+  timer.Schedule(Clock::now(), check);
+  ASSERT_EQ(done.get_future().wait_for(std::chrono::seconds(10)), std::future_status::ready);
+  EXPECT_EQ(checks.load(), 5);
+}
+
+}  // namespace
+}  // namespace evloc::service
