@@ -115,6 +115,7 @@ EsimOptions RenderCommandOptions::PixelOptions() const {
   EsimOptions esim = SensorPreset(sensor);
   if (noise_rate_hz) esim.noise_rate_hz_per_pixel = *noise_rate_hz;
   if (hot_pixel_fraction) esim.hot_pixel_fraction = *hot_pixel_fraction;
+  if (photoreceptor_cutoff_hz) esim.photoreceptor_cutoff_hz = *photoreceptor_cutoff_hz;
   esim.seed = seed;
   if (clean) esim = esim.Clean();
   return esim;
@@ -131,9 +132,14 @@ void RenderCommandOptions::Check() const {
     throw InvalidArgumentError(
         "render: --hot-pixels must be a fraction of the pixels in [0, 1), e.g. 0.001.");
   }
-  if (clean && (noise_rate_hz || hot_pixel_fraction)) {
+  if (photoreceptor_cutoff_hz &&
+      (!std::isfinite(*photoreceptor_cutoff_hz) || *photoreceptor_cutoff_hz < 0)) {
+    throw InvalidArgumentError("render: --cutoff must be a frequency >= 0 in Hz (0: no low-pass).");
+  }
+  if (clean && (noise_rate_hz || hot_pixel_fraction || photoreceptor_cutoff_hz)) {
     throw InvalidArgumentError(
-        "render: --clean switches noise and hot pixels off; drop --noise-rate and --hot-pixels.");
+        "render: --clean switches noise, hot pixels and the low-pass off; drop --noise-rate, "
+        "--hot-pixels and --cutoff.");
   }
   if (duration_s && (!std::isfinite(*duration_s) || *duration_s <= 0)) {
     throw InvalidArgumentError("render: --duration must be a positive number of seconds.");

@@ -50,6 +50,8 @@ struct RenderCommandOptions {
   std::optional<double> noise_rate_hz;
   // Fraction of hot pixels, overriding the preset's (`--hot-pixels`).
   std::optional<double> hot_pixel_fraction;
+  // Photoreceptor cutoff at intensity 1, Hz, overriding the preset's (`--cutoff`; 0: none).
+  std::optional<double> photoreceptor_cutoff_hz;
   // Event pixel without mismatch, refractory period, noise, leak, hot pixels, low-pass and
   // read-out limit.
   bool clean = false;
@@ -72,7 +74,7 @@ struct RenderCommandOptions {
 
   // Throws InvalidArgumentError for an empty output path, non-positive duration, fps, rates or
   // intervals, a ground-truth rate below 200 Hz, an unknown sensor, a bad noise rate or hot-pixel
-  // fraction, or --clean with a noise or hot-pixel override.
+  // fraction or cutoff, or --clean with a noise, hot-pixel or cutoff override.
   void Check() const;
 };
 

@@ -45,6 +45,8 @@ render options:
                         a realistic sensor; uniform with ideal); default: the sensor's
   --hot-pixels F        fraction of hot pixels (each fires ~1 kHz whatever the light), e.g. 0.001;
                         default: the sensor's (0)
+  --cutoff HZ           photoreceptor cutoff at intensity 1 (white paper, bright light); it falls
+                        with the light; 0 = no low-pass; default: the sensor's
   --clean               perfect event pixel: no threshold mismatch, refractory period, noise, leak,
                         hot pixels, low-pass or read-out limit
   --events-txt          also write events.txt (ECD text format)
@@ -84,11 +86,12 @@ std::map<std::string, std::string> ParseFlags(const std::vector<std::string>& ar
 }
 
 int RunRender(const std::vector<std::string>& args) {
-  const auto flags = ParseFlags(args,
-                                {"--out", "--camera", "--camera-yaml", "--scene", "--motion",
-                                 "--trajectory", "--duration", "--fps", "--lighting", "--seed",
-                                 "--render-motion", "--sensor", "--noise-rate", "--hot-pixels"},
-                                {"--clean", "--events-txt", "--force"});
+  const auto flags =
+      ParseFlags(args,
+                 {"--out", "--camera", "--camera-yaml", "--scene", "--motion", "--trajectory",
+                  "--duration", "--fps", "--lighting", "--seed", "--render-motion", "--sensor",
+                  "--noise-rate", "--hot-pixels", "--cutoff"},
+                 {"--clean", "--events-txt", "--force"});
   evloc::sim::RenderCommandOptions options;
   if (!flags.contains("--out")) throw UsageError("render needs --out DIR.");
   if (flags.contains("--motion") && flags.contains("--trajectory")) {
@@ -113,6 +116,7 @@ int RunRender(const std::vector<std::string>& args) {
       }
       if (flag == "--noise-rate") options.noise_rate_hz = ParseDoubleFlag(flag, value);
       if (flag == "--hot-pixels") options.hot_pixel_fraction = ParseDoubleFlag(flag, value);
+      if (flag == "--cutoff") options.photoreceptor_cutoff_hz = ParseDoubleFlag(flag, value);
       if (flag == "--clean") options.clean = true;
       if (flag == "--events-txt") options.events_txt = true;
       if (flag == "--force") options.force = true;

@@ -64,7 +64,8 @@ TEST(EvlocSimCli, BadFlagValuesFailWithAClearMessage) {
        {"render --out " + out + " --sensor davis999", "ideal, davis240, davis346, gen3 or gen4"},
        {"render --out " + out + " --hot-pixels 1.5", "--hot-pixels must be a fraction"},
        {"render --out " + out + " --noise-rate -1", "--noise-rate must be a rate >= 0"},
-       {"render --out " + out + " --clean --hot-pixels 0.01", "drop --noise-rate and --hot-pixels"},
+       {"render --out " + out + " --clean --hot-pixels 0.01", "drop --noise-rate, --hot-pixels"},
+       {"render --out " + out + " --cutoff -5", "--cutoff must be a frequency >= 0"},
        {"render", "needs --out"},
        {"explode", "unknown command"}});
   EXPECT_FALSE(fs::exists(out));
