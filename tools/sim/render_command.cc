@@ -66,6 +66,14 @@ nlohmann::json EsimJson(const EsimOptions& esim) {
           {"threshold_mismatch_sigma", esim.threshold_mismatch_sigma},
           {"refractory_period_ns", esim.refractory_period_ns},
           {"noise_rate_hz_per_pixel", esim.noise_rate_hz_per_pixel},
+          {"noise_half_intensity", esim.noise_half_intensity},
+          {"photoreceptor_cutoff_hz", esim.photoreceptor_cutoff_hz},
+          {"leak_rate_hz", esim.leak_rate_hz},
+          {"leak_rate_spread_decades", esim.leak_rate_spread_decades},
+          {"hot_pixel_fraction", esim.hot_pixel_fraction},
+          {"hot_pixel_rate_hz", esim.hot_pixel_rate_hz},
+          {"readout_rate_eps", esim.readout_rate_eps},
+          {"readout_max_delay_ns", esim.readout_max_delay_ns},
           {"log_epsilon", esim.log_epsilon},
           {"seed", esim.seed}};
 }
@@ -103,8 +111,36 @@ Camera CameraPreset(const std::string& name) {
   throw InvalidArgumentError("Unknown camera preset '" + name + "'; expected default or davis240.");
 }
 
+EsimOptions RenderCommandOptions::PixelOptions() const {
+  EsimOptions esim = SensorPreset(sensor);
+  if (noise_rate_hz) esim.noise_rate_hz_per_pixel = *noise_rate_hz;
+  if (hot_pixel_fraction) esim.hot_pixel_fraction = *hot_pixel_fraction;
+  if (photoreceptor_cutoff_hz) esim.photoreceptor_cutoff_hz = *photoreceptor_cutoff_hz;
+  esim.seed = seed;
+  if (clean) esim = esim.Clean();
+  return esim;
+}
+
 void RenderCommandOptions::Check() const {
   if (out_dir.empty()) throw InvalidArgumentError("render: --out is required.");
+  SensorPreset(sensor);
+  if (noise_rate_hz && (!std::isfinite(*noise_rate_hz) || *noise_rate_hz < 0)) {
+    throw InvalidArgumentError("render: --noise-rate must be a rate >= 0 in Hz per pixel.");
+  }
+  if (hot_pixel_fraction && (!std::isfinite(*hot_pixel_fraction) || *hot_pixel_fraction < 0 ||
+                             *hot_pixel_fraction >= 1)) {
+    throw InvalidArgumentError(
+        "render: --hot-pixels must be a fraction of the pixels in [0, 1), e.g. 0.001.");
+  }
+  if (photoreceptor_cutoff_hz &&
+      (!std::isfinite(*photoreceptor_cutoff_hz) || *photoreceptor_cutoff_hz < 0)) {
+    throw InvalidArgumentError("render: --cutoff must be a frequency >= 0 in Hz (0: no low-pass).");
+  }
+  if (clean && (noise_rate_hz || hot_pixel_fraction || photoreceptor_cutoff_hz)) {
+    throw InvalidArgumentError(
+        "render: --clean switches noise, hot pixels and the low-pass off; drop --noise-rate, "
+        "--hot-pixels and --cutoff.");
+  }
   if (duration_s && (!std::isfinite(*duration_s) || *duration_s <= 0)) {
     throw InvalidArgumentError("render: --duration must be a positive number of seconds.");
   }
@@ -150,8 +186,7 @@ nlohmann::json RunRenderCommand(const RenderCommandOptions& options) {
 
   const LightingPreset lighting = MakeLightingPreset(options.lighting, scene.bounds);
   SequenceOptions sequence;
-  sequence.esim.seed = options.seed;
-  if (options.clean) sequence.esim = sequence.esim.Clean();
+  sequence.esim = options.PixelOptions();
   sequence.frames = lighting.frames;
   sequence.frames.fps = options.fps;
   sequence.frames.seed = options.seed;
@@ -204,6 +239,7 @@ nlohmann::json RunRenderCommand(const RenderCommandOptions& options) {
         {"fps", options.fps},
         {"lighting", LightingConditionName(options.lighting)},
         {"seed", options.seed},
+        {"sensor", options.sensor},
         {"clean", options.clean},
         {"max_pixel_motion_px", options.max_pixel_motion_px},
         {"max_render_motion_px", options.max_render_motion_px},
@@ -219,6 +255,14 @@ nlohmann::json RunRenderCommand(const RenderCommandOptions& options) {
         {"illumination_shadow", sequence.illumination.shadow_factor}}},
       {"counts",
        {{"events", stats.num_events},
+        {"signal_events", stats.esim_counts.signal},
+        {"noise_events", stats.esim_counts.noise},
+        {"leak_events", stats.esim_counts.leak},
+        {"hot_pixel_events", stats.esim_counts.hot_pixel},
+        {"refractory_suppressed_events", stats.esim_counts.refractory_suppressed},
+        {"readout_dropped_events", stats.esim_counts.readout_dropped},
+        {"readout_delayed_events", stats.esim_counts.readout_delayed},
+        {"readout_max_delay_ns", stats.esim_counts.readout_max_delay_ns},
         {"event_rate_per_s", stats.num_events / duration_s},
         {"renders", stats.num_renders},
         {"interpolated_images", stats.num_interpolated},

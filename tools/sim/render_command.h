@@ -44,7 +44,16 @@ struct RenderCommandOptions {
   LightingCondition lighting = LightingCondition::kBright;
   // Seed of motion, sensor noise and event noise.
   uint64_t seed = 1;
-  // Event pixel without mismatch, refractory period and noise.
+  // Event pixel preset (`--sensor`): ideal, davis240, davis346, gen3 or gen4 (SensorPreset).
+  std::string sensor = "ideal";
+  // Shot-noise rate per pixel at the darkest level, Hz, overriding the preset's (`--noise-rate`).
+  std::optional<double> noise_rate_hz;
+  // Fraction of hot pixels, overriding the preset's (`--hot-pixels`).
+  std::optional<double> hot_pixel_fraction;
+  // Photoreceptor cutoff at intensity 1, Hz, overriding the preset's (`--cutoff`; 0: none).
+  std::optional<double> photoreceptor_cutoff_hz;
+  // Event pixel without mismatch, refractory period, noise, leak, hot pixels, low-pass and
+  // read-out limit.
   bool clean = false;
   // Also write events.txt (ECD text).
   bool events_txt = false;
@@ -60,8 +69,12 @@ struct RenderCommandOptions {
   // the flow from the rendered depth; equal to max_pixel_motion_px to render every image).
   double max_render_motion_px = 3.0;
 
+  // The event pixel's options: the sensor preset with the overrides, the seed, and --clean.
+  EsimOptions PixelOptions() const;
+
   // Throws InvalidArgumentError for an empty output path, non-positive duration, fps, rates or
-  // intervals, or a ground-truth rate below 200 Hz.
+  // intervals, a ground-truth rate below 200 Hz, an unknown sensor, a bad noise rate or hot-pixel
+  // fraction or cutoff, or --clean with a noise, hot-pixel or cutoff override.
   void Check() const;
 };
 

@@ -39,7 +39,16 @@ render options:
   --seed N              seed of motion and noise (same seed, same bytes); default 1
   --render-motion PX    largest image motion between two renders; images in between are
                         interpolated along the depth-based flow (0.5 = render every image); default 3
-  --clean               ideal event pixel: no threshold mismatch, refractory period or noise
+  --sensor NAME         event pixel: ideal | davis240 | davis346 | gen3 | gen4 (docs/simulator.md,
+                        "Sensor presets"); default: ideal (the ESIM pixel)
+  --noise-rate HZ       shot-noise rate per pixel at the darkest level (falls as light rises with
+                        a realistic sensor; uniform with ideal); default: the sensor's
+  --hot-pixels F        fraction of hot pixels (each fires ~1 kHz whatever the light), e.g. 0.001;
+                        default: the sensor's (0)
+  --cutoff HZ           photoreceptor cutoff at intensity 1 (white paper, bright light); it falls
+                        with the light; 0 = no low-pass; default: the sensor's
+  --clean               perfect event pixel: no threshold mismatch, refractory period, noise, leak,
+                        hot pixels, low-pass or read-out limit
   --events-txt          also write events.txt (ECD text format)
   --force               replace an existing non-empty output folder
 
@@ -80,7 +89,8 @@ int RunRender(const std::vector<std::string>& args) {
   const auto flags =
       ParseFlags(args,
                  {"--out", "--camera", "--camera-yaml", "--scene", "--motion", "--trajectory",
-                  "--duration", "--fps", "--lighting", "--seed", "--render-motion"},
+                  "--duration", "--fps", "--lighting", "--seed", "--render-motion", "--sensor",
+                  "--noise-rate", "--hot-pixels", "--cutoff"},
                  {"--clean", "--events-txt", "--force"});
   evloc::sim::RenderCommandOptions options;
   if (!flags.contains("--out")) throw UsageError("render needs --out DIR.");
@@ -100,6 +110,13 @@ int RunRender(const std::vector<std::string>& args) {
       if (flag == "--lighting") options.lighting = evloc::sim::ParseLightingCondition(value);
       if (flag == "--seed") options.seed = ParseUnsignedFlag(flag, value);
       if (flag == "--render-motion") options.max_render_motion_px = ParseDoubleFlag(flag, value);
+      if (flag == "--sensor") {
+        evloc::sim::SensorPreset(value);
+        options.sensor = value;
+      }
+      if (flag == "--noise-rate") options.noise_rate_hz = ParseDoubleFlag(flag, value);
+      if (flag == "--hot-pixels") options.hot_pixel_fraction = ParseDoubleFlag(flag, value);
+      if (flag == "--cutoff") options.photoreceptor_cutoff_hz = ParseDoubleFlag(flag, value);
       if (flag == "--clean") options.clean = true;
       if (flag == "--events-txt") options.events_txt = true;
       if (flag == "--force") options.force = true;
@@ -120,8 +137,11 @@ int RunRender(const std::vector<std::string>& args) {
   const auto info = evloc::sim::RunRenderCommand(options);
   std::cout << "evloc-sim render: wrote " << options.out_dir.string() << ": "
             << info["counts"]["events"] << " events (" << info["counts"]["event_rate_per_s"]
-            << " /s), " << info["counts"]["frames"] << " frames, " << info["counts"]["renders"]
-            << " renders in " << info["timings_s"]["total"] << " s\n";
+            << " /s; noise " << info["counts"]["noise_events"] << ", leak "
+            << info["counts"]["leak_events"] << ", hot pixels "
+            << info["counts"]["hot_pixel_events"] << "), " << info["counts"]["frames"]
+            << " frames, " << info["counts"]["renders"] << " renders in "
+            << info["timings_s"]["total"] << " s\n";
   return 0;
 }
 

@@ -1,6 +1,7 @@
 // Runs the evloc-sim binary: bad command lines fail clearly, and a short render is reproducible.
 #include <sys/wait.h>
 
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -8,6 +9,7 @@
 #include <string>
 
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 #include "core/common/file_util.h"
 #include "core/common/test_data.h"
@@ -59,6 +61,11 @@ TEST(EvlocSimCli, BadFlagValuesFailWithAClearMessage) {
        {"render --out " + out + " --fps abc", "--fps expects a number"},
        {"render --out " + out + " --camera vga", "default or davis240"},
        {"render --out " + out + " --bogus", "unknown argument '--bogus'"},
+       {"render --out " + out + " --sensor davis999", "ideal, davis240, davis346, gen3 or gen4"},
+       {"render --out " + out + " --hot-pixels 1.5", "--hot-pixels must be a fraction"},
+       {"render --out " + out + " --noise-rate -1", "--noise-rate must be a rate >= 0"},
+       {"render --out " + out + " --clean --hot-pixels 0.01", "drop --noise-rate, --hot-pixels"},
+       {"render --out " + out + " --cutoff -5", "--cutoff must be a frequency >= 0"},
        {"render", "needs --out"},
        {"explode", "unknown command"}});
   EXPECT_FALSE(fs::exists(out));
@@ -123,6 +130,50 @@ TEST(EvlocSimCli, SameSeedSameBytesAndTheDatasetLoads) {
             (*dataset.info)["counts"]["events"].get<int64_t>());
   EXPECT_GT(events.size(), 1000u);
   EXPECT_TRUE(dataset.ground_truth_map_path.has_value());
+  fs::remove_all(dir);
+}
+
+// Reads info.json's counts of a rendered dataset.
+nlohmann::json CountsOf(const fs::path& dataset) {
+  return nlohmann::json::parse(evloc::ReadFileToString(dataset / "info.json"))["counts"];
+}
+
+// `--sensor ideal` is the default pixel (the original ESIM, whose recorded stream esim_test.cc
+// checks); a realistic sensor's events follow the light: the same path in the dark has other
+// events and more noise than in bright light, and info.json counts them by origin.
+TEST(EvlocSimCli, IdealIsTheDefaultAndTheRealisticPixelSeesTheLight) {
+  const fs::path dir = evloc::testing::MakeTempDir("sim_cli_sensor");
+  const double duration_s = 0.2;
+  const std::string common =
+      " --camera davis240 --motion fast --seed 3 --duration " + std::to_string(duration_s);
+  ASSERT_EQ(RunSim("render --out " + (dir / "default").string() + common).exit_code, 0);
+  ASSERT_EQ(
+      RunSim("render --out " + (dir / "ideal").string() + common + " --sensor ideal").exit_code, 0);
+  EXPECT_EQ(evloc::ReadFileToString(dir / "default" / "events.evb"),
+            evloc::ReadFileToString(dir / "ideal" / "events.evb"));
+  const std::string realistic = common + " --sensor davis240 --noise-rate 3 --hot-pixels 0.002";
+  for (const char* lighting : {"bright", "dark"}) {
+    const RunResult result =
+        RunSim("render --out " + (dir / lighting).string() + realistic + " --lighting " + lighting);
+    ASSERT_EQ(result.exit_code, 0) << result.output;
+  }
+  const nlohmann::json bright = CountsOf(dir / "bright");
+  const nlohmann::json dark = CountsOf(dir / "dark");
+  for (const nlohmann::json& counts : {bright, dark}) {
+    EXPECT_EQ(counts["events"].get<int64_t>(),
+              counts["signal_events"].get<int64_t>() + counts["noise_events"].get<int64_t>() +
+                  counts["leak_events"].get<int64_t>() + counts["hot_pixel_events"].get<int64_t>());
+    // 86 hot pixels at 1 kHz, 0.5 ms refractory period: 1000 / (1 + 0.5) = 667 Hz each.
+    const double expected_hot = 86 * 1000 / 1.5 * duration_s;
+    EXPECT_NEAR(counts["hot_pixel_events"].get<double>(), expected_hot,
+                5 * std::sqrt(expected_hot));
+  }
+  // Shot noise rises as the light falls (dark: illumination 0.02 of bright).
+  EXPECT_GT(dark["noise_events"].get<double>(), 3 * bright["noise_events"].get<double>());
+  // The slow dark photoreceptor blurs edges: fewer signal events for the same path.
+  EXPECT_LT(dark["signal_events"].get<double>(), 0.9 * bright["signal_events"].get<double>());
+  EXPECT_NE(evloc::ReadFileToString(dir / "bright" / "events.evb"),
+            evloc::ReadFileToString(dir / "dark" / "events.evb"));
   fs::remove_all(dir);
 }
 

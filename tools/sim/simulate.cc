@@ -258,6 +258,7 @@ SequenceStats SimulateSequence(const RenderFunction& render, const Camera& camer
   }
   stats.num_events += static_cast<int64_t>(events.size());
   if (!events.empty()) event_sink(events);
+  stats.esim_counts = esim.counts();
   return stats;
 }
 

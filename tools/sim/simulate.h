@@ -72,6 +72,8 @@ struct SequenceStats {
   double esim_seconds = 0;
   // Time spent exposing frames, seconds.
   double frame_seconds = 0;
+  // The event pixel's counts: signal, noise, leak and hot-pixel events, suppressed and dropped.
+  EsimCounts esim_counts;
 };
 
 // Image motion between two poses: the largest pixel displacement of the world points `points`
