@@ -1,12 +1,12 @@
 #include "localizer/offline/odometry_track.h"
 
-#include "core/common/error.h"
+#include <algorithm>
 
 namespace evloc::tracking {
 
 OfflineTrackingResult RunOdometryTrack(const Dataset& dataset, odometry::OdometryMode mode,
-                                       const Rigid3d& initial_world_from_cam, int64_t initial_t_ns,
-                                       bool quiet, std::ostream& log) {
+                                       const std::optional<Rigid3d>& initial_world_from_cam,
+                                       int64_t initial_t_ns, bool quiet, std::ostream& log) {
   OfflineTrackingResult result;
   if (mode == odometry::OdometryMode::kVo) {
     if (!quiet) {
@@ -48,7 +48,39 @@ OfflineTrackingResult RunOdometryTrack(const Dataset& dataset, odometry::Odometr
     if (!quiet) log << "evloc-track: " << run.keyframes << " keyframes\n";
     return result;
   }
-  throw InvalidArgumentError("evloc-track --mode devo is not available yet");
+  if (!quiet) {
+    log << "evloc-track: Canny-DEVO on " << dataset.root.string() << " (events, "
+        << dataset.depth.size() << " depth maps)\n";
+  }
+  int64_t step_index = 0;
+  const odometry::DevoRunResult run = odometry::RunCannyDevo(
+      dataset, initial_world_from_cam, initial_t_ns, odometry::DevoRunOptions(),
+      [&](const PoseEstimate& step) {
+        if (!quiet && step_index % 300 == 0) {
+          log << "  t=" << static_cast<double>(step.t_ns - initial_t_ns) * 1e-9 << " s  "
+              << TrackingStatusName(step.status) << "  points " << step.quality.points_used
+              << "  on-edge " << step.quality.on_edge_fraction << "\n";
+        }
+        ++step_index;
+      });
+  result.steps = run.steps;
+  result.trajectory = run.trajectory;
+  result.measurements = run.events;
+  result.lost_steps = run.lost_steps;
+  result.wall_s = run.wall_s;
+  if (!quiet) {
+    double build_ms = 0;
+    for (const odometry::ReferenceFrameInfo& reference : run.reference_frames) {
+      build_ms = std::max(build_ms, reference.build_ms);
+      log << "  reference frame t=" << static_cast<double>(reference.t_ns - initial_t_ns) * 1e-9
+          << " s: " << reference.points << " points of " << reference.stats.semi_dense_pixels
+          << " semi-dense pixels, median depth " << reference.median_depth_m << " m, decay "
+          << reference.decay_time_s * 1e3 << " ms, built in " << reference.build_ms << " ms\n";
+    }
+    log << "evloc-track: " << run.reference_frames.size() << " reference frames (longest build "
+        << build_ms << " ms)\n";
+  }
+  return result;
 }
 
 }  // namespace evloc::tracking

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <cstdint>
+#include <optional>
 #include <ostream>
 
 #include "core/dataset/dataset.h"
@@ -13,11 +14,12 @@
 
 namespace evloc::tracking {
 
-// Runs `mode` over `dataset` from `initial_world_from_cam` at `initial_t_ns`; progress goes to
-// `log` unless `quiet`. A frame (or step) that was not tracked is a LOST step whose pose is the
-// prediction. Throws what the odometry throws.
+// Runs `mode` over `dataset` from its first frame at or after `initial_t_ns` (DEVO: after a
+// warm-up), which starts at `initial_world_from_cam` when given, else at the ground truth there;
+// progress goes to `log` unless `quiet`. A frame (or step) that was not tracked is a LOST step
+// whose pose is the prediction. Throws what the odometry throws.
 OfflineTrackingResult RunOdometryTrack(const Dataset& dataset, odometry::OdometryMode mode,
-                                       const Rigid3d& initial_world_from_cam, int64_t initial_t_ns,
-                                       bool quiet, std::ostream& log);
+                                       const std::optional<Rigid3d>& initial_world_from_cam,
+                                       int64_t initial_t_ns, bool quiet, std::ostream& log);
 
 }  // namespace evloc::tracking

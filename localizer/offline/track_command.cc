@@ -360,8 +360,9 @@ OfflineTrackingResult RunTrackCommand(const TrackCommandOptions& options, std::o
   }
 
   if (options.odometry) {
-    const OfflineTrackingResult result = RunOdometryTrack(
-        dataset, *options.odometry, *initial_world_from_cam, initial_t_ns, options.quiet, log);
+    const OfflineTrackingResult result =
+        RunOdometryTrack(dataset, *options.odometry, options.initial_world_from_cam, initial_t_ns,
+                         options.quiet, log);
     WriteTrackOutputs(options, odometry::OdometryModeName(*options.odometry),
                       odometry::OdometryModeName(*options.odometry), result, log);
     return result;
