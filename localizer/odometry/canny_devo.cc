@@ -5,6 +5,8 @@
 #include <cmath>
 #include <string>
 
+#include <time.h>
+
 #include <opencv2/imgproc.hpp>
 
 #include "core/common/error.h"
@@ -13,6 +15,16 @@
 #include "maps/edge_lifting.h"
 
 namespace evloc::odometry {
+namespace {
+
+// The CPU time of the calling thread, milliseconds.
+double ThreadCpuMilliseconds() {
+  timespec now{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &now);
+  return static_cast<double>(now.tv_sec) * 1e3 + static_cast<double>(now.tv_nsec) * 1e-6;
+}
+
+}  // namespace
 
 tracking::TrackerOptions CannyDevoOptions::DefaultTrackerOptions() {
   tracking::TrackerOptions options;
@@ -89,6 +101,7 @@ std::vector<tracking::PoseEstimate> CannyDevo::AddEvents(const EventBuffer& even
 ReferenceFrameInfo CannyDevo::BuildReference(const Rigid3d& world_from_cam, int64_t t_ns,
                                              const cv::Mat& depth_m, double decay_time_s) {
   const auto start = std::chrono::steady_clock::now();
+  const double start_cpu_ms = ThreadCpuMilliseconds();
   const Camera& ideal = table_.ideal_camera();
   tracking::SurfaceDecay decay;
   decay.decay_time_ns = decay_time_s * 1e9;
@@ -187,6 +200,7 @@ ReferenceFrameInfo CannyDevo::BuildReference(const Rigid3d& world_from_cam, int6
   }
   info.build_ms =
       std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  info.build_cpu_ms = ThreadCpuMilliseconds() - start_cpu_ms;
   return info;
 }
 

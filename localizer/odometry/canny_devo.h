@@ -94,6 +94,9 @@ struct ReferenceFrameInfo {
   double decay_time_s = 0;
   // Time to build it (semi-dense region, warping, depth assignment, lifting), milliseconds.
   double build_ms = 0;
+  // The CPU time of the building thread over the same work, milliseconds (on a loaded machine
+  // the wall time above also counts the time the thread waited for a core).
+  double build_cpu_ms = 0;
   // What the build did.
   ReferenceMapStats stats;
 };

@@ -75,7 +75,8 @@ OfflineTrackingResult RunOdometryTrack(const Dataset& dataset, odometry::Odometr
       log << "  reference frame t=" << static_cast<double>(reference.t_ns - initial_t_ns) * 1e-9
           << " s: " << reference.points << " points of " << reference.stats.semi_dense_pixels
           << " semi-dense pixels, median depth " << reference.median_depth_m << " m, decay "
-          << reference.decay_time_s * 1e3 << " ms, built in " << reference.build_ms << " ms\n";
+          << reference.decay_time_s * 1e3 << " ms, built in " << reference.build_ms << " ms ("
+          << reference.build_cpu_ms << " ms CPU)\n";
     }
     log << "evloc-track: " << run.reference_frames.size() << " reference frames (longest build "
         << build_ms << " ms)\n";
