@@ -4,12 +4,14 @@
 // odometry mode without a map, and evloc-eval's code scores it without alignment (both start at
 // the ground truth's first pose).
 #include <filesystem>
+#include <fstream>
 #include <iostream>
 #include <random>
 #include <sstream>
 #include <string>
 
 #include <gtest/gtest.h>
+#include <opencv2/imgcodecs.hpp>
 
 #include "core/dataset/dataset.h"
 #include "core/trajectory/tum_io.h"
@@ -71,6 +73,52 @@ TEST_F(SimulatedOdometry, CannyVoTracksOneSecondWithinACentimetre) {
   EXPECT_GT(scores.coverage, 0.95);
   std::cout << "Canny-VO: ATE " << scores.ate_translation_cm.rmse << " cm, "
             << scores.ate_rotation_deg.rmse << " deg, coverage " << scores.coverage << "\n";
+}
+
+TEST_F(SimulatedOdometry, CannyVoReadsTheSameSequenceInTheTumRgbdLayout) {
+  // The rendered sequence rewritten as a TUM RGB-D folder: rgb.txt, depth in 1/5000 m listed
+  // 7 ms after its frame (the association pairs them), the benchmark's header comments.
+  const std::filesystem::path source = *folder_ / "dataset";
+  const std::filesystem::path tum = *folder_ / "tum";
+  std::filesystem::create_directories(tum / "rgb");
+  std::filesystem::create_directories(tum / "depth");
+  const Dataset dataset = ReadDataset(source);
+  std::ofstream rgb(tum / "rgb.txt");
+  std::ofstream depth(tum / "depth.txt");
+  rgb << "# color images\n# file: 'sim.bag'\n# timestamp filename\n";
+  depth << "# depth maps\n# file: 'sim.bag'\n# timestamp filename\n";
+  ASSERT_EQ(dataset.images.size(), dataset.depth.size());
+  for (size_t i = 0; i < dataset.images.size(); ++i) {
+    const std::string name = std::to_string(i) + ".png";
+    std::filesystem::copy_file(dataset.images[i].path, tum / "rgb" / name);
+    rgb << FormatNanosecondsAsSeconds(dataset.images[i].t_ns) << " rgb/" << name << "\n";
+    cv::Mat fifths;
+    ReadDepthPng(dataset.depth[i].path).convertTo(fifths, CV_16UC1, kTumDepthUnitsPerMetre);
+    cv::imwrite((tum / "depth" / name).string(), fifths);
+    depth << FormatNanosecondsAsSeconds(dataset.depth[i].t_ns + 7'000'000) << " depth/" << name
+          << "\n";
+  }
+  rgb.close();
+  depth.close();
+  std::filesystem::copy_file(source / "calib.yaml", tum / "calib.yaml");
+  std::filesystem::copy_file(source / "groundtruth.txt", tum / "groundtruth.txt");
+  ASSERT_EQ(ReadDataset(tum).layout, DatasetLayout::kTumRgbd);
+
+  const std::filesystem::path out = *folder_ / "vo_tum.txt";
+  std::ostringstream log;
+  const OfflineTrackingResult result =
+      RunTrackCommand(ParseTrackCommandLine({"--mode", "vo", "--dataset", tum.string(), "--out",
+                                             out.string(), "--quiet"}),
+                      log);
+  EXPECT_EQ(result.steps.size(), dataset.images.size());
+  EXPECT_EQ(result.lost_steps, 0);
+  EvaluationOptions evaluation;
+  evaluation.alignment = Alignment::kNone;
+  const EvaluationResult scores = EvaluateTrajectory(ReadTumTrajectory(source / "groundtruth.txt"),
+                                                     ReadTumTrajectory(out), evaluation);
+  // The same frames and depth (quantised to 0.2 mm instead of 1 mm): the evloc layout's bound.
+  EXPECT_LT(scores.ate_translation_cm.rmse, 1.0);
+  std::cout << "Canny-VO, TUM RGB-D layout: ATE " << scores.ate_translation_cm.rmse << " cm\n";
 }
 
 TEST_F(SimulatedOdometry, CannyDevoTracksOneSecondAndSwitchesReferenceFrames) {
