@@ -11,6 +11,7 @@
 #include "core/common/error.h"
 #include "core/common/file_util.h"
 #include "core/dataset/rosbag_dataset.h"
+#include "core/dataset/tum_rgbd.h"
 #include "core/events/rosbag.h"
 #include "core/events/rosbag_events.h"
 #include "core/trajectory/tum_io.h"
@@ -208,8 +209,12 @@ std::unique_ptr<EventReader> OpenDatasetEvents(const Dataset& dataset) {
 }
 
 std::vector<TimedFile> ReadTimedFileList(const fs::path& list_path, const fs::path& root) {
-  const std::string text = ReadFileToString(list_path);
-  std::istringstream lines(text);
+  return ParseTimedFileList(ReadFileToString(list_path), list_path.string(), root);
+}
+
+std::vector<TimedFile> ParseTimedFileList(std::string_view text, const std::string& source_name,
+                                          const fs::path& root) {
+  std::istringstream lines{std::string(text)};
   std::string line;
   std::vector<TimedFile> files;
   int64_t line_number = 0;
@@ -223,18 +228,18 @@ std::vector<TimedFile> ReadTimedFileList(const fs::path& list_path, const fs::pa
     std::string relative;
     std::string extra;
     if (!(fields >> time_text >> relative) || (fields >> extra)) {
-      throw ParseError::AtLine(list_path.string(), line_number,
+      throw ParseError::AtLine(source_name, line_number,
                                "expected two fields `t_seconds relative_path`");
     }
     int64_t t_ns = 0;
     try {
       t_ns = ParseSecondsAsNanoseconds(time_text);
     } catch (const InvalidArgumentError& error) {
-      throw ParseError::AtLine(list_path.string(), line_number,
+      throw ParseError::AtLine(source_name, line_number,
                                "bad time '" + time_text + "': " + error.what());
     }
     if (!files.empty() && t_ns <= files.back().t_ns) {
-      throw ParseError::AtLine(list_path.string(), line_number,
+      throw ParseError::AtLine(source_name, line_number,
                                "time " + time_text + " is not after the previous line's");
     }
     files.push_back({t_ns, root / relative});
@@ -248,6 +253,7 @@ Dataset ReadDataset(const fs::path& root, const DatasetReaderOptions& options) {
   if (fs::is_regular_file(root, error) && IsRosbagFile(root)) {
     return ReadRosbagDataset(root, options);
   }
+  if (IsTumRgbdFolder(root)) return ReadTumRgbdDataset(root);
   if (!fs::is_directory(root, error)) {
     throw IoError("dataset folder '" + root.string() + "' does not exist.");
   }
@@ -274,14 +280,7 @@ Dataset ReadDataset(const fs::path& root, const DatasetReaderOptions& options) {
   if (fs::exists(root / dataset_files::kDepthTxt)) {
     dataset.depth = ReadTimedFileList(root / dataset_files::kDepthTxt, root);
   }
-  for (const auto* list : {&dataset.images, &dataset.depth}) {
-    for (const TimedFile& file : *list) {
-      if (!fs::exists(file.path)) {
-        throw IoError("dataset '" + root.string() + "' lists '" + file.path.string() +
-                      "', which does not exist.");
-      }
-    }
-  }
+  CheckListedFilesExist(dataset);
   if (fs::exists(root / dataset_files::kGroundTruthTxt)) {
     dataset.ground_truth = ReadTumTrajectory(root / dataset_files::kGroundTruthTxt);
   }
@@ -305,6 +304,17 @@ Dataset ReadDataset(const fs::path& root, const DatasetReaderOptions& options) {
   return dataset;
 }
 
+void CheckListedFilesExist(const Dataset& dataset) {
+  for (const auto* list : {&dataset.images, &dataset.depth}) {
+    for (const TimedFile& file : *list) {
+      if (!fs::exists(file.path)) {
+        throw IoError("dataset '" + dataset.root.string() + "' lists '" + file.path.string() +
+                      "', which does not exist.");
+      }
+    }
+  }
+}
+
 TimedPose ResolveInitialPose(const Dataset& dataset,
                              const std::optional<Rigid3d>& initial_world_from_cam,
                              int64_t fallback_t_ns) {
@@ -325,14 +335,18 @@ TimedPose ResolveInitialPose(const Dataset& dataset,
                                           : dataset.ground_truth->poses().front().world_from_cam};
 }
 
-cv::Mat ReadDepthPng(const fs::path& path) {
+cv::Mat ReadDepthPng(const fs::path& path, double units_per_metre) {
+  if (!(units_per_metre > 0) || !std::isfinite(units_per_metre)) {
+    throw InvalidArgumentError("ReadDepthPng: units per metre must be positive and finite, got " +
+                               std::to_string(units_per_metre));
+  }
   const cv::Mat raw = cv::imread(path.string(), cv::IMREAD_UNCHANGED);
   if (raw.empty()) throw IoError("cannot read depth image '" + path.string() + "'.");
   if (raw.type() != CV_16UC1) {
     throw ParseError(path.string(), "header", "a depth PNG must be 16-bit single-channel");
   }
   cv::Mat metres;
-  raw.convertTo(metres, CV_32FC1, 1e-3);
+  raw.convertTo(metres, CV_32FC1, 1.0 / units_per_metre);
   return metres;
 }
 

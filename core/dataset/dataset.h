@@ -9,6 +9,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -44,6 +45,8 @@ inline constexpr char kImagesTxt[] = "images.txt";
 inline constexpr char kDepthTxt[] = "depth.txt";
 // Ground truth, TUM: `t tx ty tz qx qy qz qw`, world_from_cam.
 inline constexpr char kGroundTruthTxt[] = "groundtruth.txt";
+// TUM RGB-D layout: colour image list `t_s rgb/T.png` (instead of images.txt).
+inline constexpr char kRgbTxt[] = "rgb.txt";
 // Ground-truth map, evloc .evmap.
 inline constexpr char kGroundTruthMap[] = "gt_map/map.evmap";
 // Ground-truth map, PLY export.
@@ -144,6 +147,23 @@ struct DatasetReaderOptions {
   void Check() const;
 };
 
+// The folder layout a dataset was read from (docs/dataset-format.md).
+enum class DatasetLayout {
+  // evloc / Event Camera Dataset: images.txt, depth at the frame times in millimetres.
+  kEvloc,
+  // TUM RGB-D: rgb.txt and depth.txt at their own times, depth in 1/5000 m.
+  kTumRgbd,
+  // A ROS1 bag file.
+  kRosbag,
+};
+
+// Depth PNG units per metre of the evloc layout (millimetres).
+inline constexpr double kEvlocDepthUnitsPerMetre = 1000.0;
+// Depth PNG units per metre of the TUM RGB-D layout.
+inline constexpr double kTumDepthUnitsPerMetre = 5000.0;
+// The association tolerance of the TUM RGB-D tools (associate.py): 0.02 s.
+inline constexpr int64_t kTumAssociationToleranceNs = 20'000'000;
+
 // What a dataset read from a ROS1 bag holds besides the Dataset fields.
 struct RosbagDatasetSource {
   // The topics it was read with.
@@ -176,13 +196,23 @@ struct Dataset {
   std::optional<nlohmann::json> info;
   // Set when the dataset is a ROS1 bag (`root` is then the bag file and `events_path` too).
   std::optional<RosbagDatasetSource> bag;
+  // The layout it was read from.
+  DatasetLayout layout = DatasetLayout::kEvloc;
+  // Units per metre of the depth PNGs (pass to ReadDepthPng): 1000, or 5000 for TUM RGB-D.
+  double depth_units_per_metre = kEvlocDepthUnitsPerMetre;
 };
 
-// Loads a dataset folder, or a ROS1 bag file (see ReadRosbagDataset in rosbag_dataset.h).
+// Loads a dataset folder, or a ROS1 bag file (see ReadRosbagDataset in rosbag_dataset.h). A
+// folder with rgb.txt and no images.txt is read in the TUM RGB-D layout (ReadTumRgbdDataset in
+// tum_rgbd.h).
 // Throws IoError when the folder or a listed file is missing, ParseError naming the file and line
 // for malformed lists, InvalidArgumentError when the folder has neither calib.yaml nor calib.txt,
 // or is an unfinished OUT.partial.
 Dataset ReadDataset(const std::filesystem::path& root, const DatasetReaderOptions& options = {});
+
+// Throws IoError naming the dataset and the file when an image or depth map it lists does not
+// exist.
+void CheckListedFilesExist(const Dataset& dataset);
 
 // Opens the events of a dataset: its event file, or the events topic of a bag. Throws
 // InvalidArgumentError when the dataset has no events (for a bag: naming the topics present).
@@ -202,9 +232,16 @@ TimedPose ResolveInitialPose(const Dataset& dataset,
 std::vector<TimedFile> ReadTimedFileList(const std::filesystem::path& list_path,
                                          const std::filesystem::path& root);
 
-// Reads a depth PNG written by DatasetWriter::AddDepth as CV_32FC1 metres (0 = no depth).
-// Throws IoError when it cannot be read, ParseError when it is not 16-bit single-channel.
-cv::Mat ReadDepthPng(const std::filesystem::path& path);
+// The same rule for list text already in memory; `source_name` names it in error messages.
+std::vector<TimedFile> ParseTimedFileList(std::string_view text, const std::string& source_name,
+                                          const std::filesystem::path& root);
+
+// Reads a 16-bit depth PNG as CV_32FC1 metres (0 = no depth): values divided by
+// `units_per_metre` (1000 for DatasetWriter::AddDepth, 5000 for TUM RGB-D; use the dataset's
+// depth_units_per_metre). Throws IoError when it cannot be read, ParseError when it is not 16-bit
+// single-channel, InvalidArgumentError when units_per_metre is not positive and finite.
+cv::Mat ReadDepthPng(const std::filesystem::path& path,
+                     double units_per_metre = kEvlocDepthUnitsPerMetre);
 
 // Reads an image as linear gray intensity in [0, 1] (CV_32FC1): 8- or 16-bit, gray or colour
 // (Rec. 709 luminance). Throws IoError when it cannot be read.

@@ -155,6 +155,7 @@ Dataset ReadRosbagDataset(const std::filesystem::path& path, const DatasetReader
   RosbagReader bag(path);
   Dataset dataset;
   dataset.root = path;
+  dataset.layout = DatasetLayout::kRosbag;
   dataset.events_path = path;
   dataset.bag = RosbagDatasetSource{topics, bag.DescribeTopics(), 0};
   if (!HasTopicOfType(bag, topics.camera_info, kCameraInfo, "camera-info")) {

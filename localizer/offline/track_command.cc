@@ -15,6 +15,7 @@
 #include "core/events/event_reader.h"
 #include "core/trajectory/tum_io.h"
 #include "localizer/offline/debug_images.h"
+#include "localizer/offline/odometry_track.h"
 #include "maps/map_directory.h"
 
 namespace evloc::tracking {
@@ -71,11 +72,43 @@ double Median(std::vector<double> values) {
   return values[middle];
 }
 
+// Writes the trajectory, the statistics (--stats) and the summary line of a run.
+void WriteTrackOutputs(const TrackCommandOptions& options, const std::string& variant,
+                       const std::string& mode, const OfflineTrackingResult& result,
+                       std::ostream& log) {
+  WriteTumTrajectory(options.output_path, result.trajectory);
+
+  std::vector<double> step_ms;
+  for (const PoseEstimate& step : result.steps) step_ms.push_back(step.timings.total_ms);
+  if (options.stats_path) {
+    nlohmann::json stats = {{"variant", variant},
+                            {"mode", mode},
+                            {"step_rate_hz", options.tracking.tracker.step_rate_hz},
+                            {"measurements", result.measurements},
+                            {"steps", result.steps.size()},
+                            {"lost_steps", result.lost_steps},
+                            {"relocalizations", RelocalizationsToJson(result)},
+                            {"wall_s", result.wall_s},
+                            {"median_step_ms", Median(step_ms)},
+                            {"per_step", StepsToJson(result)}};
+    WriteFileAtomically(*options.stats_path, stats.dump(1) + "\n");
+  }
+  if (!options.quiet) {
+    log << "evloc-track: " << result.steps.size() << " steps (" << result.lost_steps
+        << " LOST) from " << result.measurements
+        << (mode == "frames" || mode == "vo" ? " frames" : " events") << " in " << result.wall_s
+        << " s wall; median step " << Median(step_ms) << " ms; trajectory written to "
+        << options.output_path.string() << "\n";
+  }
+}
+
 }  // namespace
 
 void TrackCommandOptions::Check() const {
   if (help) return;
-  if (map_path.empty()) throw InvalidArgumentError("--map is required: a map directory or .evmap");
+  if (map_path.empty() && !odometry) {
+    throw InvalidArgumentError("--map is required: a map directory or .evmap");
+  }
   if (dataset_path.empty()) {
     throw InvalidArgumentError("--dataset is required: a dataset folder (docs/dataset-format.md)");
   }
@@ -90,7 +123,7 @@ void TrackCommandOptions::Check() const {
   if (start_s && (!std::isfinite(*start_s) || *start_s < 0)) {
     throw InvalidArgumentError("--start must be a number of seconds >= 0");
   }
-  if (no_initial_pose && tracking.tracker.input != TrackerInput::kEvents) {
+  if (no_initial_pose && (tracking.tracker.input != TrackerInput::kEvents || odometry)) {
     throw InvalidArgumentError("--init-pose none needs --mode events (the search works on events)");
   }
   if (ecd_width <= 0 || ecd_height <= 0) {
@@ -129,7 +162,10 @@ Options:
   --search-margin A      alignment margin over the best distinct hypothesis (default 0.15)
   --give-up S            a search episode that found nothing in S seconds ends "not_found" and a
                          new one starts (default 0: never)
-  --mode events|frames   events (Canny-EVT, default) or frames (Canny-VT on images.txt)
+  --mode events|frames|vo|devo
+                         events (Canny-EVT, default), frames (Canny-VT on images.txt), or the
+                         mapless odometry without --map: vo (Canny-VO on images and depth) or
+                         devo (Canny-DEVO on events and depth) (docs/tracking.md)
   --rate HZ              tracking steps per second of event time (default 300)
   --events-per-step N    a step every N events instead of a fixed rate
   --variant NAME         EVT (default), EVT-PR, EVT-OH or EVT-- (docs/tracking.md, "Variants")
@@ -222,8 +258,13 @@ TrackCommandOptions ParseTrackCommandLine(const std::vector<std::string>& argume
         tracker.input = TrackerInput::kEvents;
       } else if (value == "frames") {
         tracker.input = TrackerInput::kFrames;
+      } else if (value == "vo" || value == "devo") {
+        options.odometry =
+            value == "vo" ? odometry::OdometryMode::kVo : odometry::OdometryMode::kDevo;
+        tracker.input = value == "vo" ? TrackerInput::kFrames : TrackerInput::kEvents;
       } else {
-        throw InvalidArgumentError("--mode expects events or frames, got '" + value + "'");
+        throw InvalidArgumentError("--mode expects events, frames, vo or devo, got '" + value +
+                                   "'");
       }
     } else if (flag == "--rate") {
       tracker.step_rate_hz = ParseDoubleFlag(flag, value);
@@ -318,6 +359,14 @@ OfflineTrackingResult RunTrackCommand(const TrackCommandOptions& options, std::o
     initial_t_ns = initial.t_ns;
   }
 
+  if (options.odometry) {
+    const OfflineTrackingResult result =
+        RunOdometryTrack(dataset, *options.odometry, options.initial_world_from_cam, initial_t_ns,
+                         options.quiet, log);
+    WriteTrackOutputs(options, odometry::OdometryModeName(*options.odometry),
+                      odometry::OdometryModeName(*options.odometry), result, log);
+    return result;
+  }
   const Map map = LoadMap(ResolveMapFile(options.map_path));
   const VisibilityIndex visibility(map);
   if (!options.quiet) {
@@ -375,29 +424,8 @@ OfflineTrackingResult RunTrackCommand(const TrackCommandOptions& options, std::o
     result = TrackFrameSequence(frames, map, &visibility, dataset.camera, *initial_world_from_cam,
                                 initial_t_ns, tracking, on_step);
   }
-  WriteTumTrajectory(options.output_path, result.trajectory);
-
-  std::vector<double> step_ms;
-  for (const PoseEstimate& step : result.steps) step_ms.push_back(step.timings.total_ms);
-  if (options.stats_path) {
-    nlohmann::json stats = {{"variant", options.tracking.tracker.VariantName()},
-                            {"mode", events_mode ? "events" : "frames"},
-                            {"step_rate_hz", options.tracking.tracker.step_rate_hz},
-                            {"measurements", result.measurements},
-                            {"steps", result.steps.size()},
-                            {"lost_steps", result.lost_steps},
-                            {"relocalizations", RelocalizationsToJson(result)},
-                            {"wall_s", result.wall_s},
-                            {"median_step_ms", Median(step_ms)},
-                            {"per_step", StepsToJson(result)}};
-    WriteFileAtomically(*options.stats_path, stats.dump(1) + "\n");
-  }
-  if (!options.quiet) {
-    log << "evloc-track: " << result.steps.size() << " steps (" << result.lost_steps
-        << " LOST) from " << result.measurements << (events_mode ? " events" : " frames") << " in "
-        << result.wall_s << " s wall; median step " << Median(step_ms)
-        << " ms; trajectory written to " << options.output_path.string() << "\n";
-  }
+  WriteTrackOutputs(options, options.tracking.tracker.VariantName(),
+                    events_mode ? "events" : "frames", result, log);
   return result;
 }
 

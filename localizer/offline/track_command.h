@@ -9,6 +9,7 @@
 
 #include "core/dataset/dataset.h"
 #include "core/geometry/rigid3.h"
+#include "localizer/odometry/odometry_run.h"
 #include "localizer/offline/offline_tracking.h"
 
 namespace evloc::tracking {
@@ -50,6 +51,8 @@ struct TrackCommandOptions {
   bool quiet = false;
   // Print the usage (--help).
   bool help = false;
+  // Mapless odometry instead of map tracking (--mode vo | devo; no --map).
+  std::optional<odometry::OdometryMode> odometry;
   // The offline run's options (--mode, --rate, --events-per-step, --polarity, --occlusion,
   // --variant, --max-points, --tau).
   OfflineTrackingOptions tracking;

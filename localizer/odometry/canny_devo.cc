@@ -1,0 +1,251 @@
+#include "localizer/odometry/canny_devo.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <string>
+
+#include <time.h>
+
+#include <opencv2/imgproc.hpp>
+
+#include "core/common/error.h"
+#include "localizer/tracking/point_selection.h"
+#include "localizer/tracking/registration.h"
+#include "maps/edge_lifting.h"
+
+namespace evloc::odometry {
+namespace {
+
+// The CPU time of the calling thread, milliseconds.
+double ThreadCpuMilliseconds() {
+  timespec now{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &now);
+  return static_cast<double>(now.tv_sec) * 1e3 + static_cast<double>(now.tv_nsec) * 1e-6;
+}
+
+}  // namespace
+
+tracking::TrackerOptions CannyDevoOptions::DefaultTrackerOptions() {
+  tracking::TrackerOptions options;
+  options.use_polarity = false;
+  options.decay_time_s = 0.01;
+  return options;
+}
+
+void CannyDevoOptions::Check() const {
+  tracker.Check();
+  if (tracker.input != tracking::TrackerInput::kEvents) {
+    throw InvalidArgumentError("CannyDevoOptions: the tracker must take events");
+  }
+  reference.Check();
+  if (!(mapping_decay_time_s > 0) || !(mapping_empty_threshold > 0) ||
+      !(mapping_empty_threshold < 1)) {
+    throw InvalidArgumentError(
+        "CannyDevoOptions: need mapping_decay_time_s > 0 and 0 < mapping_empty_threshold < 1");
+  }
+  if (max_reference_points < 10 || min_reference_points < 1) {
+    throw InvalidArgumentError(
+        "CannyDevoOptions: need max_reference_points >= 10 and min_reference_points >= 1");
+  }
+  if (!(reference_max_baseline_fraction > 0) || !(reference_max_rotation_deg > 0)) {
+    throw InvalidArgumentError("CannyDevoOptions: reference-frame thresholds must be positive");
+  }
+}
+
+void ReferenceMapSource::VisibleCandidates(const Camera&, const Rigid3d&,
+                                           const VisibilityQueryOptions&,
+                                           std::vector<uint32_t>* candidates) const {
+  candidates->resize(positions_.size());
+  for (size_t i = 0; i < positions_.size(); ++i) (*candidates)[i] = static_cast<uint32_t>(i);
+}
+
+void ReferenceMapSource::Replace(std::vector<Eigen::Vector3f> positions,
+                                 std::vector<Eigen::Vector3f> gradients) {
+  if (positions.size() != gradients.size()) {
+    throw InvalidArgumentError("ReferenceMapSource: one gradient per position needed");
+  }
+  positions_ = std::move(positions);
+  gradients_ = std::move(gradients);
+  ++generation_;
+}
+
+CannyDevo::CannyDevo(const Camera& event_camera, const Camera& depth_camera,
+                     const Rigid3d& event_from_depth, const CannyDevoOptions& options)
+    : event_camera_(event_camera),
+      depth_camera_(depth_camera),
+      event_from_depth_(event_from_depth),
+      options_(options),
+      table_(event_camera),
+      mapping_surface_(table_) {
+  options_.Check();
+  depth_camera_.Check();
+  if (!event_from_depth_.IsFinite()) {
+    throw InvalidArgumentError("CannyDevo: the depth-to-event extrinsic is not finite");
+  }
+  tracker_ = std::make_unique<tracking::Tracker>(source_, event_camera_, options_.tracker);
+}
+
+std::vector<tracking::PoseEstimate> CannyDevo::AddEvents(const EventBuffer& events) {
+  if (events.empty()) return {};
+  std::vector<tracking::PoseEstimate> steps = tracker_->AddEvents(events);
+  mapping_surface_.Insert(events, 0, events.size());
+  last_event_t_ns_ = events.t_ns.back();
+  if (!steps.empty()) {
+    last_step_ = steps.back();
+    has_step_ = true;
+  }
+  return steps;
+}
+
+ReferenceFrameInfo CannyDevo::BuildReference(const Rigid3d& world_from_cam, int64_t t_ns,
+                                             const cv::Mat& depth_m, double decay_time_s) {
+  const auto start = std::chrono::steady_clock::now();
+  const double start_cpu_ms = ThreadCpuMilliseconds();
+  const Camera& ideal = table_.ideal_camera();
+  tracking::SurfaceDecay decay;
+  decay.decay_time_ns = decay_time_s * 1e9;
+  decay.empty_threshold = options_.mapping_empty_threshold;
+  cv::Mat semi_dense = mapping_surface_.ActiveMask(tracking::SurfaceChannel::kAll, t_ns, decay);
+  cv::Mat values(semi_dense.size(), CV_32FC1, cv::Scalar(0));
+  for (int y = 0; y < values.rows; ++y) {
+    for (int x = 0; x < values.cols; ++x) {
+      values.at<float>(y, x) = static_cast<float>(
+          decay.Value(mapping_surface_.LastTimestamp(tracking::SurfaceChannel::kAll, x, y), t_ns));
+    }
+  }
+  cv::Mat gradient_x;
+  cv::Mat gradient_y;
+  cv::Sobel(values, gradient_x, CV_32F, 1, 0, 3);
+  cv::Sobel(values, gradient_y, CV_32F, 0, 1, 3);
+  if (options_.thin_to_front) {
+    // Keep the front of each edge's trail: the active pixels whose surface value is not below
+    // either neighbour along the surface's gradient (non-maximum suppression, as Canny's).
+    cv::Mat front = cv::Mat::zeros(semi_dense.size(), CV_8UC1);
+    for (int y = 1; y + 1 < semi_dense.rows; ++y) {
+      for (int x = 1; x + 1 < semi_dense.cols; ++x) {
+        if (semi_dense.at<uint8_t>(y, x) == 0) continue;
+        const double gx = gradient_x.at<float>(y, x);
+        const double gy = gradient_y.at<float>(y, x);
+        const double norm = std::hypot(gx, gy);
+        int dx = 0;
+        int dy = 0;
+        if (norm > 1e-9) {
+          dx = static_cast<int>(std::lround(gx / norm));
+          dy = static_cast<int>(std::lround(gy / norm));
+        }
+        const float value = values.at<float>(y, x);
+        if (value >= values.at<float>(y + dy, x + dx) &&
+            value >= values.at<float>(y - dy, x - dx)) {
+          front.at<uint8_t>(y, x) = 255;
+        }
+      }
+    }
+    semi_dense = front;
+  }
+  ReferenceFrameInfo info;
+  info.t_ns = t_ns;
+  info.world_from_cam = world_from_cam;
+  info.decay_time_s = decay_time_s;
+  std::vector<ReferencePoint> points =
+      BuildReferenceMap(ideal, semi_dense, depth_camera_, depth_m, event_from_depth_,
+                        options_.reference, &info.stats);
+  // Even subsampling to the budget.
+  std::vector<Eigen::Vector3f> positions_in_cam;
+  positions_in_cam.reserve(points.size());
+  for (const ReferencePoint& point : points)
+    positions_in_cam.push_back(point.position.cast<float>());
+  std::vector<uint32_t> candidates(points.size());
+  for (size_t i = 0; i < candidates.size(); ++i) candidates[i] = static_cast<uint32_t>(i);
+  tracking::PointSelectionOptions selection;
+  selection.max_points = options_.max_reference_points;
+  selection.min_depth_m = options_.reference.min_depth_m;
+  selection.max_depth_m = options_.reference.max_depth_m;
+  selection.image_margin_px = 0;
+  const std::vector<uint32_t> chosen = tracking::SelectEvenly(
+      positions_in_cam, candidates, tracking::PinholeIntrinsics::FromCamera(ideal), ideal.width,
+      ideal.height, Rigid3d(), selection);
+  // Each point's 3D gradient: the direction in which the time surface rises across the edge
+  // (towards where the edge moved), lifted by the ray-plane rule (maps/edge_lifting.h). Its sign
+  // comes from the motion, not from the intensity: the polarity prediction cannot use it.
+  std::vector<Eigen::Vector3f> positions;
+  std::vector<Eigen::Vector3f> gradients;
+  std::vector<ReferencePoint> kept;
+  std::vector<double> depths;
+  const Eigen::Matrix3d rotation = world_from_cam.RotationMatrix();
+  for (const uint32_t index : chosen) {
+    const ReferencePoint& point = points[index];
+    const int x = point.pixel.x();
+    const int y = point.pixel.y();
+    Eigen::Vector2d direction(gradient_x.at<float>(y, x), gradient_y.at<float>(y, x));
+    if (!(direction.norm() > 1e-6)) direction = Eigen::Vector2d::UnitX();
+    Eigen::Vector3d gradient;
+    if (!ComputeGradient3d(ideal, point.pixel.cast<double>(), direction.normalized(),
+                           point.position, &gradient)) {
+      continue;
+    }
+    positions.push_back((world_from_cam * point.position).cast<float>());
+    gradients.push_back((rotation * gradient).cast<float>());
+    kept.push_back(point);
+    depths.push_back(point.position.z());
+  }
+  info.points = static_cast<int>(kept.size());
+  if (!depths.empty()) {
+    std::nth_element(depths.begin(), depths.begin() + depths.size() / 2, depths.end());
+    info.median_depth_m = depths[depths.size() / 2];
+  }
+  if (info.points >= options_.min_reference_points) {
+    source_.Replace(std::move(positions), std::move(gradients));
+    reference_points_ = std::move(kept);
+  }
+  info.build_ms =
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  info.build_cpu_ms = ThreadCpuMilliseconds() - start_cpu_ms;
+  return info;
+}
+
+void CannyDevo::Start(const Rigid3d& world_from_cam, int64_t t_ns, const cv::Mat& depth_m) {
+  if (started_) throw InvalidArgumentError("CannyDevo::Start: already started");
+  if (t_ns < last_event_t_ns_) {
+    throw InvalidArgumentError("CannyDevo::Start: events after the start time were given");
+  }
+  const ReferenceFrameInfo info =
+      BuildReference(world_from_cam, t_ns, depth_m, options_.mapping_decay_time_s);
+  if (info.points < options_.min_reference_points) {
+    throw InvalidArgumentError(
+        "CannyDevo::Start: the first reference map has " + std::to_string(info.points) +
+        " points (at least " + std::to_string(options_.min_reference_points) +
+        " needed): too few events before the first depth frame, or no depth on their edges");
+  }
+  references_.push_back(info);
+  tracker_->Reset(world_from_cam, t_ns);
+  started_ = true;
+}
+
+std::vector<tracking::PoseEstimate> CannyDevo::AddDepthFrame(int64_t t_ns, const cv::Mat& depth_m) {
+  if (!started_) throw InvalidArgumentError("CannyDevo::AddDepthFrame: call Start first");
+  std::vector<tracking::PoseEstimate> steps = tracker_->AdvanceTo(t_ns);
+  if (!steps.empty()) {
+    last_step_ = steps.back();
+    has_step_ = true;
+  }
+  if (!has_step_ || last_step_.status != tracking::TrackingStatus::kTracking) return steps;
+  // The pose at the depth frame: the last step's, moved on by the tracker's velocity.
+  const double dt_s = static_cast<double>(t_ns - last_step_.t_ns) * 1e-9;
+  const Rigid3d world_from_cam = last_step_.world_from_cam * ExpSE3(tracker_->velocity() * dt_s);
+  const ReferenceFrameInfo& current = references_.back();
+  const Rigid3d reference_from_cam = current.world_from_cam.Inverse() * world_from_cam;
+  const double rotation_deg =
+      AngleBetween(reference_from_cam.rotation, Eigen::Quaterniond::Identity()) * 180.0 / M_PI;
+  if (reference_from_cam.translation.norm() <=
+          options_.reference_max_baseline_fraction * current.median_depth_m &&
+      rotation_deg <= options_.reference_max_rotation_deg) {
+    return steps;
+  }
+  const ReferenceFrameInfo info =
+      BuildReference(world_from_cam, t_ns, depth_m, last_step_.quality.decay_time_ms * 1e-3);
+  if (info.points >= options_.min_reference_points) references_.push_back(info);
+  return steps;
+}
+
+}  // namespace evloc::odometry

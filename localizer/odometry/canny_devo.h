@@ -1,0 +1,157 @@
+// Canny-DEVO (Zuo et al. 2022; docs/tracking.md, "Mapless odometry"): events tracked against a
+// local reference map built from one depth frame (devo_reference_map.h), on the semi-dense region
+// of the time surface at the depth frame's time. The events go to the map tracker of
+// localizer/tracking unchanged, through its public API; the reference map reaches it through the
+// MapSource seam (a new generation per reference frame). A new reference frame is taken from the
+// next depth frame once the baseline to the current one exceeds a fraction of its median depth,
+// or the rotation an angle.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include <Eigen/Core>
+#include <opencv2/core.hpp>
+
+#include "core/camera/camera.h"
+#include "core/camera/undistortion_table.h"
+#include "core/events/event.h"
+#include "core/geometry/rigid3.h"
+#include "localizer/odometry/devo_reference_map.h"
+#include "localizer/tracking/map_source.h"
+#include "localizer/tracking/time_surface.h"
+#include "localizer/tracking/tracker.h"
+#include "localizer/tracking/tracker_options.h"
+
+namespace evloc::odometry {
+
+// Options of Canny-DEVO.
+struct CannyDevoOptions {
+  // The event tracker's options. The reference points carry no intensity gradient (their region
+  // comes from events), so the polarity-aware registration is off by default (variant EVT-OH).
+  tracking::TrackerOptions tracker = DefaultTrackerOptions();
+  // The reference map's depth assignment.
+  ReferenceMapOptions reference;
+  // Decay time of the time surface whose active pixels form the semi-dense region of the first
+  // reference frame, seconds. Later ones use the decay time of the tracker's last step (its
+  // adaptive 1-pixel trail), so that the reference region is as thin as the edges the tracker
+  // registers it to: a thicker region trails behind the edge and biases the pose along the motion.
+  double mapping_decay_time_s = 0.005;
+  // A pixel is in the semi-dense region when that surface exceeds this (delta).
+  double mapping_empty_threshold = 0.1;
+  // Keep only the front of each edge's trail in the semi-dense region (non-maximum suppression
+  // of the surface along its gradient). Off: measured worse on the simulated sequences
+  // (docs/accuracy.md, "Mapless odometry").
+  bool thin_to_front = false;
+  // Reference points kept at most (evenly spread, 16 px buckets).
+  int max_reference_points = 20000;
+  // New reference frame when the baseline to the current one exceeds this fraction of its
+  // median depth...
+  double reference_max_baseline_fraction = 0.1;
+  // ... or the rotation this angle, degrees.
+  double reference_max_rotation_deg = 10.0;
+  // The tracker needs this many reference points to start or switch.
+  int min_reference_points = 100;
+
+  // The tracker's defaults with polarity off.
+  static tracking::TrackerOptions DefaultTrackerOptions();
+  // Throws InvalidArgumentError on a bad value.
+  void Check() const;
+};
+
+// The reference map as the tracker's MapSource: the points of the current reference frame in the
+// world, every point a candidate (the tracker's own selection projects them); a new generation
+// per reference frame.
+class ReferenceMapSource final : public tracking::MapSource {
+ public:
+  uint64_t generation() const override { return generation_; }
+  tracking::MapPoints points() const override { return {positions_, gradients_}; }
+  void VisibleCandidates(const Camera& camera, const Rigid3d& world_from_cam,
+                         const VisibilityQueryOptions& options,
+                         std::vector<uint32_t>* candidates) const override;
+  // Replaces the points (world positions and unit gradients, one per position) and changes the
+  // generation. Throws InvalidArgumentError when the sizes differ.
+  void Replace(std::vector<Eigen::Vector3f> positions, std::vector<Eigen::Vector3f> gradients);
+
+ private:
+  uint64_t generation_ = 0;
+  std::vector<Eigen::Vector3f> positions_;
+  std::vector<Eigen::Vector3f> gradients_;
+};
+
+// One reference frame taken.
+struct ReferenceFrameInfo {
+  // Time of its depth frame, nanoseconds.
+  int64_t t_ns = 0;
+  // world_from_cam of the event camera at that time (the tracker's estimate).
+  Rigid3d world_from_cam;
+  // Points in the map.
+  int points = 0;
+  // Median depth of its points, metres.
+  double median_depth_m = 0;
+  // Decay time of the time surface that gave its semi-dense region, seconds.
+  double decay_time_s = 0;
+  // Time to build it (semi-dense region, warping, depth assignment, lifting), milliseconds.
+  double build_ms = 0;
+  // The CPU time of the building thread over the same work, milliseconds (on a loaded machine
+  // the wall time above also counts the time the thread waited for a core).
+  double build_cpu_ms = 0;
+  // What the build did.
+  ReferenceMapStats stats;
+};
+
+// Canny-DEVO over an event stream with depth frames. Not thread-safe.
+class CannyDevo {
+ public:
+  // `event_camera` is the event camera, `depth_camera` the depth camera, `event_from_depth` the
+  // extrinsic. Throws InvalidArgumentError for bad options or cameras.
+  CannyDevo(const Camera& event_camera, const Camera& depth_camera, const Rigid3d& event_from_depth,
+            const CannyDevoOptions& options);
+
+  // Ingests events (time-ordered, also across calls) and returns the tracking steps that became
+  // due. Before Start they only prime the time surfaces.
+  std::vector<tracking::PoseEstimate> AddEvents(const EventBuffer& events);
+
+  // Starts at the depth frame `depth_m` taken at t_ns, where the event camera is at
+  // `world_from_cam`: the first reference frame, and the tracker's pose. Every event up to t_ns
+  // must have been given. Throws InvalidArgumentError when the reference map has fewer than
+  // min_reference_points points (too few events or no depth).
+  void Start(const Rigid3d& world_from_cam, int64_t t_ns, const cv::Mat& depth_m);
+
+  // A depth frame taken at t_ns (every event up to t_ns given, after Start): runs the steps due
+  // up to t_ns and returns them, then takes the frame as the new reference when the motion since
+  // the current one demands it and the tracker is TRACKING.
+  std::vector<tracking::PoseEstimate> AddDepthFrame(int64_t t_ns, const cv::Mat& depth_m);
+
+  // True once Start succeeded.
+  bool started() const { return started_; }
+  // The reference frames taken, in order.
+  const std::vector<ReferenceFrameInfo>& reference_frames() const { return references_; }
+  // The tracker (for inspection).
+  const tracking::Tracker& tracker() const { return *tracker_; }
+  // The current reference map's points, in the event camera frame at the reference time.
+  const std::vector<ReferencePoint>& reference_points() const { return reference_points_; }
+
+ private:
+  // Builds the reference map of the depth frame at t_ns with the camera at world_from_cam.
+  ReferenceFrameInfo BuildReference(const Rigid3d& world_from_cam, int64_t t_ns,
+                                    const cv::Mat& depth_m, double decay_time_s);
+
+  Camera event_camera_;
+  Camera depth_camera_;
+  Rigid3d event_from_depth_;
+  CannyDevoOptions options_;
+  UndistortionTable table_;
+  tracking::TimeSurface mapping_surface_;
+  ReferenceMapSource source_;
+  std::unique_ptr<tracking::Tracker> tracker_;
+  bool started_ = false;
+  int64_t last_event_t_ns_ = 0;
+  tracking::PoseEstimate last_step_;
+  bool has_step_ = false;
+  std::vector<ReferencePoint> reference_points_;
+  std::vector<ReferenceFrameInfo> references_;
+};
+
+}  // namespace evloc::odometry

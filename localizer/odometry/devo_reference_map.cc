@@ -1,0 +1,178 @@
+#include "localizer/odometry/devo_reference_map.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <string>
+
+#include <Eigen/Dense>
+
+#include "core/common/error.h"
+
+namespace evloc::odometry {
+
+void ReferenceMapOptions::Check() const {
+  if (!(neighbour_radius_px >= 0.75) || !(neighbour_radius_px <= 5)) {
+    throw InvalidArgumentError("ReferenceMapOptions: neighbour_radius_px must be in [0.75, 5]");
+  }
+  if (!(foreground_depth_fraction > 0)) {
+    throw InvalidArgumentError("ReferenceMapOptions: foreground_depth_fraction must be > 0");
+  }
+  if (min_cluster_points < 1) {
+    throw InvalidArgumentError("ReferenceMapOptions: min_cluster_points must be >= 1");
+  }
+  if (!(surround_tolerance_px >= 0)) {
+    throw InvalidArgumentError("ReferenceMapOptions: surround_tolerance_px must be >= 0");
+  }
+  if (!(min_depth_m > 0) || !(max_depth_m > min_depth_m)) {
+    throw InvalidArgumentError("ReferenceMapOptions: need 0 < min_depth_m < max_depth_m");
+  }
+}
+
+std::vector<ReferencePoint> BuildReferenceMap(const Camera& event_camera, const cv::Mat& semi_dense,
+                                              const Camera& depth_camera, const cv::Mat& depth_m,
+                                              const Rigid3d& event_from_depth,
+                                              const ReferenceMapOptions& options,
+                                              ReferenceMapStats* stats) {
+  options.Check();
+  if (semi_dense.type() != CV_8UC1 || semi_dense.cols != event_camera.width ||
+      semi_dense.rows != event_camera.height) {
+    throw InvalidArgumentError("BuildReferenceMap: the semi-dense mask must be CV_8UC1 of " +
+                               std::to_string(event_camera.width) + "x" +
+                               std::to_string(event_camera.height));
+  }
+  if (depth_m.type() != CV_32FC1 || depth_m.cols != depth_camera.width ||
+      depth_m.rows != depth_camera.height) {
+    throw InvalidArgumentError("BuildReferenceMap: the depth must be CV_32FC1 metres of " +
+                               std::to_string(depth_camera.width) + "x" +
+                               std::to_string(depth_camera.height));
+  }
+  ReferenceMapStats local_stats;
+  const int width = event_camera.width;
+  const int height = event_camera.height;
+  // Warp every depth pixel into the event image; bucket the points by their nearest pixel.
+  struct Warped {
+    float u;
+    float v;
+    float z;
+  };
+  std::vector<Warped> warped;
+  warped.reserve(static_cast<size_t>(depth_m.rows) * depth_m.cols);
+  std::vector<int32_t> cell_count(static_cast<size_t>(width) * height + 1, 0);
+  const Eigen::Matrix3d rotation = event_from_depth.RotationMatrix();
+  const bool identity_intrinsics = depth_camera.model == CameraModel::kPinhole &&
+                                   depth_camera.width == width && depth_camera.height == height;
+  for (int y = 0; y < depth_m.rows; ++y) {
+    const float* row = depth_m.ptr<float>(y);
+    for (int x = 0; x < depth_m.cols; ++x) {
+      const float z = row[x];
+      if (!(z >= options.min_depth_m && z <= options.max_depth_m)) continue;
+      Eigen::Vector3d ray;
+      if (identity_intrinsics) {
+        ray << (x - depth_camera.cx) / depth_camera.fx, (y - depth_camera.cy) / depth_camera.fy, 1;
+      } else if (!depth_camera.Unproject(Eigen::Vector2d(x, y), &ray)) {
+        continue;
+      }
+      const Eigen::Vector3d point = rotation * (ray * (z / ray.z())) + event_from_depth.translation;
+      if (!(point.z() > options.min_depth_m)) continue;
+      const double u = event_camera.fx * point.x() / point.z() + event_camera.cx;
+      const double v = event_camera.fy * point.y() / point.z() + event_camera.cy;
+      const int cx = static_cast<int>(std::lround(u));
+      const int cy = static_cast<int>(std::lround(v));
+      if (cx < 0 || cy < 0 || cx >= width || cy >= height) continue;
+      warped.push_back(
+          {static_cast<float>(u), static_cast<float>(v), static_cast<float>(point.z())});
+      ++cell_count[static_cast<size_t>(cy) * width + cx + 1];
+    }
+  }
+  local_stats.warped_points = static_cast<int>(warped.size());
+  // Counting sort of the points by cell.
+  for (size_t i = 1; i < cell_count.size(); ++i) cell_count[i] += cell_count[i - 1];
+  std::vector<int32_t> cell_start(cell_count.begin(), cell_count.end());
+  std::vector<int32_t> order(warped.size());
+  for (size_t i = 0; i < warped.size(); ++i) {
+    const int cx = static_cast<int>(std::lround(warped[i].u));
+    const int cy = static_cast<int>(std::lround(warped[i].v));
+    order[cell_start[static_cast<size_t>(cy) * width + cx]++] = static_cast<int32_t>(i);
+  }
+  const int reach = static_cast<int>(std::ceil(options.neighbour_radius_px));
+  const double radius_squared = options.neighbour_radius_px * options.neighbour_radius_px;
+  const double tolerance = options.surround_tolerance_px;
+  std::vector<ReferencePoint> points;
+  std::vector<const Warped*> neighbours;
+  for (int y = 0; y < height; ++y) {
+    const uint8_t* mask_row = semi_dense.ptr<uint8_t>(y);
+    for (int x = 0; x < width; ++x) {
+      if (mask_row[x] == 0) continue;
+      ++local_stats.semi_dense_pixels;
+      neighbours.clear();
+      float nearest = std::numeric_limits<float>::max();
+      for (int cy = std::max(0, y - reach); cy <= std::min(height - 1, y + reach); ++cy) {
+        for (int cx = std::max(0, x - reach); cx <= std::min(width - 1, x + reach); ++cx) {
+          const size_t cell = static_cast<size_t>(cy) * width + cx;
+          for (int32_t k = cell_count[cell]; k < cell_count[cell + 1]; ++k) {
+            const Warped& point = warped[order[k]];
+            const double du = point.u - x;
+            const double dv = point.v - y;
+            if (du * du + dv * dv > radius_squared) continue;
+            neighbours.push_back(&point);
+            nearest = std::min(nearest, point.z);
+          }
+        }
+      }
+      // The foreground cluster: the neighbours within the fraction of the nearest depth.
+      const float limit = nearest * static_cast<float>(1 + options.foreground_depth_fraction);
+      int count = 0;
+      bool left = false, right = false, above = false, below = false;
+      Eigen::Matrix3d normal_matrix = Eigen::Matrix3d::Zero();
+      Eigen::Vector3d right_side = Eigen::Vector3d::Zero();
+      for (const Warped* point : neighbours) {
+        if (point->z > limit) continue;
+        const double du = point->u - x;
+        const double dv = point->v - y;
+        left |= du <= tolerance;
+        right |= du >= -tolerance;
+        above |= dv <= tolerance;
+        below |= dv >= -tolerance;
+        // Inverse depth as a plane over the image: 1/z = a du + b dv + c.
+        const Eigen::Vector3d row(du, dv, 1);
+        normal_matrix += row * row.transpose();
+        right_side += row / point->z;
+        ++count;
+      }
+      if (count < options.min_cluster_points) {
+        ++local_stats.without_depth;
+        continue;
+      }
+      if (!(left && right && above && below)) {
+        ++local_stats.not_surrounded;
+        continue;
+      }
+      // The ray through the pixel centre meets the plane at 1/z = c; with too few or collinear
+      // points, the mean inverse depth.
+      double inverse_depth = right_side(2) / count;
+      const Eigen::LDLT<Eigen::Matrix3d> ldlt(normal_matrix);
+      if (count >= 3 && ldlt.info() == Eigen::Success && ldlt.isPositive() &&
+          std::abs(normal_matrix.determinant()) > 1e-6 * count * count * count) {
+        const Eigen::Vector3d plane = ldlt.solve(right_side);
+        // Keep the plane only when it stays within the cluster's depths (a fit across a fold
+        // would extrapolate).
+        if (plane.allFinite() && plane(2) > 0 && plane(2) >= 1.0 / limit * 0.999 &&
+            plane(2) <= 1.0 / nearest * 1.001) {
+          inverse_depth = plane(2);
+        }
+      }
+      const double depth = 1.0 / inverse_depth;
+      ReferencePoint reference;
+      reference.pixel = Eigen::Vector2i(x, y);
+      reference.position = Eigen::Vector3d((x - event_camera.cx) / event_camera.fx * depth,
+                                           (y - event_camera.cy) / event_camera.fy * depth, depth);
+      reference.support = count;
+      points.push_back(reference);
+    }
+  }
+  if (stats != nullptr) *stats = local_stats;
+  return points;
+}
+
+}  // namespace evloc::odometry

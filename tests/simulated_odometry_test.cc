@@ -1,0 +1,153 @@
+// End-to-end mapless odometry on a short simulated sequence (docs/accuracy.md, "Mapless
+// odometry"): evloc-sim renders 1 s of the default room at 240x180 (DAVIS240 preset: frames,
+// depth at the frame times, events) into a temporary folder once; evloc-track's code runs each
+// odometry mode without a map, and evloc-eval's code scores it without alignment (both start at
+// the ground truth's first pose).
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <random>
+#include <sstream>
+#include <string>
+
+#include <gtest/gtest.h>
+#include <opencv2/imgcodecs.hpp>
+
+#include "core/dataset/dataset.h"
+#include "core/trajectory/tum_io.h"
+#include "localizer/odometry/odometry_run.h"
+#include "localizer/offline/track_command.h"
+#include "tools/eval/evaluation.h"
+#include "tools/sim/render_command.h"
+
+namespace evloc::tracking {
+namespace {
+
+class SimulatedOdometry : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    folder_ =
+        new std::filesystem::path(std::filesystem::temp_directory_path() /
+                                  ("evloc_odometry_sim_" + std::to_string(std::random_device{}())));
+    sim::RenderCommandOptions render;
+    render.out_dir = *folder_ / "dataset";
+    render.camera_preset = "davis240";
+    render.motion = sim::MotionProfile::kMid;
+    render.duration_s = 1.0;
+    sim::RunRenderCommand(render);
+  }
+  static void TearDownTestSuite() {
+    std::filesystem::remove_all(*folder_);
+    delete folder_;
+    folder_ = nullptr;
+  }
+
+  // Runs evloc-track --mode MODE and scores the trajectory.
+  static EvaluationResult Run(const std::string& mode, OfflineTrackingResult* result) {
+    const std::filesystem::path dataset = *folder_ / "dataset";
+    const std::filesystem::path out = *folder_ / (mode + ".txt");
+    TrackCommandOptions track = ParseTrackCommandLine(
+        {"--mode", mode, "--dataset", dataset.string(), "--out", out.string(), "--quiet"});
+    std::ostringstream log;
+    *result = RunTrackCommand(track, log);
+    EvaluationOptions evaluation;
+    evaluation.alignment = Alignment::kNone;
+    return EvaluateTrajectory(ReadTumTrajectory(dataset / "groundtruth.txt"),
+                              ReadTumTrajectory(out), evaluation);
+  }
+
+  static std::filesystem::path* folder_;
+};
+
+std::filesystem::path* SimulatedOdometry::folder_ = nullptr;
+
+TEST_F(SimulatedOdometry, CannyVoTracksOneSecondWithinACentimetre) {
+  OfflineTrackingResult result;
+  const EvaluationResult scores = Run("vo", &result);
+  EXPECT_EQ(result.lost_steps, 0);
+  EXPECT_EQ(result.steps.size(), 30u);  // 30 frames per second
+  // Measured 0.25 cm and 0.07 deg (docs/accuracy.md); a registration caught on wrong edges
+  // drifts by several centimetres within a second.
+  EXPECT_LT(scores.ate_translation_cm.rmse, 1.0);
+  EXPECT_LT(scores.ate_rotation_deg.rmse, 0.4);
+  EXPECT_GT(scores.coverage, 0.95);
+  std::cout << "Canny-VO: ATE " << scores.ate_translation_cm.rmse << " cm, "
+            << scores.ate_rotation_deg.rmse << " deg, coverage " << scores.coverage << "\n";
+}
+
+TEST_F(SimulatedOdometry, CannyVoReadsTheSameSequenceInTheTumRgbdLayout) {
+  // The rendered sequence rewritten as a TUM RGB-D folder: rgb.txt, depth in 1/5000 m listed
+  // 7 ms after its frame (the association pairs them), the benchmark's header comments.
+  const std::filesystem::path source = *folder_ / "dataset";
+  const std::filesystem::path tum = *folder_ / "tum";
+  std::filesystem::create_directories(tum / "rgb");
+  std::filesystem::create_directories(tum / "depth");
+  const Dataset dataset = ReadDataset(source);
+  std::ofstream rgb(tum / "rgb.txt");
+  std::ofstream depth(tum / "depth.txt");
+  rgb << "# color images\n# file: 'sim.bag'\n# timestamp filename\n";
+  depth << "# depth maps\n# file: 'sim.bag'\n# timestamp filename\n";
+  ASSERT_EQ(dataset.images.size(), dataset.depth.size());
+  for (size_t i = 0; i < dataset.images.size(); ++i) {
+    const std::string name = std::to_string(i) + ".png";
+    std::filesystem::copy_file(dataset.images[i].path, tum / "rgb" / name);
+    rgb << FormatNanosecondsAsSeconds(dataset.images[i].t_ns) << " rgb/" << name << "\n";
+    cv::Mat fifths;
+    ReadDepthPng(dataset.depth[i].path).convertTo(fifths, CV_16UC1, kTumDepthUnitsPerMetre);
+    cv::imwrite((tum / "depth" / name).string(), fifths);
+    depth << FormatNanosecondsAsSeconds(dataset.depth[i].t_ns + 7'000'000) << " depth/" << name
+          << "\n";
+  }
+  rgb.close();
+  depth.close();
+  std::filesystem::copy_file(source / "calib.yaml", tum / "calib.yaml");
+  std::filesystem::copy_file(source / "groundtruth.txt", tum / "groundtruth.txt");
+  ASSERT_EQ(ReadDataset(tum).layout, DatasetLayout::kTumRgbd);
+
+  const std::filesystem::path out = *folder_ / "vo_tum.txt";
+  std::ostringstream log;
+  const OfflineTrackingResult result =
+      RunTrackCommand(ParseTrackCommandLine({"--mode", "vo", "--dataset", tum.string(), "--out",
+                                             out.string(), "--quiet"}),
+                      log);
+  EXPECT_EQ(result.steps.size(), dataset.images.size());
+  EXPECT_EQ(result.lost_steps, 0);
+  EvaluationOptions evaluation;
+  evaluation.alignment = Alignment::kNone;
+  const EvaluationResult scores = EvaluateTrajectory(ReadTumTrajectory(source / "groundtruth.txt"),
+                                                     ReadTumTrajectory(out), evaluation);
+  // The same frames and depth (quantised to 0.2 mm instead of 1 mm): the evloc layout's bound.
+  EXPECT_LT(scores.ate_translation_cm.rmse, 1.0);
+  std::cout << "Canny-VO, TUM RGB-D layout: ATE " << scores.ate_translation_cm.rmse << " cm\n";
+}
+
+TEST_F(SimulatedOdometry, CannyDevoTracksOneSecondAndSwitchesReferenceFrames) {
+  const Dataset dataset = ReadDataset(*folder_ / "dataset");
+  ASSERT_TRUE(dataset.ground_truth.has_value());
+  const odometry::DevoRunResult run = odometry::RunCannyDevo(
+      dataset, std::nullopt, dataset.ground_truth->start_ns(), odometry::DevoRunOptions());
+  EXPECT_GE(run.steps.size(), 280u);  // 300 Hz from the first depth frame after 30 ms
+  // The reference frame is rebuilt as the camera moves (about every 0.4 s at this speed).
+  EXPECT_GE(run.reference_frames.size(), 2u);
+  for (const odometry::ReferenceFrameInfo& reference : run.reference_frames) {
+    EXPECT_GT(reference.points, 1000);
+  }
+  const std::filesystem::path out = *folder_ / "devo.txt";
+  WriteTumTrajectory(out, run.trajectory);
+  EvaluationOptions evaluation;
+  evaluation.alignment = Alignment::kNone;
+  const EvaluationResult scores =
+      EvaluateTrajectory(*dataset.ground_truth, ReadTumTrajectory(out), evaluation);
+  // Measured 4.3 cm and 0.61 deg over this second (docs/accuracy.md: far worse than Canny-VO,
+  // than the map tracker on the exact map, and than the issue's target); a tracker that loses
+  // its reference map is off by decimetres within the second.
+  EXPECT_LT(scores.ate_translation_cm.rmse, 6.0);
+  EXPECT_LT(scores.ate_rotation_deg.rmse, 1.5);
+  EXPECT_GT(scores.coverage, 0.9);
+  std::cout << "Canny-DEVO: ATE " << scores.ate_translation_cm.rmse << " cm, "
+            << scores.ate_rotation_deg.rmse << " deg, " << run.reference_frames.size()
+            << " reference frames, " << run.lost_steps << " LOST steps\n";
+}
+
+}  // namespace
+}  // namespace evloc::tracking
