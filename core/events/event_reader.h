@@ -28,6 +28,28 @@ class EventReader {
   virtual uint64_t dropped_event_count() const { return 0; }
 };
 
+// An EventReader over a source that decodes whole packets at a time (the messages of a ROS1 bag,
+// the packets of an AEDAT4 file): Read() hands out the decoded packet's events and decodes the
+// next packet when they are drained, so one packet's events are in memory at a time.
+class PacketEventReader : public EventReader {
+ public:
+  size_t Read(size_t max_events, EventBuffer* out) final;
+
+ protected:
+  // Decodes the next packet's events into `pending` (empty on entry); false at the end.
+  virtual bool DecodeNextPacket(EventBuffer* pending) = 0;
+  // Decodes the first packet now (readers whose sensor size comes with it call this from their
+  // constructor, after which Read() starts with that packet's events).
+  void DecodeFirstPacket();
+
+ private:
+  bool Refill();
+
+  EventBuffer pending_;
+  size_t pending_position_ = 0;
+  bool ended_ = false;
+};
+
 // The event file formats evloc reads.
 enum class EventFileFormat {
   // Event Camera Dataset text, `t[s] x y p` per line.
@@ -40,6 +62,8 @@ enum class EventFileFormat {
   kEvb,
   // ROS1 bag (format 2.0) with event messages on /dvs/events (see rosbag_events.h).
   kRosbag,
+  // iniVation DV AEDAT 4.0 with an events stream named "events" (see aedat4.h).
+  kAedat4,
 };
 
 // Human-readable name of a format ("ECD text", ...).
