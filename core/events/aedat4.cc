@@ -340,6 +340,24 @@ void Aedat4Reader::Decompress(uint64_t offset, const char* what) {
       }
     }
     ZSTD_DCtx_reset(decompressor_->zstd, ZSTD_reset_session_only);
+    // One frame that states its decompressed size (DV's one-shot compression writes it): one
+    // call straight into the body buffer.
+    const unsigned long long content = ZSTD_getFrameContentSize(compressed_.data(), input_size);
+    if (content != ZSTD_CONTENTSIZE_UNKNOWN && content != ZSTD_CONTENTSIZE_ERROR &&
+        content <= kMaxPacketBytes &&
+        ZSTD_findFrameCompressedSize(compressed_.data(), input_size) == input_size) {
+      if (body_.size() < content) body_.resize(static_cast<size_t>(content));
+      const size_t produced =
+          ZSTD_decompressDCtx(decompressor_->zstd, body_.data(), static_cast<size_t>(content),
+                              compressed_.data(), input_size);
+      if (ZSTD_isError(produced)) fail(ZSTD_getErrorName(produced));
+      if (produced != content) {
+        fail("the Zstd frame states " + std::to_string(content) + " bytes but holds " +
+             std::to_string(produced));
+      }
+      body_size_ = produced;
+      return;
+    }
     ZSTD_inBuffer input{compressed_.data(), input_size, 0};
     size_t hint = 1;
     for (;;) {
@@ -493,28 +511,31 @@ void DecodeAedat4Events(const Aedat4Packet& packet, const std::string& source,
   uint16_t* xs = out->x.data() + base;
   uint16_t* ys = out->y.data() + base;
   int8_t* ps = out->polarity.data() + base;
-  // Unsigned comparison drops negative coordinates too.
+  // Unsigned comparison drops negative coordinates too. Branch-free: every event is written at
+  // `kept`, which advances only for events inside the sensor; everything stays in locals (the
+  // int8_t stores may alias anything in memory).
   const uint32_t width = bounds ? static_cast<uint32_t>(bounds->width) : 32768u;
   const uint32_t height = bounds ? static_cast<uint32_t>(bounds->height) : 32768u;
   size_t kept = 0;
+  bool time_overflow = false;
   for (size_t i = 0; i < count; ++i) {
     const aedat4::Event& event = events[i];
     const int64_t t_us = event.timestamp();
-    if (t_us > kMaxMicroseconds || t_us < -kMaxMicroseconds) {
-      MicrosecondsToNanoseconds(t_us, packet, source, "event");
-    }
+    time_overflow |= (t_us > kMaxMicroseconds) | (t_us < -kMaxMicroseconds);
     const auto x = static_cast<uint32_t>(static_cast<int32_t>(event.x()));
     const auto y = static_cast<uint32_t>(static_cast<int32_t>(event.y()));
-    if (x >= width || y >= height) {
-      ++*dropped;
-      continue;
-    }
-    t[kept] = t_us * 1000;
+    t[kept] = static_cast<int64_t>(static_cast<uint64_t>(t_us) * 1000u);
     xs[kept] = static_cast<uint16_t>(x);
     ys[kept] = static_cast<uint16_t>(y);
-    ps[kept] = event.polarity() ? 1 : -1;
-    ++kept;
+    ps[kept] = static_cast<int8_t>(event.polarity() ? 1 : -1);
+    kept += static_cast<size_t>((x < width) & (y < height));
   }
+  if (time_overflow) {
+    for (size_t i = 0; i < count; ++i) {
+      MicrosecondsToNanoseconds(events[i].timestamp(), packet, source, "event");
+    }
+  }
+  *dropped += count - kept;
   out->t_ns.resize(base + kept);
   out->x.resize(base + kept);
   out->y.resize(base + kept);
@@ -638,11 +659,11 @@ void Aedat4EventReader::Initialise(const Aedat4EventOptions& options) {
   file_->SetStreams({stream->id});
 }
 
-bool Aedat4EventReader::DecodeNextPacket(EventBuffer* pending) {
+bool Aedat4EventReader::DecodeNextPacket(EventBuffer* out) {
   Aedat4Packet packet;
   if (!file_->Next(&packet)) return false;
   ++packets_;
-  DecodeAedat4Events(packet, file_->source(), sensor_size_, pending, &dropped_);
+  DecodeAedat4Events(packet, file_->source(), sensor_size_, out, &dropped_);
   return true;
 }
 

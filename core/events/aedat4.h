@@ -232,7 +232,8 @@ class Aedat4EventReader final : public PacketEventReader {
 
  private:
   void Initialise(const Aedat4EventOptions& options);
-  bool DecodeNextPacket(EventBuffer* pending) override;
+  // Appends the next packet's events to `out`; false at the end.
+  bool DecodeNextPacket(EventBuffer* out) override;
 
   std::unique_ptr<Aedat4Reader> file_;
   std::optional<SensorSize> sensor_size_;

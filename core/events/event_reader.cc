@@ -15,27 +15,40 @@
 
 namespace evloc {
 
-bool PacketEventReader::Refill() {
-  pending_.clear();
-  pending_position_ = 0;
-  if (ended_) return false;
+void PacketEventReader::DecodeFirstPacket() {
   if (!DecodeNextPacket(&pending_)) ended_ = true;
-  return !ended_;
 }
-
-void PacketEventReader::DecodeFirstPacket() { Refill(); }
 
 size_t PacketEventReader::Read(size_t max_events, EventBuffer* out) {
   size_t appended = 0;
   while (appended < max_events) {
-    if (pending_position_ == pending_.size()) {
-      if (!Refill()) break;
+    const size_t room = max_events - appended;
+    if (pending_position_ < pending_.size()) {
+      const size_t take = std::min(room, pending_.size() - pending_position_);
+      out->Append(pending_, pending_position_, take);
+      pending_position_ += take;
+      appended += take;
       continue;
     }
-    const size_t take = std::min(max_events - appended, pending_.size() - pending_position_);
-    out->Append(pending_, pending_position_, take);
-    pending_position_ += take;
-    appended += take;
+    if (ended_) break;
+    // Decode the next packet straight into `out` (no copy through pending_); the events beyond
+    // `max_events` wait in pending_ for the next call.
+    const size_t base = out->size();
+    if (!DecodeNextPacket(out)) {
+      ended_ = true;
+      break;
+    }
+    const size_t decoded = out->size() - base;
+    if (decoded > room) {
+      pending_.clear();
+      pending_.Append(*out, base + room, decoded - room);
+      pending_position_ = 0;
+      out->t_ns.resize(base + room);
+      out->x.resize(base + room);
+      out->y.resize(base + room);
+      out->polarity.resize(base + room);
+    }
+    appended += std::min(decoded, room);
   }
   return appended;
 }

@@ -29,22 +29,21 @@ class EventReader {
 };
 
 // An EventReader over a source that decodes whole packets at a time (the messages of a ROS1 bag,
-// the packets of an AEDAT4 file): Read() hands out the decoded packet's events and decodes the
-// next packet when they are drained, so one packet's events are in memory at a time.
+// the packets of an AEDAT4 file): Read() decodes the next packet straight into the caller's
+// buffer and keeps the events beyond `max_events` for the next call, so at most one packet's
+// events are held between calls.
 class PacketEventReader : public EventReader {
  public:
   size_t Read(size_t max_events, EventBuffer* out) final;
 
  protected:
-  // Decodes the next packet's events into `pending` (empty on entry); false at the end.
-  virtual bool DecodeNextPacket(EventBuffer* pending) = 0;
+  // Appends the next packet's events to `out`; false at the end.
+  virtual bool DecodeNextPacket(EventBuffer* out) = 0;
   // Decodes the first packet now (readers whose sensor size comes with it call this from their
   // constructor, after which Read() starts with that packet's events).
   void DecodeFirstPacket();
 
  private:
-  bool Refill();
-
   EventBuffer pending_;
   size_t pending_position_ = 0;
   bool ended_ = false;

@@ -184,11 +184,11 @@ void RosbagEventReader::Initialise(const RosbagEventOptions& options) {
   DecodeFirstPacket();
 }
 
-bool RosbagEventReader::DecodeNextPacket(EventBuffer* pending) {
+bool RosbagEventReader::DecodeNextPacket(EventBuffer* out) {
   RosbagMessage message;
   if (!bag_->Next(&message)) return false;
   ++messages_;
-  DecodeRosEventMessage(message, bag_->source(), pending, &sensor_size_, &dropped_, &evt3_);
+  DecodeRosEventMessage(message, bag_->source(), out, &sensor_size_, &dropped_, &evt3_);
   return true;
 }
 

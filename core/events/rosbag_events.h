@@ -61,8 +61,8 @@ class RosbagEventReader final : public PacketEventReader {
 
  private:
   void Initialise(const RosbagEventOptions& options);
-  // Decodes the next message's events into `pending`; false at the end.
-  bool DecodeNextPacket(EventBuffer* pending) override;
+  // Appends the next message's events to `out`; false at the end.
+  bool DecodeNextPacket(EventBuffer* out) override;
 
   std::unique_ptr<RosbagReader> bag_;
   std::optional<SensorSize> sensor_size_;

@@ -9,9 +9,12 @@ iniVation's DV writes them (docs.inivation.com, "AEDAT 4.0").
 Usage: write_test_aedat4.py OUT_DIR
        write_test_aedat4.py --small OUT_DIR   (at most 8 events per packet and one 4x3 frame:
        fuzzing seeds of 1-3 KB, test_<compression>.aedat4)
-       write_test_aedat4.py --bench EVENTS OUT_DIR   (bench_<compression>.aedat4 for
-       bench/events_benchmark.cc: EVENTS DAVIS346-like events in packets of 10,000 on stream
-       0, compressions none, lz4, zstd)
+       write_test_aedat4.py --bench EVENTS OUT_DIR [EVENTS_TXT ...]   (for
+       bench/events_benchmark.cc, compressions none, lz4 and zstd at level 3, packets of 10,000
+       events on stream 0: bench_<compression>.aedat4 with EVENTS events at uniformly random
+       DAVIS346 pixels (the worst case for compression), and, when ECD events.txt files are
+       given, bench_ecd_<compression>.aedat4 with EVENTS real DAVIS240 events: the files' events
+       one after the other, repeated with shifted times until there are EVENTS)
        write_test_aedat4.py --from-dataset DIR OUT.aedat4   (an lz4 file of a dataset folder's
        events.txt and images, stream "events" in packets of 1 ms, "frames")
 
@@ -179,9 +182,10 @@ def compress(body, compression):
     if compression == "lz4-high":
         return lz4.frame.compress(body, compression_level=lz4.frame.COMPRESSIONLEVEL_MINHC)
     if compression == "zstd":
-        # No content size in the frame header: the reader must grow its buffer.
-        return zstandard.ZstdCompressor(level=3, write_content_size=False).compress(body)
-    return zstandard.ZstdCompressor(level=19).compress(body)
+        # The frame states its decompressed size, as DV's one-shot compression writes it.
+        return zstandard.ZstdCompressor(level=3).compress(body)
+    # No content size in the frame header: the reader must grow its buffer.
+    return zstandard.ZstdCompressor(level=19, write_content_size=False).compress(body)
 
 
 def write_file(path, compression, streams, packets, with_table=True):
@@ -277,7 +281,19 @@ def write_test_files(out_dir, small):
             handle.write("\n".join(lines) + "\n")
 
 
-def write_bench_files(count, out_dir):
+def write_bench_set(events, size, out_dir, prefix):
+    per_packet = 10000
+    packets = []
+    for start in range(0, len(events), per_packet):
+        chunk = events[start : start + per_packet]
+        packets.append((0, event_packet(chunk), len(chunk), int(chunk[0]["t"]), int(chunk[-1]["t"])))
+    streams = [(0, "events", "EVTS", size)]
+    for compression in ("none", "lz4", "zstd"):
+        write_file(os.path.join(out_dir, "%s_%s.aedat4" % (prefix, compression)), compression,
+                   streams, packets)
+
+
+def write_bench_files(count, out_dir, events_txt):
     rng = numpy.random.default_rng(15)
     width, height = 346, 260
     events = numpy.zeros(count, dtype=EVENT_DTYPE)
@@ -285,15 +301,29 @@ def write_bench_files(count, out_dir):
     events["x"] = rng.integers(0, width, count)
     events["y"] = rng.integers(0, height, count)
     events["on"] = rng.integers(0, 2, count)
-    per_packet = 10000
-    packets = []
-    for start in range(0, count, per_packet):
-        chunk = events[start : start + per_packet]
-        packets.append((0, event_packet(chunk), len(chunk), int(chunk[0]["t"]), int(chunk[-1]["t"])))
-    streams = [(0, "events", "EVTS", (width, height))]
-    for compression in ("none", "lz4", "zstd"):
-        write_file(os.path.join(out_dir, "bench_%s.aedat4" % compression), compression, streams,
-                   packets)
+    write_bench_set(events, (width, height), out_dir, "bench")
+    if not events_txt:
+        return
+    pieces = []
+    for path in events_txt:
+        data = numpy.loadtxt(path, ndmin=2)
+        piece = numpy.zeros(len(data), dtype=EVENT_DTYPE)
+        piece["t"] = numpy.rint(data[:, 0] * 1e6).astype(numpy.int64)
+        piece["t"] -= piece["t"][0]
+        piece["x"], piece["y"], piece["on"] = data[:, 1], data[:, 2], data[:, 3] > 0
+        pieces.append(piece)
+    real = numpy.zeros(count, dtype=EVENT_DTYPE)
+    filled, offset = 0, 1_000_000
+    while filled < count:
+        for piece in pieces:
+            take = min(len(piece), count - filled)
+            real[filled : filled + take] = piece[:take]
+            real["t"][filled : filled + take] += offset
+            offset = int(real["t"][filled + take - 1]) + 1
+            filled += take
+            if filled == count:
+                break
+    write_bench_set(real, (240, 180), out_dir, "bench_ecd")
 
 
 def write_from_dataset(folder, out_path):
@@ -339,9 +369,9 @@ def main(argv):
     if len(argv) == 3 and argv[1] == "--small":
         os.makedirs(argv[2], exist_ok=True)
         write_test_files(argv[2], small=True)
-    elif len(argv) == 4 and argv[1] == "--bench":
+    elif len(argv) >= 4 and argv[1] == "--bench":
         os.makedirs(argv[3], exist_ok=True)
-        write_bench_files(int(argv[2]), argv[3])
+        write_bench_files(int(argv[2]), argv[3], argv[4:])
     elif len(argv) == 4 and argv[1] == "--from-dataset":
         write_from_dataset(argv[2], argv[3])
     elif len(argv) == 2:
