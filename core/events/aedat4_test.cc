@@ -3,9 +3,11 @@
 #include <gtest/gtest.h>
 
 #include <cstring>
+#include <map>
 #include <numeric>
 
 #include "core/common/error.h"
+#include "core/common/test_data.h"
 #include "core/events/aedat4_xml.h"
 #include "core/events/event_reader.h"
 #include "core/events/testing/test_bags.h"
@@ -241,6 +243,40 @@ TEST(Aedat4EventReader, CorruptPacketsAreParseErrorsSayingWhatWasExpected) {
     const std::string error = ParseErrorOf(bytes);
     EXPECT_NE(error.find("cut.aedat4: byte "), std::string::npos) << compression << ": " << error;
   }
+}
+
+// Real DV recordings, when someone puts them in the shared data folder (none is there yet: no
+// public AEDAT4 file with a licence allowing redistribution could be fetched,
+// docs/event-formats.md 8.5): every packet of every stream decodes, events lie inside the stated
+// sensor and their times never decrease within a stream.
+TEST(Aedat4Reader, ReadsRealRecordingsOfTheSharedData) {
+  EVLOC_REQUIRE_SHARED_DATA(folder, "aedat4");
+  size_t files = 0;
+  for (const auto& entry : std::filesystem::directory_iterator(folder)) {
+    if (entry.path().extension() != ".aedat4") continue;
+    ++files;
+    Aedat4Reader file(entry.path());
+    Aedat4Packet packet;
+    std::map<int32_t, int64_t> last_t;
+    uint64_t events = 0;
+    while (file.Next(&packet)) {
+      if (packet.stream->type == "EVTS") {
+        EventBuffer buffer;
+        uint64_t dropped = 0;
+        DecodeAedat4Events(packet, file.source(), packet.stream->size, &buffer, &dropped);
+        EXPECT_EQ(dropped, 0u) << entry.path();
+        for (size_t i = 0; i < buffer.size(); ++i) {
+          ASSERT_GE(buffer.t_ns[i], last_t[packet.stream->id]) << entry.path();
+          last_t[packet.stream->id] = buffer.t_ns[i];
+        }
+        events += buffer.size();
+      } else if (packet.stream->type == "FRME") {
+        EXPECT_FALSE(DecodeAedat4Frame(packet, file.source()).pixels.empty());
+      }
+    }
+    EXPECT_GT(events, 0u) << entry.path() << " has no events";
+  }
+  if (files == 0) GTEST_SKIP() << folder << " holds no .aedat4 file";
 }
 
 TEST(Aedat4Xml, ParsesDvDescriptionsWithEntitiesCommentsAndCdata) {

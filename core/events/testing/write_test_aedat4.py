@@ -16,7 +16,8 @@ Usage: write_test_aedat4.py OUT_DIR
        given, bench_ecd_<compression>.aedat4 with EVENTS real DAVIS240 events: the files' events
        one after the other, repeated with shifted times until there are EVENTS)
        write_test_aedat4.py --from-dataset DIR OUT.aedat4   (an lz4 file of a dataset folder's
-       events.txt and images, stream "events" in packets of 1 ms, "frames")
+       events.txt, times rounded to microseconds, stream "events" in packets of 1 ms, sized by
+       its calib.yaml; for tests/recording_end_to_end_test.cc)
 
 Writes, for each compression none / lz4 / lz4-high / zstd / zstd-high,
 OUT_DIR/test_<compression>.aedat4 with the streams
@@ -327,8 +328,8 @@ def write_bench_files(count, out_dir, events_txt):
 
 
 def write_from_dataset(folder, out_path):
-    """events.txt (t_s x y p) and images.txt (t_s path, 8-bit gray PNG) of a dataset folder."""
-    import cv2  # python3-opencv, only for this mode
+    """The events.txt (t_s x y p) of a dataset folder, sized by its calib.yaml."""
+    import yaml  # python3-yaml, only for this mode
 
     data = numpy.loadtxt(os.path.join(folder, "events.txt"), ndmin=2)
     events = numpy.zeros(len(data), dtype=EVENT_DTYPE)
@@ -336,33 +337,16 @@ def write_from_dataset(folder, out_path):
     events["x"] = data[:, 1]
     events["y"] = data[:, 2]
     events["on"] = data[:, 3] > 0
-    import yaml  # python3-yaml
-
     with open(os.path.join(folder, "calib.yaml")) as handle:
         calib = yaml.safe_load(handle)
     width, height = int(calib["width"]), int(calib["height"])
-    packets = []
     edges = numpy.searchsorted(events["t"], numpy.arange(events["t"][0], events["t"][-1] + 1001, 1000))
-    frames = []
-    images_txt = os.path.join(folder, "images.txt")
-    if os.path.exists(images_txt):
-        for line in open(images_txt):
-            if line.strip() and not line.startswith("#"):
-                t_s, name = line.split()
-                frames.append((int(round(float(t_s) * 1e6)), os.path.join(folder, name)))
-    frame_index = 0
+    packets = []
     for begin, end in zip(edges[:-1], edges[1:]):
         if end > begin:
             chunk = events[begin:end]
-            while frame_index < len(frames) and frames[frame_index][0] <= int(chunk[0]["t"]):
-                t, path = frames[frame_index]
-                image = cv2.imread(path, cv2.IMREAD_GRAYSCALE)
-                packets.append((1, frame_packet(t, image.shape[1], image.shape[0], 0, image.tobytes()),
-                                1, t, t))
-                frame_index += 1
             packets.append((0, event_packet(chunk), len(chunk), int(chunk[0]["t"]), int(chunk[-1]["t"])))
-    streams = [(0, "events", "EVTS", (width, height)), (1, "frames", "FRME", (width, height))]
-    write_file(out_path, "lz4", streams, packets)
+    write_file(out_path, "lz4", [(0, "events", "EVTS", (width, height))], packets)
 
 
 def main(argv):
