@@ -2,6 +2,7 @@
 // core (counter "Mev/s"). Results and the command line are in docs/benchmarks.md.
 #include <benchmark/benchmark.h>
 
+#include <algorithm>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
@@ -11,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "core/events/aedat4.h"
 #include "core/events/ecd_text.h"
 #include "core/events/evb.h"
 #include "core/events/event.h"
@@ -173,39 +175,71 @@ void BM_EvbRead(benchmark::State& state) {
 }
 BENCHMARK(BM_EvbRead)->Unit(benchmark::kMillisecond);
 
+// Runs `script` (a test-file writer of core/events/testing) with `--bench 2^22 FOLDER` into a
+// fresh temporary folder; the folder, or empty when the script fails.
+std::filesystem::path WriteBenchFiles(const char* script, const char* folder_name,
+                                      const std::string& extra_arguments = "") {
+  const auto folder = std::filesystem::temp_directory_path() / folder_name;
+  std::filesystem::remove_all(folder);
+  std::filesystem::create_directories(folder);
+  const auto path =
+      std::filesystem::path(EVLOC_SOURCE_DIR) / "core" / "events" / "testing" / script;
+  const std::string command = "/usr/bin/python3 '" + path.string() + "' --bench " +
+                              std::to_string(4 << 20) + " '" + folder.string() + "'" +
+                              extra_arguments;
+  return std::system(command.c_str()) == 0 ? folder : std::filesystem::path();
+}
+
 // The dvs_msgs bags of 2^22 events (messages of 1,000) written by Debian's python3-rosbag with
 // core/events/testing/write_test_bags.py --bench, once per process; empty when it cannot run.
 std::filesystem::path BenchBagsDir() {
+  static const std::filesystem::path dir =
+      WriteBenchFiles("write_test_bags.py", "evloc-events-benchmark-bags");
+  return dir;
+}
+
+// The AEDAT4 files of 2^22 events (packets of 10,000) written with python3-flatbuffers,
+// python3-lz4 and python3-zstandard by write_test_aedat4.py --bench, once per process: uniformly
+// random DAVIS346 pixels (bench_*), and the real DAVIS240 events of the shared ECD snippets
+// repeated (bench_ecd_*, only when the shared data is present).
+std::filesystem::path BenchAedat4Dir() {
   static const std::filesystem::path dir = [] {
-    const auto folder = std::filesystem::temp_directory_path() / "evloc-events-benchmark-bags";
-    std::filesystem::remove_all(folder);
-    std::filesystem::create_directories(folder);
-    const auto script = std::filesystem::path(EVLOC_SOURCE_DIR) / "core" / "events" / "testing" /
-                        "write_test_bags.py";
-    const std::string command = "/usr/bin/python3 '" + script.string() + "' --bench " +
-                                std::to_string(4 << 20) + " '" + folder.string() + "'";
-    return std::system(command.c_str()) == 0 ? folder : std::filesystem::path();
+    std::string snippets;
+    const auto folder = SharedDataDir() / "ecd" / "snippets";
+    if (std::filesystem::is_directory(folder)) {
+      std::vector<std::string> files;
+      for (const auto& entry : std::filesystem::directory_iterator(folder)) {
+        if (std::filesystem::exists(entry.path() / "events.txt")) {
+          files.push_back((entry.path() / "events.txt").string());
+        }
+      }
+      std::sort(files.begin(), files.end());
+      for (const std::string& file : files) snippets += " '" + file + "'";
+    }
+    return WriteBenchFiles("write_test_aedat4.py", "evloc-events-benchmark-aedat4", snippets);
   }();
   return dir;
 }
 
-// Reads the events of a dvs_msgs/EventArray bag (`compression` none or lz4) in 2^16-event calls.
-void RosbagDvsRead(benchmark::State& state, const char* compression) {
-  const std::filesystem::path dir = BenchBagsDir();
+// Reads the 2^22 events of `path` with a Reader in 2^16-event calls, opening it every iteration.
+template <typename Reader>
+void ReadRecording(benchmark::State& state, const std::filesystem::path& dir,
+                   const std::string& file, const char* writer) {
   if (dir.empty()) {
-    state.SkipWithError("write_test_bags.py --bench failed (needs python3-rosbag, python3-numpy)");
+    state.SkipWithError(
+        (std::string(writer) + " --bench failed (see scripts/install-deps.sh)").c_str());
     return;
   }
-  const auto path = dir / (std::string("bench_") + compression + ".bag");
+  const auto path = dir / file;
   uint64_t total = 0;
   EventBuffer read;
   for (auto _ : state) {
-    RosbagEventReader reader(path);
+    Reader reader(path);
     read.clear();
     while (reader.Read(1 << 16, &read) > 0) {
     }
     if (read.size() != (4u << 20)) {
-      state.SkipWithError("the bench bag does not hold 2^22 events");
+      state.SkipWithError("the bench file does not hold 2^22 events");
       return;
     }
     total += read.size();
@@ -214,11 +248,52 @@ void RosbagDvsRead(benchmark::State& state, const char* compression) {
       benchmark::Counter(static_cast<double>(total) / 1e6, benchmark::Counter::kIsRate);
 }
 
+// Reads the events of a dvs_msgs/EventArray bag (`compression` none or lz4).
+void RosbagDvsRead(benchmark::State& state, const char* compression) {
+  ReadRecording<RosbagEventReader>(
+      state, BenchBagsDir(), std::string("bench_") + compression + ".bag", "write_test_bags.py");
+}
+
 void BM_RosbagDvsReadUncompressed(benchmark::State& state) { RosbagDvsRead(state, "none"); }
 BENCHMARK(BM_RosbagDvsReadUncompressed)->Unit(benchmark::kMillisecond);
 
 void BM_RosbagDvsReadLz4(benchmark::State& state) { RosbagDvsRead(state, "lz4"); }
 BENCHMARK(BM_RosbagDvsReadLz4)->Unit(benchmark::kMillisecond);
+
+// Reads the events stream of an AEDAT4 file (`compression` none, lz4 or zstd).
+void Aedat4Read(benchmark::State& state, const char* compression) {
+  ReadRecording<Aedat4EventReader>(state, BenchAedat4Dir(),
+                                   std::string("bench_") + compression + ".aedat4",
+                                   "write_test_aedat4.py");
+}
+
+void BM_Aedat4ReadUncompressed(benchmark::State& state) { Aedat4Read(state, "none"); }
+BENCHMARK(BM_Aedat4ReadUncompressed)->Unit(benchmark::kMillisecond);
+
+void BM_Aedat4ReadLz4(benchmark::State& state) { Aedat4Read(state, "lz4"); }
+BENCHMARK(BM_Aedat4ReadLz4)->Unit(benchmark::kMillisecond);
+
+void BM_Aedat4ReadZstd(benchmark::State& state) { Aedat4Read(state, "zstd"); }
+BENCHMARK(BM_Aedat4ReadZstd)->Unit(benchmark::kMillisecond);
+
+// The same three compressions for the repeated real ECD events.
+void Aedat4EcdRead(benchmark::State& state, const char* compression) {
+  const auto file = std::string("bench_ecd_") + compression + ".aedat4";
+  if (!BenchAedat4Dir().empty() && !std::filesystem::exists(BenchAedat4Dir() / file)) {
+    state.SkipWithError("the shared ECD snippets are absent (../shared/data or EVLOC_DATA_DIR)");
+    return;
+  }
+  ReadRecording<Aedat4EventReader>(state, BenchAedat4Dir(), file, "write_test_aedat4.py");
+}
+
+void BM_Aedat4EcdReadUncompressed(benchmark::State& state) { Aedat4EcdRead(state, "none"); }
+BENCHMARK(BM_Aedat4EcdReadUncompressed)->Unit(benchmark::kMillisecond);
+
+void BM_Aedat4EcdReadLz4(benchmark::State& state) { Aedat4EcdRead(state, "lz4"); }
+BENCHMARK(BM_Aedat4EcdReadLz4)->Unit(benchmark::kMillisecond);
+
+void BM_Aedat4EcdReadZstd(benchmark::State& state) { Aedat4EcdRead(state, "zstd"); }
+BENCHMARK(BM_Aedat4EcdReadZstd)->Unit(benchmark::kMillisecond);
 
 }  // namespace
 }  // namespace evloc

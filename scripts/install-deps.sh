@@ -9,8 +9,8 @@ PACKAGES=(
   build-essential cmake ninja-build pkg-config ccache git clang clang-format libclang-rt-14-dev
   # core libraries
   libeigen3-dev libopencv-dev libyaml-cpp-dev nlohmann-json3-dev libhdf5-dev libsqlite3-dev
-  # ROS1 bag chunks (bz2, lz4)
-  libbz2-dev liblz4-dev
+  # ROS1 bag chunks (bz2, lz4); AEDAT4 packets (flatbuffers, lz4, zstd) and its schema compiler
+  libbz2-dev liblz4-dev libflatbuffers-dev flatbuffers-compiler libzstd-dev
   # mapping
   colmap libceres-dev libpcl-dev
   # service
@@ -23,6 +23,8 @@ PACKAGES=(
   python3 python3-grpcio python3-protobuf python3-numpy
   # the independent writer of the bag tests (core/events/testing/write_test_bags.py)
   python3-rosbag python3-roslz4
+  # the independent writer of the AEDAT4 tests (core/events/testing/write_test_aedat4.py)
+  python3-flatbuffers python3-lz4 python3-zstandard
   # TLS test certificates
   openssl
   # the service capacity plot (scripts/plot-capacity.py, docs/benchmarks.md)

@@ -94,6 +94,19 @@ void WriteFileAtomically(const std::filesystem::path& path, std::string_view con
   });
 }
 
+std::unique_ptr<std::istream> OpenInputFile(const std::filesystem::path& path) {
+  auto stream = std::make_unique<std::ifstream>(path, std::ios::binary);
+  if (!*stream) throw IoError(path.string() + ": cannot open: " + ErrnoText());
+  return stream;
+}
+
+bool FileStartsWith(const std::filesystem::path& path, std::string_view magic) {
+  const auto stream = OpenInputFile(path);
+  std::string start(magic.size(), '\0');
+  stream->read(start.data(), static_cast<std::streamsize>(start.size()));
+  return stream->gcount() == static_cast<std::streamsize>(magic.size()) && start == magic;
+}
+
 std::string ReadFileToString(const std::filesystem::path& path) {
   std::ifstream stream(path, std::ios::binary);
   if (!stream) {

@@ -3,6 +3,8 @@
 
 #include <filesystem>
 #include <functional>
+#include <istream>
+#include <memory>
 #include <ostream>
 #include <string>
 #include <string_view>
@@ -29,6 +31,14 @@ void SyncPath(const std::filesystem::path& path);
 
 // Reads a whole (small) file into a string. Throws IoError when it cannot.
 std::string ReadFileToString(const std::filesystem::path& path);
+
+// Opens a file for binary reading (the streaming readers' input). Throws IoError naming it and
+// the reason when it cannot be opened.
+std::unique_ptr<std::istream> OpenInputFile(const std::filesystem::path& path);
+
+// True when the file starts with the bytes `magic` (format detection). Throws IoError when it
+// cannot be opened.
+bool FileStartsWith(const std::filesystem::path& path, std::string_view magic);
 
 // An exclusive advisory lock (flock) on `path`, created when missing, held until destruction.
 // Serialises writers of the same file across processes and threads (each lock opens its own

@@ -10,8 +10,10 @@
 
 #include "core/common/error.h"
 #include "core/common/file_util.h"
+#include "core/dataset/aedat4_dataset.h"
 #include "core/dataset/rosbag_dataset.h"
 #include "core/dataset/tum_rgbd.h"
+#include "core/events/aedat4.h"
 #include "core/events/rosbag.h"
 #include "core/events/rosbag_events.h"
 #include "core/trajectory/tum_io.h"
@@ -165,36 +167,60 @@ void RosbagTopics::Check() const {
   }
 }
 
-bool ApplyRosbagTopicFlag(const std::string& flag, const std::string& value, RosbagTopics* topics) {
+void Aedat4DatasetOptions::Check() const {
+  if (events.empty() || frames.empty()) {
+    throw InvalidArgumentError("The AEDAT4 streams (events, frames) must not be empty.");
+  }
+}
+
+bool ApplyRecordingFlag(const std::string& flag, const std::string& value, RosbagTopics* topics,
+                        Aedat4DatasetOptions* aedat4) {
   if (flag == "--events-topic") {
     topics->events = value;
+    aedat4->events = value;
   } else if (flag == "--image-topic") {
     topics->image = value;
+    aedat4->frames = value;
   } else if (flag == "--camera-info-topic") {
     topics->camera_info = value;
   } else if (flag == "--groundtruth-topic") {
     topics->groundtruth = value;
+  } else if (flag == "--calib") {
+    aedat4->calibration = value;
+  } else if (flag == "--groundtruth") {
+    aedat4->groundtruth = value;
   } else {
     return false;
   }
   return true;
 }
 
-const char kRosbagTopicFlagsUsage[] =
-    "  --events-topic T       bag topic of the events (default /dvs/events)\n"
-    "  --image-topic T        bag topic of the images (default /dvs/image_raw)\n"
+const char kRecordingFlagsUsage[] =
+    "  --events-topic T       bag topic (default /dvs/events) or AEDAT4 stream name or id\n"
+    "                         (default events) of the events\n"
+    "  --image-topic T        bag topic (default /dvs/image_raw) or AEDAT4 stream (default\n"
+    "                         frames) of the images\n"
     "  --camera-info-topic T  bag topic of the calibration (default /dvs/camera_info)\n"
     "  --groundtruth-topic T  bag topic of the ground-truth PoseStamped (default "
-    "/optitrack/davis)\n";
+    "/optitrack/davis)\n"
+    "  --calib FILE           AEDAT4: the camera (evloc YAML, or ECD calib.txt); required\n"
+    "  --groundtruth FILE     AEDAT4: ground truth world_from_cam, TUM (optional)\n";
 
 void DatasetReaderOptions::Check() const {
   if (ecd_width <= 0 || ecd_height <= 0) {
     throw InvalidArgumentError("The ECD sensor size must be positive.");
   }
   bag_topics.Check();
+  aedat4.Check();
 }
 
 std::unique_ptr<EventReader> OpenDatasetEvents(const Dataset& dataset) {
+  if (dataset.aedat4) {
+    Aedat4EventOptions options;
+    options.stream = dataset.aedat4->options.events;
+    if (!dataset.events_path) throw InvalidArgumentError("an AEDAT4 dataset without its path");
+    return std::make_unique<Aedat4EventReader>(*dataset.events_path, options);
+  }
   if (dataset.bag) {
     RosbagEventOptions options;
     options.topic = dataset.bag->topics.events;
@@ -252,6 +278,9 @@ Dataset ReadDataset(const fs::path& root, const DatasetReaderOptions& options) {
   std::error_code error;
   if (fs::is_regular_file(root, error) && IsRosbagFile(root)) {
     return ReadRosbagDataset(root, options);
+  }
+  if (fs::is_regular_file(root, error) && IsAedat4File(root)) {
+    return ReadAedat4Dataset(root, options);
   }
   if (IsTumRgbdFolder(root)) return ReadTumRgbdDataset(root);
   if (!fs::is_directory(root, error)) {
@@ -325,6 +354,11 @@ TimedPose ResolveInitialPose(const Dataset& dataset,
                                "' (its topics: " + dataset.bag->topic_list +
                                "): name it (--groundtruth-topic) or give the initial pose with "
                                "--init-pose");
+  }
+  if (!initial_world_from_cam && !has_ground_truth && dataset.aedat4) {
+    throw InvalidArgumentError("AEDAT4 file '" + dataset.root.string() +
+                               "' holds no ground truth: give a TUM file with --groundtruth or "
+                               "the initial pose with --init-pose");
   }
   if (!initial_world_from_cam && !has_ground_truth) {
     throw InvalidArgumentError("dataset '" + dataset.root.string() +

@@ -51,6 +51,8 @@ inline constexpr char kRgbTxt[] = "rgb.txt";
 inline constexpr char kGroundTruthMap[] = "gt_map/map.evmap";
 // Ground-truth map, PLY export.
 inline constexpr char kGroundTruthPly[] = "gt_map/map.ply";
+// IMU samples (converted recordings, ECD layout): `t_s ax ay az gx gy gz`, m/s^2 and rad/s.
+inline constexpr char kImuTxt[] = "imu.txt";
 // Provenance and counts (JSON).
 inline constexpr char kInfoJson[] = "info.json";
 }  // namespace dataset_files
@@ -126,13 +128,33 @@ struct RosbagTopics {
   void Check() const;
 };
 
-// The command-line flags of RosbagTopics, shared by evloc-track and evloc-replay: sets the topic
-// of `flag` (--events-topic, --image-topic, --camera-info-topic, --groundtruth-topic) to `value`
-// and returns true, or returns false for any other flag.
-bool ApplyRosbagTopicFlag(const std::string& flag, const std::string& value, RosbagTopics* topics);
+// An AEDAT4 file (iniVation DV) read as a dataset (docs/event-formats.md, section 8): its
+// streams, and the calibration and ground truth that the format does not hold.
+struct Aedat4DatasetOptions {
+  // The events stream (EVTS), by name or id; required when events are read.
+  std::string events = "events";
+  // The frames stream (FRME); when absent the dataset has no images.
+  std::string frames = "frames";
+  // The camera: an evloc YAML camera, or an ECD calib.txt sized from the events stream; required
+  // (the format holds no calibration).
+  std::filesystem::path calibration;
+  // Ground truth world_from_cam, a TUM file; optional.
+  std::filesystem::path groundtruth;
+
+  // Throws InvalidArgumentError when a stream name is empty.
+  void Check() const;
+};
+
+// The command-line flags of recordings read as datasets, shared by evloc-track, evloc-replay and
+// evloc-convert: --events-topic and --image-topic name the bag topic and the AEDAT4 stream,
+// --camera-info-topic and --groundtruth-topic the bag topics, --calib and --groundtruth the
+// AEDAT4 file's calibration and ground truth. Sets what `flag` names to `value` and returns true,
+// or returns false for any other flag.
+bool ApplyRecordingFlag(const std::string& flag, const std::string& value, RosbagTopics* topics,
+                        Aedat4DatasetOptions* aedat4);
 
 // The help text of those flags (one line each, indented as the tools' usage).
-extern const char kRosbagTopicFlagsUsage[];
+extern const char kRecordingFlagsUsage[];
 
 // Options of the dataset reader.
 struct DatasetReaderOptions {
@@ -142,6 +164,8 @@ struct DatasetReaderOptions {
   int ecd_height = 180;
   // The topics used when the dataset is a ROS1 bag.
   RosbagTopics bag_topics;
+  // The streams and side files used when the dataset is an AEDAT4 file.
+  Aedat4DatasetOptions aedat4;
 
   // Throws InvalidArgumentError unless both sizes are positive and the topics are valid.
   void Check() const;
@@ -155,6 +179,8 @@ enum class DatasetLayout {
   kTumRgbd,
   // A ROS1 bag file.
   kRosbag,
+  // An AEDAT4 file.
+  kAedat4,
 };
 
 // Depth PNG units per metre of the evloc layout (millimetres).
@@ -172,6 +198,16 @@ struct RosbagDatasetSource {
   std::string topic_list;
   // Messages on the image topic (images are decoded by the converter, ConvertRosbagToDataset).
   uint64_t image_messages = 0;
+};
+
+// What a dataset read from an AEDAT4 file holds besides the Dataset fields.
+struct Aedat4DatasetSource {
+  // The options it was read with.
+  Aedat4DatasetOptions options;
+  // Every stream of the file with its id and type, for error messages.
+  std::string stream_list;
+  // True when the file has the frames stream (frames are decoded by the converter).
+  bool has_frames = false;
 };
 
 // A loaded dataset: its calibration, the lists of images and depth maps, ground truth and where
@@ -196,15 +232,17 @@ struct Dataset {
   std::optional<nlohmann::json> info;
   // Set when the dataset is a ROS1 bag (`root` is then the bag file and `events_path` too).
   std::optional<RosbagDatasetSource> bag;
+  // Set when the dataset is an AEDAT4 file (`root` is then the file and `events_path` too).
+  std::optional<Aedat4DatasetSource> aedat4;
   // The layout it was read from.
   DatasetLayout layout = DatasetLayout::kEvloc;
   // Units per metre of the depth PNGs (pass to ReadDepthPng): 1000, or 5000 for TUM RGB-D.
   double depth_units_per_metre = kEvlocDepthUnitsPerMetre;
 };
 
-// Loads a dataset folder, or a ROS1 bag file (see ReadRosbagDataset in rosbag_dataset.h). A
-// folder with rgb.txt and no images.txt is read in the TUM RGB-D layout (ReadTumRgbdDataset in
-// tum_rgbd.h).
+// Loads a dataset folder, a ROS1 bag file (see ReadRosbagDataset in rosbag_dataset.h) or an
+// AEDAT4 file (ReadAedat4Dataset in aedat4_dataset.h). A folder with rgb.txt and no images.txt is
+// read in the TUM RGB-D layout (ReadTumRgbdDataset in tum_rgbd.h).
 // Throws IoError when the folder or a listed file is missing, ParseError naming the file and line
 // for malformed lists, InvalidArgumentError when the folder has neither calib.yaml nor calib.txt,
 // or is an unfinished OUT.partial.
@@ -214,8 +252,9 @@ Dataset ReadDataset(const std::filesystem::path& root, const DatasetReaderOption
 // exist.
 void CheckListedFilesExist(const Dataset& dataset);
 
-// Opens the events of a dataset: its event file, or the events topic of a bag. Throws
-// InvalidArgumentError when the dataset has no events (for a bag: naming the topics present).
+// Opens the events of a dataset: its event file, the events topic of a bag or the events stream
+// of an AEDAT4 file. Throws InvalidArgumentError when the dataset has no events (for a bag or an
+// AEDAT4 file: naming the topics or streams present).
 std::unique_ptr<EventReader> OpenDatasetEvents(const Dataset& dataset);
 
 // The pose a run over `dataset` starts from: `initial_world_from_cam` when given, else the first

@@ -6,7 +6,6 @@
 #include <opencv2/imgproc.hpp>
 
 #include "core/common/error.h"
-#include "core/events/evb.h"
 #include "core/events/rosbag_events.h"
 #include "core/trajectory/tum_io.h"
 
@@ -199,64 +198,30 @@ Dataset ReadRosbagDataset(const std::filesystem::path& path, const DatasetReader
   return dataset;
 }
 
-RosbagConversionSummary ConvertRosbagToDataset(const std::filesystem::path& bag_path,
-                                               const std::filesystem::path& out_dir,
-                                               const DatasetReaderOptions& reader_options,
-                                               const RosbagConversionOptions& options) {
-  options.Check();
+RecordingConversionSummary ConvertRosbagToDataset(const std::filesystem::path& bag_path,
+                                                  const std::filesystem::path& out_dir,
+                                                  const DatasetReaderOptions& reader_options,
+                                                  const RecordingConversionOptions& options) {
   const Dataset dataset = ReadRosbagDataset(bag_path, reader_options);
   const RosbagTopics& topics = reader_options.bag_topics;
-  DatasetWriterOptions writer_options;
-  writer_options.force = options.force;
-  DatasetWriter writer(out_dir, writer_options);
-  RosbagConversionSummary summary;
-  writer.WriteCamera(dataset.camera);
-  {
-    const auto reader = OpenDatasetEvents(dataset);
-    EvbWriter events(writer.staging_dir() / dataset_files::kEventsEvb, reader->sensor_size());
-    EventBuffer buffer;
-    while (reader->Read(1 << 16, &buffer) > 0) {
-      events.Write(buffer);
-      buffer.clear();
-    }
-    events.Close();
-    summary.events = events.event_count();
-    summary.dropped_events = reader->dropped_event_count();
-  }
-  if (dataset.bag->image_messages > 0) {
+  const auto for_each_image = [&](const ImageSink& add_image) {
+    if (dataset.bag->image_messages == 0) return;
     RosbagReader bag(bag_path);
     bag.SetTopics({topics.image});
     RosbagMessage message;
     while (bag.Next(&message)) {
       const RosImage image = DecodeRosImage(message, bag.source());
-      writer.AddImage(image.t_ns, image.pixels.depth() == CV_16U
-                                      ? [&] {
-                                          cv::Mat eight;
-                                          image.pixels.convertTo(eight, CV_8U, 1.0 / 257.0);
-                                          return eight;
-                                        }()
-                                      : image.pixels);
-      ++summary.images;
+      add_image(image.t_ns, image.pixels);
     }
-  }
-  if (dataset.ground_truth) {
-    writer.WriteGroundTruth(*dataset.ground_truth);
-    summary.poses = dataset.ground_truth->size();
-  }
-  writer.WriteInfo({{"source", bag_path.filename().string()},
-                    {"converted_from", "ROS1 bag"},
-                    {"topics",
-                     {{"events", topics.events},
-                      {"image", topics.image},
-                      {"camera_info", topics.camera_info},
-                      {"groundtruth", topics.groundtruth}}},
-                    {"counts",
-                     {{"events", summary.events},
-                      {"dropped_events", summary.dropped_events},
-                      {"images", summary.images},
-                      {"poses", summary.poses}}}});
-  writer.Commit();
-  return summary;
+  };
+  return WriteRecordingAsDataset(dataset, out_dir, options, for_each_image,
+                                 {{"source", bag_path.filename().string()},
+                                  {"converted_from", "ROS1 bag"},
+                                  {"topics",
+                                   {{"events", topics.events},
+                                    {"image", topics.image},
+                                    {"camera_info", topics.camera_info},
+                                    {"groundtruth", topics.groundtruth}}}});
 }
 
 }  // namespace evloc

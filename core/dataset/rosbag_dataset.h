@@ -11,6 +11,7 @@
 #include <opencv2/core.hpp>
 
 #include "core/dataset/dataset.h"
+#include "core/dataset/recording_conversion.h"
 #include "core/events/rosbag.h"
 
 namespace evloc {
@@ -42,35 +43,14 @@ struct RosImage {
 // Throws ParseError for other encodings or a data size that does not match step × height.
 RosImage DecodeRosImage(const RosbagMessage& message, const std::string& source);
 
-// Options of the bag converter.
-struct RosbagConversionOptions {
-  // Replace an existing output folder.
-  bool force = false;
-
-  // Nothing to check; present for uniformity with other options structs.
-  void Check() const {}
-};
-
-// What the converter wrote.
-struct RosbagConversionSummary {
-  // Events written to events.evb.
-  uint64_t events = 0;
-  // Events the reader dropped (outside the sensor).
-  uint64_t dropped_events = 0;
-  // Images written (0 when the bag has no image topic).
-  uint64_t images = 0;
-  // Ground-truth poses written (0 when the bag has no ground-truth topic).
-  uint64_t poses = 0;
-};
-
 // Converts a bag into a dataset folder (calib.yaml, events.evb, images/ with images.txt when the
 // image topic exists, groundtruth.txt when the ground-truth topic exists, info.json naming the
-// source and topics) with DatasetWriter: OUT appears only when complete. Streams the bag (events
-// in one pass, images in another). Throws as ReadRosbagDataset and OpenDatasetEvents do, IoError
-// when writing fails.
-RosbagConversionSummary ConvertRosbagToDataset(const std::filesystem::path& bag_path,
-                                               const std::filesystem::path& out_dir,
-                                               const DatasetReaderOptions& reader_options,
-                                               const RosbagConversionOptions& options);
+// source and topics) with WriteRecordingAsDataset: OUT appears only when complete. Streams the bag
+// (events in one pass, images in another). Throws as ReadRosbagDataset and OpenDatasetEvents do,
+// IoError when writing fails.
+RecordingConversionSummary ConvertRosbagToDataset(const std::filesystem::path& bag_path,
+                                                  const std::filesystem::path& out_dir,
+                                                  const DatasetReaderOptions& reader_options,
+                                                  const RecordingConversionOptions& options);
 
 }  // namespace evloc

@@ -33,21 +33,29 @@ void ExpectGroundTruthAsWritten(const Trajectory& trajectory, const std::filesys
   }
 }
 
-TEST(RosbagTopics, EachFlagSetsItsTopicAndOtherFlagsAreLeftToTheCaller) {
+TEST(RecordingFlags, EachFlagSetsItsTopicOrStreamAndOtherFlagsAreLeftToTheCaller) {
   RosbagTopics topics;
+  Aedat4DatasetOptions aedat4;
   EXPECT_EQ(topics.events, "/dvs/events");
-  EXPECT_TRUE(ApplyRosbagTopicFlag("--events-topic", "/e", &topics));
-  EXPECT_TRUE(ApplyRosbagTopicFlag("--image-topic", "/i", &topics));
-  EXPECT_TRUE(ApplyRosbagTopicFlag("--camera-info-topic", "/c", &topics));
-  EXPECT_TRUE(ApplyRosbagTopicFlag("--groundtruth-topic", "/g", &topics));
-  EXPECT_FALSE(ApplyRosbagTopicFlag("--topic", "/x", &topics));
+  EXPECT_EQ(aedat4.events, "events");
+  EXPECT_TRUE(ApplyRecordingFlag("--events-topic", "/e", &topics, &aedat4));
+  EXPECT_TRUE(ApplyRecordingFlag("--image-topic", "/i", &topics, &aedat4));
+  EXPECT_TRUE(ApplyRecordingFlag("--camera-info-topic", "/c", &topics, &aedat4));
+  EXPECT_TRUE(ApplyRecordingFlag("--groundtruth-topic", "/g", &topics, &aedat4));
+  EXPECT_TRUE(ApplyRecordingFlag("--calib", "c.yaml", &topics, &aedat4));
+  EXPECT_TRUE(ApplyRecordingFlag("--groundtruth", "gt.txt", &topics, &aedat4));
+  EXPECT_FALSE(ApplyRecordingFlag("--topic", "/x", &topics, &aedat4));
   EXPECT_EQ(topics.events, "/e");
   EXPECT_EQ(topics.image, "/i");
   EXPECT_EQ(topics.camera_info, "/c");
   EXPECT_EQ(topics.groundtruth, "/g");
-  for (const char* flag :
-       {"--events-topic", "--image-topic", "--camera-info-topic", "--groundtruth-topic"}) {
-    EXPECT_NE(std::string(kRosbagTopicFlagsUsage).find(flag), std::string::npos) << flag;
+  EXPECT_EQ(aedat4.events, "/e");
+  EXPECT_EQ(aedat4.frames, "/i");
+  EXPECT_EQ(aedat4.calibration, "c.yaml");
+  EXPECT_EQ(aedat4.groundtruth, "gt.txt");
+  for (const char* flag : {"--events-topic", "--image-topic", "--camera-info-topic",
+                           "--groundtruth-topic", "--calib", "--groundtruth "}) {
+    EXPECT_NE(std::string(kRecordingFlagsUsage).find(flag), std::string::npos) << flag;
   }
 }
 
@@ -127,7 +135,8 @@ TEST(RosbagDataset, MissingOrMistypedTopicsAreErrorsListingTheTopicsPresent) {
 TEST(RosbagDataset, ConvertsABagToADatasetFolderThatReadsBackEqual) {
   EVLOC_REQUIRE_TEST_BAGS(dir);
   const auto out = testing::MakeTempDir("bag-dataset") / "converted";
-  const RosbagConversionSummary summary = ConvertRosbagToDataset(dir / "test_bz2.bag", out, {}, {});
+  const RecordingConversionSummary summary =
+      ConvertRosbagToDataset(dir / "test_bz2.bag", out, {}, {});
   const EventBuffer expected = testing::ReadExpectedEvents(dir, "dvs");
   EXPECT_EQ(summary.events, expected.size());
   EXPECT_EQ(summary.images, 4u);

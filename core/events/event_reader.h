@@ -28,6 +28,27 @@ class EventReader {
   virtual uint64_t dropped_event_count() const { return 0; }
 };
 
+// An EventReader over a source that decodes whole packets at a time (the messages of a ROS1 bag,
+// the packets of an AEDAT4 file): Read() decodes the next packet straight into the caller's
+// buffer and keeps the events beyond `max_events` for the next call, so at most one packet's
+// events are held between calls.
+class PacketEventReader : public EventReader {
+ public:
+  size_t Read(size_t max_events, EventBuffer* out) final;
+
+ protected:
+  // Appends the next packet's events to `out`; false at the end.
+  virtual bool DecodeNextPacket(EventBuffer* out) = 0;
+  // Decodes the first packet now (readers whose sensor size comes with it call this from their
+  // constructor, after which Read() starts with that packet's events).
+  void DecodeFirstPacket();
+
+ private:
+  EventBuffer pending_;
+  size_t pending_position_ = 0;
+  bool ended_ = false;
+};
+
 // The event file formats evloc reads.
 enum class EventFileFormat {
   // Event Camera Dataset text, `t[s] x y p` per line.
@@ -40,6 +61,8 @@ enum class EventFileFormat {
   kEvb,
   // ROS1 bag (format 2.0) with event messages on /dvs/events (see rosbag_events.h).
   kRosbag,
+  // iniVation DV AEDAT 4.0 with an events stream named "events" (see aedat4.h).
+  kAedat4,
 };
 
 // Human-readable name of a format ("ECD text", ...).

@@ -10,6 +10,7 @@
 #include <string_view>
 
 #include "core/common/error.h"
+#include "core/common/file_util.h"
 
 namespace evloc {
 namespace {
@@ -110,20 +111,11 @@ std::string RosbagPosition(const RosbagMessage& message, uint64_t offset_in_mess
 }
 
 bool IsRosbagFile(const std::filesystem::path& path) {
-  std::ifstream file(path, std::ios::binary);
-  if (!file) throw IoError(path.string() + ": cannot open");
-  char start[kMagicSize] = {0};
-  file.read(start, kMagicSize);
-  return file.gcount() == static_cast<std::streamsize>(kMagicSize) &&
-         std::memcmp(start, kMagic, kMagicSize) == 0;
+  return FileStartsWith(path, std::string_view(kMagic, kMagicSize));
 }
 
-RosbagReader::RosbagReader(const std::filesystem::path& path) : source_(path.string()) {
-  auto file = std::make_unique<std::ifstream>(path, std::ios::binary);
-  if (!*file) throw IoError(source_ + ": cannot open");
-  stream_ = std::move(file);
-  Open();
-}
+RosbagReader::RosbagReader(const std::filesystem::path& path)
+    : RosbagReader(OpenInputFile(path), path.string()) {}
 
 RosbagReader::RosbagReader(std::unique_ptr<std::istream> stream, std::string source)
     : stream_(std::move(stream)), source_(std::move(source)) {

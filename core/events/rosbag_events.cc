@@ -4,6 +4,7 @@
 #include <cstring>
 
 #include "core/common/error.h"
+#include "core/common/file_util.h"
 
 namespace evloc {
 namespace {
@@ -154,9 +155,7 @@ void DecodeRosEventMessage(const RosbagMessage& message, const std::string& sour
 
 RosbagEventReader::RosbagEventReader(const std::filesystem::path& path,
                                      const RosbagEventOptions& options)
-    : bag_(std::make_unique<RosbagReader>(path)) {
-  Initialise(options);
-}
+    : RosbagEventReader(OpenInputFile(path), path.string(), options) {}
 
 RosbagEventReader::RosbagEventReader(std::unique_ptr<std::istream> stream, std::string source,
                                      const RosbagEventOptions& options)
@@ -182,32 +181,15 @@ void RosbagEventReader::Initialise(const RosbagEventOptions& options) {
   }
   bag_->SetTopics({options.topic});
   // The sensor size comes with the first message: decode it now.
-  DecodeNextMessage();
+  DecodeFirstPacket();
 }
 
-bool RosbagEventReader::DecodeNextMessage() {
+bool RosbagEventReader::DecodeNextPacket(EventBuffer* out) {
   RosbagMessage message;
-  pending_.clear();
-  pending_position_ = 0;
   if (!bag_->Next(&message)) return false;
   ++messages_;
-  DecodeRosEventMessage(message, bag_->source(), &pending_, &sensor_size_, &dropped_, &evt3_);
+  DecodeRosEventMessage(message, bag_->source(), out, &sensor_size_, &dropped_, &evt3_);
   return true;
-}
-
-size_t RosbagEventReader::Read(size_t max_events, EventBuffer* out) {
-  size_t appended = 0;
-  while (appended < max_events) {
-    if (pending_position_ == pending_.size()) {
-      if (!DecodeNextMessage()) break;
-      continue;
-    }
-    const size_t take = std::min(max_events - appended, pending_.size() - pending_position_);
-    out->Append(pending_, pending_position_, take);
-    pending_position_ += take;
-    appended += take;
-  }
-  return appended;
 }
 
 }  // namespace evloc

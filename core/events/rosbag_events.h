@@ -41,7 +41,7 @@ void DecodeRosEventMessage(const RosbagMessage& message, const std::string& sour
                            uint64_t* dropped, std::unique_ptr<Evt3Decoder>* evt3);
 
 // Streams the events of one topic of a bag, message by message.
-class RosbagEventReader final : public EventReader {
+class RosbagEventReader final : public PacketEventReader {
  public:
   // Opens the bag. Throws IoError / ParseError for the file, InvalidArgumentError when the topic
   // is missing (the message lists the bag's topics) or its type is not an event type.
@@ -50,7 +50,6 @@ class RosbagEventReader final : public EventReader {
   RosbagEventReader(std::unique_ptr<std::istream> stream, std::string source,
                     const RosbagEventOptions& options = {});
 
-  size_t Read(size_t max_events, EventBuffer* out) override;
   // The width and height of the first message (dvs_msgs and prophesee_event_msgs state them).
   std::optional<SensorSize> sensor_size() const override { return sensor_size_; }
   uint64_t dropped_event_count() const override { return dropped_; }
@@ -62,14 +61,12 @@ class RosbagEventReader final : public EventReader {
 
  private:
   void Initialise(const RosbagEventOptions& options);
-  // Decodes the next message into pending_; false at the end.
-  bool DecodeNextMessage();
+  // Appends the next message's events to `out`; false at the end.
+  bool DecodeNextPacket(EventBuffer* out) override;
 
   std::unique_ptr<RosbagReader> bag_;
   std::optional<SensorSize> sensor_size_;
   std::unique_ptr<Evt3Decoder> evt3_;
-  EventBuffer pending_;
-  size_t pending_position_ = 0;
   uint64_t dropped_ = 0;
   uint64_t messages_ = 0;
 };

@@ -14,28 +14,16 @@
 namespace evloc {
 namespace {
 
-std::string ReadBytes(const std::filesystem::path& path) {
-  std::ifstream file(path, std::ios::binary);
-  return std::string(std::istreambuf_iterator<char>(file), {});
-}
-
-std::unique_ptr<std::istream> Stream(const std::string& bytes) {
-  return std::make_unique<std::istringstream>(bytes);
-}
-
-EventBuffer ReadAll(EventReader* reader, size_t batch) {
-  EventBuffer events;
-  while (reader->Read(batch, &events) > 0) {
-  }
-  return events;
-}
+using testing::ReadAllEvents;
+using testing::ReadBytes;
+using testing::StreamOf;
 
 std::string ParseErrorOf(const std::string& bytes, const std::string& topic) {
   try {
     RosbagEventOptions options;
     options.topic = topic;
-    RosbagEventReader reader(Stream(bytes), "cut.bag", options);
-    ReadAll(&reader, 1000);
+    RosbagEventReader reader(StreamOf(bytes), "cut.bag", options);
+    ReadAllEvents(&reader, 1000);
   } catch (const ParseError& error) {
     return error.what();
   }
@@ -90,7 +78,7 @@ TEST(RosbagEventReader, ReadsDvsEventArraysOfEveryCompressionExactly) {
     EXPECT_EQ(reader.sensor_size(), (SensorSize{240, 180}));
     for (size_t batch : {size_t{1}, size_t{77}, size_t{1} << 20}) {
       RosbagEventReader fresh(dir / (std::string("test_") + compression + ".bag"));
-      EXPECT_EQ(ReadAll(&fresh, batch), expected) << compression << " batch " << batch;
+      EXPECT_EQ(ReadAllEvents(&fresh, batch), expected) << compression << " batch " << batch;
       EXPECT_EQ(fresh.dropped_event_count(), 0u);
       // 12 messages, one of them empty.
       EXPECT_EQ(fresh.messages(), 12u);
@@ -113,7 +101,7 @@ TEST(RosbagEventReader, ReadsPropheseeArraysAndMonoAndEvt3EventPackets) {
       options.topic = test.topic;
       RosbagEventReader reader(dir / (std::string("test_") + compression + ".bag"), options);
       EXPECT_EQ(reader.sensor_size(), test.size);
-      EXPECT_EQ(ReadAll(&reader, 100), testing::ReadExpectedEvents(dir, test.expected))
+      EXPECT_EQ(ReadAllEvents(&reader, 100), testing::ReadExpectedEvents(dir, test.expected))
           << test.topic << " " << compression;
     }
   }
@@ -124,7 +112,7 @@ TEST(RosbagEventReader, OpenEventFileDetectsBagsAndReadsTheDefaultTopic) {
   EXPECT_EQ(DetectEventFileFormat(dir / "test_bz2.bag"), EventFileFormat::kRosbag);
   EXPECT_STREQ(EventFileFormatName(EventFileFormat::kRosbag), "ROS1 bag");
   const auto reader = OpenEventFile(dir / "test_bz2.bag");
-  EXPECT_EQ(ReadAll(reader.get(), 500), testing::ReadExpectedEvents(dir, "dvs"));
+  EXPECT_EQ(ReadAllEvents(reader.get(), 500), testing::ReadExpectedEvents(dir, "dvs"));
 }
 
 TEST(RosbagEventReader, AMissingOrNonEventTopicIsAnErrorListingTheTopics) {
@@ -182,9 +170,9 @@ TEST(RosbagEventReader, AnUnindexedBagIsReadByScanningItsChunks) {
     std::memcpy(&index_start, bytes.data() + index_pos, 8);
     bytes.resize(index_start);
     std::memset(bytes.data() + index_pos, 0, 8);
-    RosbagEventReader reader(Stream(bytes), "active.bag");
+    RosbagEventReader reader(StreamOf(bytes), "active.bag");
     EXPECT_FALSE(reader.bag().indexed());
-    EXPECT_EQ(ReadAll(&reader, 4096), testing::ReadExpectedEvents(dir, "dvs")) << compression;
+    EXPECT_EQ(ReadAllEvents(&reader, 4096), testing::ReadExpectedEvents(dir, "dvs")) << compression;
   }
 }
 
@@ -211,7 +199,7 @@ TEST(RosbagEventReader, CorruptChunksAndMessagesAreParseErrorsSayingWhatWasExpec
     // The event count of the first EventArray made larger than the message: the error names
     // the count and the bytes left, at the count's file offset (uncompressed bag).
     std::string bytes = ReadBytes(dir / "test_none.bag");
-    RosbagReader bag(Stream(bytes), "a.bag");
+    RosbagReader bag(StreamOf(bytes), "a.bag");
     bag.SetTopics({"/dvs/events"});
     RosbagMessage message;
     ASSERT_TRUE(bag.Next(&message));

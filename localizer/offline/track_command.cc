@@ -140,7 +140,8 @@ Tracks a recorded sequence against a map, offline, with the tracker the localize
 
 Options:
   --map PATH             map directory (holding map.evmap) or .evmap file (required)
-  --dataset DIR|FILE.bag dataset folder, evloc or Event Camera Dataset layout, or a ROS1 bag
+  --dataset DIR|FILE     dataset folder, evloc or Event Camera Dataset layout, a ROS1 bag
+                         (.bag) or an AEDAT4 file (.aedat4)
                          (required)
   --out PATH             output TUM trajectory (required)
   --init-pose "tx ty tz qx qy qz qw" | none
@@ -194,7 +195,7 @@ Options:
                          predicted gradient and flow)
   --debug-every N        one debug picture every N steps (default 30)
   --ecd-size WxH         sensor size for ECD folders with calib.txt only (default 240x180)
-)" + std::string(kRosbagTopicFlagsUsage) +
+)" + std::string(kRecordingFlagsUsage) +
          R"(  --quiet                no progress output
   --help                 print this help
 
@@ -306,7 +307,7 @@ TrackCommandOptions ParseTrackCommandLine(const std::vector<std::string>& argume
       options.debug_every_steps = static_cast<int>(ParseIntegerFlag(flag, value));
     } else if (flag == "--ecd-size") {
       ParseSizeFlag(flag, value, &options.ecd_width, &options.ecd_height);
-    } else if (ApplyRosbagTopicFlag(flag, value, &options.bag_topics)) {
+    } else if (ApplyRecordingFlag(flag, value, &options.bag_topics, &options.aedat4)) {
     } else {
       throw InvalidArgumentError("unknown flag '" + flag + "' (see --help)");
     }
@@ -321,6 +322,7 @@ OfflineTrackingResult RunTrackCommand(const TrackCommandOptions& options, std::o
   reader_options.ecd_width = options.ecd_width;
   reader_options.ecd_height = options.ecd_height;
   reader_options.bag_topics = options.bag_topics;
+  reader_options.aedat4 = options.aedat4;
   const Dataset dataset = ReadDataset(options.dataset_path, reader_options);
   const bool events_mode = options.tracking.tracker.input == TrackerInput::kEvents;
 

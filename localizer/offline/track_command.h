@@ -18,11 +18,14 @@ namespace evloc::tracking {
 struct TrackCommandOptions {
   // Map directory or .evmap file (--map).
   std::filesystem::path map_path;
-  // Dataset folder in the evloc/ECD layout, or a ROS1 bag (--dataset).
+  // Dataset folder in the evloc/ECD layout, a ROS1 bag or an AEDAT4 file (--dataset).
   std::filesystem::path dataset_path;
   // The topics when the dataset is a bag (--events-topic, --image-topic, --camera-info-topic,
   // --groundtruth-topic).
   RosbagTopics bag_topics;
+  // The streams, calibration and ground truth when the dataset is an AEDAT4 file
+  // (--events-topic, --image-topic, --calib, --groundtruth).
+  Aedat4DatasetOptions aedat4;
   // Output TUM trajectory, world_from_cam at every step (--out).
   std::filesystem::path output_path;
   // Initial pose (--init-pose "tx ty tz qx qy qz qw"); defaults to the first ground-truth pose

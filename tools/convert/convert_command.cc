@@ -7,23 +7,28 @@ namespace evloc {
 
 void ConvertCommandOptions::Check() const {
   if (help) return;
-  if (bag_path.empty()) throw InvalidArgumentError("--bag is required: a ROS1 bag");
+  if (input_path.empty()) {
+    throw InvalidArgumentError("--input is required: a ROS1 bag or an AEDAT4 file");
+  }
   if (out_dir.empty()) throw InvalidArgumentError("--out is required: the dataset folder to write");
   topics.Check();
+  aedat4.Check();
 }
 
 std::string ConvertCommandUsage() {
-  return R"(Usage: evloc-convert --bag FILE.bag --out DIR [options]
+  return R"(Usage: evloc-convert --input FILE.bag|FILE.aedat4 --out DIR [options]
 
-Converts a ROS1 bag (format 2.0, uncompressed, bz2 or lz4) into a dataset folder: calib.yaml from
-the camera info, events.evb, images/ with images.txt, groundtruth.txt (TUM) and info.json
-(docs/event-formats.md, section 7; docs/dataset-format.md). evloc-track and evloc-replay also
-read the bag directly with --dataset FILE.bag; the folder is needed for frames mode.
+Converts a ROS1 bag (format 2.0, uncompressed, bz2 or lz4) or an iniVation AEDAT4 file
+(uncompressed, LZ4 or Zstd) into a dataset folder: calib.yaml (from the bag's camera info, or
+the AEDAT4 file's --calib), events.evb, images/ with images.txt, groundtruth.txt (TUM),
+imu.txt (AEDAT4 IMU samples) and info.json (docs/event-formats.md, sections 7 and 8;
+docs/dataset-format.md). evloc-track and evloc-replay also read both directly with --dataset
+FILE; the folder is needed for frames mode.
 
 Options:
-  --bag FILE.bag         the bag (required)
+  --input FILE           the bag or AEDAT4 file (required; --bag is the same flag)
   --out DIR              the dataset folder to write; it appears only when complete (required)
-)" + std::string(kRosbagTopicFlagsUsage) +
+)" + std::string(kRecordingFlagsUsage) +
          R"(  --force                replace an existing output folder
   --help                 print this help
 
@@ -44,11 +49,11 @@ ConvertCommandOptions ParseConvertCommandLine(const std::vector<std::string>& ar
       continue;
     }
     const std::string& value = TakeFlagValue(arguments, &i);
-    if (flag == "--bag") {
-      options.bag_path = value;
+    if (flag == "--input" || flag == "--bag") {
+      options.input_path = value;
     } else if (flag == "--out") {
       options.out_dir = value;
-    } else if (!ApplyRosbagTopicFlag(flag, value, &options.topics)) {
+    } else if (!ApplyRecordingFlag(flag, value, &options.topics, &options.aedat4)) {
       throw UsageError("unknown flag '" + flag + "' (see --help)");
     }
   }
@@ -56,17 +61,23 @@ ConvertCommandOptions ParseConvertCommandLine(const std::vector<std::string>& ar
   return options;
 }
 
-RosbagConversionSummary RunConvertCommand(const ConvertCommandOptions& options, std::ostream& log) {
+RecordingConversionSummary RunConvertCommand(const ConvertCommandOptions& options,
+                                             std::ostream& log) {
   options.Check();
   DatasetReaderOptions reader_options;
   reader_options.bag_topics = options.topics;
-  RosbagConversionOptions conversion;
+  reader_options.aedat4 = options.aedat4;
+  RecordingConversionOptions conversion;
   conversion.force = options.force;
-  const RosbagConversionSummary summary =
-      ConvertRosbagToDataset(options.bag_path, options.out_dir, reader_options, conversion);
+  const RecordingConversionSummary summary =
+      ConvertRecordingToDataset(options.input_path, options.out_dir, reader_options, conversion);
   log << "evloc-convert: " << options.out_dir.string() << ": " << summary.events << " events ("
       << summary.dropped_events << " dropped outside the sensor), " << summary.images << " images, "
-      << summary.poses << " ground-truth poses\n";
+      << summary.poses << " ground-truth poses";
+  if (summary.imu_samples > 0 || summary.triggers > 0) {
+    log << ", " << summary.imu_samples << " IMU samples, " << summary.triggers << " triggers";
+  }
+  log << "\n";
   return summary;
 }
 

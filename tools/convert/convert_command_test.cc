@@ -16,7 +16,7 @@ TEST(ConvertCommand, ParsesEveryFlagIntoItsOption) {
   const ConvertCommandOptions options = ParseConvertCommandLine(
       {"--bag", "a.bag", "--out", "d", "--events-topic", "/e", "--image-topic", "/i",
        "--camera-info-topic", "/c", "--groundtruth-topic", "/g", "--force"});
-  EXPECT_EQ(options.bag_path, "a.bag");
+  EXPECT_EQ(options.input_path, "a.bag");
   EXPECT_EQ(options.out_dir, "d");
   EXPECT_EQ(options.topics.events, "/e");
   EXPECT_EQ(options.topics.image, "/i");
@@ -27,6 +27,13 @@ TEST(ConvertCommand, ParsesEveryFlagIntoItsOption) {
   EXPECT_THROW(ParseConvertCommandLine({"--bag", "a.bag", "--out", "d", "--topic", "x"}),
                UsageError);
   EXPECT_NE(ConvertCommandUsage().find("--groundtruth-topic"), std::string::npos);
+  const ConvertCommandOptions aedat4 =
+      ParseConvertCommandLine({"--input", "r.aedat4", "--out", "d", "--events-topic", "dvs",
+                               "--calib", "c.yaml", "--groundtruth", "gt.txt"});
+  EXPECT_EQ(aedat4.input_path, "r.aedat4");
+  EXPECT_EQ(aedat4.aedat4.events, "dvs");
+  EXPECT_EQ(aedat4.aedat4.calibration, "c.yaml");
+  EXPECT_EQ(aedat4.aedat4.groundtruth, "gt.txt");
 }
 
 TEST(ConvertCommand, WritesADatasetFolderAndSaysWhatItWrote) {
@@ -45,6 +52,31 @@ TEST(ConvertCommand, WritesADatasetFolderAndSaysWhatItWrote) {
   ASSERT_TRUE(dataset.info);
   EXPECT_EQ((*dataset.info)["topics"]["events"], "/dvs/events");
   std::filesystem::remove_all(out.parent_path());
+}
+
+TEST(ConvertCommand, ConvertsAnAedat4FileWithItsCalibration) {
+  EVLOC_REQUIRE_TEST_AEDAT4(dir);
+  const auto folder = testing::MakeTempDir("convert-aedat4");
+  Camera camera;
+  camera.width = 346;
+  camera.height = 260;
+  camera.fx = camera.fy = 300;
+  camera.cx = 172.5;
+  camera.cy = 129.5;
+  WriteCameraYaml(folder / "cam.yaml", camera);
+  std::ostringstream log;
+  const auto summary =
+      RunConvertCommand(ParseConvertCommandLine({"--input", (dir / "test_lz4.aedat4").string(),
+                                                 "--out", (folder / "dataset").string(), "--calib",
+                                                 (folder / "cam.yaml").string()}),
+                        log);
+  EXPECT_EQ(summary.events, testing::ReadExpectedEvents(dir, "events").size());
+  EXPECT_NE(log.str().find(std::to_string(summary.events) + " events (3 dropped"),
+            std::string::npos)
+      << log.str();
+  const Dataset dataset = ReadDataset(folder / "dataset");
+  EXPECT_EQ(dataset.images.size(), 4u);
+  std::filesystem::remove_all(folder);
 }
 
 }  // namespace

@@ -238,6 +238,7 @@ class Replayer {
     reader_options.ecd_width = options.ecd_width;
     reader_options.ecd_height = options.ecd_height;
     reader_options.bag_topics = options.bag_topics;
+    reader_options.aedat4 = options.aedat4;
     dataset_ = ReadDataset(options.dataset, reader_options);
     reader_ = OpenDatasetEvents(dataset_);
     source_ = std::make_unique<EventSource>(*reader_);
@@ -893,7 +894,8 @@ Options:
   --server TARGET        localizer address: HOST:PORT, or a gRPC target such as
                          ipv4:HOST:PORT,HOST:PORT or dns:///NAME:PORT (required)
   --map NAME             map name on the server (required)
-  --dataset DIR|FILE.bag dataset folder, evloc or Event Camera Dataset layout, or a ROS1 bag
+  --dataset DIR|FILE     dataset folder, evloc or Event Camera Dataset layout, a ROS1 bag
+                         (.bag) or an AEDAT4 file (.aedat4)
                          (required)
   --out PATH             output TUM trajectory (required)
   --speed S|max          playback speed relative to real time (default 1), or max: as fast as
@@ -916,7 +918,7 @@ Options:
   --max-lead-ms MS       with --speed max: session time sent ahead of the last pose (default 50)
   --duration S           stop after S seconds of session time after the initial pose
   --ecd-size WxH         sensor size for ECD folders with calib.txt only (default 240x180)
-)" + std::string(kRosbagTopicFlagsUsage) +
+)" + std::string(kRecordingFlagsUsage) +
          R"(  --reconnect N          reconnect attempts of one outage (default 0: fail at once)
   --reconnect-backoff-ms MS
                          delay ceiling of the first attempt, doubled per attempt (default 100)
@@ -1004,7 +1006,7 @@ ReplayCommand ParseReplayCommandLine(const std::vector<std::string>& arguments) 
       options.duration_s = ParseDoubleFlag(flag, value);
     } else if (flag == "--ecd-size") {
       ParseSizeFlag(flag, value, &options.ecd_width, &options.ecd_height);
-    } else if (ApplyRosbagTopicFlag(flag, value, &options.bag_topics)) {
+    } else if (ApplyRecordingFlag(flag, value, &options.bag_topics, &options.aedat4)) {
     } else if (flag == "--reconnect") {
       options.reconnect = ParseIntFlag(flag, value);
     } else if (flag == "--reconnect-backoff-ms") {

@@ -30,11 +30,14 @@ struct ReplayOptions {
   std::string server;
   // Map name on the server (--map).
   std::string map_name;
-  // Dataset folder (core/dataset/dataset.h layout) or ROS1 bag (--dataset).
+  // Dataset folder (core/dataset/dataset.h layout), ROS1 bag or AEDAT4 file (--dataset).
   std::filesystem::path dataset;
   // The topics when the dataset is a bag (--events-topic, --image-topic, --camera-info-topic,
   // --groundtruth-topic).
   RosbagTopics bag_topics;
+  // The streams, calibration and ground truth when the dataset is an AEDAT4 file
+  // (--events-topic, --image-topic, --calib, --groundtruth).
+  Aedat4DatasetOptions aedat4;
   // Output TUM trajectory of the received poses (--out).
   std::filesystem::path output;
   // Playback speed relative to real time; nullopt: as fast as the server keeps up (--speed 1 |

@@ -303,7 +303,8 @@ void EventsFromFramesCommandOptions::Check() const {
 nlohmann::json RunEventsFromFramesCommand(const EventsFromFramesCommandOptions& options) {
   options.Check();
   const auto total_start = Clock::now();
-  const Dataset input = ReadDataset(options.in_dir, {options.ecd_width, options.ecd_height, {}});
+  const Dataset input =
+      ReadDataset(options.in_dir, {options.ecd_width, options.ecd_height, {}, {}});
   if (input.images.size() < 2) {
     throw InvalidArgumentError("events-from-frames: '" + options.in_dir.string() +
                                "' lists fewer than 2 images in images.txt.");
