@@ -47,6 +47,18 @@ nlohmann::json StepsToJson(const OfflineTrackingResult& result) {
                      {"search_best_alignment", step.search.best_alignment},
                      {"search_second_alignment", step.search.second_alignment}});
   }
+  // What the noise filters did between two steps (packet-granular: each packet is filtered whole
+  // before the steps it completes run).
+  EventFilterCounts previous;
+  for (size_t i = 0; i < result.filter_counts.size() && i < steps.size(); ++i) {
+    const EventFilterCounts& now = result.filter_counts[i];
+    steps[i]["filter_input"] = now.input - previous.input;
+    steps[i]["filter_hot_pixel"] = now.hot_pixel - previous.hot_pixel;
+    steps[i]["filter_refractory"] = now.refractory - previous.refractory;
+    steps[i]["filter_background_activity"] = now.background_activity - previous.background_activity;
+    steps[i]["filter_masked_pixels"] = now.masked_pixels;
+    previous = now;
+  }
   return steps;
 }
 
@@ -62,6 +74,23 @@ nlohmann::json RelocalizationsToJson(const OfflineTrackingResult& result) {
                         {"max_step_ms", episode.max_step_ms}});
   }
   return episodes;
+}
+
+nlohmann::json FilterCountsToJson(const EventFilterCounts& counts) {
+  const auto fraction = [&](int64_t removed) {
+    return counts.input > 0 ? static_cast<double>(removed) / static_cast<double>(counts.input)
+                            : 0.0;
+  };
+  return {{"input", counts.input},
+          {"passed", counts.passed},
+          {"held", counts.held},
+          {"hot_pixel", counts.hot_pixel},
+          {"refractory", counts.refractory},
+          {"background_activity", counts.background_activity},
+          {"masked_pixels", counts.masked_pixels},
+          {"hot_pixel_fraction", fraction(counts.hot_pixel)},
+          {"refractory_fraction", fraction(counts.refractory)},
+          {"background_activity_fraction", fraction(counts.background_activity)}};
 }
 
 double Median(std::vector<double> values) {
@@ -148,12 +177,26 @@ Options:
                          with polarity and occlusion: points claim edge pixels of their
                          predicted polarity (default on)
   --velocity-window S    constant-velocity window, seconds (default 0.02)
+  --hot-pixels on|off    mask hot pixels (docs/tracking.md, "Noise filters"; default off)
+  --hot-pixel-window S   hot-pixel counting window and learning period, seconds (default 0.1)
+  --hot-pixel-factor F   a pixel is hot at F times the median count of the pixels that fired
+                         (default 10)
+  --hot-pixel-min-rate HZ
+                         ... and at least this many events per second (default 100)
+  --refractory S         drop a pixel's events within S seconds of its last passed one
+                         (default 0: off)
+  --background-activity S
+                         keep an event only if a neighbour fired within S seconds before it
+                         (default 0: off)
+  --background-activity-self on|off
+                         the pixel's own previous event counts as a neighbour (default off)
   --min-alignment A      a step is bad below this chance-corrected alignment (docs/tracking.md)
   --max-mean-residual R  a step is bad above this mean field value at the points
   --stats PATH           per-step statistics (status: TRACKING, LOST, INITIALIZING or
                          RELOCALIZING; points, quality, timings) and the search episodes
                          ("relocalizations": start_t_s, end_t_s, outcome found / not_found /
-                         ended) as JSON
+                         ended) and what the noise filters removed ("event_filter", and per
+                         step) as JSON
   --debug-dir DIR        write debug pictures (time surface with the map, ON/OFF surfaces,
                          predicted gradient and flow)
   --debug-every N        one debug picture every N steps (default 30)
@@ -253,6 +296,20 @@ TrackCommandOptions ParseTrackCommandLine(const std::vector<std::string>& argume
       tracker.polarity_after_unsigned_solve = ParseSwitchFlag(flag, value);
     } else if (flag == "--polarity-culling") {
       tracker.polarity_aware_culling = ParseSwitchFlag(flag, value);
+    } else if (flag == "--hot-pixels") {
+      tracker.event_filter.hot_pixels = ParseSwitchFlag(flag, value);
+    } else if (flag == "--hot-pixel-window") {
+      tracker.event_filter.hot_pixel_window_s = ParseDoubleFlag(flag, value);
+    } else if (flag == "--hot-pixel-factor") {
+      tracker.event_filter.hot_pixel_rate_factor = ParseDoubleFlag(flag, value);
+    } else if (flag == "--hot-pixel-min-rate") {
+      tracker.event_filter.hot_pixel_min_rate_hz = ParseDoubleFlag(flag, value);
+    } else if (flag == "--refractory") {
+      tracker.event_filter.refractory_period_s = ParseDoubleFlag(flag, value);
+    } else if (flag == "--background-activity") {
+      tracker.event_filter.background_activity_window_s = ParseDoubleFlag(flag, value);
+    } else if (flag == "--background-activity-self") {
+      tracker.event_filter.background_activity_include_self = ParseSwitchFlag(flag, value);
     } else if (flag == "--min-alignment") {
       tracker.min_alignment = ParseDoubleFlag(flag, value);
     } else if (flag == "--max-mean-residual") {
@@ -387,6 +444,7 @@ OfflineTrackingResult RunTrackCommand(const TrackCommandOptions& options, std::o
                             {"steps", result.steps.size()},
                             {"lost_steps", result.lost_steps},
                             {"relocalizations", RelocalizationsToJson(result)},
+                            {"event_filter", FilterCountsToJson(result.final_filter_counts)},
                             {"wall_s", result.wall_s},
                             {"median_step_ms", Median(step_ms)},
                             {"per_step", StepsToJson(result)}};
@@ -397,6 +455,15 @@ OfflineTrackingResult RunTrackCommand(const TrackCommandOptions& options, std::o
         << " LOST) from " << result.measurements << (events_mode ? " events" : " frames") << " in "
         << result.wall_s << " s wall; median step " << Median(step_ms)
         << " ms; trajectory written to " << options.output_path.string() << "\n";
+    if (events_mode && options.tracking.tracker.event_filter.Enabled()) {
+      const EventFilterCounts& counts = result.final_filter_counts;
+      const double input = std::max<double>(1.0, static_cast<double>(counts.input));
+      log << "evloc-track: noise filters removed " << counts.hot_pixel << " hot-pixel ("
+          << 100.0 * counts.hot_pixel / input << " %), " << counts.refractory << " refractory ("
+          << 100.0 * counts.refractory / input << " %), " << counts.background_activity
+          << " background-activity (" << 100.0 * counts.background_activity / input << " %) of "
+          << counts.input << " events; " << counts.masked_pixels << " pixels masked at the end\n";
+    }
   }
   return result;
 }

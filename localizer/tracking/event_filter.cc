@@ -1,0 +1,194 @@
+#include "localizer/tracking/event_filter.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <string>
+
+#include "core/common/error.h"
+
+namespace evloc::tracking {
+namespace {
+
+// A time long before any event, far enough from the int64 limit that t - kLongAgo cannot
+// overflow for any session time below 2^62 ns (146 years).
+constexpr int64_t kLongAgoNs = std::numeric_limits<int64_t>::min() / 4;
+
+int64_t Nanoseconds(double seconds) { return std::llround(seconds * 1e9); }
+
+}  // namespace
+
+EventFilter::EventFilter(SensorSize sensor_size, const EventFilterOptions& options)
+    : options_((options.Check(), options)),
+      enabled_(options.Enabled()),
+      width_(sensor_size.width),
+      height_(sensor_size.height),
+      window_ns_(std::max<int64_t>(1, Nanoseconds(options.hot_pixel_window_s))),
+      refractory_ns_(Nanoseconds(options.refractory_period_s)),
+      background_window_ns_(Nanoseconds(options.background_activity_window_s)) {
+  sensor_size.Check();
+  const size_t pixels = static_cast<size_t>(width_) * height_;
+  if (options_.hot_pixels) {
+    window_counts_.assign(pixels, 0);
+    masked_.assign(pixels, 0);
+  }
+  if (refractory_ns_ > 0) last_passed_ns_.assign(pixels, kLongAgoNs);
+  if (background_window_ns_ > 0) {
+    last_event_ns_.assign(static_cast<size_t>(width_ + 2) * (height_ + 2), kLongAgoNs);
+  }
+}
+
+const EventBuffer& EventFilter::Process(const EventBuffer& events) {
+  if (!enabled_) return events;
+  const size_t count = events.size();
+  const int64_t* t_ns = events.t_ns.data();
+  const uint16_t* xs = events.x.data();
+  const uint16_t* ys = events.y.data();
+  const int8_t* polarity = events.polarity.data();
+  // Validate first: a bad event changes nothing.
+  bool inside = true;
+  for (size_t i = 0; i < count; ++i) inside &= xs[i] < width_ && ys[i] < height_;
+  if (!inside) {
+    for (size_t i = 0; i < count; ++i) {
+      if (xs[i] >= width_ || ys[i] >= height_) {
+        throw InvalidArgumentError("Event " + std::to_string(i) + " at pixel (" +
+                                   std::to_string(xs[i]) + ", " + std::to_string(ys[i]) +
+                                   ") lies outside the " + std::to_string(width_) + "x" +
+                                   std::to_string(height_) + " sensor.");
+      }
+    }
+  }
+  out_.clear();
+  out_.reserve(count);
+  counts_.input += static_cast<int64_t>(count);
+  const size_t learning_cap = static_cast<size_t>(options_.hot_pixel_learning_max_events);
+  for (size_t i = 0; i < count; ++i) {
+    const size_t index = static_cast<size_t>(ys[i]) * width_ + xs[i];
+    if (options_.hot_pixels) {
+      Count(index, t_ns[i]);
+      if (learning_) {
+        held_.push_back({t_ns[i], xs[i], ys[i], polarity[i]});
+        ++counts_.held;
+        // A learning period that holds too many events ends early, judged on what it saw.
+        if (held_.size() >= learning_cap) {
+          EndLearning(t_ns[i] - window_start_ns_ + 1, t_ns[i] + 1);
+        }
+        continue;
+      }
+    }
+    Pass(index, t_ns[i], xs[i], ys[i], polarity[i]);
+  }
+  return out_;
+}
+
+const EventBuffer& EventFilter::AdvanceTo(int64_t t_ns) {
+  out_.clear();
+  // The learning window [start, end) is complete once no event before `end` can follow.
+  if (learning_ && t_ns >= window_end_ns_ - 1) EndLearning(window_ns_, window_end_ns_);
+  return out_;
+}
+
+void EventFilter::Count(size_t index, int64_t t_ns) {
+  if (!started_) {
+    started_ = true;
+    learning_ = true;
+    window_start_ns_ = t_ns;
+    window_end_ns_ = t_ns + window_ns_;
+  }
+  while (t_ns >= window_end_ns_) {
+    if (learning_) {
+      EndLearning(window_ns_, window_end_ns_);
+    } else {
+      CloseWindow(window_ns_, window_end_ns_);
+    }
+    // Skip whole windows without events at once (they would only unmask, and nothing is masked).
+    if (t_ns >= window_end_ns_ && masked_list_.empty()) {
+      window_start_ns_ += (t_ns - window_start_ns_) / window_ns_ * window_ns_;
+      window_end_ns_ = window_start_ns_ + window_ns_;
+    }
+  }
+  if (window_counts_[index]++ == 0) touched_.push_back(static_cast<uint32_t>(index));
+}
+
+void EventFilter::CloseWindow(int64_t duration_ns, int64_t next_start_ns) {
+  // The population's level: the median count of the unmasked pixels that fired.
+  scratch_counts_.clear();
+  for (const uint32_t pixel : touched_) {
+    if (masked_[pixel] == 0) scratch_counts_.push_back(window_counts_[pixel]);
+  }
+  double median = 0;
+  if (!scratch_counts_.empty()) {
+    const auto middle = scratch_counts_.begin() + scratch_counts_.size() / 2;
+    std::nth_element(scratch_counts_.begin(), middle, scratch_counts_.end());
+    median = *middle;
+  }
+  const double min_count =
+      std::ceil(options_.hot_pixel_min_rate_hz * static_cast<double>(duration_ns) * 1e-9);
+  const double threshold = std::max(min_count, options_.hot_pixel_rate_factor * median);
+  // Unmask the pixels that calmed down (below half the threshold: hysteresis).
+  size_t kept = 0;
+  for (const uint32_t pixel : masked_list_) {
+    if (window_counts_[pixel] < 0.5 * threshold) {
+      masked_[pixel] = 0;
+    } else {
+      masked_list_[kept++] = pixel;
+    }
+  }
+  masked_list_.resize(kept);
+  for (const uint32_t pixel : touched_) {
+    if (masked_[pixel] == 0 && window_counts_[pixel] >= threshold) {
+      masked_[pixel] = 1;
+      masked_list_.push_back(pixel);
+    }
+    window_counts_[pixel] = 0;
+  }
+  touched_.clear();
+  counts_.masked_pixels = static_cast<int64_t>(masked_list_.size());
+  window_start_ns_ = next_start_ns;
+  window_end_ns_ = next_start_ns + window_ns_;
+}
+
+void EventFilter::EndLearning(int64_t duration_ns, int64_t next_start_ns) {
+  learning_ = false;
+  CloseWindow(duration_ns, next_start_ns);
+  const size_t count = held_.size();
+  out_.reserve(out_.size() + count);
+  for (size_t i = 0; i < count; ++i) {
+    Pass(static_cast<size_t>(held_.y[i]) * width_ + held_.x[i], held_.t_ns[i], held_.x[i],
+         held_.y[i], held_.polarity[i]);
+  }
+  counts_.held = 0;
+  held_ = EventBuffer();
+}
+
+void EventFilter::Pass(size_t index, int64_t t_ns, uint16_t x, uint16_t y, int8_t polarity) {
+  if (options_.hot_pixels && masked_[index] != 0) {
+    ++counts_.hot_pixel;
+    return;
+  }
+  if (refractory_ns_ > 0) {
+    if (t_ns - last_passed_ns_[index] < refractory_ns_) {
+      ++counts_.refractory;
+      return;
+    }
+    last_passed_ns_[index] = t_ns;
+  }
+  if (background_window_ns_ > 0) {
+    const ptrdiff_t stride = width_ + 2;
+    int64_t* cell = last_event_ns_.data() + (static_cast<ptrdiff_t>(y) + 1) * stride + x + 1;
+    const int64_t above = std::max({cell[-stride - 1], cell[-stride], cell[-stride + 1]});
+    const int64_t beside = std::max(cell[-1], cell[1]);
+    const int64_t below = std::max({cell[stride - 1], cell[stride], cell[stride + 1]});
+    int64_t support = std::max({above, beside, below});
+    if (options_.background_activity_include_self) support = std::max(support, cell[0]);
+    cell[0] = t_ns;
+    if (support < t_ns - background_window_ns_) {
+      ++counts_.background_activity;
+      return;
+    }
+  }
+  ++counts_.passed;
+  out_.push_back({t_ns, x, y, polarity});
+}
+
+}  // namespace evloc::tracking
