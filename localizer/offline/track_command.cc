@@ -15,6 +15,7 @@
 #include "core/events/event_reader.h"
 #include "core/trajectory/tum_io.h"
 #include "localizer/offline/debug_images.h"
+#include "localizer/tracking/event_filter.h"
 #include "maps/map_directory.h"
 
 namespace evloc::tracking {
@@ -177,20 +178,8 @@ Options:
                          with polarity and occlusion: points claim edge pixels of their
                          predicted polarity (default on)
   --velocity-window S    constant-velocity window, seconds (default 0.02)
-  --hot-pixels on|off    mask hot pixels (docs/tracking.md, "Noise filters"; default off)
-  --hot-pixel-window S   hot-pixel counting window and learning period, seconds (default 0.1)
-  --hot-pixel-factor F   a pixel is hot at F times the median count of the pixels that fired
-                         (default 10)
-  --hot-pixel-min-rate HZ
-                         ... and at least this many events per second (default 100)
-  --refractory S         drop a pixel's events within S seconds of its last passed one
-                         (default 0: off)
-  --background-activity S
-                         keep an event only if a neighbour fired within S seconds before it
-                         (default 0: off)
-  --background-activity-self on|off
-                         the pixel's own previous event counts as a neighbour (default off)
-  --min-alignment A      a step is bad below this chance-corrected alignment (docs/tracking.md)
+)" + std::string(kEventFilterFlagsUsage) +
+         R"(  --min-alignment A      a step is bad below this chance-corrected alignment (docs/tracking.md)
   --max-mean-residual R  a step is bad above this mean field value at the points
   --stats PATH           per-step statistics (status: TRACKING, LOST, INITIALIZING or
                          RELOCALIZING; points, quality, timings) and the search episodes
@@ -296,20 +285,7 @@ TrackCommandOptions ParseTrackCommandLine(const std::vector<std::string>& argume
       tracker.polarity_after_unsigned_solve = ParseSwitchFlag(flag, value);
     } else if (flag == "--polarity-culling") {
       tracker.polarity_aware_culling = ParseSwitchFlag(flag, value);
-    } else if (flag == "--hot-pixels") {
-      tracker.event_filter.hot_pixels = ParseSwitchFlag(flag, value);
-    } else if (flag == "--hot-pixel-window") {
-      tracker.event_filter.hot_pixel_window_s = ParseDoubleFlag(flag, value);
-    } else if (flag == "--hot-pixel-factor") {
-      tracker.event_filter.hot_pixel_rate_factor = ParseDoubleFlag(flag, value);
-    } else if (flag == "--hot-pixel-min-rate") {
-      tracker.event_filter.hot_pixel_min_rate_hz = ParseDoubleFlag(flag, value);
-    } else if (flag == "--refractory") {
-      tracker.event_filter.refractory_period_s = ParseDoubleFlag(flag, value);
-    } else if (flag == "--background-activity") {
-      tracker.event_filter.background_activity_window_s = ParseDoubleFlag(flag, value);
-    } else if (flag == "--background-activity-self") {
-      tracker.event_filter.background_activity_include_self = ParseSwitchFlag(flag, value);
+    } else if (ApplyEventFilterFlag(flag, value, &tracker.event_filter)) {
     } else if (flag == "--min-alignment") {
       tracker.min_alignment = ParseDoubleFlag(flag, value);
     } else if (flag == "--max-mean-residual") {

@@ -5,14 +5,15 @@
 #include <limits>
 #include <string>
 
+#include "core/common/cli.h"
 #include "core/common/error.h"
 
 namespace evloc::tracking {
 namespace {
 
-// A time long before any event, far enough from the int64 limit that t - kLongAgo cannot
-// overflow for any session time below 2^62 ns (146 years).
-constexpr int64_t kLongAgoNs = std::numeric_limits<int64_t>::min() / 4;
+// The time of a pixel that never had an event. The tests compare t - period (no overflow for any
+// session time, |t| <= 2^62 ns) with the stored times, never t - stored.
+constexpr int64_t kLongAgoNs = std::numeric_limits<int64_t>::min();
 
 int64_t Nanoseconds(double seconds) { return std::llround(seconds * 1e9); }
 
@@ -29,8 +30,7 @@ EventFilter::EventFilter(SensorSize sensor_size, const EventFilterOptions& optio
   sensor_size.Check();
   const size_t pixels = static_cast<size_t>(width_) * height_;
   if (options_.hot_pixels) {
-    window_counts_.assign(pixels, 0);
-    masked_.assign(pixels, 0);
+    pixel_state_.assign(pixels, 0);
   }
   if (refractory_ns_ > 0) last_passed_ns_.assign(pixels, kLongAgoNs);
   if (background_window_ns_ > 0) {
@@ -58,15 +58,21 @@ const EventBuffer& EventFilter::Process(const EventBuffer& events) {
       }
     }
   }
-  out_.clear();
-  out_.reserve(count);
+  out_count_ = 0;
+  // At most the held events and this packet's come out of this call.
+  ReserveOutput(count + held_.size());
   counts_.input += static_cast<int64_t>(count);
   const size_t learning_cap = static_cast<size_t>(options_.hot_pixel_learning_max_events);
   for (size_t i = 0; i < count; ++i) {
     const size_t index = static_cast<size_t>(ys[i]) * width_ + xs[i];
     if (options_.hot_pixels) {
-      Count(index, t_ns[i]);
-      if (learning_) {
+      if (t_ns[i] >= window_end_ns_ || !started_) [[unlikely]] {
+        CloseWindowsUntil(t_ns[i]);
+      }
+      if ((pixel_state_[index]++ & ~kMaskedBit) == 0) {
+        touched_.push_back(static_cast<uint32_t>(index));
+      }
+      if (learning_) [[unlikely]] {
         held_.push_back({t_ns[i], xs[i], ys[i], polarity[i]});
         ++counts_.held;
         // A learning period that holds too many events ends early, judged on what it saw.
@@ -78,17 +84,35 @@ const EventBuffer& EventFilter::Process(const EventBuffer& events) {
     }
     Pass(index, t_ns[i], xs[i], ys[i], polarity[i]);
   }
-  return out_;
+  return FinishOutput();
 }
 
 const EventBuffer& EventFilter::AdvanceTo(int64_t t_ns) {
-  out_.clear();
+  out_count_ = 0;
   // The learning window [start, end) is complete once no event before `end` can follow.
   if (learning_ && t_ns >= window_end_ns_ - 1) EndLearning(window_ns_, window_end_ns_);
+  return FinishOutput();
+}
+
+void EventFilter::ReserveOutput(size_t count) {
+  const size_t size = out_count_ + count;
+  if (out_.t_ns.size() < size) {
+    out_.t_ns.resize(size);
+    out_.x.resize(size);
+    out_.y.resize(size);
+    out_.polarity.resize(size);
+  }
+}
+
+const EventBuffer& EventFilter::FinishOutput() {
+  out_.t_ns.resize(out_count_);
+  out_.x.resize(out_count_);
+  out_.y.resize(out_count_);
+  out_.polarity.resize(out_count_);
   return out_;
 }
 
-void EventFilter::Count(size_t index, int64_t t_ns) {
+void EventFilter::CloseWindowsUntil(int64_t t_ns) {
   if (!started_) {
     started_ = true;
     learning_ = true;
@@ -107,14 +131,13 @@ void EventFilter::Count(size_t index, int64_t t_ns) {
       window_end_ns_ = window_start_ns_ + window_ns_;
     }
   }
-  if (window_counts_[index]++ == 0) touched_.push_back(static_cast<uint32_t>(index));
 }
 
 void EventFilter::CloseWindow(int64_t duration_ns, int64_t next_start_ns) {
   // The population's level: the median count of the unmasked pixels that fired.
   scratch_counts_.clear();
   for (const uint32_t pixel : touched_) {
-    if (masked_[pixel] == 0) scratch_counts_.push_back(window_counts_[pixel]);
+    if ((pixel_state_[pixel] & kMaskedBit) == 0) scratch_counts_.push_back(pixel_state_[pixel]);
   }
   double median = 0;
   if (!scratch_counts_.empty()) {
@@ -128,19 +151,19 @@ void EventFilter::CloseWindow(int64_t duration_ns, int64_t next_start_ns) {
   // Unmask the pixels that calmed down (below half the threshold: hysteresis).
   size_t kept = 0;
   for (const uint32_t pixel : masked_list_) {
-    if (window_counts_[pixel] < 0.5 * threshold) {
-      masked_[pixel] = 0;
+    if ((pixel_state_[pixel] & ~kMaskedBit) < 0.5 * threshold) {
+      pixel_state_[pixel] &= ~kMaskedBit;
     } else {
       masked_list_[kept++] = pixel;
     }
   }
   masked_list_.resize(kept);
   for (const uint32_t pixel : touched_) {
-    if (masked_[pixel] == 0 && window_counts_[pixel] >= threshold) {
-      masked_[pixel] = 1;
+    if ((pixel_state_[pixel] & kMaskedBit) == 0 && pixel_state_[pixel] >= threshold) {
+      pixel_state_[pixel] |= kMaskedBit;
       masked_list_.push_back(pixel);
     }
-    window_counts_[pixel] = 0;
+    pixel_state_[pixel] &= kMaskedBit;  // The count restarts.
   }
   touched_.clear();
   counts_.masked_pixels = static_cast<int64_t>(masked_list_.size());
@@ -152,7 +175,7 @@ void EventFilter::EndLearning(int64_t duration_ns, int64_t next_start_ns) {
   learning_ = false;
   CloseWindow(duration_ns, next_start_ns);
   const size_t count = held_.size();
-  out_.reserve(out_.size() + count);
+  ReserveOutput(count);
   for (size_t i = 0; i < count; ++i) {
     Pass(static_cast<size_t>(held_.y[i]) * width_ + held_.x[i], held_.t_ns[i], held_.x[i],
          held_.y[i], held_.polarity[i]);
@@ -162,12 +185,12 @@ void EventFilter::EndLearning(int64_t duration_ns, int64_t next_start_ns) {
 }
 
 void EventFilter::Pass(size_t index, int64_t t_ns, uint16_t x, uint16_t y, int8_t polarity) {
-  if (options_.hot_pixels && masked_[index] != 0) {
+  if (options_.hot_pixels && (pixel_state_[index] & kMaskedBit) != 0) {
     ++counts_.hot_pixel;
     return;
   }
   if (refractory_ns_ > 0) {
-    if (t_ns - last_passed_ns_[index] < refractory_ns_) {
+    if (t_ns - refractory_ns_ < last_passed_ns_[index]) {
       ++counts_.refractory;
       return;
     }
@@ -188,7 +211,47 @@ void EventFilter::Pass(size_t index, int64_t t_ns, uint16_t x, uint16_t y, int8_
     }
   }
   ++counts_.passed;
-  out_.push_back({t_ns, x, y, polarity});
+  out_.t_ns[out_count_] = t_ns;
+  out_.x[out_count_] = x;
+  out_.y[out_count_] = y;
+  out_.polarity[out_count_] = polarity;
+  ++out_count_;
 }
+
+bool ApplyEventFilterFlag(std::string_view flag, std::string_view value,
+                          EventFilterOptions* options) {
+  if (flag == "--hot-pixels") {
+    options->hot_pixels = ParseSwitchFlag(flag, value);
+  } else if (flag == "--hot-pixel-window") {
+    options->hot_pixel_window_s = ParseDoubleFlag(flag, value);
+  } else if (flag == "--hot-pixel-factor") {
+    options->hot_pixel_rate_factor = ParseDoubleFlag(flag, value);
+  } else if (flag == "--hot-pixel-min-rate") {
+    options->hot_pixel_min_rate_hz = ParseDoubleFlag(flag, value);
+  } else if (flag == "--refractory") {
+    options->refractory_period_s = ParseDoubleFlag(flag, value);
+  } else if (flag == "--background-activity") {
+    options->background_activity_window_s = ParseDoubleFlag(flag, value);
+  } else if (flag == "--background-activity-self") {
+    options->background_activity_include_self = ParseSwitchFlag(flag, value);
+  } else {
+    return false;
+  }
+  return true;
+}
+
+const char kEventFilterFlagsUsage[] =
+    "  --hot-pixels on|off     mask hot pixels (docs/tracking.md, \"Noise filters\"; default off)\n"
+    "  --hot-pixel-window S    hot-pixel counting window and learning period, seconds (default\n"
+    "                          0.1)\n"
+    "  --hot-pixel-factor F    a pixel is hot at F times the median count of the pixels that\n"
+    "                          fired in the window (default 10)...\n"
+    "  --hot-pixel-min-rate HZ ...and at least HZ events per second (default 100)\n"
+    "  --refractory S          drop a pixel's events within S seconds of its last passed one\n"
+    "                          (default 0: off)\n"
+    "  --background-activity S keep an event only when a neighbour fired within S seconds\n"
+    "                          before it (default 0: off)\n"
+    "  --background-activity-self on|off\n"
+    "                          the pixel's own previous event counts as support (default off)\n";
 
 }  // namespace evloc::tracking

@@ -7,6 +7,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <string_view>
 #include <vector>
 
 #include "core/events/event.h"
@@ -69,12 +70,17 @@ class EventFilter {
   // What the filters did so far.
   const EventFilterCounts& counts() const { return counts_; }
   // True when sensor pixel (x, y) is masked as hot now. Unchecked.
-  bool IsMasked(int x, int y) const { return masked_[static_cast<size_t>(y) * width_ + x] != 0; }
+  bool IsMasked(int x, int y) const {
+    return options_.hot_pixels &&
+           (pixel_state_[static_cast<size_t>(y) * width_ + x] & kMaskedBit) != 0;
+  }
 
  private:
-  // Counts an event of pixel `index` at t_ns in the current window, closing the windows that
-  // end at or before it first.
-  void Count(size_t index, int64_t t_ns);
+  // A pixel's state: its count in the current window, and this bit when it is masked.
+  static constexpr uint32_t kMaskedBit = uint32_t{1} << 31;
+
+  // Closes the windows that end at or before t_ns (the first event also opens the first one).
+  void CloseWindowsUntil(int64_t t_ns);
   // Judges the window [window_start_ns_, window_end_ns_) (or its first `duration_ns` when the
   // learning period ends early), updates the mask and starts the next window at `next_start_ns`.
   void CloseWindow(int64_t duration_ns, int64_t next_start_ns);
@@ -82,6 +88,10 @@ class EventFilter {
   void EndLearning(int64_t duration_ns, int64_t next_start_ns);
   // Stages 2-3 (and the mask of stage 1) for one event; appends it to out_ when it passes.
   void Pass(size_t index, int64_t t_ns, uint16_t x, uint16_t y, int8_t polarity);
+  // Makes room for `count` more events in out_ (written by index, trimmed by FinishOutput).
+  void ReserveOutput(size_t count);
+  // Trims out_ to the events written.
+  const EventBuffer& FinishOutput();
 
   EventFilterOptions options_;
   bool enabled_ = false;
@@ -90,10 +100,10 @@ class EventFilter {
   int64_t window_ns_ = 0;
   int64_t refractory_ns_ = 0;
   int64_t background_window_ns_ = 0;
-  // Hot pixels: per-pixel counts of the current window, the pixels counted in it, the mask.
-  std::vector<uint32_t> window_counts_;
+  // Hot pixels: per-pixel state (count in the current window | kMaskedBit), the pixels counted
+  // in the window, the masked pixels.
+  std::vector<uint32_t> pixel_state_;
   std::vector<uint32_t> touched_;
-  std::vector<uint8_t> masked_;
   std::vector<uint32_t> masked_list_;
   std::vector<uint32_t> scratch_counts_;
   bool started_ = false;
@@ -107,7 +117,17 @@ class EventFilter {
   // 8 neighbours need no border test), the time of its last event.
   std::vector<int64_t> last_event_ns_;
   EventBuffer out_;
+  // Events written to out_ (its arrays may be longer until FinishOutput).
+  size_t out_count_ = 0;
   EventFilterCounts counts_;
 };
+
+// The command-line flags of the noise filters shared by evloc-track and evloc-localizer serve:
+// when `flag` is one of them, sets its field of `options` from `value` and returns true (throws
+// InvalidArgumentError for a malformed value); returns false for any other flag.
+bool ApplyEventFilterFlag(std::string_view flag, std::string_view value,
+                          EventFilterOptions* options);
+// Their usage lines (two-space indent, the descriptions from column 26).
+extern const char kEventFilterFlagsUsage[];
 
 }  // namespace evloc::tracking
