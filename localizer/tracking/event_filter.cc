@@ -133,6 +133,23 @@ void EventFilter::CloseWindowsUntil(int64_t t_ns) {
   }
 }
 
+uint32_t EventFilter::NeighbourMedianCount(uint32_t pixel) const {
+  const int x = static_cast<int>(pixel % static_cast<uint32_t>(width_));
+  const int y = static_cast<int>(pixel / static_cast<uint32_t>(width_));
+  uint32_t counts[8];
+  int n = 0;
+  for (int dy = -1; dy <= 1; ++dy) {
+    for (int dx = -1; dx <= 1; ++dx) {
+      const int nx = x + dx;
+      const int ny = y + dy;
+      if ((dx == 0 && dy == 0) || nx < 0 || ny < 0 || nx >= width_ || ny >= height_) continue;
+      counts[n++] = pixel_state_[static_cast<size_t>(ny) * width_ + nx] & ~kMaskedBit;
+    }
+  }
+  std::nth_element(counts, counts + n / 2, counts + n);
+  return counts[n / 2];
+}
+
 void EventFilter::CloseWindow(int64_t duration_ns, int64_t next_start_ns) {
   // The population's level: the median count of the unmasked pixels that fired.
   scratch_counts_.clear();
@@ -145,26 +162,43 @@ void EventFilter::CloseWindow(int64_t duration_ns, int64_t next_start_ns) {
     std::nth_element(scratch_counts_.begin(), middle, scratch_counts_.end());
     median = *middle;
   }
-  const double min_count =
-      std::ceil(options_.hot_pixel_min_rate_hz * static_cast<double>(duration_ns) * 1e-9);
-  const double threshold = std::max(min_count, options_.hot_pixel_rate_factor * median);
-  // Unmask the pixels that calmed down (below half the threshold: hysteresis).
+  const double factor = options_.hot_pixel_rate_factor;
+  const double population_threshold =
+      std::max(std::ceil(options_.hot_pixel_min_rate_hz * static_cast<double>(duration_ns) * 1e-9),
+               factor * median);
+  // A pixel's own threshold also compares it with its 8 neighbours (their median count, so that
+  // a hot neighbour does not hide it): a moving edge fires neighbouring pixels alike, however
+  // textured the scene, while a hot pixel fires alone.
+  const auto threshold = [&](uint32_t pixel) {
+    return std::max(population_threshold,
+                    factor * std::max<double>(1.0, NeighbourMedianCount(pixel)));
+  };
+  // Decide from this window's counts before any is reset: unmask the pixels that calmed down
+  // (below half their threshold: hysteresis), mask the new hot ones.
+  scratch_unmask_.clear();
+  for (const uint32_t pixel : masked_list_) {
+    if ((pixel_state_[pixel] & ~kMaskedBit) < 0.5 * threshold(pixel)) {
+      scratch_unmask_.push_back(pixel);
+    }
+  }
+  scratch_mask_.clear();
+  for (const uint32_t pixel : touched_) {
+    const uint32_t state = pixel_state_[pixel];
+    if ((state & kMaskedBit) == 0 && state >= population_threshold && state >= threshold(pixel)) {
+      scratch_mask_.push_back(pixel);
+    }
+  }
+  for (const uint32_t pixel : scratch_unmask_) pixel_state_[pixel] &= ~kMaskedBit;
   size_t kept = 0;
   for (const uint32_t pixel : masked_list_) {
-    if ((pixel_state_[pixel] & ~kMaskedBit) < 0.5 * threshold) {
-      pixel_state_[pixel] &= ~kMaskedBit;
-    } else {
-      masked_list_[kept++] = pixel;
-    }
+    if ((pixel_state_[pixel] & kMaskedBit) != 0) masked_list_[kept++] = pixel;
   }
   masked_list_.resize(kept);
-  for (const uint32_t pixel : touched_) {
-    if ((pixel_state_[pixel] & kMaskedBit) == 0 && pixel_state_[pixel] >= threshold) {
-      pixel_state_[pixel] |= kMaskedBit;
-      masked_list_.push_back(pixel);
-    }
-    pixel_state_[pixel] &= kMaskedBit;  // The count restarts.
+  for (const uint32_t pixel : scratch_mask_) {
+    pixel_state_[pixel] |= kMaskedBit;
+    masked_list_.push_back(pixel);
   }
+  for (const uint32_t pixel : touched_) pixel_state_[pixel] &= kMaskedBit;  // The counts restart.
   touched_.clear();
   counts_.masked_pixels = static_cast<int64_t>(masked_list_.size());
   window_start_ns_ = next_start_ns;

@@ -36,10 +36,11 @@ struct EventFilterCounts {
 
 // The filters of one session (not thread-safe). Events are processed in time order in three
 // stages: (1) hot pixels: every pixel's events are counted in consecutive windows of
-// hot_pixel_window_s; at the end of a window a pixel is masked when its count reaches both
-// hot_pixel_min_rate_hz x window and hot_pixel_rate_factor x the median count of the unmasked
-// pixels that fired in the window, and a masked pixel is unmasked when its count falls below half
-// of that threshold (a window without any event unmasks every pixel). The first window is the
+// hot_pixel_window_s; at the end of a window a pixel is masked when its count reaches
+// hot_pixel_min_rate_hz x window, hot_pixel_rate_factor x the median count of the unmasked
+// pixels that fired in the window, and hot_pixel_rate_factor x the median count of its 8
+// neighbours (at least 1); a masked pixel is unmasked when its count falls below half of its
+// threshold (a window without any event unmasks every pixel). The first window is the
 // learning period: its events are held back and filtered with the mask learned from it, so a
 // pixel hot from the first event never reaches the surfaces. (2) refractory: an event less than
 // refractory_period_s after the last event of its pixel that passed this stage is removed.
@@ -84,6 +85,8 @@ class EventFilter {
   // Judges the window [window_start_ns_, window_end_ns_) (or its first `duration_ns` when the
   // learning period ends early), updates the mask and starts the next window at `next_start_ns`.
   void CloseWindow(int64_t duration_ns, int64_t next_start_ns);
+  // The median count in the current window of the (up to 8) neighbours of `pixel`.
+  uint32_t NeighbourMedianCount(uint32_t pixel) const;
   // Ends the learning period: judges it and runs its held-back events through the stages 2-3.
   void EndLearning(int64_t duration_ns, int64_t next_start_ns);
   // Stages 2-3 (and the mask of stage 1) for one event; appends it to out_ when it passes.
@@ -106,6 +109,8 @@ class EventFilter {
   std::vector<uint32_t> touched_;
   std::vector<uint32_t> masked_list_;
   std::vector<uint32_t> scratch_counts_;
+  std::vector<uint32_t> scratch_unmask_;
+  std::vector<uint32_t> scratch_mask_;
   bool started_ = false;
   bool learning_ = false;
   int64_t window_start_ns_ = 0;
