@@ -1,12 +1,14 @@
 // Tracking benchmarks (docs/tracking.md, "Performance"): one tracking step at 640x480 with 2,000
 // points, broken down into surface upkeep, selection and solve, for lazy and dense fields and the
-// ablation variants; and the event ingestion rate of the time surface.
+// ablation variants; the event ingestion rate of the time surface and the cost of the noise filters
+// before it.
 #include <benchmark/benchmark.h>
 
 #include <algorithm>
 #include <random>
 #include <vector>
 
+#include "localizer/tracking/event_filter.h"
 #include "localizer/tracking/testing/synthetic_scene.h"
 #include "localizer/tracking/time_surface.h"
 #include "localizer/tracking/tracker.h"
@@ -177,6 +179,46 @@ void BM_Ingestion(benchmark::State& state) {
   state.SetLabel(state.range(0) == 0 ? "edge events" : "uniform random pixels");
 }
 BENCHMARK(BM_Ingestion)->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond);
+
+// The noise filters before the surfaces (event_filter.h), in steady state (after the hot-pixel
+// learning period): every event of the scene (640x480, 450 ms of edge events) or 2^20 events on
+// uniformly random pixels at 10 M events/s, per iteration, shifted in time from one iteration to
+// the next. Args: filters (1 hot pixels, 2 refractory 1 ms, 4 background activity 10 ms; a
+// sum: several), events (0 edge, 1 uniform random). Items per second: events filtered.
+void BM_EventFilter(benchmark::State& state) {
+  const int filters = static_cast<int>(state.range(0));
+  EventBuffer events;
+  if (state.range(1) == 0) {
+    events.Append(GetScene().warm_up);
+    for (const EventBuffer& packet : GetScene().packets) events.Append(packet);
+  } else {
+    std::mt19937 random(5);
+    std::uniform_int_distribution<int> x(0, 639), y(0, 479);
+    for (size_t i = 0; i < (1u << 20); ++i) {
+      events.push_back({static_cast<int64_t>(i) * 100, static_cast<uint16_t>(x(random)),
+                        static_cast<uint16_t>(y(random)), static_cast<int8_t>(i % 2 ? 1 : -1)});
+    }
+  }
+  const int64_t span_ns = events.t_ns.back() - events.t_ns.front() + 1;
+  EventFilterOptions options;
+  options.hot_pixels = (filters & 1) != 0;
+  options.refractory_period_s = (filters & 2) != 0 ? 0.001 : 0.0;
+  options.background_activity_window_s = (filters & 4) != 0 ? 0.01 : 0.0;
+  EventFilter filter(SensorSize{640, 480}, options);
+  filter.Process(events);  // The learning period.
+  int64_t passed = 0;
+  for (auto _ : state) {
+    state.PauseTiming();
+    for (int64_t& t : events.t_ns) t += span_ns;
+    state.ResumeTiming();
+    passed += static_cast<int64_t>(filter.Process(events).size());
+  }
+  state.SetItemsProcessed(static_cast<int64_t>(state.iterations() * events.size()));
+  state.counters["passed_fraction"] =
+      static_cast<double>(passed) / static_cast<double>(state.iterations() * events.size());
+  state.SetLabel(state.range(1) == 0 ? "edge events" : "uniform random pixels");
+}
+BENCHMARK(BM_EventFilter)->ArgsProduct({{1, 2, 4, 7}, {0, 1}})->Unit(benchmark::kMicrosecond);
 
 }  // namespace
 }  // namespace evloc::tracking

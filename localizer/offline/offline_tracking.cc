@@ -63,6 +63,7 @@ void Record(const PoseEstimate& step, const Tracker& tracker, const StepCallback
   bool open = !result->relocalizations.empty() && result->relocalizations.back().outcome == "ended";
   RecordEpisode(step, &result->relocalizations, &open);
   result->steps.push_back(step);
+  result->filter_counts.push_back(tracker.event_filter().counts());
   if (on_step) on_step(step, tracker);
 }
 
@@ -221,6 +222,7 @@ OfflineTrackingResult TrackEventStream(EventReader& reader, const Map& map,
       Record(step, tracker, on_step, &result);
     }
   }
+  result.final_filter_counts = tracker.event_filter().counts();
   result.wall_s = SecondsSince(start);
   return result;
 }

@@ -73,6 +73,11 @@ struct OfflineTrackingResult {
   int64_t measurements = 0;
   // Steps whose status was LOST.
   int64_t lost_steps = 0;
+  // The noise filters' counts (cumulative) when each step ran, one per element of `steps`
+  // (events mode).
+  std::vector<EventFilterCounts> filter_counts;
+  // The noise filters' counts at the end of the run.
+  EventFilterCounts final_filter_counts;
   // The search episodes, in order.
   std::vector<RelocalizationEpisode> relocalizations;
   // Wall-clock time of the run (reading included), seconds.

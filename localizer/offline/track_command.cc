@@ -16,6 +16,7 @@
 #include "core/trajectory/tum_io.h"
 #include "localizer/offline/debug_images.h"
 #include "localizer/offline/odometry_track.h"
+#include "localizer/tracking/event_filter.h"
 #include "maps/map_directory.h"
 
 namespace evloc::tracking {
@@ -48,6 +49,18 @@ nlohmann::json StepsToJson(const OfflineTrackingResult& result) {
                      {"search_best_alignment", step.search.best_alignment},
                      {"search_second_alignment", step.search.second_alignment}});
   }
+  // What the noise filters did between two steps (packet-granular: each packet is filtered whole
+  // before the steps it completes run).
+  EventFilterCounts previous;
+  for (size_t i = 0; i < result.filter_counts.size() && i < steps.size(); ++i) {
+    const EventFilterCounts& now = result.filter_counts[i];
+    steps[i]["filter_input"] = now.input - previous.input;
+    steps[i]["filter_hot_pixel"] = now.hot_pixel - previous.hot_pixel;
+    steps[i]["filter_refractory"] = now.refractory - previous.refractory;
+    steps[i]["filter_background_activity"] = now.background_activity - previous.background_activity;
+    steps[i]["filter_masked_pixels"] = now.masked_pixels;
+    previous = now;
+  }
   return steps;
 }
 
@@ -63,6 +76,23 @@ nlohmann::json RelocalizationsToJson(const OfflineTrackingResult& result) {
                         {"max_step_ms", episode.max_step_ms}});
   }
   return episodes;
+}
+
+nlohmann::json FilterCountsToJson(const EventFilterCounts& counts) {
+  const auto fraction = [&](int64_t removed) {
+    return counts.input > 0 ? static_cast<double>(removed) / static_cast<double>(counts.input)
+                            : 0.0;
+  };
+  return {{"input", counts.input},
+          {"passed", counts.passed},
+          {"held", counts.held},
+          {"hot_pixel", counts.hot_pixel},
+          {"refractory", counts.refractory},
+          {"background_activity", counts.background_activity},
+          {"masked_pixels", counts.masked_pixels},
+          {"hot_pixel_fraction", fraction(counts.hot_pixel)},
+          {"refractory_fraction", fraction(counts.refractory)},
+          {"background_activity_fraction", fraction(counts.background_activity)}};
 }
 
 double Median(std::vector<double> values) {
@@ -88,6 +118,7 @@ void WriteTrackOutputs(const TrackCommandOptions& options, const std::string& va
                             {"steps", result.steps.size()},
                             {"lost_steps", result.lost_steps},
                             {"relocalizations", RelocalizationsToJson(result)},
+                            {"event_filter", FilterCountsToJson(result.final_filter_counts)},
                             {"wall_s", result.wall_s},
                             {"median_step_ms", Median(step_ms)},
                             {"per_step", StepsToJson(result)}};
@@ -99,6 +130,15 @@ void WriteTrackOutputs(const TrackCommandOptions& options, const std::string& va
         << (mode == "frames" || mode == "vo" ? " frames" : " events") << " in " << result.wall_s
         << " s wall; median step " << Median(step_ms) << " ms; trajectory written to "
         << options.output_path.string() << "\n";
+    if (mode == "events" && options.tracking.tracker.event_filter.Enabled()) {
+      const EventFilterCounts& counts = result.final_filter_counts;
+      const double input = std::max<double>(1.0, static_cast<double>(counts.input));
+      log << "evloc-track: noise filters removed " << counts.hot_pixel << " hot-pixel ("
+          << 100.0 * counts.hot_pixel / input << " %), " << counts.refractory << " refractory ("
+          << 100.0 * counts.refractory / input << " %), " << counts.background_activity
+          << " background-activity (" << 100.0 * counts.background_activity / input << " %) of "
+          << counts.input << " events; " << counts.masked_pixels << " pixels masked at the end\n";
+    }
   }
 }
 
@@ -185,12 +225,14 @@ Options:
                          with polarity and occlusion: points claim edge pixels of their
                          predicted polarity (default on)
   --velocity-window S    constant-velocity window, seconds (default 0.02)
-  --min-alignment A      a step is bad below this chance-corrected alignment (docs/tracking.md)
+)" + std::string(kEventFilterFlagsUsage) +
+         R"(  --min-alignment A      a step is bad below this chance-corrected alignment (docs/tracking.md)
   --max-mean-residual R  a step is bad above this mean field value at the points
   --stats PATH           per-step statistics (status: TRACKING, LOST, INITIALIZING or
                          RELOCALIZING; points, quality, timings) and the search episodes
                          ("relocalizations": start_t_s, end_t_s, outcome found / not_found /
-                         ended) as JSON
+                         ended) and what the noise filters removed ("event_filter", and per
+                         step) as JSON
   --debug-dir DIR        write debug pictures (time surface with the map, ON/OFF surfaces,
                          predicted gradient and flow)
   --debug-every N        one debug picture every N steps (default 30)
@@ -295,6 +337,7 @@ TrackCommandOptions ParseTrackCommandLine(const std::vector<std::string>& argume
       tracker.polarity_after_unsigned_solve = ParseSwitchFlag(flag, value);
     } else if (flag == "--polarity-culling") {
       tracker.polarity_aware_culling = ParseSwitchFlag(flag, value);
+    } else if (ApplyEventFilterFlag(flag, value, &tracker.event_filter)) {
     } else if (flag == "--min-alignment") {
       tracker.min_alignment = ParseDoubleFlag(flag, value);
     } else if (flag == "--max-mean-residual") {

@@ -2,6 +2,7 @@
 
 #include "core/common/cli.h"
 #include "core/common/error.h"
+#include "localizer/tracking/event_filter.h"
 
 namespace evloc::service {
 
@@ -72,7 +73,10 @@ Options:
   --tau SECONDS              default time-surface decay time (default 0.03)
   --decay-trail PX           default adaptive decay trail, pixels (default 1; 0: a fixed decay time;
                              docs/tracking.md)
-  --help                     print this help
+  default noise filters (docs/tracking.md, "Noise filters"; a session's
+  TrackingOptions.event_filter overrides them):
+)" + std::string(tracking::kEventFilterFlagsUsage) +
+         R"(  --help                     print this help
 
 Stop with Ctrl-C (SIGINT) or SIGTERM. Exit codes: 0 stopped, 1 failure, 2 bad command line.
 )";
@@ -180,6 +184,7 @@ ServeCommand ParseServeCommandLine(const std::vector<std::string>& arguments) {
       server.tracker.decay_time_s = ParseDoubleFlag(flag, value);
     } else if (flag == "--decay-trail") {
       server.tracker.decay_trail_px = ParseDoubleFlag(flag, value);
+    } else if (tracking::ApplyEventFilterFlag(flag, value, &server.tracker.event_filter)) {
     } else {
       throw InvalidArgumentError("unknown flag '" + flag + "' (see --help)");
     }

@@ -45,6 +45,14 @@ TEST(ServeCommand, EveryFlagReachesItsOption) {
                                               "0.02",
                                               "--decay-trail",
                                               "2",
+                                              "--hot-pixels",
+                                              "on",
+                                              "--hot-pixel-window",
+                                              "0.05",
+                                              "--refractory",
+                                              "0.0005",
+                                              "--background-activity",
+                                              "0.004",
                                               "--metrics",
                                               "127.0.0.1:9464",
                                               "--tls-cert",
@@ -102,6 +110,10 @@ TEST(ServeCommand, EveryFlagReachesItsOption) {
   EXPECT_EQ(server.tracker.max_points, 1000);
   EXPECT_EQ(server.tracker.decay_time_s, 0.02);
   EXPECT_EQ(server.tracker.decay_trail_px, 2);
+  EXPECT_TRUE(server.tracker.event_filter.hot_pixels);
+  EXPECT_EQ(server.tracker.event_filter.hot_pixel_window_s, 0.05);
+  EXPECT_EQ(server.tracker.event_filter.refractory_period_s, 0.0005);
+  EXPECT_EQ(server.tracker.event_filter.background_activity_window_s, 0.004);
   EXPECT_EQ(server.metrics_address, "127.0.0.1:9464");
   EXPECT_EQ(server.tls_cert_file, "c.pem");
   EXPECT_EQ(server.tls_key_file, "k.pem");

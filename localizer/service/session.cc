@@ -25,6 +25,27 @@ grpc::Status InvalidArgument(const std::string& message) {
   return {grpc::StatusCode::INVALID_ARGUMENT, message};
 }
 
+// The set fields of a session's noise filter options, over the server's defaults (checked with
+// the other tracker options).
+void ApplyEventFilterOptions(const api::EventFilterOptions& proto,
+                             tracking::EventFilterOptions* options) {
+  if (proto.has_hot_pixels()) options->hot_pixels = proto.hot_pixels();
+  if (proto.has_hot_pixel_window_s()) options->hot_pixel_window_s = proto.hot_pixel_window_s();
+  if (proto.has_hot_pixel_rate_factor()) {
+    options->hot_pixel_rate_factor = proto.hot_pixel_rate_factor();
+  }
+  if (proto.has_hot_pixel_min_rate_hz()) {
+    options->hot_pixel_min_rate_hz = proto.hot_pixel_min_rate_hz();
+  }
+  if (proto.has_refractory_period_s()) options->refractory_period_s = proto.refractory_period_s();
+  if (proto.has_background_activity_window_s()) {
+    options->background_activity_window_s = proto.background_activity_window_s();
+  }
+  if (proto.has_background_activity_include_self()) {
+    options->background_activity_include_self = proto.background_activity_include_self();
+  }
+}
+
 }  // namespace
 
 api::MapDescription DescribeMap(const MapDescriptionData& map) {
@@ -181,6 +202,7 @@ SessionSettings SessionSettingsFromProto(const api::SessionStart& start,
     }
     if (options.decay_time_s() != 0) settings.tracker.decay_time_s = options.decay_time_s();
     if (options.has_decay_trail_px()) settings.tracker.decay_trail_px = options.decay_trail_px();
+    ApplyEventFilterOptions(options.event_filter(), &settings.tracker.event_filter);
     settings.tracker.input =
         options.frames() ? tracking::TrackerInput::kFrames : tracking::TrackerInput::kEvents;
     settings.tracker.Check();

@@ -194,15 +194,18 @@ TEST(PacketDecoder, RealEvt2RecordingStreamsThrough) {
 
 // Serves `events` in PACKED packets of `packet_ns` through RequestValidator and SessionTracker
 // (fed with a stop function that never stops) and expects the offline tracker's poses bit for
-// bit; `after_packet` sees each packet's item and every pose served so far.
+// bit; `after_packet` sees each packet's item and every pose served so far. `options` are the
+// session's TrackingOptions.
 void ExpectSessionGivesOfflinePoses(
     const EventBuffer& events, int64_t packet_ns, size_t min_steps,
     const std::function<void(const SessionItem&, const std::vector<tracking::PoseEstimate>&)>&
-        after_packet = {}) {
+        after_packet = {},
+    const api::TrackingOptions& options = {}) {
   auto map = std::make_shared<LoadedMap>();
   map->map = testing::TestMap();
   map->visibility = std::make_unique<VisibilityIndex>(map->map);
-  const api::TrackRequest start = testing::TestSessionStart();
+  api::TrackRequest start = testing::TestSessionStart();
+  start.mutable_start()->mutable_options()->MergeFrom(options);
   const SessionSettings settings = SessionSettingsFromProto(start.start(), SessionLimits{});
   SessionTracker tracker(map, settings);
   RequestValidator validator(settings, SessionLimits{});
@@ -216,12 +219,12 @@ void ExpectSessionGivesOfflinePoses(
     }
     if (after_packet) after_packet(item, served);
   }
-  tracking::OfflineTrackingOptions options;
-  options.tracker = settings.tracker;
+  tracking::OfflineTrackingOptions offline_options;
+  offline_options.tracker = settings.tracker;
   testing::BufferEventReader reader(events);
-  const auto offline =
-      tracking::TrackEventStream(reader, map->map, map->visibility.get(), settings.camera,
-                                 *settings.initial_world_from_cam, settings.initial_t_ns, options);
+  const auto offline = tracking::TrackEventStream(reader, map->map, map->visibility.get(),
+                                                  settings.camera, *settings.initial_world_from_cam,
+                                                  settings.initial_t_ns, offline_options);
   ASSERT_GE(offline.steps.size(), min_steps);
   ASSERT_GE(served.size(), offline.steps.size());
   for (size_t i = 0; i < offline.steps.size(); ++i) {
@@ -276,6 +279,26 @@ TEST(SessionSettings, RejectsInvalidCamerasAndOptions) {
   EXPECT_EQ(SessionSettingsFromProto(adaptive, defaults).tracker.decay_trail_px, 2);
   bad = start;
   bad.mutable_options()->set_decay_trail_px(-1);
+  EXPECT_THROW(SessionSettingsFromProto(bad, defaults), InvalidArgumentError);
+  // Noise filters: a set field overrides the server's default, an unset one keeps it.
+  SessionLimits filtering = defaults;
+  filtering.tracker.event_filter.refractory_period_s = 0.001;
+  EXPECT_EQ(SessionSettingsFromProto(start, filtering).tracker.event_filter.refractory_period_s,
+            0.001);
+  api::SessionStart filtered = start;
+  filtered.mutable_options()->mutable_event_filter()->set_hot_pixels(true);
+  filtered.mutable_options()->mutable_event_filter()->set_background_activity_window_s(0.005);
+  const tracking::EventFilterOptions filter =
+      SessionSettingsFromProto(filtered, filtering).tracker.event_filter;
+  EXPECT_TRUE(filter.hot_pixels);
+  EXPECT_EQ(filter.background_activity_window_s, 0.005);
+  EXPECT_EQ(filter.refractory_period_s, 0.001);
+  EXPECT_FALSE(filter.background_activity_include_self);
+  bad = start;
+  bad.mutable_options()->mutable_event_filter()->set_refractory_period_s(-1);
+  EXPECT_THROW(SessionSettingsFromProto(bad, defaults), InvalidArgumentError);
+  bad = start;
+  bad.mutable_options()->mutable_event_filter()->set_hot_pixel_rate_factor(0.5);
   EXPECT_THROW(SessionSettingsFromProto(bad, defaults), InvalidArgumentError);
   bad = start;
   bad.mutable_options()->set_variant("EVT-XY");
@@ -419,6 +442,18 @@ TEST(SessionTracker, StopEndsProcessWithinOneStep) {
 TEST(SessionTracker, LongPacketsFedOneStepAtATimeGiveTheOfflinePoses) {
   // 37 ms packets: about 7 steps each, ends between step times.
   ExpectSessionGivesOfflinePoses(testing::TestEvents(150'000'000), 37'000'000, 20);
+}
+
+// With every noise filter on (the hot-pixel learning period holds the first 20 ms back) the
+// session still gives the offline tracker's poses bit for bit.
+TEST(SessionTracker, FilteredPacketsGiveTheOfflinePoses) {
+  api::TrackingOptions options;
+  api::EventFilterOptions* filter = options.mutable_event_filter();
+  filter->set_hot_pixels(true);
+  filter->set_hot_pixel_window_s(0.02);
+  filter->set_refractory_period_s(0.0005);
+  filter->set_background_activity_window_s(0.005);
+  ExpectSessionGivesOfflinePoses(testing::TestEvents(120'000'000), 3'000'000, 15, {}, options);
 }
 
 // Finding 2 of issue 14: PACKED packets above the event cap are refused before decoding.

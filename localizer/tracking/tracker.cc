@@ -42,6 +42,7 @@ Tracker::Tracker(std::unique_ptr<const MapSource> owned, const MapSource* borrow
       polarity_options_{options.polarity_neutral_band_deg, options.gradient_probe_depth_fraction,
                         options.min_flow_px},
       surface_(table_),
+      filter_(SensorSize{table_.width(), table_.height()}, options.event_filter),
       motion_(std::llround(options.velocity_window_s * 1e9)) {
   if (table_.ideal_camera().width < 8 || table_.ideal_camera().height < 8) {
     throw InvalidArgumentError("Tracker: the camera image must be at least 8x8 pixels.");
@@ -98,6 +99,15 @@ std::vector<PoseEstimate> Tracker::AddEvents(const EventBuffer& events) {
     }
   }
   if (count > 0 && !first_event_t_ns_) first_event_t_ns_ = t_ns[0];
+  // The noise filters (event_filter.h) choose the events that reach the surfaces.
+  std::vector<PoseEstimate> estimates = Ingest(filter_.Process(events));
+  if (count > 0) last_event_t_ns_ = t_ns[count - 1];
+  return estimates;
+}
+
+std::vector<PoseEstimate> Tracker::Ingest(const EventBuffer& events) {
+  const size_t count = events.size();
+  const int64_t* t_ns = events.t_ns.data();
   std::vector<PoseEstimate> estimates;
   size_t begin = 0;
   while (begin < count) {
@@ -129,7 +139,6 @@ std::vector<PoseEstimate> Tracker::AddEvents(const EventBuffer& events) {
       }
     }
   }
-  if (count > 0) last_event_t_ns_ = t_ns[count - 1];
   return estimates;
 }
 
@@ -141,7 +150,9 @@ std::vector<PoseEstimate> Tracker::AdvanceTo(int64_t t_ns) {
   }
   if (!complete_until_t_ns_ || t_ns > *complete_until_t_ns_) complete_until_t_ns_ = t_ns;
   std::vector<PoseEstimate> estimates;
-  if (options_.input != TrackerInput::kEvents || options_.events_per_step || !initialized()) {
+  if (options_.input == TrackerInput::kEvents) estimates = Ingest(filter_.AdvanceTo(t_ns));
+  if (options_.input != TrackerInput::kEvents || options_.events_per_step || !initialized() ||
+      filter_.holding()) {
     return estimates;
   }
   while (next_step_t_ns_ <= t_ns) {

@@ -16,6 +16,7 @@
 #include "core/camera/undistortion_table.h"
 #include "core/events/event.h"
 #include "core/geometry/rigid3.h"
+#include "localizer/tracking/event_filter.h"
 #include "localizer/tracking/map_source.h"
 #include "localizer/tracking/motion_model.h"
 #include "localizer/tracking/occlusion.h"
@@ -199,6 +200,8 @@ class Tracker {
   const Camera& ideal_camera() const { return table_.ideal_camera(); }
   // The time surface (for inspection and tests).
   const TimeSurface& time_surface() const { return surface_; }
+  // The noise filters before the surfaces (their counts, for statistics).
+  const EventFilter& event_filter() const { return filter_; }
   // The body-frame velocity of the motion prior, (v, omega) per second.
   const Vector6d& velocity() const { return motion_.velocity(); }
   // The time span of the poses that velocity was measured over, ns (0 after a reset).
@@ -216,6 +219,8 @@ class Tracker {
   Tracker(std::unique_ptr<const MapSource> owned, const MapSource* borrowed, const Camera& camera,
           const TrackerOptions& options);
 
+  // Runs the events that passed the noise filters into the surfaces and the steps they complete.
+  std::vector<PoseEstimate> Ingest(const EventBuffer& events);
   PoseEstimate Step(int64_t t_ns);
   // Reads the source's points and generation; throws InvalidArgumentError when they are
   // inconsistent.
@@ -308,6 +313,7 @@ class Tracker {
   SurfaceDecay decay_;
   PolarityPredictionOptions polarity_options_;
   TimeSurface surface_;
+  EventFilter filter_;
   std::unique_ptr<TimeSurfaceField> lazy_fields_[3];
   DenseField dense_fields_[3];
   DenseField frame_field_;

@@ -29,7 +29,26 @@ void RegistrationOptions::Check() const {
           "registration.image_margin_px must be finite and >= 0.");
 }
 
+void EventFilterOptions::Check() const {
+  Require(
+      std::isfinite(hot_pixel_window_s) && hot_pixel_window_s >= 1e-3 && hot_pixel_window_s <= 10,
+      "event_filter.hot_pixel_window_s must be in [0.001, 10] seconds.");
+  Require(std::isfinite(hot_pixel_rate_factor) && hot_pixel_rate_factor > 1,
+          "event_filter.hot_pixel_rate_factor must be finite and > 1.");
+  Require(Positive(hot_pixel_min_rate_hz) && hot_pixel_min_rate_hz <= 1e7,
+          "event_filter.hot_pixel_min_rate_hz must be in (0, 1e7] events per second.");
+  Require(hot_pixel_learning_max_events >= 1 && hot_pixel_learning_max_events <= (int64_t{1} << 28),
+          "event_filter.hot_pixel_learning_max_events must be in [1, 2^28].");
+  Require(
+      std::isfinite(refractory_period_s) && refractory_period_s >= 0 && refractory_period_s <= 1,
+      "event_filter.refractory_period_s must be in [0, 1] seconds (0: off).");
+  Require(std::isfinite(background_activity_window_s) && background_activity_window_s >= 0 &&
+              background_activity_window_s <= 1,
+          "event_filter.background_activity_window_s must be in [0, 1] seconds (0: off).");
+}
+
 void TrackerOptions::Check() const {
+  event_filter.Check();
   Require(Positive(step_rate_hz) && step_rate_hz <= 1e6, "step_rate_hz must be in (0, 1e6].");
   Require(std::isfinite(decay_trail_px) && decay_trail_px >= 0,
           "decay_trail_px must be finite and >= 0 (0 = a fixed decay time).");

@@ -54,6 +54,38 @@ struct RegistrationOptions {
   void Check() const;
 };
 
+// Noise filters applied to the events before the time surfaces (event_filter.h; docs/tracking.md,
+// "Noise filters").
+struct EventFilterOptions {
+  // Mask hot pixels: pixels whose event count in a window is far above the population's.
+  bool hot_pixels = false;
+  // Length of the counting windows, seconds; the first window is the learning period, whose
+  // events are held back until it ends.
+  double hot_pixel_window_s = 0.1;
+  // A pixel is hot when its count in a window reaches this many times the median count of the
+  // pixels that fired in it...
+  double hot_pixel_rate_factor = 10.0;
+  // ...and at least this rate, events per second.
+  double hot_pixel_min_rate_hz = 100.0;
+  // The learning period ends early once it holds this many events (bounds its memory: 13 bytes
+  // per event).
+  int64_t hot_pixel_learning_max_events = int64_t{1} << 20;
+  // An event less than this after the last passed event of its pixel is removed, seconds; 0 off.
+  double refractory_period_s = 0.0;
+  // Background activity: an event passes only when one of its 8 neighbours had an event within
+  // this window before it, seconds; 0 off.
+  double background_activity_window_s = 0.0;
+  // The background-activity filter also counts the pixel's own previous event as support.
+  bool background_activity_include_self = false;
+
+  // True when some filter is on.
+  bool Enabled() const {
+    return hot_pixels || refractory_period_s > 0 || background_activity_window_s > 0;
+  }
+  // Throws InvalidArgumentError when a field is out of range.
+  void Check() const;
+};
+
 // Options of the event tracker (and of its frame-based twin).
 struct TrackerOptions {
   // Measurements the tracker consumes.
@@ -64,6 +96,10 @@ struct TrackerOptions {
   double step_rate_hz = 300.0;
   // When set, a step runs after every this many events instead of at a fixed rate.
   std::optional<int64_t> events_per_step;
+
+  // --- Noise filters, before the time surfaces ---
+  // Hot pixels, refractory period, background activity (all in sensor pixels).
+  EventFilterOptions event_filter;
 
   // --- Time surfaces ---
   // Decay time tau of T = exp(-(t - t_last) / tau), seconds. With decay_trail_px > 0, the

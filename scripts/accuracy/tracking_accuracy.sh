@@ -13,6 +13,8 @@
 #   EVT, EVT-PR, EVT-OH, EVT-- (docs/tracking.md, "Variants"); EVT1 = EVT with --two-stage off
 #   (one signed solve, as the paper); VT = Canny-VT on the dataset's frames (--mode frames; the
 #   rate does not apply).
+#   RUN_TAG names the results folder's variant of the flags (OUT_DIR/results/...-RATE-RUN_TAG), so
+#   that runs with different TRACK_FLAGS (e.g. the noise filters) keep their results apart.
 #   MAP=built uses OUT_DIR/maps/NAME-SECONDSs (an evloc-mapper map of the sequence's frames, built
 #   beforehand) instead of the dataset's gt_map.
 # A dataset already in OUT_DIR is reused (rendering 10 s of mid at 640x480 takes 10-30 min).
@@ -84,7 +86,7 @@ for sequence in "${SEQUENCES[@]}"; do
         VT) flags=(--mode frames) ;;
         *) flags=(--variant "$variant" --rate "$rate") ;;
       esac
-      run=$OUT/results/$MAP-$name-$variant-$rate
+      run=$OUT/results/$MAP-$name-$variant-$rate${RUN_TAG:+-$RUN_TAG}
       mkdir -p "$run"
       "$TRACK" --map "$map" --dataset "$dataset" --out "$run/est.txt" --stats "$run/stats.json" \
         "${flags[@]}" --quiet ${EXTRA[@]+"${EXTRA[@]}"} > "$run/track.log" 2>&1 ||

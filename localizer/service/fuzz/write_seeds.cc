@@ -102,14 +102,26 @@ Camera SmallCamera() { return Camera::Pinhole(80, 60, 62.5, 62.5, 39.5, 29.5); }
 // A seed of the requests target: the test SessionStart with SmallCamera(), then the windows as
 // EventPackets (coordinates scaled to the small camera; from 0.1 ms before the initial time, so
 // that the first one primes the surfaces); with `pose_hint` a PoseHint and an empty packet in the
-// middle.
-std::string RequestsSeed(api::EventEncoding encoding, bool pose_hint) {
+// middle; with `filters` every noise filter on, the hot-pixel learning period (1 ms) ending within
+// the seed's windows.
+std::string RequestsSeed(api::EventEncoding encoding, bool pose_hint, bool filters = false) {
   const int64_t start_ns = testing::kInitialTimeNs - kWindowNs;
   std::string seed;
   api::TrackRequest start = testing::TestSessionStart();
   *start.mutable_start()->mutable_camera() = CameraToProto(SmallCamera());
   // Steps every 250 us, so that the few windows run several.
   start.mutable_start()->mutable_options()->set_step_rate_hz(4000);
+  if (filters) {
+    api::EventFilterOptions* filter =
+        start.mutable_start()->mutable_options()->mutable_event_filter();
+    filter->set_hot_pixels(true);
+    filter->set_hot_pixel_window_s(0.001);
+    filter->set_hot_pixel_rate_factor(4);
+    filter->set_hot_pixel_min_rate_hz(5000);
+    filter->set_refractory_period_s(0.0002);
+    filter->set_background_activity_window_s(0.0005);
+    filter->set_background_activity_include_self(true);
+  }
   AppendRecord(start.SerializeAsString(), &seed);
   std::vector<EventBuffer> windows = Windows(start_ns);
   for (EventBuffer& window : windows) {
@@ -185,6 +197,8 @@ int Main(int argc, char** argv) {
   WriteFile(out / "requests" / "packed", RequestsSeed(api::EVENT_ENCODING_PACKED, false));
   WriteFile(out / "requests" / "packed_hint", RequestsSeed(api::EVENT_ENCODING_PACKED, true));
   WriteFile(out / "requests" / "evt3", RequestsSeed(api::EVENT_ENCODING_EVT3, false));
+  WriteFile(out / "requests" / "packed_filters",
+            RequestsSeed(api::EVENT_ENCODING_PACKED, true, /*filters=*/true));
   WriteFile(out / "requests" / "frames", FrameSeed());
   fs::create_directories(out / "locate");
   const std::vector<api::LocateRequest> locate = LocateSeedRequests();
