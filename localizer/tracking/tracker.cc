@@ -10,6 +10,7 @@
 
 #include "core/common/error.h"
 #include "localizer/tracking/point_selection.h"
+#include "localizer/tracking/pose_time.h"
 
 namespace evloc::tracking {
 namespace {
@@ -42,7 +43,8 @@ Tracker::Tracker(std::unique_ptr<const MapSource> owned, const MapSource* borrow
       polarity_options_{options.polarity_neutral_band_deg, options.gradient_probe_depth_fraction,
                         options.min_flow_px},
       surface_(table_),
-      motion_(std::llround(options.velocity_window_s * 1e9)) {
+      motion_(std::llround(options.velocity_window_s * 1e9),
+              std::llround(options.stamp_velocity_window_s * 1e9)) {
   if (table_.ideal_camera().width < 8 || table_.ideal_camera().height < 8) {
     throw InvalidArgumentError("Tracker: the camera image must be at least 8x8 pixels.");
   }
@@ -558,6 +560,20 @@ PoseEstimate Tracker::Step(int64_t t_ns) {
     last_good_world_from_cam_ = estimate.world_from_cam;
     status_ = TrackingStatus::kTracking;
     lost_steps_ = 0;
+    // The registered pose shows the camera when the events under its points fired: move it
+    // forward by their age to the step time (the motion model keeps the registered poses, which
+    // the surfaces of the next step will match again).
+    if (options_.input == TrackerInput::kEvents && motion_.velocity_span_ns() > 0) {
+      const SurfaceAge age =
+          MeasureSurfaceAge(surface_, SurfaceChannel::kAll, decay_, t_ns, intrinsics_,
+                            best.registration.cam_from_world, motion_.smooth_velocity(),
+                            points_.positions, selected_, &scratch_age_samples_);
+      estimate.quality.surface_age_ms = static_cast<double>(age.age_ns) * 1e-6;
+      if (options_.stamp_at_step_time) {
+        estimate.world_from_cam =
+            estimate.world_from_cam * ExpSE3(motion_.smooth_velocity() * (age.age_ns * 1e-9));
+      }
+    }
   } else {
     // The best failed attempt is no estimate: a LOST step reports the last good pose, with a
     // covariance that says it carries no information.
