@@ -29,8 +29,10 @@ struct SurfaceAge {
 };
 
 // The age at `t_ns` of the events that `indices` of `positions` (world points) were registered
-// to at `cam_from_world`: for each point, the age of the last event in `channel` at the pixel
-// nearest to its projection, when that pixel is active under `decay`. The result is the median
+// to at `cam_from_world`: for each point, the bilinear blend (at its projection) of the ages of
+// the last events in `channel` of the active pixels (under `decay`) of its cell, as the field's
+// bilinear sample blends their values; a point whose cell has less than a quarter of its weight
+// on active pixels does not count. The result is the median
 // of those ages weighted by the squared image speed of each point under `velocity` (the
 // body-frame twist of world_from_cam per second, ConstantVelocityModel): a point that does not
 // move in the image says nothing about time, and a fast one pins it most precisely. The median

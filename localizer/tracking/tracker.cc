@@ -71,6 +71,7 @@ void Tracker::Reset(const Rigid3d& world_from_cam, int64_t t_ns) {
   }
   motion_.Reset(world_from_cam, t_ns);
   last_good_world_from_cam_ = world_from_cam;
+  last_good_reported_world_from_cam_ = world_from_cam;
   status_ = TrackingStatus::kTracking;
   started_ = true;
   has_pose_ = true;
@@ -574,12 +575,14 @@ PoseEstimate Tracker::Step(int64_t t_ns) {
             estimate.world_from_cam * ExpSE3(motion_.smooth_velocity() * (age.age_ns * 1e-9));
       }
     }
+    last_good_reported_world_from_cam_ = estimate.world_from_cam;
   } else {
     // The best failed attempt is no estimate: a LOST step reports the last good pose, with a
     // covariance that says it carries no information.
     status_ = TrackingStatus::kLost;
     motion_.Reset(last_good_world_from_cam_, t_ns);
-    estimate.world_from_cam = last_good_world_from_cam_;
+    // The pose last reported as good (at its step time when stamped).
+    estimate.world_from_cam = last_good_reported_world_from_cam_;
     estimate.covariance = Matrix6d::Identity() * kUnconstrainedVariance;
     // The local recovery gave up for long enough: search the whole map from the next step.
     ++lost_steps_;

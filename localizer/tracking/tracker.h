@@ -322,7 +322,11 @@ class Tracker {
   EdgeZBuffer zbuffer_;
   ConstantVelocityModel motion_;
   TrackingStatus status_ = TrackingStatus::kTracking;
+  // The last good registered pose (the motion model's, the recovery's centre).
   Rigid3d last_good_world_from_cam_;
+  // The last good pose as reported (stamped at its step time): what steps without an estimate
+  // report.
+  Rigid3d last_good_reported_world_from_cam_;
   // True once Reset or StartWithoutPose was called.
   bool started_ = false;
   // True once a pose was set or verified.
