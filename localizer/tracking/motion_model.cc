@@ -12,6 +12,7 @@ void ConstantVelocityModel::Reset(const Rigid3d& world_from_cam, int64_t t_ns) {
   velocity_ = Vector6d::Zero();
   velocity_span_ns_ = 0;
   smooth_velocity_ = Vector6d::Zero();
+  smooth_velocity_span_ns_ = 0;
   history_.clear();
   history_.emplace_back(t_ns, world_from_cam);
 }
@@ -27,8 +28,12 @@ void ConstantVelocityModel::Update(const Rigid3d& world_from_cam, int64_t t_ns) 
     history_.pop_front();
   }
   std::tie(velocity_, velocity_span_ns_) = TwistOver(window_ns_);
-  smooth_velocity_ =
-      smooth_window_ns_ == window_ns_ ? velocity_ : TwistOver(smooth_window_ns_).first;
+  if (smooth_window_ns_ == window_ns_) {
+    smooth_velocity_ = velocity_;
+    smooth_velocity_span_ns_ = velocity_span_ns_;
+  } else {
+    std::tie(smooth_velocity_, smooth_velocity_span_ns_) = TwistOver(smooth_window_ns_);
+  }
   last_world_from_cam_ = world_from_cam;
   last_t_ns_ = t_ns;
 }

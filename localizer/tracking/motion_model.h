@@ -46,6 +46,10 @@ class ConstantVelocityModel {
   // the price of lagging behind an acceleration (for short extrapolations, Tracker's step-time
   // stamping). Equal to velocity() while the history is shorter than the short window.
   const Vector6d& smooth_velocity() const { return smooth_velocity_; }
+  // The time span smooth_velocity() was measured over, ns (0 after Reset).
+  int64_t smooth_velocity_span_ns() const { return smooth_velocity_span_ns_; }
+  // The smooth window, ns.
+  int64_t smooth_window_ns() const { return smooth_window_ns_; }
 
   // The pose predicted at t_ns (the last pose when not initialized or at the same time).
   Rigid3d Predict(int64_t t_ns) const;
@@ -62,6 +66,7 @@ class ConstantVelocityModel {
   Vector6d velocity_ = Vector6d::Zero();
   int64_t velocity_span_ns_ = 0;
   Vector6d smooth_velocity_ = Vector6d::Zero();
+  int64_t smooth_velocity_span_ns_ = 0;
   // The poses since the last Reset within the smooth window of the newest (newest last).
   std::deque<std::pair<int64_t, Rigid3d>> history_;
 };

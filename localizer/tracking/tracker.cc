@@ -564,7 +564,11 @@ PoseEstimate Tracker::Step(int64_t t_ns) {
     // The registered pose shows the camera when the events under its points fired: move it
     // forward by their age to the step time (the motion model keeps the registered poses, which
     // the surfaces of the next step will match again).
-    if (options_.input == TrackerInput::kEvents && motion_.velocity_span_ns() > 0) {
+    // Only once the smooth velocity spans its whole window since the last Reset: right after a
+    // Reset (a pose hint, a return from LOST) it is the difference of a few poses, one of them
+    // possibly centimetres off, and moving a pose forward by it would add that error.
+    if (options_.input == TrackerInput::kEvents && motion_.smooth_velocity_span_ns() > 0 &&
+        motion_.smooth_velocity_span_ns() >= motion_.smooth_window_ns()) {
       const SurfaceAge age =
           MeasureSurfaceAge(surface_, SurfaceChannel::kAll, decay_, t_ns, intrinsics_,
                             best.registration.cam_from_world, motion_.smooth_velocity(),
