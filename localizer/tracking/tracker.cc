@@ -577,6 +577,9 @@ PoseEstimate Tracker::Step(int64_t t_ns) {
       if (options_.stamp_at_step_time) {
         estimate.world_from_cam =
             estimate.world_from_cam * ExpSE3(motion_.smooth_velocity() * (age.age_ns * 1e-9));
+        // A unit quaternion, as every reader of a pose normalises it (bit-identical poses
+        // through the service).
+        estimate.world_from_cam.rotation.normalize();
       }
     }
     last_good_reported_world_from_cam_ = estimate.world_from_cam;
