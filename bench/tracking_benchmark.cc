@@ -1,17 +1,38 @@
-// Tracking benchmarks (docs/tracking.md, "Performance"): one tracking step at 640x480 with 2,000
-// points, broken down into surface upkeep, selection and solve, for lazy and dense fields and the
-// ablation variants; the event ingestion rate of the time surface and the cost of the noise filters
-// before it.
+// Tracking benchmarks (docs/tracking.md, "Performance"; docs/benchmarks.md, "Tracking"): one
+// tracking step, broken down into surface upkeep, selection and solve, for lazy and dense fields
+// and the ablation variants; the event ingestion rate of the time surface and the cost of the
+// noise filters before it.
+//
+// BM_TrackingStep replays the steps of a real run when EVLOC_BENCH_DATASET names a dataset folder
+// (events, calibration, ground truth for the initial pose, gt_map/ or EVLOC_BENCH_MAP): the first
+// EVLOC_BENCH_SECONDS (default 2) of its events, cut into the packets of the 300 Hz steps, fed to
+// a tracker with evloc-track's defaults (visibility index, 2500 points) from the pose evloc-track
+// starts from. The tracker is deterministic, so the steps timed are the steps of the run: the
+// same events, the same predicted poses, the same selections (scripts/bench-tracking-replay.sh
+// prints them beside the `evloc-track --stats` median of the same seconds). Without it the
+// benchmark steps through a synthetic 640x480 rectangle scene (2000 points), as before.
 #include <benchmark/benchmark.h>
 
 #include <algorithm>
+#include <cstdlib>
+#include <filesystem>
+#include <iostream>
+#include <limits>
+#include <memory>
+#include <optional>
 #include <random>
+#include <string>
 #include <vector>
 
+#include "core/common/error.h"
+#include "core/dataset/dataset.h"
 #include "localizer/tracking/event_filter.h"
 #include "localizer/tracking/testing/synthetic_scene.h"
 #include "localizer/tracking/time_surface.h"
 #include "localizer/tracking/tracker.h"
+#include "maps/map.h"
+#include "maps/map_directory.h"
+#include "maps/visibility.h"
 
 namespace evloc::tracking {
 namespace {
@@ -23,39 +44,112 @@ constexpr int64_t kEndNs = 450'000'000;
 struct Scene {
   Camera camera = Camera::Pinhole(640, 480, 500.0, 500.0, 319.5, 239.5);
   Map map;
-  // Events before the first step, then one packet per step.
+  // Built for a replayed dataset (as evloc-track does).
+  std::unique_ptr<VisibilityIndex> visibility;
+  // The pose and time the run starts from.
+  Rigid3d start_world_from_cam;
+  int64_t start_t_ns = kStartNs;
+  // Events up to the start time, then one packet per step.
   EventBuffer warm_up;
   std::vector<EventBuffer> packets;
+  // Empty for the synthetic scene, else the dataset folder.
+  std::string replayed;
 };
 
-const Scene& GetScene() {
-  static const Scene scene = [] {
-    Scene result;
-    result.map = testing::MakeRectangleMap(testing::DefaultRectangles(), 0.003);
-    const EventBuffer events = testing::SimulateEdgeEvents(
-        result.map, result.camera, [](int64_t t_ns) { return testing::SmoothMotion(t_ns); }, 0,
-        kEndNs + kStepNs, 50'000);
-    int64_t boundary = kStartNs;
-    EventBuffer* current = &result.warm_up;
-    for (size_t i = 0; i < events.size(); ++i) {
-      while (events.t_ns[i] > boundary) {
-        result.packets.emplace_back();
-        current = &result.packets.back();
+// Cuts `events` (from `reader` when given) into the warm-up (t <= start) and one packet per
+// step period after it, up to `end_t_ns`.
+void CutIntoSteps(EventReader* reader, const EventBuffer* events, int64_t end_t_ns, Scene* scene) {
+  int64_t boundary = scene->start_t_ns;
+  EventBuffer* current = &scene->warm_up;
+  EventBuffer batch;
+  size_t offset = 0;
+  for (;;) {
+    if (reader != nullptr) {
+      batch.clear();
+      if (reader->Read(1 << 20, &batch) == 0) return;
+      events = &batch;
+    } else if (offset++ > 0) {
+      return;
+    }
+    for (size_t i = 0; i < events->size(); ++i) {
+      const int64_t t_ns = events->t_ns[i];
+      if (t_ns > end_t_ns) return;
+      while (t_ns > boundary) {
+        scene->packets.emplace_back();
+        current = &scene->packets.back();
         boundary += kStepNs;
       }
-      current->push_back(events[i]);
+      current->push_back((*events)[i]);
     }
-    return result;
-  }();
+  }
+}
+
+std::unique_ptr<Scene> LoadReplayedScene(const std::string& folder) {
+  auto scene = std::make_unique<Scene>();
+  scene->replayed = folder;
+  const Dataset dataset = ReadDataset(folder);
+  scene->camera = dataset.camera;
+  const char* map_path = std::getenv("EVLOC_BENCH_MAP");
+  scene->map = LoadMap(ResolveMapFile(map_path != nullptr ? std::filesystem::path(map_path)
+                                                          : std::filesystem::path(folder) /
+                                                                dataset_files::kGroundTruthMap));
+  scene->visibility = std::make_unique<VisibilityIndex>(scene->map);
+  int64_t first_t_ns = 0;
+  {
+    EventBuffer first;
+    if (OpenDatasetEvents(dataset)->Read(1, &first) == 1) first_t_ns = first.t_ns[0];
+  }
+  const TimedPose start = ResolveInitialPose(dataset, std::nullopt, first_t_ns);
+  scene->start_world_from_cam = start.world_from_cam;
+  scene->start_t_ns = start.t_ns;
+  const char* seconds_text = std::getenv("EVLOC_BENCH_SECONDS");
+  const double seconds = seconds_text != nullptr ? std::atof(seconds_text) : 2.0;
+  if (!(seconds > 0)) throw InvalidArgumentError("EVLOC_BENCH_SECONDS must be positive.");
+  const auto reader = OpenDatasetEvents(dataset);
+  // One step more than asked: the last step runs when the next packet's first event arrives.
+  CutIntoSteps(reader.get(), nullptr, start.t_ns + static_cast<int64_t>(seconds * 1e9) + kStepNs,
+               scene.get());
+  if (scene->packets.size() < 2) {
+    throw InvalidArgumentError("EVLOC_BENCH_DATASET " + folder +
+                               ": fewer than two steps of events after the initial pose.");
+  }
+  scene->packets.pop_back();  // Its step would need the packet after it.
   return scene;
+}
+
+std::unique_ptr<Scene> MakeSyntheticScene() {
+  auto scene = std::make_unique<Scene>();
+  scene->map = testing::MakeRectangleMap(testing::DefaultRectangles(), 0.003);
+  scene->start_world_from_cam = testing::SmoothMotion(kStartNs);
+  const EventBuffer events = testing::SimulateEdgeEvents(
+      scene->map, scene->camera, [](int64_t t_ns) { return testing::SmoothMotion(t_ns); }, 0,
+      kEndNs + kStepNs, 50'000);
+  CutIntoSteps(nullptr, &events, std::numeric_limits<int64_t>::max(), scene.get());
+  return scene;
+}
+
+// The synthetic scene (BM_TrackingSequence, BM_Ingestion, and BM_TrackingStep without a dataset).
+const Scene& GetScene() {
+  static const std::unique_ptr<Scene> scene = MakeSyntheticScene();
+  return *scene;
+}
+
+// The scene BM_TrackingStep steps through: the replayed dataset when EVLOC_BENCH_DATASET is set.
+const Scene& GetStepScene() {
+  static const std::unique_ptr<Scene> scene = [] {
+    const char* folder = std::getenv("EVLOC_BENCH_DATASET");
+    return folder != nullptr && *folder != 0 ? LoadReplayedScene(folder) : nullptr;
+  }();
+  return scene ? *scene : GetScene();
 }
 
 // One tracking step per iteration: the packet of one step period (the step itself runs when the
 // next packet's first event arrives, so each AddEvents call runs exactly one step).
 void BM_TrackingStep(benchmark::State& state) {
-  const Scene& scene = GetScene();
+  const Scene& scene = GetStepScene();
   TrackerOptions options;
-  options.max_points = 2000;
+  // evloc-track's defaults for a replayed run; the synthetic scene's budget as before.
+  if (scene.replayed.empty()) options.max_points = 2000;
   options.field_evaluation = state.range(0) == 0 ? FieldEvaluation::kLazy : FieldEvaluation::kDense;
   options.use_polarity = state.range(1) != 0;
   options.use_occlusion_culling = state.range(2) != 0;
@@ -64,9 +158,9 @@ void BM_TrackingStep(benchmark::State& state) {
   std::unique_ptr<Tracker> tracker;
   size_t next_packet = 0;
   auto restart = [&] {
-    tracker = std::make_unique<Tracker>(scene.map, nullptr, scene.camera, options);
+    tracker = std::make_unique<Tracker>(scene.map, scene.visibility.get(), scene.camera, options);
     tracker->AddEvents(scene.warm_up);
-    tracker->Reset(testing::SmoothMotion(kStartNs), kStartNs);
+    tracker->Reset(scene.start_world_from_cam, scene.start_t_ns);
     next_packet = 0;
   };
   restart();
@@ -107,6 +201,10 @@ void BM_TrackingStep(benchmark::State& state) {
   state.counters["lm_iterations"] = mean(iterations);
   state.counters["lost_steps"] = static_cast<double>(lost);
   state.SetLabel(
+      (scene.replayed.empty()
+           ? std::string("synthetic ")
+           : "replay " + std::filesystem::path(scene.replayed).filename().string() + " (" +
+                 std::to_string(scene.packets.size()) + " steps) ") +
       std::string(state.range(0) == 0 ? "lazy" : "dense") + " " + options.VariantName() +
       (options.smooth_field ? " smoothed" : "") +
       (options.use_polarity && !options.polarity_after_unsigned_solve ? " one-stage" : ""));

@@ -37,6 +37,7 @@ nlohmann::json StepsToJson(const OfflineTrackingResult& result) {
                      {"mean_residual", step.quality.mean_residual},
                      {"iterations", step.quality.iterations},
                      {"decay_time_ms", step.quality.decay_time_ms},
+                     {"surface_age_ms", step.quality.surface_age_ms},
                      {"recovery_attempts", step.quality.recovery_attempts},
                      {"surface_ms", step.timings.surface_ms},
                      {"selection_ms", step.timings.selection_ms},
@@ -226,7 +227,13 @@ Options:
                          predicted polarity (default on)
   --velocity-window S    constant-velocity window, seconds (default 0.02)
 )" + std::string(kEventFilterFlagsUsage) +
-         R"(  --min-alignment A      a step is bad below this chance-corrected alignment (docs/tracking.md)
+         R"(  --stamp-at-step-time on|off
+                         move each pose forward by the age of the events it was registered to,
+                         to its step time (default off: the registered pose, which lags by
+                         1.5-5.5 ms; docs/tracking.md, "Pose time")
+  --stamp-velocity-window S
+                         the velocity window of that move, seconds (default 0.1)
+  --min-alignment A      a step is bad below this chance-corrected alignment (docs/tracking.md)
   --max-mean-residual R  a step is bad above this mean field value at the points
   --stats PATH           per-step statistics (status: TRACKING, LOST, INITIALIZING or
                          RELOCALIZING; points, quality, timings) and the search episodes
@@ -333,6 +340,10 @@ TrackCommandOptions ParseTrackCommandLine(const std::vector<std::string>& argume
       tracker.polarity_neutral_band_deg = ParseDoubleFlag(flag, value);
     } else if (flag == "--min-flow") {
       tracker.min_flow_px = ParseDoubleFlag(flag, value);
+    } else if (flag == "--stamp-at-step-time") {
+      tracker.stamp_at_step_time = ParseSwitchFlag(flag, value);
+    } else if (flag == "--stamp-velocity-window") {
+      tracker.stamp_velocity_window_s = ParseDoubleFlag(flag, value);
     } else if (flag == "--two-stage") {
       tracker.polarity_after_unsigned_solve = ParseSwitchFlag(flag, value);
     } else if (flag == "--polarity-culling") {

@@ -1,5 +1,7 @@
 #include "localizer/tracking/motion_model.h"
 
+#include <tuple>
+
 #include "core/common/error.h"
 
 namespace evloc::tracking {
@@ -9,6 +11,8 @@ void ConstantVelocityModel::Reset(const Rigid3d& world_from_cam, int64_t t_ns) {
   last_t_ns_ = t_ns;
   velocity_ = Vector6d::Zero();
   velocity_span_ns_ = 0;
+  smooth_velocity_ = Vector6d::Zero();
+  smooth_velocity_span_ns_ = 0;
   history_.clear();
   history_.emplace_back(t_ns, world_from_cam);
 }
@@ -19,14 +23,35 @@ void ConstantVelocityModel::Update(const Rigid3d& world_from_cam, int64_t t_ns) 
         "ConstantVelocityModel::Update needs a pose later than the last one (call Reset first).");
   }
   history_.emplace_back(t_ns, world_from_cam);
-  // Keep the oldest pose within the window, and always the previous one.
-  while (history_.size() > 2 && t_ns - history_[1].first >= window_ns_) history_.pop_front();
-  const auto& [oldest_t_ns, oldest_world_from_cam] = history_.front();
-  velocity_span_ns_ = t_ns - oldest_t_ns;
-  velocity_ = LogSE3(oldest_world_from_cam.Inverse() * world_from_cam) /
-              (static_cast<double>(velocity_span_ns_) * 1e-9);
+  // Keep the oldest pose within the longer window, and always the previous one.
+  while (history_.size() > 2 && t_ns - history_[1].first >= smooth_window_ns_) {
+    history_.pop_front();
+  }
+  std::tie(velocity_, velocity_span_ns_) = TwistOver(window_ns_);
+  if (smooth_window_ns_ == window_ns_) {
+    smooth_velocity_ = velocity_;
+    smooth_velocity_span_ns_ = velocity_span_ns_;
+  } else {
+    std::tie(smooth_velocity_, smooth_velocity_span_ns_) = TwistOver(smooth_window_ns_);
+  }
   last_world_from_cam_ = world_from_cam;
   last_t_ns_ = t_ns;
+}
+
+std::pair<Vector6d, int64_t> ConstantVelocityModel::TwistOver(int64_t window_ns) const {
+  const auto& [newest_t_ns, newest_world_from_cam] = history_.back();
+  size_t oldest = 0;
+  for (size_t i = history_.size() - 1; i-- > 0;) {
+    if (newest_t_ns - history_[i].first >= window_ns) {
+      oldest = i;
+      break;
+    }
+  }
+  const auto& [oldest_t_ns, oldest_world_from_cam] = history_[oldest];
+  const int64_t span_ns = newest_t_ns - oldest_t_ns;
+  return {LogSE3(oldest_world_from_cam.Inverse() * newest_world_from_cam) /
+              (static_cast<double>(span_ns) * 1e-9),
+          span_ns};
 }
 
 Rigid3d ConstantVelocityModel::Predict(int64_t t_ns) const {

@@ -2,6 +2,7 @@
 // twist over the recent estimates, extrapolated to the next step time.
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 #include <deque>
 #include <optional>
@@ -17,8 +18,10 @@ namespace evloc::tracking {
 // of decimetres per second, which the window divides by the number of steps it spans.
 class ConstantVelocityModel {
  public:
-  // `window_ns` = 0 takes the velocity from the last two poses only.
-  explicit ConstantVelocityModel(int64_t window_ns = 0) : window_ns_(window_ns) {}
+  // `window_ns` = 0 takes the velocity from the last two poses only. `smooth_window_ns` is the
+  // window of smooth_velocity() (at least `window_ns` is used).
+  explicit ConstantVelocityModel(int64_t window_ns = 0, int64_t smooth_window_ns = 0)
+      : window_ns_(window_ns), smooth_window_ns_(std::max(window_ns, smooth_window_ns)) {}
 
   // Forgets the history and sets the pose at t_ns; the velocity becomes zero.
   void Reset(const Rigid3d& world_from_cam, int64_t t_ns);
@@ -39,17 +42,32 @@ class ConstantVelocityModel {
   const Vector6d& velocity() const { return velocity_; }
   // The time span the velocity was measured over, ns (0 after Reset).
   int64_t velocity_span_ns() const { return velocity_span_ns_; }
+  // The same twist measured over the longer smooth window: pose noise averages out further, at
+  // the price of lagging behind an acceleration (for short extrapolations, Tracker's step-time
+  // stamping). Equal to velocity() while the history is shorter than the short window.
+  const Vector6d& smooth_velocity() const { return smooth_velocity_; }
+  // The time span smooth_velocity() was measured over, ns (0 after Reset).
+  int64_t smooth_velocity_span_ns() const { return smooth_velocity_span_ns_; }
+  // The smooth window, ns.
+  int64_t smooth_window_ns() const { return smooth_window_ns_; }
 
   // The pose predicted at t_ns (the last pose when not initialized or at the same time).
   Rigid3d Predict(int64_t t_ns) const;
 
  private:
+  // The twist from the oldest pose of `history_` that is at least `window_ns` older than the
+  // newest (at least the previous pose; the oldest when none is), and that span.
+  std::pair<Vector6d, int64_t> TwistOver(int64_t window_ns) const;
+
   int64_t window_ns_ = 0;
+  int64_t smooth_window_ns_ = 0;
   Rigid3d last_world_from_cam_;
   std::optional<int64_t> last_t_ns_;
   Vector6d velocity_ = Vector6d::Zero();
   int64_t velocity_span_ns_ = 0;
-  // The poses since the last Reset within the window of the newest (newest last).
+  Vector6d smooth_velocity_ = Vector6d::Zero();
+  int64_t smooth_velocity_span_ns_ = 0;
+  // The poses since the last Reset within the smooth window of the newest (newest last).
   std::deque<std::pair<int64_t, Rigid3d>> history_;
 };
 

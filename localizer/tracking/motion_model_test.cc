@@ -67,6 +67,45 @@ TEST(ConstantVelocityModel, WindowAveragesPoseNoiseOut) {
   EXPECT_LT((windowed.velocity() - twist).norm(), 1e-9);
 }
 
+// The smooth window keeps the short velocity bit for bit and averages noise out further.
+TEST(ConstantVelocityModel, SmoothVelocityUsesTheLongerWindow) {
+  Vector6d twist;
+  twist << 0.3, -0.1, 0.2, 0.4, -0.2, 0.1;
+  const Rigid3d start(ExpSO3(Eigen::Vector3d(0.2, 0.1, -0.3)), Eigen::Vector3d(1, 2, 3));
+  const int64_t period_ns = 3'333'333;
+  ConstantVelocityModel short_only(20'000'000);
+  ConstantVelocityModel both(20'000'000, 100'000'000);
+  short_only.Reset(start, 0);
+  both.Reset(start, 0);
+  double worst_short = 0;
+  double worst_smooth = 0;
+  for (int step = 1; step <= 90; ++step) {
+    const int64_t t_ns = step * period_ns;
+    Rigid3d pose = start * ExpSE3(twist * (static_cast<double>(t_ns) * 1e-9));
+    pose.translation.x() += (step % 2 == 0 ? 1.0 : -1.0) * 1e-3;
+    short_only.Update(pose, t_ns);
+    both.Update(pose, t_ns);
+    EXPECT_EQ(both.velocity(), short_only.velocity()) << step;
+    EXPECT_EQ(both.velocity_span_ns(), short_only.velocity_span_ns()) << step;
+    if (step < 6) {
+      EXPECT_EQ(both.smooth_velocity(), both.velocity()) << step;
+    }
+    if (step >= 31) {
+      worst_short = std::max(worst_short, (both.velocity().head<3>() - twist.head<3>()).norm());
+      worst_smooth =
+          std::max(worst_smooth, (both.smooth_velocity().head<3>() - twist.head<3>()).norm());
+    }
+  }
+  EXPECT_GT(worst_short, 0.08);    // 2 mm / 20 ms = 0.1 m/s.
+  EXPECT_LT(worst_smooth, 0.025);  // 2 mm / 100 ms = 0.02 m/s.
+  // Without noise both are exact.
+  both.Reset(start, 0);
+  for (int step = 1; step <= 40; ++step) {
+    both.Update(start * ExpSE3(twist * (step * 0.005)), step * 5'000'000);
+  }
+  EXPECT_LT((both.smooth_velocity() - twist).norm(), 1e-9);
+}
+
 TEST(ConstantVelocityModel, RejectsUpdatesThatDoNotMoveForwardInTime) {
   ConstantVelocityModel model;
   EXPECT_THROW(model.Update(Rigid3d(), 10), InvalidArgumentError);

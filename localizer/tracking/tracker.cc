@@ -10,6 +10,7 @@
 
 #include "core/common/error.h"
 #include "localizer/tracking/point_selection.h"
+#include "localizer/tracking/pose_time.h"
 
 namespace evloc::tracking {
 namespace {
@@ -43,7 +44,8 @@ Tracker::Tracker(std::unique_ptr<const MapSource> owned, const MapSource* borrow
                         options.min_flow_px},
       surface_(table_),
       filter_(SensorSize{table_.width(), table_.height()}, options.event_filter),
-      motion_(std::llround(options.velocity_window_s * 1e9)) {
+      motion_(std::llround(options.velocity_window_s * 1e9),
+              std::llround(options.stamp_velocity_window_s * 1e9)) {
   if (table_.ideal_camera().width < 8 || table_.ideal_camera().height < 8) {
     throw InvalidArgumentError("Tracker: the camera image must be at least 8x8 pixels.");
   }
@@ -70,6 +72,7 @@ void Tracker::Reset(const Rigid3d& world_from_cam, int64_t t_ns) {
   }
   motion_.Reset(world_from_cam, t_ns);
   last_good_world_from_cam_ = world_from_cam;
+  last_good_reported_world_from_cam_ = world_from_cam;
   status_ = TrackingStatus::kTracking;
   started_ = true;
   has_pose_ = true;
@@ -569,12 +572,35 @@ PoseEstimate Tracker::Step(int64_t t_ns) {
     last_good_world_from_cam_ = estimate.world_from_cam;
     status_ = TrackingStatus::kTracking;
     lost_steps_ = 0;
+    // The registered pose shows the camera when the events under its points fired: move it
+    // forward by their age to the step time (the motion model keeps the registered poses, which
+    // the surfaces of the next step will match again).
+    // Only once the smooth velocity spans its whole window since the last Reset: right after a
+    // Reset (a pose hint, a return from LOST) it is the difference of a few poses, one of them
+    // possibly centimetres off, and moving a pose forward by it would add that error.
+    if (options_.input == TrackerInput::kEvents && motion_.smooth_velocity_span_ns() > 0 &&
+        motion_.smooth_velocity_span_ns() >= motion_.smooth_window_ns()) {
+      const SurfaceAge age =
+          MeasureSurfaceAge(surface_, SurfaceChannel::kAll, decay_, t_ns, intrinsics_,
+                            best.registration.cam_from_world, motion_.smooth_velocity(),
+                            points_.positions, selected_, &scratch_age_samples_);
+      estimate.quality.surface_age_ms = static_cast<double>(age.age_ns) * 1e-6;
+      if (options_.stamp_at_step_time) {
+        estimate.world_from_cam =
+            estimate.world_from_cam * ExpSE3(motion_.smooth_velocity() * (age.age_ns * 1e-9));
+        // A unit quaternion, as every reader of a pose normalises it (bit-identical poses
+        // through the service).
+        estimate.world_from_cam.rotation.normalize();
+      }
+    }
+    last_good_reported_world_from_cam_ = estimate.world_from_cam;
   } else {
     // The best failed attempt is no estimate: a LOST step reports the last good pose, with a
     // covariance that says it carries no information.
     status_ = TrackingStatus::kLost;
     motion_.Reset(last_good_world_from_cam_, t_ns);
-    estimate.world_from_cam = last_good_world_from_cam_;
+    // The pose last reported as good (at its step time when stamped).
+    estimate.world_from_cam = last_good_reported_world_from_cam_;
     estimate.covariance = Matrix6d::Identity() * kUnconstrainedVariance;
     // The local recovery gave up for long enough: search the whole map from the next step.
     ++lost_steps_;

@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <memory>
 #include <optional>
+#include <utility>
 #include <vector>
 
 #include <opencv2/core.hpp>
@@ -104,6 +105,10 @@ struct TrackingQuality {
   int polarity_matches = 0;
   // The time-surface decay time of the step, milliseconds (adaptive with decay_trail_px).
   double decay_time_ms = 0;
+  // The age of the events the estimate was registered to (MeasureSurfaceAge), milliseconds; with
+  // stamp_at_step_time the reported pose was moved forward by it to the step time. 0 when not
+  // measured (frames, no velocity yet, a step that is no estimate).
+  double surface_age_ms = 0;
 };
 
 // Wall-clock time spent in each stage of a step, milliseconds.
@@ -325,7 +330,11 @@ class Tracker {
   EdgeZBuffer zbuffer_;
   ConstantVelocityModel motion_;
   TrackingStatus status_ = TrackingStatus::kTracking;
+  // The last good registered pose (the motion model's, the recovery's centre).
   Rigid3d last_good_world_from_cam_;
+  // The last good pose as reported (stamped at its step time): what steps without an estimate
+  // report.
+  Rigid3d last_good_reported_world_from_cam_;
   // True once Reset or StartWithoutPose was called.
   bool started_ = false;
   // True once a pose was set or verified.
@@ -390,6 +399,7 @@ class Tracker {
   std::vector<Eigen::Vector2d> scratch_group_pixels_;
   std::vector<double> scratch_group_depths_;
   std::vector<uint8_t> scratch_group_keep_;
+  std::vector<std::pair<int64_t, double>> scratch_age_samples_;
 };
 
 }  // namespace evloc::tracking

@@ -84,6 +84,9 @@ void TrackerOptions::Check() const {
           "on_edge_radius_px must be in [0, 10].");
   Require(std::isfinite(velocity_window_s) && velocity_window_s >= 0 && velocity_window_s <= 1,
           "velocity_window_s must be in [0, 1] seconds.");
+  Require(std::isfinite(stamp_velocity_window_s) && stamp_velocity_window_s >= 0 &&
+              stamp_velocity_window_s <= 1,
+          "stamp_velocity_window_s must be in [0, 1] seconds.");
   Require(std::isfinite(min_alignment) && min_alignment >= -1 && min_alignment <= 1,
           "min_alignment must be in [-1, 1].");
   Require(std::isfinite(max_mean_residual) && max_mean_residual > 0,

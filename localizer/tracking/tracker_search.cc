@@ -42,6 +42,7 @@ void Tracker::StartWithoutPose(int64_t t_ns) {
   started_ = true;
   has_pose_ = false;
   last_good_world_from_cam_ = Rigid3d();
+  last_good_reported_world_from_cam_ = Rigid3d();
   motion_.Reset(Rigid3d(), t_ns);
   next_step_t_ns_ = t_ns;
   last_step_t_ns_ = t_ns - 1;
@@ -426,7 +427,7 @@ void Tracker::SearchStep(int64_t t_ns, PoseEstimate* estimate) {
   progress.coarse = 0;
   progress.refined = 0;
   progress.gave_up = false;
-  estimate->world_from_cam = last_good_world_from_cam_;
+  estimate->world_from_cam = last_good_reported_world_from_cam_;
   estimate->covariance = Matrix6d::Identity() * kUnconstrainedVariance;
   estimate->quality.decay_time_ms = decay_.decay_time_ns * 1e-6;
 
@@ -455,6 +456,7 @@ void Tracker::SearchStep(int64_t t_ns, PoseEstimate* estimate) {
         has_pose_ = true;
         lost_steps_ = 0;
         last_good_world_from_cam_ = pose;
+        last_good_reported_world_from_cam_ = pose;
         estimate->world_from_cam = pose;
         estimate->covariance = attempt.registration.covariance;
         estimate->status = status_;
