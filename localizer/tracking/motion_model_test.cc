@@ -26,13 +26,36 @@ TEST(ConstantVelocityModel, ExtrapolatesAConstantTwistExactly) {
   EXPECT_LT((model.Predict(25'000'000).translation - pose_at(0.01).translation).norm(), 1e-15);
 }
 
+// The noisy motion of the window tests: a constant twist from `start`, poses 3.3 ms apart with
+// alternating +-1 mm along x (the worst case for a two-pose difference).
+constexpr int64_t kNoisyPeriodNs = 3'333'333;
+const Vector6d& NoisyTwist() {
+  static const Vector6d twist = (Vector6d() << 0.3, -0.1, 0.2, 0.4, -0.2, 0.1).finished();
+  return twist;
+}
+const Rigid3d& NoisyStart() {
+  static const Rigid3d start(ExpSO3(Eigen::Vector3d(0.2, 0.1, -0.3)), Eigen::Vector3d(1, 2, 3));
+  return start;
+}
+Rigid3d NoisyPose(int step) {
+  Rigid3d pose =
+      NoisyStart() * ExpSE3(NoisyTwist() * (static_cast<double>(step * kNoisyPeriodNs) * 1e-9));
+  pose.translation.x() += (step % 2 == 0 ? 1.0 : -1.0) * 1e-3;
+  return pose;
+}
+// The pose of the same twist without noise, 5 ms per step.
+Rigid3d ExactPose(int step) { return NoisyStart() * ExpSE3(NoisyTwist() * (step * 0.005)); }
+// Error of the translational part of an estimated twist, m/s.
+double SpeedError(const Vector6d& velocity) {
+  return (velocity.head<3>() - NoisyTwist().head<3>()).norm();
+}
+
 // Millimetre noise on poses 3.3 ms apart: the last-two-poses velocity is off by decimetres per
 // second, the 20 ms window by a few centimetres per second.
 TEST(ConstantVelocityModel, WindowAveragesPoseNoiseOut) {
-  Vector6d twist;
-  twist << 0.3, -0.1, 0.2, 0.4, -0.2, 0.1;
-  const Rigid3d start(ExpSO3(Eigen::Vector3d(0.2, 0.1, -0.3)), Eigen::Vector3d(1, 2, 3));
-  const int64_t period_ns = 3'333'333;
+  const Vector6d& twist = NoisyTwist();
+  const Rigid3d& start = NoisyStart();
+  const int64_t period_ns = kNoisyPeriodNs;
   ConstantVelocityModel two_poses(0);
   ConstantVelocityModel windowed(20'000'000);
   two_poses.Reset(start, 0);
@@ -42,37 +65,29 @@ TEST(ConstantVelocityModel, WindowAveragesPoseNoiseOut) {
   double worst_windowed = 0;
   for (int step = 1; step <= 60; ++step) {
     const int64_t t_ns = step * period_ns;
-    // Alternating +-1 mm along x: the worst case for a two-pose difference.
-    const Eigen::Vector3d noise((step % 2 == 0 ? 1.0 : -1.0) * 1e-3, 0, 0);
-    Rigid3d pose = start * ExpSE3(twist * (static_cast<double>(t_ns) * 1e-9));
-    pose.translation += noise;
+    const Rigid3d pose = NoisyPose(step);
     two_poses.Update(pose, t_ns);
     windowed.Update(pose, t_ns);
     if (step >= 7) {
       EXPECT_GE(windowed.velocity_span_ns(), 20'000'000);
       EXPECT_LT(windowed.velocity_span_ns(), 20'000'000 + period_ns);
-      worst_two_poses =
-          std::max(worst_two_poses, (two_poses.velocity().head<3>() - twist.head<3>()).norm());
-      worst_windowed =
-          std::max(worst_windowed, (windowed.velocity().head<3>() - twist.head<3>()).norm());
+      worst_two_poses = std::max(worst_two_poses, SpeedError(two_poses.velocity()));
+      worst_windowed = std::max(worst_windowed, SpeedError(windowed.velocity()));
     }
   }
   EXPECT_GT(worst_two_poses, 0.5);  // 2 mm / 3.3 ms = 0.6 m/s.
   EXPECT_LT(worst_windowed, 0.12);  // 2 mm / 20 ms = 0.1 m/s.
   // A constant twist without noise is still exact over the window.
   windowed.Reset(start, 0);
-  for (int step = 1; step <= 10; ++step) {
-    windowed.Update(start * ExpSE3(twist * (step * 0.005)), step * 5'000'000);
-  }
+  for (int step = 1; step <= 10; ++step) windowed.Update(ExactPose(step), step * 5'000'000);
   EXPECT_LT((windowed.velocity() - twist).norm(), 1e-9);
 }
 
 // The smooth window keeps the short velocity bit for bit and averages noise out further.
 TEST(ConstantVelocityModel, SmoothVelocityUsesTheLongerWindow) {
-  Vector6d twist;
-  twist << 0.3, -0.1, 0.2, 0.4, -0.2, 0.1;
-  const Rigid3d start(ExpSO3(Eigen::Vector3d(0.2, 0.1, -0.3)), Eigen::Vector3d(1, 2, 3));
-  const int64_t period_ns = 3'333'333;
+  const Vector6d& twist = NoisyTwist();
+  const Rigid3d& start = NoisyStart();
+  const int64_t period_ns = kNoisyPeriodNs;
   ConstantVelocityModel short_only(20'000'000);
   ConstantVelocityModel both(20'000'000, 100'000'000);
   short_only.Reset(start, 0);
@@ -81,8 +96,7 @@ TEST(ConstantVelocityModel, SmoothVelocityUsesTheLongerWindow) {
   double worst_smooth = 0;
   for (int step = 1; step <= 90; ++step) {
     const int64_t t_ns = step * period_ns;
-    Rigid3d pose = start * ExpSE3(twist * (static_cast<double>(t_ns) * 1e-9));
-    pose.translation.x() += (step % 2 == 0 ? 1.0 : -1.0) * 1e-3;
+    const Rigid3d pose = NoisyPose(step);
     short_only.Update(pose, t_ns);
     both.Update(pose, t_ns);
     EXPECT_EQ(both.velocity(), short_only.velocity()) << step;
@@ -91,18 +105,15 @@ TEST(ConstantVelocityModel, SmoothVelocityUsesTheLongerWindow) {
       EXPECT_EQ(both.smooth_velocity(), both.velocity()) << step;
     }
     if (step >= 31) {
-      worst_short = std::max(worst_short, (both.velocity().head<3>() - twist.head<3>()).norm());
-      worst_smooth =
-          std::max(worst_smooth, (both.smooth_velocity().head<3>() - twist.head<3>()).norm());
+      worst_short = std::max(worst_short, SpeedError(both.velocity()));
+      worst_smooth = std::max(worst_smooth, SpeedError(both.smooth_velocity()));
     }
   }
   EXPECT_GT(worst_short, 0.08);    // 2 mm / 20 ms = 0.1 m/s.
   EXPECT_LT(worst_smooth, 0.025);  // 2 mm / 100 ms = 0.02 m/s.
   // Without noise both are exact.
   both.Reset(start, 0);
-  for (int step = 1; step <= 40; ++step) {
-    both.Update(start * ExpSE3(twist * (step * 0.005)), step * 5'000'000);
-  }
+  for (int step = 1; step <= 40; ++step) both.Update(ExactPose(step), step * 5'000'000);
   EXPECT_LT((both.smooth_velocity() - twist).norm(), 1e-9);
 }
 
