@@ -5,6 +5,7 @@
 #include <cmath>
 #include <iomanip>
 #include <sstream>
+#include <tuple>
 
 #include "core/common/error.h"
 #include "maps/crc32c.h"
@@ -310,6 +311,17 @@ uint32_t ComputeMapContentChecksum(const Map& map) {
   return hasher.crc();
 }
 
+std::pair<Eigen::Vector3f, Eigen::Vector3f> BoundingBox(
+    const std::vector<Eigen::Vector3f>& positions) {
+  if (positions.empty()) return {Eigen::Vector3f::Zero(), Eigen::Vector3f::Zero()};
+  std::pair<Eigen::Vector3f, Eigen::Vector3f> box{positions.front(), positions.front()};
+  for (const Eigen::Vector3f& position : positions) {
+    box.first = box.first.cwiseMin(position);
+    box.second = box.second.cwiseMax(position);
+  }
+  return box;
+}
+
 MapInfo SummarizeMap(const Map& map) {
   MapInfo info;
   info.num_points = map.size();
@@ -318,14 +330,7 @@ MapInfo SummarizeMap(const Map& map) {
   for (const Keyframe& keyframe : map.keyframes) {
     info.num_visibility_entries += keyframe.visible_points.size();
   }
-  if (!map.positions.empty()) {
-    info.bounding_box_min = map.positions.front();
-    info.bounding_box_max = map.positions.front();
-    for (const Eigen::Vector3f& position : map.positions) {
-      info.bounding_box_min = info.bounding_box_min.cwiseMin(position);
-      info.bounding_box_max = info.bounding_box_max.cwiseMax(position);
-    }
-  }
+  std::tie(info.bounding_box_min, info.bounding_box_max) = BoundingBox(map.positions);
   std::vector<float> known_sigmas;
   for (const float sigma : map.inverse_depth_sigma) {
     if (sigma > 0.0f) known_sigmas.push_back(sigma);

@@ -10,6 +10,7 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include "core/camera/camera.h"
@@ -239,6 +240,10 @@ struct MapInfo {
 
 // Summarises a map.
 MapInfo SummarizeMap(const Map& map);
+
+// Axis-aligned bounding box of `positions` as {min, max}; both zero when there are none.
+std::pair<Eigen::Vector3f, Eigen::Vector3f> BoundingBox(
+    const std::vector<Eigen::Vector3f>& positions);
 
 // What ReadMapFileSummary reads of a .evmap file without loading its points.
 struct MapFileSummary {

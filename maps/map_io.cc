@@ -215,22 +215,14 @@ pb::MapFile ToProto(const Map& map) {
   return file;
 }
 
-// The summary field of `file` (its own summary field is ignored), as SaveMap writes it and LoadMap
-// expects it.
-pb::Summary SummaryOf(const pb::MapFile& file) {
+// The summary field of `map`, whose file (`file`, its own summary field ignored) is read or
+// written, as SaveMap writes it and LoadMap expects it.
+pb::Summary SummaryOf(const Map& map, const pb::MapFile& file) {
   pb::Summary summary;
-  const pb::Points& points = file.points();
-  summary.set_num_points(points.count());
-  summary.set_num_keyframes(static_cast<uint64_t>(file.keyframes_size()));
-  if (points.positions_size() >= 3) {
-    Eigen::Vector3f low(points.positions(0), points.positions(1), points.positions(2));
-    Eigen::Vector3f high = low;
-    for (int i = 3; i + 2 < points.positions_size(); i += 3) {
-      const Eigen::Vector3f position(points.positions(i), points.positions(i + 1),
-                                     points.positions(i + 2));
-      low = low.cwiseMin(position);
-      high = high.cwiseMax(position);
-    }
+  summary.set_num_points(map.size());
+  summary.set_num_keyframes(map.keyframes.size());
+  if (!map.positions.empty()) {
+    const auto [low, high] = BoundingBox(map.positions);
     for (const float value : {low.x(), low.y(), low.z(), high.x(), high.y(), high.z()}) {
       summary.add_bounding_box(value);
     }
@@ -467,7 +459,7 @@ Map ParsePayload(MapFileHeader header, std::string_view payload, const std::stri
     const auto invalid = [&source](const std::string& what) {
       return ParseError::AtByte(source, kMapFileHeaderSize, "invalid evloc map payload: " + what);
     };
-    const std::string expected = SummaryOf(file).SerializeAsString();
+    const std::string expected = SummaryOf(map, file).SerializeAsString();
     const auto disagrees = [&](const pb::Summary& stored) {
       return stored.SerializeAsString() != expected;
     };
@@ -495,7 +487,7 @@ void SaveMap(const std::filesystem::path& path, const Map& map) {
   // The summary first, then the map: a summary reader stops after the first field.
   const pb::MapFile file = ToProto(map);
   pb::MapFile summary_only;
-  *summary_only.mutable_summary() = SummaryOf(file);
+  *summary_only.mutable_summary() = SummaryOf(map, file);
   std::string payload = summary_only.SerializeAsString();
   if (!file.AppendToString(&payload)) {
     throw InvalidArgumentError("cannot serialise map for '" + path.string() +
