@@ -6,6 +6,7 @@
 
 #include "core/common/error.h"
 #include "localizer/wire/packed_events.h"
+#include "localizer/wire/twist.h"
 #include "proto/convert/proto_convert.h"
 
 namespace evloc::service {
@@ -177,6 +178,15 @@ SessionSettings SessionSettingsFromProto(const api::SessionStart& start,
   if (start.has_initial_world_from_cam()) {
     settings.initial_world_from_cam =
         RigidFromProto(start.initial_world_from_cam(), "SessionStart.initial_world_from_cam");
+  }
+  if (start.has_initial_velocity()) {
+    if (!settings.initial_world_from_cam) {
+      throw InvalidArgumentError(
+          "SessionStart.initial_velocity needs SessionStart.initial_world_from_cam: a session "
+          "without a pose starts by relocalizing, at rest");
+    }
+    settings.initial_velocity =
+        wire::TwistFromProto(start.initial_velocity(), "SessionStart.initial_velocity");
   }
   CheckSessionTime(start.initial_t_ns(), "SessionStart.initial_t_ns");
   CheckSessionTime(start.sensor_time_offset_ns(), "SessionStart.sensor_time_offset_ns");
@@ -459,7 +469,12 @@ void SessionTracker::StartTracker() {
     started_ = true;
     return;
   }
-  tracker_.Reset(*settings_.initial_world_from_cam, settings_.initial_t_ns);
+  if (settings_.initial_velocity) {
+    tracker_.Reset(*settings_.initial_world_from_cam, settings_.initial_t_ns,
+                   *settings_.initial_velocity);
+  } else {
+    tracker_.Reset(*settings_.initial_world_from_cam, settings_.initial_t_ns);
+  }
   started_ = true;
 }
 

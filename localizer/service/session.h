@@ -53,6 +53,8 @@ struct SessionSettings {
   std::optional<Rigid3d> initial_world_from_cam;
   // Session time of the initial pose, ns.
   int64_t initial_t_ns = 0;
+  // Velocity at the initial pose (body-frame twist per second); nullopt: at rest.
+  std::optional<Vector6d> initial_velocity;
   // Tracker options (server defaults with the client's overrides).
   tracking::TrackerOptions tracker;
   // Session time = sensor time + this, for raw Prophesee packets, ns.

@@ -14,6 +14,7 @@
 #include "localizer/service/testing/service_fixture.h"
 #include "localizer/tracking/testing/synthetic_scene.h"
 #include "localizer/wire/packed_events.h"
+#include "localizer/wire/twist.h"
 #include "proto/convert/proto_convert.h"
 
 namespace evloc::service {
@@ -311,6 +312,22 @@ TEST(SessionSettings, RejectsInvalidCamerasAndOptions) {
   EXPECT_THROW(SessionSettingsFromProto(bad, defaults), InvalidArgumentError);
   bad = start;
   bad.set_initial_t_ns(int64_t{1} << 62 | 1);
+  EXPECT_THROW(SessionSettingsFromProto(bad, defaults), InvalidArgumentError);
+  // An initial velocity (a resumed session): both parts, finite, bounded, and only with a pose.
+  api::SessionStart moving = start;
+  Vector6d twist;
+  twist << 0.5, 0, -0.25, 0, 0.1, 0;
+  *moving.mutable_initial_velocity() = wire::TwistToProto(twist);
+  EXPECT_EQ(SessionSettingsFromProto(moving, defaults).initial_velocity, twist);
+  EXPECT_FALSE(SessionSettingsFromProto(start, defaults).initial_velocity.has_value());
+  bad = moving;
+  bad.clear_initial_world_from_cam();
+  EXPECT_THROW(SessionSettingsFromProto(bad, defaults), InvalidArgumentError);
+  bad = moving;
+  bad.mutable_initial_velocity()->clear_linear();
+  EXPECT_THROW(SessionSettingsFromProto(bad, defaults), InvalidArgumentError);
+  bad = moving;
+  bad.mutable_initial_velocity()->mutable_angular()->set_x(1e3);
   EXPECT_THROW(SessionSettingsFromProto(bad, defaults), InvalidArgumentError);
   // A camera larger than the server allows (a session's memory grows with its pixels).
   defaults.max_camera_pixels = 320 * 240 - 1;

@@ -1,5 +1,6 @@
 #include "localizer/tracking/motion_model.h"
 
+#include <algorithm>
 #include <tuple>
 
 #include "core/common/error.h"
@@ -15,6 +16,22 @@ void ConstantVelocityModel::Reset(const Rigid3d& world_from_cam, int64_t t_ns) {
   smooth_velocity_span_ns_ = 0;
   history_.clear();
   history_.emplace_back(t_ns, world_from_cam);
+}
+
+void ConstantVelocityModel::Reset(const Rigid3d& world_from_cam, int64_t t_ns,
+                                  const Vector6d& velocity) {
+  if (!velocity.allFinite()) {
+    throw InvalidArgumentError("ConstantVelocityModel::Reset: the velocity is not finite.");
+  }
+  Reset(world_from_cam, t_ns);
+  constexpr int64_t kShortestSeedNs = 1'000'000;
+  const int64_t span_ns = std::max(smooth_window_ns_, kShortestSeedNs);
+  history_.emplace_front(
+      t_ns - span_ns, world_from_cam * ExpSE3(-velocity * (static_cast<double>(span_ns) * 1e-9)));
+  velocity_ = velocity;
+  velocity_span_ns_ = span_ns;
+  smooth_velocity_ = velocity;
+  smooth_velocity_span_ns_ = span_ns;
 }
 
 void ConstantVelocityModel::Update(const Rigid3d& world_from_cam, int64_t t_ns) {

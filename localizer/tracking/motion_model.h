@@ -25,6 +25,12 @@ class ConstantVelocityModel {
 
   // Forgets the history and sets the pose at t_ns; the velocity becomes zero.
   void Reset(const Rigid3d& world_from_cam, int64_t t_ns);
+  // Forgets the history and sets the pose at t_ns moving with `velocity` (a body-frame twist per
+  // second, as velocity()), e.g. a session resumed elsewhere with the velocity its client
+  // measured: the history starts with the pose one smooth window (at least 1 ms) earlier on that
+  // motion, so both velocities equal `velocity` over a full window at once and the newer
+  // estimates replace it as they arrive. Throws InvalidArgumentError for a non-finite velocity.
+  void Reset(const Rigid3d& world_from_cam, int64_t t_ns, const Vector6d& velocity);
   // Adds the estimate at t_ns (after the last one) and updates the velocity. Throws
   // InvalidArgumentError when t_ns is not after the last time or no pose was set.
   void Update(const Rigid3d& world_from_cam, int64_t t_ns);

@@ -1,5 +1,7 @@
 #include "localizer/tracking/motion_model.h"
 
+#include <limits>
+
 #include <gtest/gtest.h>
 
 #include "core/common/error.h"
@@ -115,6 +117,42 @@ TEST(ConstantVelocityModel, SmoothVelocityUsesTheLongerWindow) {
   both.Reset(start, 0);
   for (int step = 1; step <= 40; ++step) both.Update(ExactPose(step), step * 5'000'000);
   EXPECT_LT((both.smooth_velocity() - twist).norm(), 1e-9);
+}
+
+// A Reset with a velocity (a resumed session) predicts, and spans both windows, at once; the
+// estimates that follow replace the seed: after a smooth window of exact poses of another motion
+// both velocities are that motion's.
+TEST(ConstantVelocityModel, ResetWithAVelocityMovesOnAtOnceAndForgetsTheSeed) {
+  const Vector6d& twist = NoisyTwist();
+  ConstantVelocityModel model(20'000'000, 100'000'000);
+  model.Reset(ExactPose(0), 0, twist);
+  EXPECT_EQ(model.velocity(), twist);
+  EXPECT_EQ(model.smooth_velocity(), twist);
+  EXPECT_GE(model.velocity_span_ns(), 20'000'000);
+  EXPECT_GE(model.smooth_velocity_span_ns(), model.smooth_window_ns());
+  const Rigid3d predicted = model.Predict(5'000'000);
+  EXPECT_LT((predicted.translation - ExactPose(1).translation).norm(), 1e-12);
+  EXPECT_LT(AngleBetween(predicted.rotation, ExactPose(1).rotation), 1e-12);
+  // The first update on the same motion keeps the velocity.
+  model.Update(ExactPose(1), 5'000'000);
+  EXPECT_LT((model.velocity() - twist).norm(), 1e-9);
+  EXPECT_LT((model.smooth_velocity() - twist).norm(), 1e-9);
+
+  // Seeded with the wrong velocity (zero) on a moving camera: the seed is gone once the windows
+  // hold estimates only.
+  model.Reset(ExactPose(0), 0, Vector6d::Zero());
+  for (int step = 1; step <= 21; ++step) model.Update(ExactPose(step), step * 5'000'000);
+  EXPECT_LT((model.smooth_velocity() - twist).norm(), 1e-9);
+  EXPECT_LT((model.velocity() - twist).norm(), 1e-9);
+
+  // Without a smooth window the seed spans 1 ms.
+  ConstantVelocityModel two_poses;
+  two_poses.Reset(ExactPose(0), 0, twist);
+  EXPECT_EQ(two_poses.velocity_span_ns(), 1'000'000);
+  EXPECT_EQ(two_poses.velocity(), twist);
+  Vector6d bad = twist;
+  bad[2] = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_THROW(two_poses.Reset(ExactPose(0), 0, bad), InvalidArgumentError);
 }
 
 TEST(ConstantVelocityModel, RejectsUpdatesThatDoNotMoveForwardInTime) {

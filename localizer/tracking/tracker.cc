@@ -71,6 +71,18 @@ void Tracker::Reset(const Rigid3d& world_from_cam, int64_t t_ns) {
     throw InvalidArgumentError("Tracker::Reset: the pose is not finite.");
   }
   motion_.Reset(world_from_cam, t_ns);
+  StartTrackingAt(world_from_cam, t_ns);
+}
+
+void Tracker::Reset(const Rigid3d& world_from_cam, int64_t t_ns, const Vector6d& velocity) {
+  if (!world_from_cam.IsFinite()) {
+    throw InvalidArgumentError("Tracker::Reset: the pose is not finite.");
+  }
+  motion_.Reset(world_from_cam, t_ns, velocity);
+  StartTrackingAt(world_from_cam, t_ns);
+}
+
+void Tracker::StartTrackingAt(const Rigid3d& world_from_cam, int64_t t_ns) {
   last_good_world_from_cam_ = world_from_cam;
   last_good_reported_world_from_cam_ = world_from_cam;
   status_ = TrackingStatus::kTracking;

@@ -160,6 +160,12 @@ class Tracker {
   // Sets the pose at t_ns (initialisation or an external pose hint): status kTracking, zero
   // velocity, the next fixed-rate step at t_ns + 1 / step_rate_hz.
   void Reset(const Rigid3d& world_from_cam, int64_t t_ns);
+  // The same, moving with `velocity` (body-frame twist per second: world_from_cam(t + dt) =
+  // world_from_cam(t) * ExpSE3(velocity * dt)), e.g. a session resumed on another server with the
+  // velocity of its last poses: the first steps then predict, set their decay time, predict
+  // polarities and stamp their poses as the uninterrupted session would (ConstantVelocityModel).
+  // Throws InvalidArgumentError for a non-finite pose or velocity.
+  void Reset(const Rigid3d& world_from_cam, int64_t t_ns, const Vector6d& velocity);
 
   // Starts without a pose at t_ns: status kInitializing, the first fixed-rate step at t_ns; the
   // steps search the map (docs/relocalization.md, "Events") until a hypothesis is verified.
@@ -213,6 +219,9 @@ class Tracker {
   int64_t velocity_span_ns() const { return motion_.velocity_span_ns(); }
 
  private:
+  // The state after a Reset (the motion model already set): TRACKING at the pose, the next step
+  // one period after t_ns.
+  void StartTrackingAt(const Rigid3d& world_from_cam, int64_t t_ns);
   // The outcome of one solve from one starting pose.
   struct Attempt {
     RegistrationResult registration;

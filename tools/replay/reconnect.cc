@@ -247,4 +247,23 @@ std::optional<Clock::duration> ServerRetryDelay(const std::string& pushback_ms,
   return std::nullopt;
 }
 
+std::optional<Vector6d> ResumeVelocity(const std::vector<TimedPose>& poses,
+                                       const std::vector<bool>& tracking, int64_t window_ns) {
+  if (poses.size() != tracking.size()) {
+    throw InvalidArgumentError("ResumeVelocity: one TRACKING flag per pose is needed");
+  }
+  const size_t newest = poses.size();
+  if (newest < 2 || !tracking[newest - 1] || !tracking[newest - 2]) return std::nullopt;
+  // Walk back over the run while the span is shorter than the window.
+  size_t oldest = newest - 2;
+  const int64_t newest_t_ns = poses[newest - 1].t_ns;
+  while (oldest > 0 && tracking[oldest - 1] && newest_t_ns - poses[oldest].t_ns < window_ns) {
+    --oldest;
+  }
+  const int64_t span_ns = newest_t_ns - poses[oldest].t_ns;
+  if (span_ns <= 0) return std::nullopt;
+  return LogSE3(poses[oldest].world_from_cam.Inverse() * poses[newest - 1].world_from_cam) /
+         (static_cast<double>(span_ns) * 1e-9);
+}
+
 }  // namespace evloc::replay

@@ -9,6 +9,9 @@
 #include <optional>
 #include <random>
 #include <string>
+#include <vector>
+
+#include "core/trajectory/trajectory.h"
 
 namespace evloc::replay {
 
@@ -96,5 +99,13 @@ class ReconnectBackoff {
 // says); nullopt when neither holds a delay.
 std::optional<std::chrono::steady_clock::duration> ServerRetryDelay(
     const std::string& pushback_ms, const std::string& status_details);
+
+// The velocity a resumed session starts with (SessionStart.initial_velocity): the body-frame
+// twist per second, as the tracker's constant-velocity model measures it, from the oldest pose of
+// the trailing run of TRACKING poses that is at least `window_ns` older than the newest (the
+// oldest of the run when none is) to the newest. `tracking[i]`: whether poses[i] was TRACKING.
+// nullopt when the last two poses are not both TRACKING (the session then resumes at rest).
+std::optional<Vector6d> ResumeVelocity(const std::vector<TimedPose>& poses,
+                                       const std::vector<bool>& tracking, int64_t window_ns);
 
 }  // namespace evloc::replay

@@ -40,6 +40,39 @@ ReconnectOptions TestOptions() {
   return options;
 }
 
+// The velocity a resumed session starts with: over the trailing TRACKING poses within the window,
+// as the tracker measures it; none when the last two poses are not both TRACKING.
+TEST(ResumeVelocity, IsTheTwistOfTheLastTrackingPosesWithinTheWindow) {
+  Vector6d twist;
+  twist << 0.4, -0.2, 0.1, 0.3, 0.2, -0.5;
+  const Rigid3d start(ExpSO3(Eigen::Vector3d(0.1, -0.2, 0.3)), Eigen::Vector3d(1, 0, 2));
+  std::vector<TimedPose> poses;
+  std::vector<bool> tracking;
+  for (int i = 0; i < 60; ++i) {
+    const int64_t t_ns = int64_t{i} * 5'000'000;
+    // A different motion before the window: it must not enter the measure.
+    const Vector6d motion = i < 20 ? Vector6d(-twist) : twist;
+    const Rigid3d pose = i == 0 ? start : poses.back().world_from_cam * ExpSE3(motion * 0.005);
+    poses.push_back({t_ns, pose});
+    tracking.push_back(true);
+  }
+  const std::optional<Vector6d> velocity = ResumeVelocity(poses, tracking, 100'000'000);
+  ASSERT_TRUE(velocity.has_value());
+  EXPECT_LT((*velocity - twist).norm(), 1e-9);
+  // A LOST pose inside the window shortens the run to the poses after it.
+  tracking[55] = false;
+  ASSERT_TRUE(ResumeVelocity(poses, tracking, 100'000'000).has_value());
+  EXPECT_LT((*ResumeVelocity(poses, tracking, 100'000'000) - twist).norm(), 1e-9);
+  // Ending on a LOST pose, or on one TRACKING pose after a LOST one: at rest.
+  tracking[58] = false;
+  EXPECT_FALSE(ResumeVelocity(poses, tracking, 100'000'000).has_value());
+  tracking[58] = true;
+  tracking[59] = false;
+  EXPECT_FALSE(ResumeVelocity(poses, tracking, 100'000'000).has_value());
+  EXPECT_FALSE(ResumeVelocity({}, {}, 100'000'000).has_value());
+  EXPECT_THROW(ResumeVelocity(poses, {}, 100'000'000), InvalidArgumentError);
+}
+
 TEST(ReconnectBackoff, DelaysAreFullJitterUnderTheCappedExponential) {
   // Attempt k waits within [0, min(cap, base * 2^(k-1))], and the same seed gives the same
   // delays (fake clock: each attempt fails when its delay has passed).

@@ -27,6 +27,7 @@
 #include "evloc/localizer.grpc.pb.h"
 #include "localizer/wire/packed_events.h"
 #include "localizer/wire/percentile.h"
+#include "localizer/wire/twist.h"
 #include "proto/convert/proto_convert.h"
 #include "tools/replay/reconnect.h"
 
@@ -36,6 +37,7 @@ namespace {
 using Clock = std::chrono::steady_clock;
 
 using wire::Percentile;
+using wire::TwistToProto;
 
 // Floor division for possibly negative numerators.
 int64_t FloorDiv(int64_t numerator, int64_t denominator) {
@@ -401,6 +403,15 @@ grpc::Status Replayer::RunSession(const TimedPose& start, bool resumed, SessionO
   if (!options_.start_without_pose || resumed) {
     *session_start->mutable_initial_world_from_cam() = RigidToProto(start.world_from_cam);
   }
+  if (resumed && options_.resume_velocity_ms > 0) {
+    std::optional<Vector6d> velocity;
+    {
+      std::lock_guard<std::mutex> lock(shared_.mutex);
+      velocity = ResumeVelocity(shared_.poses, shared_.tracking,
+                                std::llround(options_.resume_velocity_ms * 1e6));
+    }
+    if (velocity) *session_start->mutable_initial_velocity() = TwistToProto(*velocity);
+  }
   session_start->set_initial_t_ns(start.t_ns);
   if (options_.step_rate_hz) {
     session_start->mutable_options()->set_step_rate_hz(*options_.step_rate_hz);
@@ -752,6 +763,9 @@ void ReplayOptions::Check() const {
   if (!(resume_prime_ms >= 0 && resume_prime_ms <= 1000)) {
     throw InvalidArgumentError("--resume-prime-ms must be in 0..1000");
   }
+  if (!(resume_velocity_ms >= 0 && resume_velocity_ms <= 1000)) {
+    throw InvalidArgumentError("--resume-velocity-ms must be in 0..1000");
+  }
 }
 
 ReplayResult RunReplay(const ReplayOptions& options, std::ostream& log) {
@@ -930,6 +944,9 @@ Options:
   --reconnect-seed N     seed of the jitter (default random)
   --resume-prime-ms MS   events before the resume pose sent again to prime the new session
                          (default 100)
+  --resume-velocity-ms MS
+                         a resumed session starts with the velocity of the last TRACKING poses
+                         within MS (default 100; 0: at rest)
   --lb pick_first|round_robin
                          gRPC load balancing over the addresses of --server (default pick_first)
   --report FILE          write the figures as JSON (events, poses, outages, latency)
@@ -1021,6 +1038,8 @@ ReplayCommand ParseReplayCommandLine(const std::vector<std::string>& arguments) 
       options.reconnect_seed = ParseUnsignedFlag(flag, value);
     } else if (flag == "--resume-prime-ms") {
       options.resume_prime_ms = ParseDoubleFlag(flag, value);
+    } else if (flag == "--resume-velocity-ms") {
+      options.resume_velocity_ms = ParseDoubleFlag(flag, value);
     } else if (flag == "--lb") {
       options.lb_policy = value;
     } else if (flag == "--report") {

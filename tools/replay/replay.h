@@ -104,6 +104,9 @@ struct ReplayOptions {
   // Session time of events before the resume pose that a new session is sent again to prime
   // its time surfaces, ms (--resume-prime-ms).
   double resume_prime_ms = 100.0;
+  // Window of the velocity a resumed session starts with, ms: the twist over the last TRACKING
+  // poses received within it (ResumeVelocity); 0: resume at rest (--resume-velocity-ms).
+  double resume_velocity_ms = 100.0;
   // gRPC load-balancing policy over the addresses of --server: "pick_first" or "round_robin";
   // empty: gRPC's default (pick_first) (--lb).
   std::string lb_policy;

@@ -377,9 +377,10 @@ TEST_F(ReplayTest, ReconnectsToAnotherServerAndResumesFromTheLastPose) {
 
   // The trajectory continues across the failure: one pose per step at the same step times as
   // without the failure, identical up to the resume pose. After it the new session starts with
-  // fresh time surfaces and zero velocity, so the poses differ slightly: they must stay as close
-  // to the ground truth as the uninterrupted ones (this scene's tracking error is 1-16 mm), and
-  // within 1 cm of them (resuming from a wrong pose, e.g. the initial one, is off by ~7 cm).
+  // fresh time surfaces (primed by the last 100 ms of events) and the velocity of the last poses,
+  // so the poses differ slightly: they must stay as close to the ground truth as the
+  // uninterrupted ones (this scene's tracking error is 1-16 mm), and within 5 mm of them
+  // (2.4 mm measured; resumed at rest 5.5 mm, from a wrong pose, e.g. the initial one, ~7 cm).
   const Trajectory& served = result.trajectory;
   ASSERT_EQ(served.size(), reference.size()) << log.str();
   const Trajectory ground_truth = *ReadDataset(dataset_).ground_truth;
@@ -410,8 +411,8 @@ TEST_F(ReplayTest, ReconnectsToAnotherServerAndResumesFromTheLastPose) {
   const double after = static_cast<double>(served.size() - resume_index - 1);
   const double served_rms_m = std::sqrt(served_sq / after);
   const double reference_rms_m = std::sqrt(reference_sq / after);
-  EXPECT_LT(worst_m, 0.010) << "worst translation difference to the uninterrupted poses, m";
-  EXPECT_LT(worst_rad, 0.5 * M_PI / 180) << "worst rotation difference, rad";
+  EXPECT_LT(worst_m, 0.005) << "worst translation difference to the uninterrupted poses, m";
+  EXPECT_LT(worst_rad, 0.25 * M_PI / 180) << "worst rotation difference, rad";
   EXPECT_LT(served_rms_m, 1.5 * reference_rms_m + 0.001)
       << "translation RMS error after the resume, m (uninterrupted: " << reference_rms_m << ")";
   const std::string report = ReadFileToString(folder_.path() / "report.json");

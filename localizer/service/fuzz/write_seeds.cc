@@ -15,6 +15,7 @@
 #include "localizer/service/testing/service_fixture.h"
 #include "localizer/tracking/testing/synthetic_scene.h"
 #include "localizer/wire/packed_events.h"
+#include "localizer/wire/twist.h"
 #include "proto/convert/proto_convert.h"
 
 namespace evloc::service::fuzz {
@@ -103,8 +104,9 @@ Camera SmallCamera() { return Camera::Pinhole(80, 60, 62.5, 62.5, 39.5, 29.5); }
 // EventPackets (coordinates scaled to the small camera; from 0.1 ms before the initial time, so
 // that the first one primes the surfaces); with `pose_hint` a PoseHint and an empty packet in the
 // middle; with `filters` every noise filter on, the hot-pixel learning period (1 ms) ending within
-// the seed's windows.
-std::string RequestsSeed(api::EventEncoding encoding, bool pose_hint, bool filters = false) {
+// the seed's windows; with `velocity` an initial velocity (a resumed session).
+std::string RequestsSeed(api::EventEncoding encoding, bool pose_hint, bool filters = false,
+                         bool velocity = false) {
   const int64_t start_ns = testing::kInitialTimeNs - kWindowNs;
   std::string seed;
   api::TrackRequest start = testing::TestSessionStart();
@@ -121,6 +123,10 @@ std::string RequestsSeed(api::EventEncoding encoding, bool pose_hint, bool filte
     filter->set_refractory_period_s(0.0002);
     filter->set_background_activity_window_s(0.0005);
     filter->set_background_activity_include_self(true);
+  }
+  if (velocity) {
+    *start.mutable_start()->mutable_initial_velocity() =
+        wire::TwistToProto((Vector6d() << 0.2, -0.1, 0.05, 0.3, 0.1, -0.2).finished());
   }
   AppendRecord(start.SerializeAsString(), &seed);
   std::vector<EventBuffer> windows = Windows(start_ns);
@@ -199,6 +205,9 @@ int Main(int argc, char** argv) {
   WriteFile(out / "requests" / "evt3", RequestsSeed(api::EVENT_ENCODING_EVT3, false));
   WriteFile(out / "requests" / "packed_filters",
             RequestsSeed(api::EVENT_ENCODING_PACKED, true, /*filters=*/true));
+  WriteFile(out / "requests" / "packed_velocity",
+            RequestsSeed(api::EVENT_ENCODING_PACKED, false, /*filters=*/false,
+                         /*velocity=*/true));
   WriteFile(out / "requests" / "frames", FrameSeed());
   fs::create_directories(out / "locate");
   const std::vector<api::LocateRequest> locate = LocateSeedRequests();
