@@ -204,6 +204,8 @@ Options:
   --search-margin A      alignment margin over the best distinct hypothesis (default 0.15)
   --give-up S            a search episode that found nothing in S seconds ends "not_found" and a
                          new one starts (default 0: never)
+  --search-cpu-share F   the search may use F cores per second of event time (default 0:
+                         unbounded and reproducible; the server's default is 0.5)
   --mode events|frames|vo|devo
                          events (Canny-EVT, default), frames (Canny-VT on images.txt), or the
                          mapless odometry without --map: vo (Canny-VO on images and depth) or
@@ -293,6 +295,8 @@ TrackCommandOptions ParseTrackCommandLine(const std::vector<std::string>& argume
       tracker.lost_steps_before_relocalization = static_cast<int>(ParseIntegerFlag(flag, value));
     } else if (flag == "--give-up") {
       tracker.relocalization_give_up_s = ParseDoubleFlag(flag, value);
+    } else if (flag == "--search-cpu-share") {
+      tracker.relocalization_cpu_share = ParseDoubleFlag(flag, value);
     } else if (flag == "--search-active-fraction") {
       tracker.relocalization_active_fraction = ParseDoubleFlag(flag, value);
     } else if (flag == "--search-grid") {

@@ -133,8 +133,15 @@ struct LocalizerServerOptions {
   // cancelled, seconds. Keep it below the pod's terminationGracePeriodSeconds (20) minus its
   // preStop sleep (5) (--drain-timeout).
   double drain_timeout_s = 10.0;
-  // Default tracker options of every session (SessionStart.options override them).
-  tracking::TrackerOptions tracker;
+  // Default tracker options of every session (SessionStart.options override them). A searching
+  // session's search may use half a core per second of session time (--search-cpu-share): a
+  // live session whose search is slower than real time keeps up with its events instead of
+  // overflowing its queue, and leaves the rest of its worker to the other sessions.
+  tracking::TrackerOptions tracker = [] {
+    tracking::TrackerOptions options;
+    options.relocalization_cpu_share = 0.5;
+    return options;
+  }();
 
   // Throws InvalidArgumentError naming the first invalid field.
   void Check() const;

@@ -73,6 +73,8 @@ Options:
   --tau SECONDS              default time-surface decay time (default 0.03)
   --decay-trail PX           default adaptive decay trail, pixels (default 1; 0: a fixed decay time;
                              docs/tracking.md)
+  --search-cpu-share F       CPU a searching session's search may use, cores per second of
+                             session time (default 0.5; 0: unbounded; docs/relocalization.md)
   default noise filters (docs/tracking.md, "Noise filters"; a session's
   TrackingOptions.event_filter overrides them):
 )" + std::string(tracking::kEventFilterFlagsUsage) +
@@ -184,6 +186,8 @@ ServeCommand ParseServeCommandLine(const std::vector<std::string>& arguments) {
       server.tracker.decay_time_s = ParseDoubleFlag(flag, value);
     } else if (flag == "--decay-trail") {
       server.tracker.decay_trail_px = ParseDoubleFlag(flag, value);
+    } else if (flag == "--search-cpu-share") {
+      server.tracker.relocalization_cpu_share = ParseDoubleFlag(flag, value);
     } else if (tracking::ApplyEventFilterFlag(flag, value, &server.tracker.event_filter)) {
     } else {
       throw InvalidArgumentError("unknown flag '" + flag + "' (see --help)");

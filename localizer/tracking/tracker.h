@@ -69,6 +69,9 @@ struct SearchProgress {
   // True when this step ended an episode that searched relocalization_give_up_s without a
   // verified pose (a new episode starts with the next step).
   bool gave_up = false;
+  // True when this step did no search work because the search had used its CPU share
+  // (TrackerOptions::relocalization_cpu_share).
+  bool deferred = false;
   // Alignment of the best refined hypothesis of the last judged round (0 before one).
   double best_alignment = 0;
   // Alignment of the best refined hypothesis distinct from it (0 when there was none).
@@ -275,6 +278,11 @@ class Tracker {
   void BeginSearch(TrackingStatus status, int64_t t_ns);
   // One searching step at t_ns (the surfaces are up to date): fills `estimate`.
   void SearchStep(int64_t t_ns, PoseEstimate* estimate);
+  // The work of a searching step outside verification: a round's start, pre-scores, alignments
+  // or refinements, within the per-step counts of the options.
+  void SearchWork(int64_t t_ns);
+  // The status and progress of a searching step, and the give-up of a long episode.
+  void FinishSearchStep(int64_t t_ns, PoseEstimate* estimate);
   // Sets the decay time of the search's steps from the events themselves: the one that leaves
   // relocalization_active_fraction of the pixels active at t_ns, within [min_decay_time_s,
   // decay_time_s] (the velocity that sets the tracking decay is unknown while searching).
@@ -355,6 +363,10 @@ class Tracker {
   SearchPhase search_phase_ = SearchPhase::kStart;
   SearchProgress search_progress_;
   int64_t search_start_t_ns_ = 0;
+  // The search's CPU budget (relocalization_cpu_share): CPU time it may still use, ns, as of the
+  // step at search_credit_t_ns_.
+  double search_credit_ns_ = 0;
+  int64_t search_credit_t_ns_ = 0;
   // The decay time of the search's steps, nanoseconds (0: not chosen yet).
   double search_decay_ns_ = 0;
   std::optional<Eigen::Vector3d> search_center_;

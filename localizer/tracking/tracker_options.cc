@@ -132,6 +132,11 @@ void TrackerOptions::Check() const {
           "relocalization_active_fraction must be in (0, 1].");
   Require(std::isfinite(relocalization_give_up_s) && relocalization_give_up_s >= 0,
           "relocalization_give_up_s must be finite and >= 0 (0 = never).");
+  Require(std::isfinite(relocalization_cpu_share) && relocalization_cpu_share >= 0 &&
+              relocalization_cpu_share <= 1,
+          "relocalization_cpu_share must be in [0, 1] (0 = unbounded).");
+  Require(Positive(relocalization_cpu_burst_s) && relocalization_cpu_burst_s <= 10,
+          "relocalization_cpu_burst_s must be in (0, 10].");
   Require(std::isfinite(relocalization_min_active_fraction) &&
               relocalization_min_active_fraction >= 0 && relocalization_min_active_fraction < 1,
           "relocalization_min_active_fraction must be in [0, 1).");

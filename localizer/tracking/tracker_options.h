@@ -259,6 +259,17 @@ struct TrackerOptions {
   // Fraction of the image's pixels that must be active before a round starts (fewer events mean
   // too little to search on).
   double relocalization_min_active_fraction = 0.01;
+  // Most CPU the search work of a searching tracker may use (the rounds: fields, pre-scores,
+  // alignments, refinements; not the ingestion of events nor the verification steps), as a
+  // fraction of one core per second of event time; 0: unbounded. A step over the budget does no
+  // search work (SearchProgress::deferred) and the round goes on from the newest events at a later
+  // step, so a live session whose search is slower than real time keeps up with its events
+  // instead of queuing them. The budget is measured in the thread's CPU time, so with a share set
+  // the steps that search depend on the machine (a run is no longer bit-reproducible).
+  double relocalization_cpu_share = 0.0;
+  // The most CPU time the budget saves up while the search is idle or cheap, seconds (a burst:
+  // a round's first step builds its fields).
+  double relocalization_cpu_burst_s = 0.05;
 
   // --- Frame-based twin (Canny-VT) ---
   // Lower hysteresis threshold of cv::Canny on 8-bit frames.

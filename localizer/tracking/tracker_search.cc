@@ -8,6 +8,8 @@
 #include <cmath>
 #include <numbers>
 
+#include <time.h>
+
 #include <opencv2/imgproc.hpp>
 
 #include "core/common/error.h"
@@ -18,6 +20,14 @@ namespace evloc::tracking {
 namespace {
 
 constexpr double kRadiansPerDegree = std::numbers::pi / 180.0;
+
+// CPU time of the calling thread, ns (the search's budget: a session's steps run on one thread
+// at a time, a step on one thread).
+int64_t ThreadCpuTimeNs() {
+  timespec now{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &now);
+  return int64_t{now.tv_sec} * 1'000'000'000 + now.tv_nsec;
+}
 
 }  // namespace
 
@@ -72,6 +82,8 @@ void Tracker::BeginSearch(TrackingStatus status, int64_t t_ns) {
   status_ = status;
   search_decay_ns_ = 0;
   search_start_t_ns_ = t_ns;
+  search_credit_ns_ = options_.relocalization_cpu_burst_s * 1e9;
+  search_credit_t_ns_ = t_ns;
   search_phase_ = SearchPhase::kStart;
   ++search_progress_.episode;
   search_progress_.round = 0;
@@ -427,6 +439,7 @@ void Tracker::SearchStep(int64_t t_ns, PoseEstimate* estimate) {
   progress.coarse = 0;
   progress.refined = 0;
   progress.gave_up = false;
+  progress.deferred = false;
   estimate->world_from_cam = last_good_reported_world_from_cam_;
   estimate->covariance = Matrix6d::Identity() * kUnconstrainedVariance;
   estimate->quality.decay_time_ms = decay_.decay_time_ns * 1e-6;
@@ -472,6 +485,30 @@ void Tracker::SearchStep(int64_t t_ns, PoseEstimate* estimate) {
     return;
   }
 
+  // The CPU share: the budget grows with event time (up to the burst); a step without credit
+  // does no search work.
+  const bool bounded = options_.relocalization_cpu_share > 0;
+  int64_t cpu_start_ns = 0;
+  if (bounded) {
+    search_credit_ns_ =
+        std::min(search_credit_ns_ + options_.relocalization_cpu_share *
+                                         static_cast<double>(t_ns - search_credit_t_ns_),
+                 options_.relocalization_cpu_burst_s * 1e9);
+    search_credit_t_ns_ = t_ns;
+    if (search_credit_ns_ <= 0) {
+      progress.deferred = true;
+      FinishSearchStep(t_ns, estimate);
+      return;
+    }
+    cpu_start_ns = ThreadCpuTimeNs();
+  }
+  SearchWork(t_ns);
+  if (bounded) search_credit_ns_ -= static_cast<double>(ThreadCpuTimeNs() - cpu_start_ns);
+  FinishSearchStep(t_ns, estimate);
+}
+
+void Tracker::SearchWork(int64_t t_ns) {
+  SearchProgress& progress = search_progress_;
   // A round needs one decay time of events since the first event, and enough active pixels.
   const bool surfaces_full =
       first_event_t_ns_ && t_ns - *first_event_t_ns_ >= options_.decay_time_s * 1e9;
@@ -548,8 +585,11 @@ void Tracker::SearchStep(int64_t t_ns, PoseEstimate* estimate) {
       }
     }
   }
+}
+
+void Tracker::FinishSearchStep(int64_t t_ns, PoseEstimate* estimate) {
   estimate->status = status_;
-  estimate->search = progress;
+  estimate->search = search_progress_;
   if (options_.relocalization_give_up_s > 0 &&
       t_ns - search_start_t_ns_ >= options_.relocalization_give_up_s * 1e9) {
     estimate->search.gave_up = true;

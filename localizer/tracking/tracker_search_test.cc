@@ -1,11 +1,13 @@
 // The tracker's global search (INITIALIZING / RELOCALIZING; docs/relocalization.md, "Events") on
 // the synthetic rectangle scene: from no pose, after a blackout, against unrelated events, and
 // the verification's refusal of an ambiguous round.
+#include <algorithm>
 #include <cmath>
 #include <iostream>
 #include <random>
 
 #include <gtest/gtest.h>
+#include <time.h>
 
 #include "core/common/error.h"
 #include "localizer/tracking/testing/synthetic_scene.h"
@@ -98,6 +100,74 @@ TEST(TrackerSearch, FindsItselfFromNoPoseAndEveryTrackingPoseIsRight) {
   }
   EXPECT_GT(tracking_after, 100);
   EXPECT_EQ(tracker.status(), TrackingStatus::kTracking);
+}
+
+// With a CPU share the search defers steps once it has used its budget (a live session then
+// keeps up with its events), still finds itself, and its work per second of events stays within
+// the share (plus the saved-up burst and the overshoot of the last step that had credit).
+TEST(TrackerSearch, ACpuShareBoundsTheSearchWorkAndItStillFindsItself) {
+  const EventBuffer events = SceneEvents(1'500'000'000);
+  TrackerOptions options;
+  // The whole search of this small scene takes about 25 ms of CPU: a 5 ms burst and 5 % of a core
+  // spread it over about half a second of events.
+  options.relocalization_cpu_share = 0.05;
+  options.relocalization_cpu_burst_s = 0.005;
+  Tracker tracker(SceneMap(), nullptr, kCamera, options);
+  tracker.StartWithoutPose(0);
+  const auto cpu_ns = [] {
+    timespec now{};
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &now);
+    return int64_t{now.tv_sec} * 1'000'000'000 + now.tv_nsec;
+  };
+  // One step's events at a time, so that the CPU of each searching step is measured alone.
+  const int64_t period_ns = std::llround(1e9 / options.step_rate_hz);
+  std::vector<PoseEstimate> estimates;
+  int64_t search_cpu_ns = 0;
+  int64_t longest_step_ns = 0;
+  int64_t searched_until_ns = 0;
+  int deferred = 0;
+  int working = 0;
+  int64_t deferred_cpu_ns = 0;
+  size_t begin = 0;
+  for (int64_t end_ns = period_ns; begin < events.size(); end_ns += period_ns) {
+    size_t end = begin;
+    while (end < events.size() && events.t_ns[end] < end_ns) ++end;
+    EventBuffer window;
+    window.Append(events, begin, end - begin);
+    const int64_t before = cpu_ns();
+    const std::vector<PoseEstimate> step = tracker.AddEvents(window);
+    const int64_t used = cpu_ns() - before;
+    for (const PoseEstimate& estimate : step) {
+      const bool searching =
+          estimate.status != TrackingStatus::kTracking && estimate.search.verified_steps == 0;
+      if (searching && estimate.search.deferred) {
+        ++deferred;
+        deferred_cpu_ns += used;
+      } else if (searching) {
+        ++working;
+        search_cpu_ns += used;
+        longest_step_ns = std::max(longest_step_ns, used);
+      }
+      if (searching) searched_until_ns = estimate.t_ns;
+      estimates.push_back(estimate);
+    }
+    begin = end;
+  }
+  const int64_t first_tracking_ns = CheckEstimates(estimates, options);
+  std::cout << "CPU share 0.05: TRACKING at " << first_tracking_ns * 1e-9 << " s, " << deferred
+            << " steps deferred, " << working << " working steps of " << search_cpu_ns * 1e-6
+            << " ms over " << searched_until_ns * 1e-9 << " s of events (longest step "
+            << longest_step_ns * 1e-6 << " ms)\n";
+  ASSERT_GT(deferred, 0);
+  ASSERT_GE(first_tracking_ns, 0) << "never TRACKING";
+  EXPECT_EQ(tracker.status(), TrackingStatus::kTracking);
+  // The budget covers the search work, not the ingestion of the step's events: a deferred step
+  // is ingestion only, so its mean cost is taken off every working step.
+  const double work_ns = static_cast<double>(search_cpu_ns) -
+                         working * static_cast<double>(deferred_cpu_ns) / deferred;
+  EXPECT_LE(work_ns,
+            options.relocalization_cpu_share * static_cast<double>(searched_until_ns + period_ns) +
+                options.relocalization_cpu_burst_s * 1e9 + static_cast<double>(longest_step_ns));
 }
 
 // At the hand-over the motion prior's velocity is measured on verified steps only, not from the
