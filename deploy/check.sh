@@ -6,7 +6,8 @@
 #      command serves with TLS and tokens, never --insecure, and metrics on loopback);
 #   2. Kubernetes manifests: every file under deploy/k8s parses and passes the Kubernetes JSON
 #      schemas with no unknown field (deploy/tools/validate-k8s.mjs); the base passes the security
-#      policy (TLS, tokens, no --insecure, a NetworkPolicy; validate-k8s.mjs --policy secure);
+#      policy (TLS, tokens, no --insecure, a NetworkPolicy, readiness on evloc.api.Localizer and
+#      liveness on the overall health; validate-k8s.mjs --policy secure);
 #      with kubectl present, every kustomization is rendered and its output validated the same
 #      way, with the policy dev-insecure for overlays/dev-insecure only and secure for the rest;
 #   3. deploy/systemd: systemd-analyze verify, with the unit pointing at a built evloc-localizer;

@@ -324,6 +324,24 @@ function checkPolicy(objects, policy) {
       } else if (!insecure && !(tls && auth)) {
         errors.push(`${where}: a plaintext server must say --insecure explicitly`);
       }
+      // Readiness asks whether the replica admits sessions (service evloc.api.Localizer), so a
+      // full replica leaves the Service; liveness asks for the overall health (a full replica is
+      // alive; restarting it would drop its sessions).
+      const probeService = (probe) => {
+        if (!probe) return null;
+        if (probe.grpc) return probe.grpc.service ?? "";
+        const command = (probe.exec?.command ?? []).map(String);
+        if (!command.includes("--health-check")) return null;
+        return flagsOf(command).get("--health-service") ?? "";
+      };
+      const readiness = probeService(container.readinessProbe);
+      if (readiness !== "evloc.api.Localizer") {
+        errors.push(`${where}: readinessProbe must ask for the health of service evloc.api.Localizer (got ${JSON.stringify(readiness)})`);
+      }
+      const liveness = probeService(container.livenessProbe);
+      if (liveness !== "") {
+        errors.push(`${where}: livenessProbe must ask for the overall health (service "", got ${JSON.stringify(liveness)})`);
+      }
       const matching = policies.filter((p) => selects(p.spec?.podSelector?.matchLabels, labels));
       if (matching.length === 0) {
         errors.push(`${where}: no NetworkPolicy selects its pods (labels ${JSON.stringify(labels)})`);
