@@ -46,6 +46,7 @@ nlohmann::json StepsToJson(const OfflineTrackingResult& result) {
                      {"search_round", step.search.round},
                      {"search_prescored", step.search.prescored},
                      {"search_refined", step.search.refined},
+                     {"search_deferred", step.search.deferred},
                      {"search_verified_steps", step.search.verified_steps},
                      {"search_best_alignment", step.search.best_alignment},
                      {"search_second_alignment", step.search.second_alignment}});
