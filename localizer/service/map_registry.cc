@@ -25,11 +25,6 @@ bool IsValidMapName(const std::string& name) {
   return name.find('/') == std::string::npos && name.find('\\') == std::string::npos;
 }
 
-template <typename T>
-uint64_t VectorBytes(const std::vector<T>& values) {
-  return values.capacity() * sizeof(T);
-}
-
 // Runs `read` (which reads map `name`), letting evloc Errors through and turning anything else
 // (std::bad_alloc from a forged size, an unexpected exception) into a MapLoadError.
 template <typename Read>
@@ -74,29 +69,6 @@ std::string MapVersionString(uint32_t content_crc32c) {
   char text[16];
   std::snprintf(text, sizeof(text), "%08x", content_crc32c);
   return text;
-}
-
-uint64_t MapMemoryBytes(const Map& map) {
-  uint64_t bytes = sizeof(Map) + VectorBytes(map.positions) + VectorBytes(map.gradients) +
-                   VectorBytes(map.inverse_depth_sigma) + VectorBytes(map.gradient_magnitude) +
-                   VectorBytes(map.source_keyframe) + VectorBytes(map.cameras);
-  for (const Keyframe& keyframe : map.keyframes) {
-    bytes +=
-        sizeof(Keyframe) + keyframe.image_name.capacity() + VectorBytes(keyframe.visible_points);
-  }
-  if (map.relocalization) {
-    bytes +=
-        VectorBytes(map.relocalization->landmarks) + VectorBytes(map.relocalization->vocabulary);
-    for (const KeyframeFeatures& features : map.relocalization->keyframes) {
-      bytes += sizeof(KeyframeFeatures) + VectorBytes(features.keypoints) +
-               VectorBytes(features.descriptors) + VectorBytes(features.landmarks) +
-               VectorBytes(features.global_descriptor);
-    }
-  }
-  // The visibility index: one point index per point (voxel order or per source keyframe), one
-  // voxel record at most per point, and a centre and an axis per keyframe.
-  bytes += map.size() * (sizeof(uint32_t) + 32) + map.keyframes.size() * 48;
-  return bytes;
 }
 
 void MapRegistryOptions::Check() const {

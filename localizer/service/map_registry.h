@@ -90,9 +90,6 @@ struct MapRegistryOptions {
   void Check() const;
 };
 
-// Estimated memory of `map` with a visibility index, bytes: its arrays plus the index's.
-uint64_t MapMemoryBytes(const Map& map);
-
 // Thread-safe registry of the maps in a folder.
 class MapRegistry {
  public:
