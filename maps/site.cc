@@ -4,9 +4,11 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <map>
 #include <system_error>
+#include <tuple>
 #include <unordered_set>
 
 #include "core/common/error.h"
@@ -95,6 +97,8 @@ pb::SiteManifest ToProto(const SiteManifest& manifest) {
     entry.set_num_keyframes(tile.num_keyframes);
     entry.set_file_bytes(tile.file_bytes);
     entry.set_content_crc32c(tile.content_crc32c);
+    for (int i = 0; i < 3; ++i) entry.add_bounding_box(tile.box_min[i]);
+    for (int i = 0; i < 3; ++i) entry.add_bounding_box(tile.box_max[i]);
   }
   out.set_source_content_crc32c(manifest.source_content_crc32c);
   pb::Provenance& provenance = *out.mutable_provenance();
@@ -133,6 +137,16 @@ SiteManifest FromProto(const pb::SiteManifest& in, const std::string& source) {
     tile.num_keyframes = entry.num_keyframes();
     tile.file_bytes = entry.file_bytes();
     tile.content_crc32c = entry.content_crc32c();
+    if (entry.bounding_box_size() != 6) {
+      throw ParseError(source, "byte 24",
+                       "tile (" + std::to_string(entry.ix()) + ", " + std::to_string(entry.iy()) +
+                           ") has " + std::to_string(entry.bounding_box_size()) +
+                           " bounding box values; expected 6");
+    }
+    for (int i = 0; i < 3; ++i) {
+      tile.box_min[i] = entry.bounding_box(i);
+      tile.box_max[i] = entry.bounding_box(3 + i);
+    }
     manifest.tiles.push_back(std::move(tile));
   }
   manifest.source_content_crc32c = in.source_content_crc32c();
@@ -240,12 +254,31 @@ void SiteManifest::Check() const {
     if (tile.num_core_points > tile.num_points) {
       throw InvalidArgumentError(what + " has more core points than points");
     }
+    if (!tile.box_min.allFinite() || !tile.box_max.allFinite() ||
+        (tile.box_min.array() > tile.box_max.array()).any()) {
+      throw InvalidArgumentError(what + " has a bounding box that is not finite or min > max");
+    }
   }
   const std::string expected = SiteVersionOf(tiles);
   if (version != expected) {
     throw InvalidArgumentError("site manifest: version '" + version + "' is not the tiles' (" +
                                expected + ")");
   }
+}
+
+MapInfo SummarizeSite(const SiteManifest& manifest) {
+  MapInfo info;
+  info.format_version = manifest.format_version;
+  info.content_crc32c = static_cast<uint32_t>(std::strtoul(manifest.version.c_str(), nullptr, 16));
+  for (size_t t = 0; t < manifest.tiles.size(); ++t) {
+    const SiteTile& tile = manifest.tiles[t];
+    info.num_points += tile.num_core_points;
+    info.num_keyframes += tile.num_keyframes;
+    info.bounding_box_min = t == 0 ? tile.box_min : info.bounding_box_min.cwiseMin(tile.box_min);
+    info.bounding_box_max = t == 0 ? tile.box_max : info.bounding_box_max.cwiseMax(tile.box_max);
+  }
+  info.provenance = manifest.provenance;
+  return info;
 }
 
 std::string SiteVersionOf(const std::vector<SiteTile>& tiles) {
@@ -514,6 +547,7 @@ SiteManifest TileMap(const Map& map, const std::filesystem::path& directory,
     tile.file_bytes = std::filesystem::file_size(path, error);
     if (error) throw IoError(where + "cannot stat '" + path.string() + "': " + error.message());
     tile.content_crc32c = ComputeMapContentChecksum(tile_map);
+    std::tie(tile.box_min, tile.box_max) = BoundingBox(tile_map.positions);
     manifest.tiles.push_back(std::move(tile));
   }
   manifest.version = SiteVersionOf(manifest.tiles);

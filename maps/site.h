@@ -90,6 +90,9 @@ struct SiteTile {
   uint64_t file_bytes = 0;
   // Content checksum of the tile map (docs/map-format.md, "Checksums").
   uint32_t content_crc32c = 0;
+  // Bounding box of the tile file's points, metres.
+  Eigen::Vector3f box_min = Eigen::Vector3f::Zero();
+  Eigen::Vector3f box_max = Eigen::Vector3f::Zero();
 };
 
 // The manifest of a site.
@@ -117,9 +120,15 @@ struct SiteManifest {
   // Throws InvalidArgumentError naming the first problem unless: the version is supported, the
   // grid is valid, the tiles are sorted and unique, every file name is one plain path component
   // ending in ".evmap", every core and padded square is the grid's, num_core_points <=
-  // num_points, and `version` equals SiteVersionOf(tiles).
+  // num_points, finite bounding boxes with min <= max, and `version` equals SiteVersionOf(tiles).
   void Check() const;
 };
+
+// What describes a site as a map (the service's ListMaps): its unique points (the tiles' core
+// points), keyframes, the union of the tiles' bounding boxes, the site version's number as the
+// content checksum, has_relocalization false (not summarised per tile); format_version is the
+// manifest's.
+MapInfo SummarizeSite(const SiteManifest& manifest);
 
 // The version of a site with these tiles: CRC32C over each tile's ix, iy (i32) and content
 // checksum (u32), little-endian, as 8 lowercase hex digits.
