@@ -146,9 +146,14 @@ bool TiledMapSource::Update(const Rigid3d& world_from_cam, const Eigen::Vector3d
     }
   }
   std::vector<std::shared_ptr<const LoadedTile>> tiles = Gather(needed, false);
+  if (tiles.size() < needed.size()) {
+    // Some needed tiles are still loading: keep what is composed meanwhile (tracking goes on with
+    // it); the tiles no longer needed are dropped once every needed one is in.
+    for (const auto& tile : current_->tiles) {
+      if (!std::binary_search(needed.begin(), needed.end(), tile->tile)) tiles.push_back(tile);
+    }
+  }
   std::vector<size_t> ids = IdsOf(tiles);
-  // The needed tiles still missing are being loaded; tiles needed at the last pose but not now
-  // are dropped once the next composition is in.
   if (ids != current_->tile_ids && !pending_) {
     auto pending = std::make_shared<Pending>();
     pending->tile_ids = ids;

@@ -4,7 +4,9 @@
 // (loads run on the cache's loader threads) and, when the set of loaded tiles changed, composes
 // the new union on a loader thread too; the next Update after the composition is ready swaps it
 // in and changes the generation. So a tracking step never waits for a file or a copy, and a
-// session whose tiles are not loaded yet keeps tracking on what is loaded. Points in overlaps are
+// session whose tiles are not loaded yet keeps tracking on what is loaded: while a needed tile is
+// missing, the composed tiles stay and the loaded needed ones join them; once every needed tile
+// is in, the composition is exactly the needed tiles. Points in overlaps are
 // not doubled: a tile contributes the points it owns (its core square) and, of its padding, only
 // those whose owner tile is not loaded (the first loaded tile holding such a point takes it).
 #pragma once
