@@ -97,6 +97,7 @@ pb::SiteManifest ToProto(const SiteManifest& manifest) {
     entry.set_num_keyframes(tile.num_keyframes);
     entry.set_file_bytes(tile.file_bytes);
     entry.set_content_crc32c(tile.content_crc32c);
+    entry.set_num_core_keyframes(tile.num_core_keyframes);
     for (int i = 0; i < 3; ++i) entry.add_bounding_box(tile.box_min[i]);
     for (int i = 0; i < 3; ++i) entry.add_bounding_box(tile.box_max[i]);
   }
@@ -137,6 +138,7 @@ SiteManifest FromProto(const pb::SiteManifest& in, const std::string& source) {
     tile.num_keyframes = entry.num_keyframes();
     tile.file_bytes = entry.file_bytes();
     tile.content_crc32c = entry.content_crc32c();
+    tile.num_core_keyframes = entry.num_core_keyframes();
     if (entry.bounding_box_size() != 6) {
       throw ParseError(source, "byte 24",
                        "tile (" + std::to_string(entry.ix()) + ", " + std::to_string(entry.iy()) +
@@ -251,8 +253,10 @@ void SiteManifest::Check() const {
         !SameRectangle(tile.padded, grid.Padded(tile.index))) {
       throw InvalidArgumentError(what + " has core or padded bounds that are not the grid's");
     }
-    if (tile.num_core_points > tile.num_points) {
-      throw InvalidArgumentError(what + " has more core points than points");
+    if (tile.num_core_points > tile.num_points || tile.num_core_keyframes > tile.num_keyframes) {
+      throw InvalidArgumentError(what +
+                                 " has more core points (or keyframes) than points (or "
+                                 "keyframes)");
     }
     if (!tile.box_min.allFinite() || !tile.box_max.allFinite() ||
         (tile.box_min.array() > tile.box_max.array()).any()) {
@@ -273,7 +277,7 @@ MapInfo SummarizeSite(const SiteManifest& manifest) {
   for (size_t t = 0; t < manifest.tiles.size(); ++t) {
     const SiteTile& tile = manifest.tiles[t];
     info.num_points += tile.num_core_points;
-    info.num_keyframes += tile.num_keyframes;
+    info.num_keyframes += tile.num_core_keyframes;
     info.bounding_box_min = t == 0 ? tile.box_min : info.bounding_box_min.cwiseMin(tile.box_min);
     info.bounding_box_max = t == 0 ? tile.box_max : info.bounding_box_max.cwiseMax(tile.box_max);
   }
@@ -409,29 +413,52 @@ void TilingOptions::Check() const {
   }
 }
 
-Map ExtractTile(const Map& map, const TileGrid& grid, TileIndex index, uint64_t* core_points) {
+Map ExtractTile(const Map& map, const TileGrid& grid, TileIndex index, uint64_t* core_points,
+                uint64_t* core_keyframes) {
   Map tile;
   tile.cameras = map.cameras;
   tile.provenance = map.provenance;
-  // Keyframes whose camera centre the tile owns.
-  std::vector<uint32_t> kept_keyframe(map.keyframes.size(), kNoKeyframe);
-  for (size_t k = 0; k < map.keyframes.size(); ++k) {
-    const Eigen::Vector3d centre = map.keyframes[k].cam_from_world.Inverse().translation;
-    if (grid.IndexOf(centre.x(), centre.y()) == index) {
-      kept_keyframe[k] = static_cast<uint32_t>(tile.keyframes.size());
-      tile.keyframes.push_back(map.keyframes[k]);
-      tile.keyframes.back().visible_points.clear();
-    }
-  }
+  // The points the tile holds, in their order.
   std::vector<uint32_t> new_index(map.size(), kNoKeyframe);
+  uint32_t held = 0;
   uint64_t owned = 0;
   for (size_t i = 0; i < map.size(); ++i) {
     const Eigen::Vector3f& p = map.positions[i];
     if (!grid.Holds(index, p.x(), p.y())) continue;
     if (grid.IndexOf(p.x(), p.y()) == index) ++owned;
-    new_index[i] = static_cast<uint32_t>(tile.size());
+    new_index[i] = held++;
+  }
+  // The keyframes whose camera centre the tile owns, and those that see (or are the source of)
+  // one of its points: a keyframe in one tile sees points of others, and each tile's keyframe
+  // visibility must find them.
+  std::vector<bool> sees(map.keyframes.size(), false);
+  uint64_t owned_keyframes = 0;
+  for (size_t k = 0; k < map.keyframes.size(); ++k) {
+    const Eigen::Vector3d centre = map.keyframes[k].cam_from_world.Inverse().translation;
+    sees[k] = grid.IndexOf(centre.x(), centre.y()) == index;
+    owned_keyframes += sees[k] ? 1 : 0;
+    for (const uint32_t point : map.keyframes[k].visible_points) {
+      if (sees[k]) break;
+      sees[k] = new_index[point] != kNoKeyframe;
+    }
+  }
+  for (size_t i = 0; i < map.size(); ++i) {
     const uint32_t source = map.source_keyframe[i];
-    tile.AddPoint(p, map.gradients[i], map.inverse_depth_sigma[i], map.gradient_magnitude[i],
+    if (new_index[i] != kNoKeyframe && source != kNoKeyframe) sees[source] = true;
+  }
+  std::vector<uint32_t> kept_keyframe(map.keyframes.size(), kNoKeyframe);
+  for (size_t k = 0; k < map.keyframes.size(); ++k) {
+    if (!sees[k]) continue;
+    kept_keyframe[k] = static_cast<uint32_t>(tile.keyframes.size());
+    tile.keyframes.push_back(map.keyframes[k]);
+    tile.keyframes.back().visible_points.clear();
+  }
+  tile.Reserve(held);
+  for (size_t i = 0; i < map.size(); ++i) {
+    if (new_index[i] == kNoKeyframe) continue;
+    const uint32_t source = map.source_keyframe[i];
+    tile.AddPoint(map.positions[i], map.gradients[i], map.inverse_depth_sigma[i],
+                  map.gradient_magnitude[i],
                   source == kNoKeyframe ? kNoKeyframe : kept_keyframe[source]);
   }
   for (size_t k = 0; k < map.keyframes.size(); ++k) {
@@ -474,6 +501,7 @@ Map ExtractTile(const Map& map, const TileGrid& grid, TileIndex index, uint64_t*
     tile.relocalization = std::move(out);
   }
   if (core_points != nullptr) *core_points = owned;
+  if (core_keyframes != nullptr) *core_keyframes = owned_keyframes;
   return tile;
 }
 
@@ -539,7 +567,8 @@ SiteManifest TileMap(const Map& map, const std::filesystem::path& directory,
     tile.file_name = TileFileName(index);
     tile.core = grid.Core(index);
     tile.padded = grid.Padded(index);
-    const Map tile_map = ExtractTile(map, grid, index, &tile.num_core_points);
+    const Map tile_map =
+        ExtractTile(map, grid, index, &tile.num_core_points, &tile.num_core_keyframes);
     const std::filesystem::path path = directory / tile.file_name;
     SaveMap(path, tile_map);
     tile.num_points = tile_map.size();

@@ -84,8 +84,9 @@ struct SiteTile {
   // Points of the file, and of them those whose owner is this tile.
   uint64_t num_points = 0;
   uint64_t num_core_points = 0;
-  // Keyframes of the file.
+  // Keyframes of the file, and of them those whose camera centre the tile owns.
   uint64_t num_keyframes = 0;
+  uint64_t num_core_keyframes = 0;
   // Size of the file, bytes.
   uint64_t file_bytes = 0;
   // Content checksum of the tile map (docs/map-format.md, "Checksums").
@@ -120,14 +121,15 @@ struct SiteManifest {
   // Throws InvalidArgumentError naming the first problem unless: the version is supported, the
   // grid is valid, the tiles are sorted and unique, every file name is one plain path component
   // ending in ".evmap", every core and padded square is the grid's, num_core_points <=
-  // num_points, finite bounding boxes with min <= max, and `version` equals SiteVersionOf(tiles).
+  // num_points, num_core_keyframes <= num_keyframes, finite bounding boxes with min <= max, and
+  // `version` equals SiteVersionOf(tiles).
   void Check() const;
 };
 
 // What describes a site as a map (the service's ListMaps): its unique points (the tiles' core
-// points), keyframes, the union of the tiles' bounding boxes, the site version's number as the
-// content checksum, has_relocalization false (not summarised per tile); format_version is the
-// manifest's.
+// points), keyframes (each once: by camera centre), the union of the tiles' bounding boxes, the
+// site version's number as the content checksum, has_relocalization false (not summarised per
+// tile); format_version is the manifest's.
 MapInfo SummarizeSite(const SiteManifest& manifest);
 
 // The version of a site with these tiles: CRC32C over each tile's ix, iy (i32) and content
@@ -181,13 +183,14 @@ struct TilingOptions {
 };
 
 // The tile `index` of `map` cut with `grid`: the points the tile holds (TileGrid::Holds), in
-// their original order; the keyframes whose camera centre lies in the core square, their visible
-// points restricted to the tile's; every camera; each point's source keyframe when that keyframe
-// is kept (kNoKeyframe otherwise); and, when the map has relocalization data, the landmarks the
-// tile holds, the vocabulary, and the kept keyframes' features that see a kept landmark. The
-// provenance is the map's. `core_points` (when given) gets how many of the points the tile owns.
+// their original order; the keyframes whose camera centre lies in the core square or that see
+// (or are the source of) one of the tile's points, their visible points restricted to the tile's;
+// every camera; each point's source keyframe when that keyframe is kept (kNoKeyframe otherwise);
+// and, when the map has relocalization data, the landmarks the tile holds, the vocabulary, and the
+// kept keyframes' features that see a kept landmark. The provenance is the map's. `core_points` and
+// `core_keyframes` (when given) get how many of the points and keyframes the tile owns.
 Map ExtractTile(const Map& map, const TileGrid& grid, TileIndex index,
-                uint64_t* core_points = nullptr);
+                uint64_t* core_points = nullptr, uint64_t* core_keyframes = nullptr);
 
 // Splits `map` into a site in `directory` (created when missing): one tile file per grid square
 // that owns at least one point, then the manifest, written last and atomically, so that a killed

@@ -125,7 +125,7 @@ void TileCache::LoadSlot(const std::shared_ptr<const Site>& site, size_t tile, c
     loaded->map = LoadTile(site->directory, site->manifest, tile);
     VisibilityIndexOptions visibility;
     visibility.voxel_size_m = options_.voxel_size_m;
-    visibility.use_keyframes = false;
+    visibility.use_keyframes = options_.keyframe_visibility;
     loaded->visibility = std::make_unique<VisibilityIndex>(loaded->map, visibility);
     loaded->memory_bytes = MapMemoryBytes(loaded->map);
   } catch (const Error&) {

@@ -49,7 +49,9 @@ struct LoadedTile {
   SiteTile entry;
   // The tile map (LoadTile: checked against the manifest).
   Map map;
-  // Voxel visibility index on `map` (a tile's keyframes do not list what neighbours hold).
+  // Visibility index on `map`: its keyframes' (a tile keeps every keyframe that sees one of its
+  // points), or a voxel grid for tiles without keyframe visibility or with
+  // TileCacheOptions::keyframe_visibility off.
   std::unique_ptr<VisibilityIndex> visibility;
   // MapMemoryBytes(map): what counts against the budget.
   uint64_t memory_bytes = 0;
@@ -62,8 +64,10 @@ struct TileCacheOptions {
   uint64_t memory_budget_bytes = uint64_t{2} << 30;
   // Background loader threads.
   int loader_threads = 1;
-  // Voxel size of the tiles' visibility indexes, metres.
+  // Voxel size of the tiles' voxel visibility indexes, metres.
   double voxel_size_m = 0.25;
+  // Use the tiles' keyframe visibility when they have it (else always voxels).
+  bool keyframe_visibility = true;
 
   // Throws InvalidArgumentError unless the budget is > 0, 1 <= loader_threads <= 64 and the voxel
   // size is finite and > 0.

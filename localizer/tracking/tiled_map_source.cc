@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <set>
+#include <tuple>
 #include <utility>
 
 #include "core/common/error.h"
@@ -30,10 +32,11 @@ std::vector<size_t> IdsOf(const std::vector<std::shared_ptr<const LoadedTile>>& 
 }  // namespace
 
 void TileSelectionOptions::Check() const {
-  for (const double value : {radius_m, lookahead_s, view_distance_m}) {
+  for (const double value : {radius_m, lookahead_s, view_distance_m, release_margin_m}) {
     if (!std::isfinite(value) || value < 0) {
       throw InvalidArgumentError(
-          "tile selection: radius_m, lookahead_s and view_distance_m must be finite and >= 0");
+          "tile selection: radius_m, lookahead_s, view_distance_m and release_margin_m must be "
+          "finite and >= 0");
     }
   }
 }
@@ -53,9 +56,10 @@ TiledMapSource::~TiledMapSource() {
 }
 
 std::vector<size_t> TiledMapSource::NeededTiles(const Rigid3d& world_from_cam,
-                                                const Eigen::Vector3d& velocity_world) const {
+                                                const Eigen::Vector3d& velocity_world,
+                                                double extra_m) const {
   const TileGrid& grid = site_->manifest.grid;
-  const double radius = options_.radius_m > 0 ? options_.radius_m : grid.tile_size_m;
+  const double radius = (options_.radius_m > 0 ? options_.radius_m : grid.tile_size_m) + extra_m;
   std::vector<Eigen::Vector2d> centres;
   const Eigen::Vector3d position = world_from_cam.translation;
   centres.emplace_back(position.head<2>());
@@ -85,6 +89,21 @@ std::vector<size_t> TiledMapSource::NeededTiles(const Rigid3d& world_from_cam,
   std::sort(needed.begin(), needed.end());
   needed.erase(std::unique(needed.begin(), needed.end()), needed.end());
   return needed;
+}
+
+std::vector<size_t> TiledMapSource::Wanted(const Rigid3d& world_from_cam,
+                                           const Eigen::Vector3d& velocity_world) const {
+  std::vector<size_t> wanted = NeededTiles(world_from_cam, velocity_world);
+  const double margin = options_.release_margin_m > 0 ? options_.release_margin_m
+                                                      : 0.5 * site_->manifest.grid.tile_size_m;
+  for (const size_t id : NeededTiles(world_from_cam, velocity_world, margin)) {
+    if (std::binary_search(current_->tile_ids.begin(), current_->tile_ids.end(), id)) {
+      wanted.push_back(id);
+    }
+  }
+  std::sort(wanted.begin(), wanted.end());
+  wanted.erase(std::unique(wanted.begin(), wanted.end()), wanted.end());
+  return wanted;
 }
 
 std::vector<std::shared_ptr<const LoadedTile>> TiledMapSource::Gather(
@@ -123,7 +142,7 @@ void TiledMapSource::Install(std::shared_ptr<const Composition> composition) {
 }
 
 bool TiledMapSource::Update(const Rigid3d& world_from_cam, const Eigen::Vector3d& velocity_world) {
-  const std::vector<size_t> needed = NeededTiles(world_from_cam, velocity_world);
+  const std::vector<size_t> needed = Wanted(world_from_cam, velocity_world);
   if (options_.synchronous) {
     std::vector<std::shared_ptr<const LoadedTile>> tiles = Gather(needed, true);
     if (IdsOf(tiles) == current_->tile_ids) return false;
@@ -208,10 +227,15 @@ void TiledMapSource::VisibleCandidates(const Camera& camera, const Rigid3d& worl
 
 void TiledMapSource::CandidateViewpoints(const ViewpointQuery& query,
                                          std::vector<Rigid3d>* world_from_cams) const {
+  // Tiles share the keyframes that see several of them: each keyframe once.
   std::vector<std::pair<int64_t, Rigid3d>> keyframes;
+  std::set<std::tuple<int64_t, double, double, double>> seen;
   for (const auto& tile : current_->tiles) {
     for (const Keyframe& keyframe : tile->map.keyframes) {
-      keyframes.emplace_back(keyframe.t_ns, keyframe.cam_from_world.Inverse());
+      const Rigid3d world_from_cam = keyframe.cam_from_world.Inverse();
+      const Eigen::Vector3d& c = world_from_cam.translation;
+      if (!seen.insert({keyframe.t_ns, c.x(), c.y(), c.z()}).second) continue;
+      keyframes.emplace_back(keyframe.t_ns, world_from_cam);
     }
   }
   ViewpointsAlongKeyframes(std::move(keyframes), query, world_from_cams);

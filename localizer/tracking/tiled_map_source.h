@@ -36,11 +36,16 @@ struct TileSelectionOptions {
   // Also the tiles within radius_m of the point this far ahead along the optical axis, metres
   // (0: none); what a camera looking far sees.
   double view_distance_m = 0;
+  // A composed tile stays while it is within radius_m + this of a centre, metres; 0: half a tile
+  // size. The hysteresis keeps a tile at the edge of the radius from coming and going with
+  // every small motion.
+  double release_margin_m = 0;
   // Load and compose on the calling thread (evloc-track, tests): every Update ends with every
   // needed tile loaded and composed, so the poses do not depend on timing.
   bool synchronous = false;
 
-  // Throws InvalidArgumentError unless the distances and the lookahead are finite and >= 0.
+  // Throws InvalidArgumentError unless the distances, the margin and the lookahead are finite
+  // and >= 0.
   void Check() const;
 };
 
@@ -68,9 +73,11 @@ class TiledMapSource final : public MapSource {
   // them on the calling thread), for session start-up. Throws like a synchronous Update.
   void LoadNow(const Rigid3d& world_from_cam);
 
-  // The tiles (positions in the manifest, ascending) needed at this pose and velocity.
+  // The tiles (positions in the manifest, ascending) needed at this pose and velocity: within
+  // radius_m (plus `extra_m`) of the camera centre, of where it will be, and of the point ahead
+  // on its optical axis.
   std::vector<size_t> NeededTiles(const Rigid3d& world_from_cam,
-                                  const Eigen::Vector3d& velocity_world) const;
+                                  const Eigen::Vector3d& velocity_world, double extra_m = 0) const;
   // The tiles (positions in the manifest, ascending) of the current composition.
   std::vector<size_t> composed_tiles() const;
   // The site.
@@ -78,12 +85,13 @@ class TiledMapSource final : public MapSource {
 
   uint64_t generation() const override { return generation_; }
   MapPoints points() const override;
-  // Each composed tile's voxel visibility query, restricted to the points it contributes, in the
+  // Each composed tile's visibility query, restricted to the points it contributes, in the
   // composed indices (ascending).
   void VisibleCandidates(const Camera& camera, const Rigid3d& world_from_cam,
                          const VisibilityQueryOptions& options,
                          std::vector<uint32_t>* candidates) const override;
-  // The keyframes of the composed tiles, with poses interpolated between consecutive ones.
+  // The keyframes of the composed tiles (each once), with poses interpolated between consecutive
+  // ones.
   void CandidateViewpoints(const ViewpointQuery& query,
                            std::vector<Rigid3d>* world_from_cams) const override;
 
@@ -96,6 +104,9 @@ class TiledMapSource final : public MapSource {
   // Composition work handed to a loader thread and its result.
   struct Pending;
 
+  // The needed tiles, and the composed ones within the release margin.
+  std::vector<size_t> Wanted(const Rigid3d& world_from_cam,
+                             const Eigen::Vector3d& velocity_world) const;
   // Requests/loads the needed tiles; returns the resident ones.
   std::vector<std::shared_ptr<const LoadedTile>> Gather(const std::vector<size_t>& needed,
                                                         bool load_here);

@@ -83,7 +83,9 @@ TEST_F(TiledMapSourceTest, VisibleCandidatesAreTheVisiblePointsOfTheComposition)
   TileSelectionOptions options;
   options.synchronous = true;
   options.radius_m = 30;  // Every tile.
-  TiledMapSource source(site_, cache_, options);
+  TileCacheOptions voxels;
+  voxels.keyframe_visibility = false;
+  TiledMapSource source(site_, std::make_shared<TileCache>(voxels), options);
   const Rigid3d pose = CorridorCameraPose(3.0);
   EXPECT_TRUE(source.Update(pose, Eigen::Vector3d::Zero()));
   ASSERT_EQ(source.composed_tiles().size(), site_->manifest.tiles.size());
