@@ -14,6 +14,7 @@
 #include "maps/map.h"
 #include "maps/map_directory.h"
 #include "maps/pcd_import.h"
+#include "maps/site.h"
 
 namespace evloc {
 namespace {
@@ -60,6 +61,89 @@ const char kUpgradeHelp[] =
     "                  map already has\n"
     "  --threads N     threads for feature extraction and matching (default 2; same result)\n"
     "  --help          show this help\n";
+
+const char kTileHelp[] =
+    "usage: evloc-mapper tile --map MAP --out SITE [--tile-size M] [--overlap M]\n"
+    "                         [--origin X,Y] [--name NAME] [--force]\n"
+    "\n"
+    "Splits a built map into a site served as tiles (docs/map-format.md, \"Sites\"): SITE gets\n"
+    "one self-contained .evmap per square of the grid in the x-y plane (z up) that owns points\n"
+    "(the points of the square grown by the overlap; the keyframes, with their relocalization\n"
+    "features, whose camera centre lies in the square), then site.manifest, written last, so a\n"
+    "killed run leaves no site. `evloc-localizer serve` serves SITE under its folder name and\n"
+    "`evloc-track --map SITE` tracks against it.\n"
+    "\n"
+    "  --map MAP        the map (directory or .evmap file)\n"
+    "  --out SITE       the site folder (created if missing)\n"
+    "  --tile-size M    edge of a tile's square, metres (default 50)\n"
+    "  --overlap M      how far each tile reaches into its neighbours, metres, below the tile\n"
+    "                   size (default 10)\n"
+    "  --origin X,Y     corner of tile (0, 0), metres (default: the multiple of the tile size at\n"
+    "                   or below the points' smallest x and y)\n"
+    "  --name NAME      site name in the manifest (default: the folder name)\n"
+    "  --force          replace a site already in SITE\n"
+    "  --help           show this help\n";
+
+int Tile(const std::vector<std::string>& arguments, const std::string& command_line,
+         std::ostream& out) {
+  std::filesystem::path map_path;
+  std::filesystem::path site_path;
+  TilingOptions options;
+  options.command_line = command_line;
+  for (size_t i = 0; i < arguments.size(); ++i) {
+    const std::string& argument = arguments[i];
+    const auto value = [&]() -> const std::string& { return TakeFlagValue(arguments, &i); };
+    if (argument == "--help" || argument == "-h") {
+      out << kTileHelp;
+      return 0;
+    } else if (argument == "--map") {
+      map_path = value();
+    } else if (argument == "--out") {
+      site_path = value();
+    } else if (argument == "--tile-size") {
+      options.tile_size_m = ParseDoubleFlag(argument, value());
+    } else if (argument == "--overlap") {
+      options.overlap_m = ParseDoubleFlag(argument, value());
+    } else if (argument == "--origin") {
+      const std::string& text = value();
+      const size_t comma = text.find(',');
+      if (comma == std::string::npos) throw UsageError("--origin takes X,Y in metres");
+      options.origin = Eigen::Vector2d(ParseDoubleFlag(argument, text.substr(0, comma)),
+                                       ParseDoubleFlag(argument, text.substr(comma + 1)));
+    } else if (argument == "--name") {
+      options.name = value();
+    } else if (argument == "--force") {
+      options.overwrite = true;
+    } else if (argument.rfind("-", 0) == 0) {
+      throw UsageError("unknown option '" + argument + "'");
+    } else {
+      throw UsageError("unexpected argument '" + argument + "'");
+    }
+  }
+  if (map_path.empty()) throw UsageError("tile needs --map MAP");
+  if (site_path.empty()) throw UsageError("tile needs --out SITE");
+  try {
+    options.Check();
+  } catch (const InvalidArgumentError& error) {
+    throw UsageError(error.what());
+  }
+  const Map map = LoadMap(ResolveMapFile(map_path));
+  const SiteManifest manifest = TileMap(map, site_path, options);
+  uint64_t points = 0;
+  uint64_t bytes = 0;
+  for (const SiteTile& tile : manifest.tiles) {
+    points += tile.num_points;
+    bytes += tile.file_bytes;
+  }
+  out << "tiled " << map.size() << " points and " << map.keyframes.size() << " keyframes into "
+      << manifest.tiles.size() << " tiles of " << options.tile_size_m << " m (overlap "
+      << options.overlap_m << " m): " << points << " points stored (x" << std::setprecision(3)
+      << static_cast<double>(points) / static_cast<double>(map.size()) << "), " << bytes
+      << " bytes\n"
+      << "site " << manifest.name << " version " << manifest.version << " in " << site_path.string()
+      << "\n";
+  return 0;
+}
 
 // The options of `upgrade`, one field per flag.
 struct UpgradeCommandOptions {
@@ -313,6 +397,11 @@ int RunUpgradeCommand(const std::vector<std::string>& arguments, const std::stri
                     [&] { return Upgrade(arguments, command_line, out); });
 }
 
+int RunTileCommand(const std::vector<std::string>& arguments, const std::string& command_line,
+                   std::ostream& out, std::ostream& err) {
+  return RunGuarded("evloc-mapper tile", err, [&] { return Tile(arguments, command_line, out); });
+}
+
 int RunInfoCommand(const std::vector<std::string>& arguments, const std::string& /*command_line*/,
                    std::ostream& out, std::ostream& err) {
   return RunGuarded("evloc-mapper info", err, [&] { return Info(arguments, out); });
@@ -338,6 +427,7 @@ const std::vector<MapperSubcommand>& MapperSubcommands() {
       {"info", "verify and summarise a map", RunInfoCommand},
       {"upgrade", "add relocalization data (format v2) to a v1 map from its images",
        RunUpgradeCommand},
+      {"tile", "split a map into a site of tiles for serving", RunTileCommand},
   };
   return subcommands;
 }

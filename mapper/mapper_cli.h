@@ -38,6 +38,10 @@ int RunImportPcdCommand(const std::vector<std::string>& arguments, const std::st
 int RunUpgradeCommand(const std::vector<std::string>& arguments, const std::string& command_line,
                       std::ostream& out, std::ostream& err);
 
+// `evloc-mapper tile --map MAP --out SITE [...]`: splits a map into a site of tiles (maps/site.h).
+int RunTileCommand(const std::vector<std::string>& arguments, const std::string& command_line,
+                   std::ostream& out, std::ostream& err);
+
 // `evloc-mapper info MAP` (a map directory or a .evmap file).
 int RunInfoCommand(const std::vector<std::string>& arguments, const std::string& command_line,
                    std::ostream& out, std::ostream& err);

@@ -180,6 +180,7 @@ VisibilityIndex::VisibilityIndex(const Map& map, const VisibilityIndexOptions& o
       uses_keyframes_ = true;
     }
   }
+  if (!options_.use_keyframes) uses_keyframes_ = false;
   if (uses_keyframes_) return;
   points_by_source_keyframe_.clear();
 
@@ -267,6 +268,38 @@ std::vector<uint32_t> VisibilityIndex::Query(const Camera& camera, const Rigid3d
   }
   std::sort(visible.begin(), visible.end());
   return visible;
+}
+
+namespace {
+
+template <typename T>
+uint64_t VectorBytes(const std::vector<T>& values) {
+  return values.capacity() * sizeof(T);
+}
+
+}  // namespace
+
+uint64_t MapMemoryBytes(const Map& map) {
+  uint64_t bytes = sizeof(Map) + VectorBytes(map.positions) + VectorBytes(map.gradients) +
+                   VectorBytes(map.inverse_depth_sigma) + VectorBytes(map.gradient_magnitude) +
+                   VectorBytes(map.source_keyframe) + VectorBytes(map.cameras);
+  for (const Keyframe& keyframe : map.keyframes) {
+    bytes +=
+        sizeof(Keyframe) + keyframe.image_name.capacity() + VectorBytes(keyframe.visible_points);
+  }
+  if (map.relocalization) {
+    bytes +=
+        VectorBytes(map.relocalization->landmarks) + VectorBytes(map.relocalization->vocabulary);
+    for (const KeyframeFeatures& features : map.relocalization->keyframes) {
+      bytes += sizeof(KeyframeFeatures) + VectorBytes(features.keypoints) +
+               VectorBytes(features.descriptors) + VectorBytes(features.landmarks) +
+               VectorBytes(features.global_descriptor);
+    }
+  }
+  // The visibility index: one point index per point (voxel order or per source keyframe), one
+  // voxel record at most per point, and a centre and an axis per keyframe.
+  bytes += map.size() * (sizeof(uint32_t) + 32) + map.keyframes.size() * 48;
+  return bytes;
 }
 
 }  // namespace evloc

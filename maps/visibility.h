@@ -21,6 +21,9 @@ struct VisibilityIndexOptions {
   // Edge length of the voxels of the synthesised index used for maps without keyframe
   // visibility, metres. Smaller voxels cull tighter but cost more per query.
   double voxel_size_m = 0.25;
+  // Use the keyframes' visibility when the map has it; false always builds the voxel grid (the
+  // tiles of a site: a tile's keyframes do not list the points of its neighbours they see).
+  bool use_keyframes = true;
 
   // Throws InvalidArgumentError unless voxel_size_m is finite and > 0.
   void Check() const;
@@ -95,5 +98,9 @@ class VisibilityIndex {
   std::vector<Voxel> voxels_;
   std::vector<uint32_t> voxel_points_;
 };
+
+// Estimated memory of `map` with a visibility index, bytes: its arrays plus the index's (what
+// the service's map and tile caches count against their budget).
+uint64_t MapMemoryBytes(const Map& map);
 
 }  // namespace evloc

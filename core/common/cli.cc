@@ -73,6 +73,41 @@ uint64_t ParseUnsignedFlag(std::string_view flag, std::string_view text) {
   return ParseWholeNumber<uint64_t>(flag, text, "a non-negative integer");
 }
 
+uint64_t ParseByteSizeFlag(std::string_view flag, std::string_view text) {
+  int shift = 0;
+  std::string_view digits = text;
+  if (!text.empty()) {
+    switch (text.back()) {
+      case 'K':
+      case 'k':
+        shift = 10;
+        break;
+      case 'M':
+      case 'm':
+        shift = 20;
+        break;
+      case 'G':
+      case 'g':
+        shift = 30;
+        break;
+      case 'T':
+      case 't':
+        shift = 40;
+        break;
+      default:
+        break;
+    }
+    if (shift > 0) digits.remove_suffix(1);
+  }
+  const uint64_t value = ParseWholeNumber<uint64_t>(flag, digits, "a byte count (e.g. 2G, 512M)");
+  constexpr uint64_t kLimit = uint64_t{1} << 50;
+  if (value > (kLimit >> shift)) {
+    throw UsageError(std::string(flag) + " is out of range (at most 1024T): '" + std::string(text) +
+                     "'");
+  }
+  return value << shift;
+}
+
 int ParseIntFlag(std::string_view flag, std::string_view text) {
   const int64_t value = ParseIntegerFlag(flag, text);
   if (value < std::numeric_limits<int>::min() || value > std::numeric_limits<int>::max()) {

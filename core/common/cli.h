@@ -88,6 +88,10 @@ int64_t ParseIntegerFlag(std::string_view flag, std::string_view text);
 // UsageError.
 uint64_t ParseUnsignedFlag(std::string_view flag, std::string_view text);
 
+// Parses a byte count: a non-negative integer with an optional binary suffix K, M, G or T (2^10,
+// 2^20, 2^30, 2^40; "2G" is 2147483648), at most 2^50. Throws UsageError.
+uint64_t ParseByteSizeFlag(std::string_view flag, std::string_view text);
+
 // Parses a base-10 integer that fits an int. Throws UsageError.
 int ParseIntFlag(std::string_view flag, std::string_view text);
 

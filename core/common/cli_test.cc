@@ -155,3 +155,20 @@ TEST(ParseCommandLine, TurnsEveryParserErrorIntoAUsageError) {
 
 }  // namespace
 }  // namespace evloc
+
+namespace evloc {
+namespace {
+
+TEST(ParseByteSizeFlag, TakesBinarySuffixesAndRefusesTheRest) {
+  EXPECT_EQ(ParseByteSizeFlag("--map-memory", "2G"), uint64_t{2} << 30);
+  EXPECT_EQ(ParseByteSizeFlag("--map-memory", "512M"), uint64_t{512} << 20);
+  EXPECT_EQ(ParseByteSizeFlag("--map-memory", "3k"), 3072u);
+  EXPECT_EQ(ParseByteSizeFlag("--map-memory", "1048576"), 1048576u);
+  EXPECT_EQ(ParseByteSizeFlag("--map-memory", "1024T"), uint64_t{1} << 50);
+  for (const char* bad : {"", "G", "-1G", "2.5G", "2GB", "1025T", "nan"}) {
+    EXPECT_THROW(ParseByteSizeFlag("--map-memory", bad), UsageError) << bad;
+  }
+}
+
+}  // namespace
+}  // namespace evloc

@@ -163,12 +163,23 @@ OfflineTrackingResult TrackEventStream(EventReader& reader, const Map& map,
                                        const std::optional<Rigid3d>& initial_world_from_cam,
                                        int64_t initial_t_ns, const OfflineTrackingOptions& options,
                                        const StepCallback& on_step) {
+  const StaticMapSource source(map, visibility);
+  return TrackEventStream(reader, source, camera, initial_world_from_cam, initial_t_ns, options,
+                          on_step, {});
+}
+
+OfflineTrackingResult TrackEventStream(EventReader& reader, const MapSource& source,
+                                       const Camera& camera,
+                                       const std::optional<Rigid3d>& initial_world_from_cam,
+                                       int64_t initial_t_ns, const OfflineTrackingOptions& options,
+                                       const StepCallback& on_step,
+                                       const BetweenBatchesCallback& between_batches) {
   options.Check();
   if (options.tracker.input != TrackerInput::kEvents) {
     throw InvalidArgumentError("offline tracking: event streams need the events input mode");
   }
   const auto start = std::chrono::steady_clock::now();
-  Tracker tracker(map, visibility, camera, options.tracker);
+  Tracker tracker(source, camera, options.tracker);
   OfflineTrackingResult result;
   EventBuffer batch;
   bool started = false;
@@ -218,6 +229,7 @@ OfflineTrackingResult TrackEventStream(EventReader& reader, const Map& map,
       started = true;
       batch = std::move(tail);
     }
+    if (between_batches) between_batches(tracker);
     for (const PoseEstimate& step : tracker.AddEvents(batch)) {
       Record(step, tracker, on_step, &result);
     }

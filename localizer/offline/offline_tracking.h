@@ -99,6 +99,20 @@ OfflineTrackingResult TrackEventStream(EventReader& reader, const Map& map,
                                        int64_t initial_t_ns, const OfflineTrackingOptions& options,
                                        const StepCallback& on_step = {});
 
+// Called before each batch of events once the tracker has a pose: where a MapSource that
+// changes with the pose (a site's TiledMapSource) follows the tracker, between two calls into it.
+using BetweenBatchesCallback = std::function<void(const Tracker& tracker)>;
+
+// TrackEventStream against any MapSource (which must outlive the call); `between_batches`, when
+// set, runs before each batch after the start. The overload above is this with a
+// StaticMapSource of `map` and `visibility`.
+OfflineTrackingResult TrackEventStream(EventReader& reader, const MapSource& source,
+                                       const Camera& camera,
+                                       const std::optional<Rigid3d>& initial_world_from_cam,
+                                       int64_t initial_t_ns, const OfflineTrackingOptions& options,
+                                       const StepCallback& on_step,
+                                       const BetweenBatchesCallback& between_batches);
+
 // A frame of a sequence: its time and image file.
 struct FrameFile {
   // Capture time, nanoseconds.

@@ -18,6 +18,7 @@
 #include "localizer/offline/odometry_track.h"
 #include "localizer/tracking/event_filter.h"
 #include "maps/map_directory.h"
+#include "maps/site.h"
 
 namespace evloc::tracking {
 namespace {
@@ -144,6 +145,59 @@ void WriteTrackOutputs(const TrackCommandOptions& options, const std::string& va
   }
 }
 
+// evloc-track against a site (--map SITE): the tiles near the pose through a synchronous
+// TiledMapSource, updated between event batches. Events only; debug pictures need a whole map.
+OfflineTrackingResult RunSiteTrack(const TrackCommandOptions& options, const Dataset& dataset,
+                                   const OfflineTrackingOptions& tracking,
+                                   const std::optional<Rigid3d>& initial_world_from_cam,
+                                   int64_t initial_t_ns, bool events_mode, std::ostream& log) {
+  if (!events_mode) {
+    throw InvalidArgumentError("--map " + options.map_path.string() +
+                               " is a site: sites are tracked with --mode events only; give a "
+                               "whole map for frames");
+  }
+  if (options.debug_dir) {
+    throw InvalidArgumentError("--debug-dir needs a whole map; --map " + options.map_path.string() +
+                               " is a site");
+  }
+  if (!initial_world_from_cam) {
+    throw InvalidArgumentError("--map " + options.map_path.string() +
+                               " is a site: its tiles are chosen by the pose, so give an initial "
+                               "pose (--init-pose none is not supported on sites)");
+  }
+  if (!dataset.events_path) {
+    throw InvalidArgumentError("dataset '" + options.dataset_path.string() +
+                               "' has no events.evb or events.txt");
+  }
+  TileCacheOptions cache_options;
+  cache_options.memory_budget_bytes = options.map_memory_bytes;
+  auto cache = std::make_shared<TileCache>(cache_options);
+  TileSelectionOptions selection = options.tiles;
+  selection.synchronous = true;
+  TiledMapSource source(OpenSite(options.map_path), cache, selection);
+  source.LoadNow(*initial_world_from_cam);
+  if (!options.quiet) {
+    log << "evloc-track: site " << source.site().manifest.name << " version "
+        << source.site().manifest.version << " (" << source.site().manifest.tiles.size()
+        << " tiles of " << source.site().manifest.grid.tile_size_m << " m), dataset "
+        << options.dataset_path.string() << ", variant " << tracking.tracker.VariantName()
+        << ", events at " << tracking.tracker.step_rate_hz << " Hz\n";
+  }
+  int64_t compositions = 0;
+  const auto reader = OpenDatasetEvents(dataset);
+  OfflineTrackingResult result = TrackEventStream(
+      *reader, source, dataset.camera, initial_world_from_cam, initial_t_ns, tracking, {},
+      [&](const Tracker& tracker) { compositions += source.Follow(tracker) ? 1 : 0; });
+  WriteTrackOutputs(options, tracking.tracker.VariantName(), "events", result, log);
+  if (!options.quiet) {
+    const TileCacheStats stats = cache->stats();
+    log << "evloc-track: tiles: " << stats.loads << " loaded, " << stats.evictions << " evicted, "
+        << compositions << " changes of the composed set, " << stats.resident_bytes
+        << " bytes resident at the end\n";
+  }
+  return result;
+}
+
 }  // namespace
 
 void TrackCommandOptions::Check() const {
@@ -171,6 +225,8 @@ void TrackCommandOptions::Check() const {
   if (ecd_width <= 0 || ecd_height <= 0) {
     throw InvalidArgumentError("--ecd-size must be WIDTHxHEIGHT with positive sizes");
   }
+  tiles.Check();
+  if (map_memory_bytes == 0) throw InvalidArgumentError("--map-memory must be more than 0 bytes");
   tracking.Check();
 }
 
@@ -181,7 +237,16 @@ Tracks a recorded sequence against a map, offline, with the tracker the localize
 (docs/tracking.md), and writes world_from_cam at every step as a TUM trajectory.
 
 Options:
-  --map PATH             map directory (holding map.evmap) or .evmap file (required)
+  --map PATH             map directory (holding map.evmap), .evmap file, or site folder
+                         (holding site.manifest, evloc-mapper tile; docs/map-format.md "Sites")
+                         (required)
+  --tile-radius M        with a site: the tiles within M metres of the camera (default: one
+                         tile size), of where it will be (--tile-lookahead) and of the point
+                         --tile-view-distance ahead on its optical axis are composed
+  --tile-lookahead S     seconds ahead at the current velocity (default 2)
+  --tile-view-distance M metres ahead on the optical axis (default 0: not used)
+  --map-memory SIZE      with a site: budget of the loaded tiles, bytes with K/M/G suffix
+                         (default 2G)
   --dataset DIR|FILE     dataset folder, evloc or Event Camera Dataset layout, a ROS1 bag
                          (.bag) or an AEDAT4 file (.aedat4)
                          (required)
@@ -271,6 +336,14 @@ TrackCommandOptions ParseTrackCommandLine(const std::vector<std::string>& argume
     const std::string& value = TakeFlagValue(arguments, &i);
     if (flag == "--map") {
       options.map_path = value;
+    } else if (flag == "--tile-radius") {
+      options.tiles.radius_m = ParseDoubleFlag(flag, value);
+    } else if (flag == "--tile-lookahead") {
+      options.tiles.lookahead_s = ParseDoubleFlag(flag, value);
+    } else if (flag == "--tile-view-distance") {
+      options.tiles.view_distance_m = ParseDoubleFlag(flag, value);
+    } else if (flag == "--map-memory") {
+      options.map_memory_bytes = ParseByteSizeFlag(flag, value);
     } else if (flag == "--dataset") {
       options.dataset_path = value;
     } else if (flag == "--out") {
@@ -427,6 +500,10 @@ OfflineTrackingResult RunTrackCommand(const TrackCommandOptions& options, std::o
     WriteTrackOutputs(options, odometry::OdometryModeName(*options.odometry),
                       odometry::OdometryModeName(*options.odometry), result, log);
     return result;
+  }
+  if (IsSiteDirectory(options.map_path)) {
+    return RunSiteTrack(options, dataset, tracking, initial_world_from_cam, initial_t_ns,
+                        events_mode, log);
   }
   const Map map = LoadMap(ResolveMapFile(options.map_path));
   const VisibilityIndex visibility(map);

@@ -11,6 +11,7 @@
 #include "core/geometry/rigid3.h"
 #include "localizer/odometry/odometry_run.h"
 #include "localizer/offline/offline_tracking.h"
+#include "localizer/tracking/tiled_map_source.h"
 
 namespace evloc::tracking {
 
@@ -18,6 +19,12 @@ namespace evloc::tracking {
 struct TrackCommandOptions {
   // Map directory or .evmap file (--map).
   std::filesystem::path map_path;
+  // When map_path is a site (a folder with site.manifest): which tiles a pose needs (--tile-radius,
+  // --tile-lookahead, --tile-view-distance; always synchronous here, so runs are reproducible)
+  // and the tile cache's budget (--map-memory).
+  TileSelectionOptions tiles;
+  // Budget of the loaded tiles, bytes (--map-memory SIZE).
+  uint64_t map_memory_bytes = TileCacheOptions{}.memory_budget_bytes;
   // Dataset folder in the evloc/ECD layout, a ROS1 bag or an AEDAT4 file (--dataset).
   std::filesystem::path dataset_path;
   // The topics when the dataset is a bag (--events-topic, --image-topic, --camera-info-topic,

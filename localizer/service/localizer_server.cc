@@ -34,7 +34,7 @@ namespace evloc::service {
 // Options and tokens.
 
 void LocalizerServerOptions::Check() const {
-  MapRegistryOptions{maps_dir, max_map_memory_bytes}.Check();
+  registry_options().Check();
   if (listen_address.empty()) throw InvalidArgumentError("--listen: the address is empty");
   if (max_sessions < 1) throw InvalidArgumentError("--max-sessions must be at least 1");
   if (threads != 0 && threads < max_sessions + 2) {
@@ -104,6 +104,15 @@ ListenSecurity LocalizerServerOptions::listen_security() const {
           insecure};
 }
 
+MapRegistryOptions LocalizerServerOptions::registry_options() const {
+  MapRegistryOptions options;
+  options.maps_dir = maps_dir;
+  options.max_map_memory_bytes = max_map_memory_bytes;
+  options.max_tile_memory_bytes = max_map_memory_bytes;
+  options.tile_loader_threads = tile_loader_threads;
+  return options;
+}
+
 SessionLimits LocalizerServerOptions::session_limits() const {
   SessionLimits limits;
   limits.tracker = tracker;
@@ -161,6 +170,36 @@ std::string ServerCounters::PrometheusText() const {
   return text.str();
 }
 
+std::string TileCacheMetricsText(const TileCacheStats& stats) {
+  std::ostringstream text;
+  const auto metric = [&text](const char* name, const char* type, const char* help, auto value) {
+    text << "# HELP " << name << " " << help << "\n# TYPE " << name << " " << type << "\n"
+         << name << " " << value << "\n";
+  };
+  metric("evloc_tile_hits_total", "counter",
+         "Tiles a session newly needed that were resident (sites, docs/api.md).", stats.hits);
+  metric("evloc_tile_misses_total", "counter",
+         "Tiles a session newly needed that had to be loaded.", stats.misses);
+  metric("evloc_tile_loads_total", "counter", "Tiles loaded by the loader threads.", stats.loads);
+  metric("evloc_tile_load_failures_total", "counter",
+         "Tile loads that failed (missing, damaged or mismatching tile files).",
+         stats.load_failures);
+  metric("evloc_tile_load_seconds_total", "counter", "Wall time spent loading tiles.",
+         stats.load_seconds);
+  metric("evloc_tile_load_seconds_max", "gauge", "The longest tile load so far.",
+         stats.max_load_seconds);
+  metric("evloc_tile_evictions_total", "counter",
+         "Unused tiles dropped to meet the --map-memory budget.", stats.evictions);
+  metric("evloc_tile_resident_bytes", "gauge", "Memory of the loaded tiles (estimate).",
+         stats.resident_bytes);
+  metric("evloc_tile_resident", "gauge", "Loaded tiles.", stats.resident_tiles);
+  metric("evloc_tile_in_use", "gauge", "Loaded tiles some session uses.", stats.tiles_in_use);
+  metric("evloc_tile_pending_loads", "gauge", "Tile loads queued or running.", stats.pending_loads);
+  metric("evloc_tile_budget_bytes", "gauge", "The --map-memory budget of the tiles.",
+         stats.budget_bytes);
+  return text.str();
+}
+
 std::string LocalizerServerOptions::Describe() const {
   std::ostringstream text;
   text << "maps: " << maps_dir.string() << "\n"
@@ -174,7 +213,8 @@ std::string LocalizerServerOptions::Describe() const {
        << "idle-timeout: " << idle_timeout_s << " s\n"
        << "queue-packets: " << queue_packets << "\n"
        << "backpressure-fraction: " << backpressure_fraction << "\n"
-       << "max-map-memory: " << (max_map_memory_bytes >> 20) << " MiB\n"
+       << "map-memory: " << max_map_memory_bytes << " bytes (maps; and the tiles of sites)\n"
+       << "tile-loader-threads: " << tile_loader_threads << "\n"
        << "max-camera-pixels: " << max_camera_pixels << "\n"
        << "max-packet-span: " << max_packet_span_s << " s\n"
        << "max-rate: " << max_step_rate_hz << " Hz\n"
@@ -223,7 +263,7 @@ class LocalizerServer::Service final
       : options_(options),
         session_limits_(options.session_limits()),
         log_(std::move(log)),
-        registry_(MapRegistryOptions{options.maps_dir, options.max_map_memory_bytes}),
+        registry_(options.registry_options()),
         memory_(options.max_memory_bytes),
         pool_(TrackingPool::ThreadsFor(options.tracking_threads)) {
     if (options.auth_tokens_file) {
@@ -374,7 +414,8 @@ class LocalizerServer::Service final
            "(the --max-memory budget in use).\n# TYPE evloc_queued_bytes gauge\nevloc_queued_bytes "
         << memory_.used() << "\n# HELP evloc_memory_budget_bytes The --max-memory budget.\n"
         << "# TYPE evloc_memory_budget_bytes gauge\nevloc_memory_budget_bytes " << memory_.limit()
-        << "\n";
+        << "\n"
+        << TileCacheMetricsText(registry_.tile_cache().stats());
     return text.str();
   }
 

@@ -28,6 +28,9 @@ namespace evloc::service {
 
 class MetricsHttpServer;
 
+// The Prometheus text of the sites' tile cache counters (evloc_tile_*; docs/api.md, "Metrics").
+std::string TileCacheMetricsText(const TileCacheStats& stats);
+
 // Options of the server; every field is a flag of `evloc-localizer serve`.
 struct LocalizerServerOptions {
   // Folder with one subdirectory per map (NAME/map.evmap) (--maps).
@@ -75,9 +78,14 @@ struct LocalizerServerOptions {
   // Serve on a non-loopback address without TLS or without authentication (tokens or client
   // certificates). False: such a configuration is refused by Check() (--insecure).
   bool insecure = false;
-  // Budget of the loaded-map cache, bytes; least recently used maps beyond it are dropped
-  // (--max-map-memory, in MiB).
+  // Budget of the loaded maps and of the sites' loaded tiles, bytes (--map-memory SIZE, or
+  // --max-map-memory in MiB): least recently used maps beyond it are dropped (sessions keep
+  // theirs), and so are tiles no session uses; whole maps and tiles are two caches, each bounded
+  // by it.
   uint64_t max_map_memory_bytes = MapRegistryOptions{}.max_map_memory_bytes;
+  // Background threads that load the sites' tiles and compose them for sessions
+  // (--tile-loader-threads); never the tracking workers.
+  int tile_loader_threads = 1;
   // Largest camera a session may declare, width * height pixels (--max-camera-pixels).
   int64_t max_camera_pixels = SessionLimits{}.max_camera_pixels;
   // Most a packet's end (or a PoseHint) may lie after the session time, seconds
@@ -149,6 +157,8 @@ struct LocalizerServerOptions {
   ListenSecurity listen_security() const;
   // What every session is checked against (tracker defaults, camera size).
   SessionLimits session_limits() const;
+  // The map registry's options (maps folder, budgets, tile loader threads).
+  MapRegistryOptions registry_options() const;
   // The effective configuration, one "key: value" line per option.
   std::string Describe() const;
 };

@@ -165,6 +165,12 @@ grpc::Status LocateInLoadedMap(const api::LocateRequest& request, const LoadedMa
   try {
     const Camera camera = CheckedLocateCamera(request, max_camera_pixels);
     const cv::Mat gray = LocateImageFromProto(request, camera);
+    if (map.site) {
+      return {grpc::StatusCode::FAILED_PRECONDITION,
+              "map '" + map.name +
+                  "' is a site of tiles: Locate does not search sites yet; locate in the whole "
+                  "map it was tiled from"};
+    }
     if (!map.map.relocalization) {
       return {grpc::StatusCode::FAILED_PRECONDITION,
               "map '" + map.name + "': " + relocalization::kNoRelocalizationDataMessage};

@@ -7,6 +7,7 @@
 #include <system_error>
 
 #include "maps/map_directory.h"
+#include "maps/site.h"
 
 namespace evloc::service {
 
@@ -23,11 +24,6 @@ namespace {
 bool IsValidMapName(const std::string& name) {
   if (name.empty() || name.front() == '.') return false;
   return name.find('/') == std::string::npos && name.find('\\') == std::string::npos;
-}
-
-template <typename T>
-uint64_t VectorBytes(const std::vector<T>& values) {
-  return values.capacity() * sizeof(T);
 }
 
 // Runs `read` (which reads map `name`), letting evloc Errors through and turning anything else
@@ -76,29 +72,6 @@ std::string MapVersionString(uint32_t content_crc32c) {
   return text;
 }
 
-uint64_t MapMemoryBytes(const Map& map) {
-  uint64_t bytes = sizeof(Map) + VectorBytes(map.positions) + VectorBytes(map.gradients) +
-                   VectorBytes(map.inverse_depth_sigma) + VectorBytes(map.gradient_magnitude) +
-                   VectorBytes(map.source_keyframe) + VectorBytes(map.cameras);
-  for (const Keyframe& keyframe : map.keyframes) {
-    bytes +=
-        sizeof(Keyframe) + keyframe.image_name.capacity() + VectorBytes(keyframe.visible_points);
-  }
-  if (map.relocalization) {
-    bytes +=
-        VectorBytes(map.relocalization->landmarks) + VectorBytes(map.relocalization->vocabulary);
-    for (const KeyframeFeatures& features : map.relocalization->keyframes) {
-      bytes += sizeof(KeyframeFeatures) + VectorBytes(features.keypoints) +
-               VectorBytes(features.descriptors) + VectorBytes(features.landmarks) +
-               VectorBytes(features.global_descriptor);
-    }
-  }
-  // The visibility index: one point index per point (voxel order or per source keyframe), one
-  // voxel record at most per point, and a centre and an axis per keyframe.
-  bytes += map.size() * (sizeof(uint32_t) + 32) + map.keyframes.size() * 48;
-  return bytes;
-}
-
 void MapRegistryOptions::Check() const {
   if (maps_dir.empty()) throw InvalidArgumentError("map registry: the map folder is not set");
   std::error_code error;
@@ -107,15 +80,30 @@ void MapRegistryOptions::Check() const {
                                "' is not a directory (give a folder with one subdirectory per "
                                "map, each holding map.evmap)");
   }
-  if (max_map_memory_bytes == 0) {
+  if (max_map_memory_bytes == 0 || max_tile_memory_bytes == 0) {
     throw InvalidArgumentError(
         "map registry: the map memory budget is 0 bytes; give at least the size of one map");
   }
+  if (tile_loader_threads < 1 || tile_loader_threads > 64) {
+    throw InvalidArgumentError("map registry: the tile loader threads must be in 1..64");
+  }
 }
 
-MapRegistry::MapRegistry(MapRegistryOptions options) : options_(std::move(options)) {
-  options_.Check();
+namespace {
+
+TileCacheOptions TileCacheOptionsOf(const MapRegistryOptions& options) {
+  options.Check();
+  TileCacheOptions tiles;
+  tiles.memory_budget_bytes = options.max_tile_memory_bytes;
+  tiles.loader_threads = options.tile_loader_threads;
+  return tiles;
 }
+
+}  // namespace
+
+MapRegistry::MapRegistry(MapRegistryOptions options)
+    : options_(std::move(options)),
+      tiles_(std::make_shared<TileCache>(TileCacheOptionsOf(options_))) {}
 
 std::vector<std::string> MapRegistry::ListNames() const {
   std::vector<std::string> names;
@@ -125,7 +113,8 @@ std::vector<std::string> MapRegistry::ListNames() const {
     const std::string name = it->path().filename().string();
     if (!IsValidMapName(name)) continue;
     std::error_code file_error;
-    if (std::filesystem::is_regular_file(it->path() / kMapFileName, file_error)) {
+    if (std::filesystem::is_regular_file(it->path() / kMapFileName, file_error) ||
+        IsSiteDirectory(it->path())) {
       names.push_back(name);
     }
   }
@@ -134,9 +123,11 @@ std::vector<std::string> MapRegistry::ListNames() const {
 }
 
 std::optional<MapRegistry::FileStamp> MapRegistry::Stamp(const std::string& name) const {
-  const std::filesystem::path file = options_.maps_dir / name / kMapFileName;
-  std::error_code error;
   FileStamp stamp;
+  stamp.site = IsSiteDirectory(options_.maps_dir / name);
+  const std::filesystem::path file =
+      options_.maps_dir / name / (stamp.site ? kSiteManifestFileName : kMapFileName);
+  std::error_code error;
   stamp.bytes = std::filesystem::file_size(file, error);
   if (error) return std::nullopt;
   stamp.time = std::filesystem::last_write_time(file, error);
@@ -149,12 +140,22 @@ std::shared_ptr<const LoadedMap> MapRegistry::LoadVersion(const std::string& nam
   return WithTypedErrors(name, [&] {
     auto loaded = std::make_shared<LoadedMap>();
     loaded->name = name;
+    loaded->file_bytes = stamp.bytes;
+    loaded->file_time = stamp.time;
+    if (stamp.site) {
+      loaded->site = OpenSite(options_.maps_dir / name);
+      loaded->tiles = tiles_;
+      loaded->info = SummarizeSite(loaded->site->manifest);
+      loaded->content_crc32c = loaded->info.content_crc32c;
+      loaded->version = loaded->site->manifest.version;
+      // The manifest; the tiles count against the tile cache's budget.
+      loaded->memory_bytes = sizeof(Site) + loaded->site->manifest.tiles.size() * sizeof(SiteTile);
+      return std::shared_ptr<const LoadedMap>(std::move(loaded));
+    }
     loaded->map = LoadMap(options_.maps_dir / name / kMapFileName);
     loaded->info = SummarizeMap(loaded->map);
     loaded->content_crc32c = loaded->info.content_crc32c;
     loaded->version = MapVersionString(loaded->content_crc32c);
-    loaded->file_bytes = stamp.bytes;
-    loaded->file_time = stamp.time;
     loaded->visibility = std::make_unique<VisibilityIndex>(loaded->map);
     loaded->memory_bytes = MapMemoryBytes(loaded->map);
     return std::shared_ptr<const LoadedMap>(std::move(loaded));
@@ -285,9 +286,17 @@ MapDescriptionData MapRegistry::Describe(const std::string& name) {
   }
   MapDescriptionData description;
   description.name = name;
-  description.summary = WithTypedErrors(
-      name, [&] { return ReadMapFileSummary(options_.maps_dir / name / kMapFileName); });
-  description.version = MapVersionString(description.summary.info.content_crc32c);
+  if (stamp->site) {
+    const SiteManifest manifest =
+        WithTypedErrors(name, [&] { return ReadSiteManifest(options_.maps_dir / name); });
+    description.summary.info = SummarizeSite(manifest);
+    description.summary.file_bytes = stamp->bytes;
+    description.version = manifest.version;
+  } else {
+    description.summary = WithTypedErrors(
+        name, [&] { return ReadMapFileSummary(options_.maps_dir / name / kMapFileName); });
+    description.version = MapVersionString(description.summary.info.content_crc32c);
+  }
   std::lock_guard<std::mutex> lock(mutex_);
   Entry& entry = entries_[name];
   entry.description = description;

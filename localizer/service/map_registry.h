@@ -1,7 +1,9 @@
 // The maps a localizer serves: one per subdirectory of a map folder (`DIR/NAME/map.evmap`, the
-// name being the directory name). Maps are loaded on first use and shared read-only with every
-// session; a new file dropped into the folder (atomically, as WriteMapDirectory does) is picked
-// up by the next session while running sessions keep the version they started with.
+// name being the directory name), and the sites served as tiles (`DIR/NAME/site.manifest`,
+// maps/site.h): a site is "loaded" as its manifest, and its tiles come from the registry's
+// server-wide TileCache as sessions need them. Maps are loaded on first use and shared read-only
+// with every session; a new file dropped into the folder (atomically, as WriteMapDirectory does) is
+// picked up by the next session while running sessions keep the version they started with.
 //
 // Bounded: the loaded maps are an LRU cache with a byte budget (max_map_memory_bytes); a map
 // dropped from the cache stays alive as long as a session holds it (shared_ptr). Concurrent: the
@@ -23,6 +25,7 @@
 
 #include "core/common/error.h"
 #include "maps/map.h"
+#include "maps/tile_cache.h"
 #include "maps/visibility.h"
 
 namespace evloc::service {
@@ -57,8 +60,12 @@ struct LoadedMap {
   Map map;
   // Summary (counts, bounding box).
   MapInfo info;
-  // Visibility index built on `map`.
+  // Visibility index built on `map` (null for a site).
   std::unique_ptr<VisibilityIndex> visibility;
+  // For a site: the site (its manifest) and the tile cache its sessions take tiles from; `map`
+  // is then empty and `file_bytes`, `file_time` are the manifest's.
+  std::shared_ptr<const Site> site;
+  std::shared_ptr<TileCache> tiles;
   // Estimated memory of the map and its index, bytes (what counts against the cache budget).
   uint64_t memory_bytes = 0;
 };
@@ -85,13 +92,15 @@ struct MapRegistryOptions {
   // recently used maps are dropped from the cache (sessions keep theirs). The most recently
   // used map always stays, even when it alone is larger.
   uint64_t max_map_memory_bytes = uint64_t{1} << 30;
+  // The budget of the sites' tile cache, bytes (its own LRU of unused tiles).
+  uint64_t max_tile_memory_bytes = uint64_t{1} << 30;
+  // Background threads of the tile cache (loads and compositions of the sites' tiles).
+  int tile_loader_threads = 1;
 
-  // Throws InvalidArgumentError when maps_dir is empty or not a directory, or the budget is 0.
+  // Throws InvalidArgumentError when maps_dir is empty or not a directory, a budget is 0, or the
+  // loader threads are not in 1..64.
   void Check() const;
 };
-
-// Estimated memory of `map` with a visibility index, bytes: its arrays plus the index's.
-uint64_t MapMemoryBytes(const Map& map);
 
 // Thread-safe registry of the maps in a folder.
 class MapRegistry {
@@ -99,7 +108,8 @@ class MapRegistry {
   // Throws InvalidArgumentError when the options are invalid. Loads nothing yet.
   explicit MapRegistry(MapRegistryOptions options);
 
-  // Names of the maps in the folder (subdirectories holding map.evmap), sorted.
+  // Names of the maps and sites in the folder (subdirectories holding map.evmap or
+  // site.manifest), sorted.
   std::vector<std::string> ListNames() const;
 
   // The current version of map `name`: loaded on first use, and reloaded when map.evmap changed
@@ -125,14 +135,18 @@ class MapRegistry {
   uint64_t cached_bytes() const;
   // Number of maps in the cache.
   size_t cached_maps() const;
+  // The sites' tile cache (its counters for the metrics).
+  const TileCache& tile_cache() const { return *tiles_; }
 
  private:
   // Size and modification time of a map file: a file version.
   struct FileStamp {
     uint64_t bytes = 0;
     std::filesystem::file_time_type time;
+    // The file is a site manifest (else a map.evmap).
+    bool site = false;
     bool operator==(const FileStamp& other) const {
-      return bytes == other.bytes && time == other.time;
+      return bytes == other.bytes && time == other.time && site == other.site;
     }
   };
   // One load of one file version; the first requester loads, the others wait on `done`.
@@ -151,7 +165,7 @@ class MapRegistry {
     FileStamp described;
   };
 
-  // The file version of `name`'s map.evmap; nullopt when it does not exist.
+  // The file version of `name`'s site.manifest or else map.evmap; nullopt when neither exists.
   std::optional<FileStamp> Stamp(const std::string& name) const;
   // Loads `name` at `stamp`, converting every exception to an evloc Error.
   std::shared_ptr<const LoadedMap> LoadVersion(const std::string& name,
@@ -160,6 +174,7 @@ class MapRegistry {
   void InsertLocked(Entry& entry, std::shared_ptr<const LoadedMap> map);
 
   MapRegistryOptions options_;
+  std::shared_ptr<TileCache> tiles_;
   mutable std::mutex mutex_;
   std::map<std::string, Entry> entries_;
   // Names of the cached maps, most recently used first.

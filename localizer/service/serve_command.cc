@@ -26,8 +26,12 @@ Options:
   --idle-timeout SECONDS     cancel a session that sends nothing this long (default 30)
   --queue-packets N          packets a session may have waiting (default 256)
   --backpressure-fraction F  queue fill that triggers a Backpressure notice (default 0.5)
-  --max-map-memory MIB       memory budget of the loaded maps; least recently used maps beyond
-                             it are unloaded, sessions keep theirs (default 1024)
+  --map-memory SIZE          memory budget of the loaded maps and, separately, of the loaded
+                             tiles of sites, bytes with a K/M/G/T suffix (e.g. 2G); least
+                             recently used maps beyond it are unloaded (sessions keep theirs),
+                             and so are tiles no session uses (default 1G)
+  --max-map-memory MIB       the same in MiB (default 1024)
+  --tile-loader-threads N    background threads loading and composing sites' tiles (default 1)
   --max-camera-pixels N      largest camera a session may declare, width * height (default
                              4194304; a session's memory grows with it)
   --max-packet-span SECONDS  most a packet's end_t_ns (or a pose hint) may lie after the session
@@ -127,6 +131,13 @@ ServeCommand ParseServeCommandLine(const std::vector<std::string>& arguments) {
         throw InvalidArgumentError("--max-map-memory must be 1 .. 2^40 MiB, got " + value);
       }
       server.max_map_memory_bytes = static_cast<uint64_t>(mib) << 20;
+    } else if (flag == "--map-memory") {
+      server.max_map_memory_bytes = ParseByteSizeFlag(flag, value);
+      if (server.max_map_memory_bytes == 0) {
+        throw InvalidArgumentError("--map-memory must be more than 0 bytes, got " + value);
+      }
+    } else if (flag == "--tile-loader-threads") {
+      server.tile_loader_threads = ParseIntFlag(flag, value);
     } else if (flag == "--max-camera-pixels") {
       server.max_camera_pixels = ParseIntegerFlag(flag, value);
     } else if (flag == "--max-packet-span") {

@@ -448,11 +448,32 @@ void RequestValidator::CheckSteps(int64_t end_t_ns) const {
   }
 }
 
+namespace {
+
+// The source a session tracks against: its map with its visibility index, or a site's tiles.
+std::unique_ptr<tracking::MapSource> SessionMapSource(const LoadedMap& map,
+                                                      const SessionSettings& settings) {
+  if (!map.site) return std::make_unique<tracking::StaticMapSource>(map.map, map.visibility.get());
+  if (!settings.initial_world_from_cam) {
+    throw InvalidArgumentError("map '" + map.name +
+                               "' is a site of tiles: a session on it needs "
+                               "SessionStart.initial_world_from_cam (find one with Locate on a "
+                               "whole map)");
+  }
+  auto tiled = std::make_unique<tracking::TiledMapSource>(map.site, map.tiles);
+  tiled->LoadNow(*settings.initial_world_from_cam);
+  return tiled;
+}
+
+}  // namespace
+
 SessionTracker::SessionTracker(std::shared_ptr<const LoadedMap> map,
                                const SessionSettings& settings)
     : map_(std::move(map)),
       settings_(settings),
-      tracker_(map_->map, map_->visibility.get(), settings.camera, settings.tracker),
+      source_(SessionMapSource(*map_, settings)),
+      tiled_(dynamic_cast<tracking::TiledMapSource*>(source_.get())),
+      tracker_(*source_, settings.camera, settings.tracker),
       takes_frames_(settings.tracker.input == tracking::TrackerInput::kFrames),
       advanced_t_ns_(settings.initial_t_ns) {
   if (takes_frames_) StartTracker();
@@ -492,6 +513,7 @@ std::vector<tracking::PoseEstimate> SessionTracker::Process(const SessionItem& i
       }
       advanced_t_ns_ = std::max(advanced_t_ns_, item.t_ns);
       if (item.t_ns <= settings_.initial_t_ns) return estimates;
+      if (tiled_ != nullptr) tiled_->Follow(tracker_);
       if (auto estimate = tracker_.AddFrame(item.t_ns, item.gray)) {
         estimates.push_back(std::move(*estimate));
       }
@@ -554,6 +576,9 @@ void SessionTracker::TrackInPeriods(const EventBuffer& events, int64_t end_t_ns,
       stopped_ = true;
       return;
     }
+    // A site's tiles follow the pose between periods (never loading here: the cache's loader
+    // threads load and compose, the next period after that sees the new tiles).
+    if (tiled_ != nullptr) tiled_->Follow(tracker_);
     // |times| <= 2^62 and period_ns <= 1e9: no overflow.
     const int64_t slice_end = end_t_ns - bound <= period_ns ? end_t_ns : bound + period_ns;
     size_t stop_index = next;

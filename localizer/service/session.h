@@ -22,6 +22,7 @@
 #include "core/geometry/rigid3.h"
 #include "evloc/localizer.pb.h"
 #include "localizer/service/map_registry.h"
+#include "localizer/tracking/tiled_map_source.h"
 #include "localizer/tracking/tracker.h"
 
 namespace evloc::service {
@@ -229,8 +230,11 @@ class RequestValidator {
 // TrackEventStream does, so both give the same poses). Not thread-safe.
 class SessionTracker {
  public:
-  // Keeps `map` alive for the session. Throws InvalidArgumentError when the tracker rejects the
-  // camera or the options.
+  // Keeps `map` alive for the session. For a site, the tiles needed at the initial pose are
+  // loaded here (the only tile loads a session waits for; later ones run on the tile cache's
+  // loader threads) and the tiles follow the tracker between step periods. Throws
+  // InvalidArgumentError when the tracker rejects the camera or the options, or a site session
+  // has no initial pose; IoError or ParseError when a tile needed at the start cannot be loaded.
   SessionTracker(std::shared_ptr<const LoadedMap> map, const SessionSettings& settings);
 
   // Asked between steps whether to stop (cancellation, shutdown, CPU budget): true makes Process
@@ -267,6 +271,10 @@ class SessionTracker {
 
   std::shared_ptr<const LoadedMap> map_;
   SessionSettings settings_;
+  // What the tracker reads the map through: the whole map, or a site's tiles near the pose
+  // (`tiled_`, the same object, followed between step periods).
+  std::unique_ptr<tracking::MapSource> source_;
+  tracking::TiledMapSource* tiled_ = nullptr;
   tracking::Tracker tracker_;
   bool takes_frames_ = false;
   bool started_ = false;

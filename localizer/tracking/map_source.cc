@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <numeric>
+#include <utility>
 
 #include "core/common/error.h"
 
@@ -30,14 +31,11 @@ void MapSource::CandidateViewpoints(const ViewpointQuery& /*query*/,
   world_from_cams->clear();
 }
 
-void StaticMapSource::CandidateViewpoints(const ViewpointQuery& query,
-                                          std::vector<Rigid3d>* world_from_cams) const {
+void ViewpointsAlongKeyframes(std::vector<std::pair<int64_t, Rigid3d>> keyframes,
+                              const ViewpointQuery& query, std::vector<Rigid3d>* world_from_cams) {
   world_from_cams->clear();
-  std::vector<size_t> order(map_.keyframes.size());
-  std::iota(order.begin(), order.end(), size_t{0});
-  std::stable_sort(order.begin(), order.end(), [this](size_t a, size_t b) {
-    return map_.keyframes[a].t_ns < map_.keyframes[b].t_ns;
-  });
+  std::stable_sort(keyframes.begin(), keyframes.end(),
+                   [](const auto& a, const auto& b) { return a.first < b.first; });
   const auto add = [&](const Rigid3d& world_from_cam) {
     if (query.search_center &&
         (world_from_cam.translation - *query.search_center).norm() > query.search_radius_m) {
@@ -45,16 +43,26 @@ void StaticMapSource::CandidateViewpoints(const ViewpointQuery& query,
     }
     world_from_cams->push_back(world_from_cam);
   };
-  for (size_t k = 0; k < order.size(); ++k) {
-    const Rigid3d world_from_cam = map_.keyframes[order[k]].cam_from_world.Inverse();
+  for (size_t k = 0; k < keyframes.size(); ++k) {
+    const Rigid3d& world_from_cam = keyframes[k].second;
     add(world_from_cam);
-    if (k + 1 == order.size()) break;
-    const Rigid3d next = map_.keyframes[order[k + 1]].cam_from_world.Inverse();
+    if (k + 1 == keyframes.size()) break;
+    const Rigid3d& next = keyframes[k + 1].second;
     const int samples = std::max(0, query.samples_between_keyframes);
     for (int s = 1; s <= samples; ++s) {
       add(Interpolate(world_from_cam, next, static_cast<double>(s) / (samples + 1)));
     }
   }
+}
+
+void StaticMapSource::CandidateViewpoints(const ViewpointQuery& query,
+                                          std::vector<Rigid3d>* world_from_cams) const {
+  std::vector<std::pair<int64_t, Rigid3d>> keyframes;
+  keyframes.reserve(map_.keyframes.size());
+  for (const Keyframe& keyframe : map_.keyframes) {
+    keyframes.emplace_back(keyframe.t_ns, keyframe.cam_from_world.Inverse());
+  }
+  ViewpointsAlongKeyframes(std::move(keyframes), query, world_from_cams);
 }
 
 }  // namespace evloc::tracking

@@ -11,6 +11,7 @@
 #include <cstdint>
 #include <optional>
 #include <span>
+#include <utility>
 #include <vector>
 
 #include "core/camera/camera.h"
@@ -72,6 +73,12 @@ class MapSource {
   virtual void CandidateViewpoints(const ViewpointQuery& query,
                                    std::vector<Rigid3d>* world_from_cams) const;
 };
+
+// The viewpoints of a global search over keyframes given as (time, world_from_cam): each keyframe
+// and query.samples_between_keyframes poses interpolated between consecutive ones in time order
+// (equal times keep their order), those outside the query's search region dropped.
+void ViewpointsAlongKeyframes(std::vector<std::pair<int64_t, Rigid3d>> keyframes,
+                              const ViewpointQuery& query, std::vector<Rigid3d>* world_from_cams);
 
 // A fixed Map, with an optional VisibilityIndex built on it: generation 0 forever. Without an
 // index every point is a candidate.

@@ -111,12 +111,13 @@ api::TrackRequest BadPacket(const api::TrackRequest& packet, int width) {
 }
 
 SessionOutcome RunSession(api::Localizer::Stub& stub, const Workload& workload,
-                          const LoadOptions& options, Ending ending, size_t cut) {
+                          const api::TrackRequest& start, const LoadOptions& options, Ending ending,
+                          size_t cut) {
   SessionOutcome outcome;
   grpc::ClientContext context;
   auto stream = stub.Track(&context);
   api::TrackResponse response;
-  if (!stream->Write(workload.start) || !stream->Read(&response) || !response.has_started()) {
+  if (!stream->Write(start) || !stream->Read(&response) || !response.has_started()) {
     outcome.status = stream->Finish();
     return outcome;
   }
@@ -220,12 +221,14 @@ nlohmann::json ResultJson(const LoadOptions& options, const LoadResult& result) 
   json["poses"] = result.poses;
   json["backpressure_notices"] = result.backpressure_notices;
   json["server_latency_us"] = {{"p50", result.server_latency_p50_us},
+                               {"p95", result.server_latency_p95_us},
                                {"p99", result.server_latency_p99_us},
                                {"max", result.server_latency_max_us}};
   json["client_latency_us"] = {{"p50", result.client_latency_p50_us},
                                {"p99", result.client_latency_p99_us},
                                {"max", result.client_latency_max_us}};
-  json["step_ms"] = {{"p50", result.step_p50_ms}, {"p99", result.step_p99_ms}};
+  json["step_ms"] = {
+      {"p50", result.step_p50_ms}, {"p95", result.step_p95_ms}, {"p99", result.step_p99_ms}};
   json["wall_s"] = result.wall_s;
   return json;
 }
@@ -271,6 +274,7 @@ LoadResult RunLoad(const LoadOptions& options, std::ostream& log) {
   const auto deadline = wall_start + std::chrono::duration_cast<Clock::duration>(
                                          std::chrono::duration<double>(options.duration_s));
   std::vector<std::thread> slots;
+  int64_t spread_next = 0;
   for (int slot = 0; slot < options.sessions; ++slot) {
     slots.emplace_back([&, slot] {
       auto stub = api::Localizer::NewStub(
@@ -285,8 +289,23 @@ LoadResult RunLoad(const LoadOptions& options, std::ostream& log) {
                               : draw < options.cancel_fraction + options.bad_fraction
                                   ? Ending::kBadPacket
                                   : Ending::kNormal;
+        api::TrackRequest start = workload.start;
+        if (options.spread_columns > 0) {
+          int64_t k = 0;
+          {
+            std::lock_guard<std::mutex> lock(mutex);
+            k = spread_next++;
+          }
+          auto* translation =
+              start.mutable_start()->mutable_initial_world_from_cam()->mutable_translation();
+          translation->set_x(translation->x() + static_cast<double>(k % options.spread_columns) *
+                                                    options.spread_pitch_m);
+          translation->set_y(translation->y() + static_cast<double>((k / options.spread_columns) %
+                                                                    options.spread_rows) *
+                                                    options.spread_pitch_m);
+        }
         const SessionOutcome outcome =
-            RunSession(*stub, workload, options, ending, packet_index(random));
+            RunSession(*stub, workload, start, options, ending, packet_index(random));
         std::lock_guard<std::mutex> lock(mutex);
         ++result.sessions;
         result.normal_sessions += ending == Ending::kNormal;
@@ -315,12 +334,14 @@ LoadResult RunLoad(const LoadOptions& options, std::ostream& log) {
   for (std::thread& slot : slots) slot.join();
   result.wall_s = std::chrono::duration<double>(Clock::now() - wall_start).count();
   result.server_latency_p50_us = Percentile(server_latency_us, 0.5);
+  result.server_latency_p95_us = Percentile(server_latency_us, 0.95);
   result.server_latency_p99_us = Percentile(server_latency_us, 0.99);
   result.server_latency_max_us = Percentile(server_latency_us, 1.0);
   result.client_latency_p50_us = Percentile(client_latency_us, 0.5);
   result.client_latency_p99_us = Percentile(client_latency_us, 0.99);
   result.client_latency_max_us = Percentile(client_latency_us, 1.0);
   result.step_p50_ms = Percentile(step_ms, 0.5);
+  result.step_p95_ms = Percentile(step_ms, 0.95);
   result.step_p99_ms = Percentile(step_ms, 0.99);
 
   log << "evloc-load: " << result.sessions << " sessions (" << result.normal_sessions << " normal, "
@@ -364,6 +385,9 @@ Options:
   --cancel-fraction F    fraction of sessions the client cancels at a random packet (default 0)
   --bad-fraction F       fraction of sessions that send an event outside the sensor at a random
                          packet, expecting INVALID_ARGUMENT (default 0)
+  --spread CxR:P          the k-th session starts at its pose moved by ((k mod C) * P,
+                         ((k / C) mod R) * P, 0) metres: sessions spread over a site made of
+                         copies of the dataset's scene (docs/benchmarks.md, "Sites")
   --seed N               seed of those random choices (default 1)
   --report PATH          write the figures as JSON
   --help                 print this help
@@ -405,6 +429,18 @@ LoadOptions ParseLoadCommandLine(const std::vector<std::string>& arguments, bool
       options.cancel_fraction = ParseDoubleFlag(flag, value);
     } else if (flag == "--bad-fraction") {
       options.bad_fraction = ParseDoubleFlag(flag, value);
+    } else if (flag == "--spread") {
+      const size_t x = value.find('x');
+      const size_t colon = value.find(':');
+      if (x == std::string::npos || colon == std::string::npos || colon < x) {
+        throw InvalidArgumentError("--spread expects COLUMNSxROWS:PITCH, e.g. 8x8:5");
+      }
+      options.spread_columns = ParseIntFlag(flag, value.substr(0, x));
+      options.spread_rows = ParseIntFlag(flag, value.substr(x + 1, colon - x - 1));
+      options.spread_pitch_m = ParseDoubleFlag(flag, value.substr(colon + 1));
+      if (options.spread_columns < 1 || options.spread_rows < 1 || !(options.spread_pitch_m > 0)) {
+        throw InvalidArgumentError("--spread needs positive columns, rows and pitch");
+      }
     } else if (flag == "--seed") {
       options.seed = static_cast<uint32_t>(ParseIntegerFlag(flag, value));
     } else if (flag == "--report") {

@@ -43,6 +43,13 @@ struct LoadOptions {
   // Fraction of sessions that send an event outside the sensor at a random packet and expect
   // INVALID_ARGUMENT (--bad-fraction).
   double bad_fraction = 0;
+  // Spread the sessions over a grid of copies of the dataset's scene (a site made of copies,
+  // docs/benchmarks.md "Sites"): the k-th session opened (over all slots) starts at its initial
+  // pose moved by ((k mod columns) * pitch, ((k / columns) mod rows) * pitch, 0) metres
+  // (--spread COLUMNSxROWS:PITCH); 0 columns: every session at the dataset's pose.
+  int spread_columns = 0;
+  int spread_rows = 0;
+  double spread_pitch_m = 0;
   // Seed of the random choices (--seed).
   uint32_t seed = 1;
   // Write the result as JSON here (--report).
@@ -80,6 +87,7 @@ struct LoadResult {
   // Server-side latency (PoseUpdate.latency_us): median, 99th percentile, maximum, microseconds.
   double server_latency_p50_us = 0;
   // 99th percentile.
+  double server_latency_p95_us = 0;
   double server_latency_p99_us = 0;
   // Maximum.
   double server_latency_max_us = 0;
@@ -93,6 +101,7 @@ struct LoadResult {
   // Median and 99th percentile of the server's step time, milliseconds.
   double step_p50_ms = 0;
   // 99th percentile.
+  double step_p95_ms = 0;
   double step_p99_ms = 0;
   // Wall time of the run, seconds.
   double wall_s = 0;
