@@ -8,6 +8,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "core/camera/calibration_file.h"
 #include "core/common/error.h"
 #include "core/common/file_util.h"
 #include "core/dataset/aedat4_dataset.h"
@@ -203,7 +204,8 @@ const char kRecordingFlagsUsage[] =
     "  --camera-info-topic T  bag topic of the calibration (default /dvs/camera_info)\n"
     "  --groundtruth-topic T  bag topic of the ground-truth PoseStamped (default "
     "/optitrack/davis)\n"
-    "  --calib FILE           AEDAT4: the camera (evloc YAML, or ECD calib.txt); required\n"
+    "  --calib FILE[#CAM]     AEDAT4: the camera, any format of docs/camera.md (evloc YAML,\n"
+    "                         Kalibr, ROS camera_info, OpenCV, COLMAP, ECD calib.txt); required\n"
     "  --groundtruth FILE     AEDAT4: ground truth world_from_cam, TUM (optional)\n";
 
 void DatasetReaderOptions::Check() const {
@@ -294,7 +296,7 @@ Dataset ReadDataset(const fs::path& root, const DatasetReaderOptions& options) {
   Dataset dataset;
   dataset.root = root;
   if (fs::exists(root / dataset_files::kCalibYaml)) {
-    dataset.camera = ReadCameraYaml(root / dataset_files::kCalibYaml);
+    dataset.camera = ReadCalibrationFile(root / dataset_files::kCalibYaml, 0, 0);
   } else if (fs::exists(root / dataset_files::kCalibTxt)) {
     dataset.camera =
         ReadEcdCalibration(root / dataset_files::kCalibTxt, options.ecd_width, options.ecd_height);
