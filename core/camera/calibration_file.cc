@@ -6,7 +6,6 @@
 
 #include <cmath>
 #include <cstdint>
-#include <regex>
 #include <set>
 #include <sstream>
 
@@ -25,6 +24,8 @@ using camera_text::ToLower;
 // A rotation block of a Kalibr extrinsic may differ from a rotation by this much (Kalibr writes
 // about 8 significant digits; a wrong matrix differs by far more).
 constexpr double kRotationTolerance = 1e-6;
+// Largest side of a matrix read from an OpenCV file (a camera matrix is 3x3, distortion 14x1).
+constexpr int kMaxMatrixSide = 16;
 // Formats documented in the error of an undetected file.
 constexpr char kKnownFormats[] =
     "expected one of: an evloc camera YAML (model, width, height, intrinsics, distortion), a "
@@ -104,6 +105,15 @@ YAML::Node LoadYamlMap(const std::string& text, const std::string& source) {
   return root;
 }
 
+// Calibration files are text: a NUL byte means a binary or damaged file. (OpenCV 4.6's XML parser
+// dereferences a null pointer on some inputs with NUL bytes: found by the fuzzer.)
+void CheckNoNulByte(const std::string& text, const std::string& source) {
+  const size_t nul = text.find('\0');
+  if (nul != std::string::npos) {
+    throw ParseError::AtByte(source, nul, "a NUL byte: a calibration file is text");
+  }
+}
+
 // Checks a camera built by a reader; a failure becomes a ParseError at `line`.
 void CheckCamera(const Camera& camera, const std::string& source, int line,
                  const std::string& context) {
@@ -117,6 +127,13 @@ void CheckCamera(const Camera& camera, const std::string& source, int line,
 bool IsInteger(const std::string& token) {
   if (token.empty() || token.size() > 10) return false;
   return std::all_of(token.begin(), token.end(), [](unsigned char c) { return std::isdigit(c); });
+}
+
+// The index N of a Kalibr camera key "camN" (1 to 4 digits); -1 for any other key.
+int KalibrCameraIndex(const std::string& key) {
+  if (key.size() < 4 || key.size() > 7 || key.compare(0, 3, "cam") != 0) return -1;
+  if (!IsInteger(key.substr(3))) return -1;
+  return std::stoi(key.substr(3));
 }
 
 bool IsColmapModelName(const std::string& token) {
@@ -389,8 +406,9 @@ Calibration ParseDetected(CalibrationFormat format, const std::string& text,
                                  "no camera line 'CAMERA_ID MODEL WIDTH HEIGHT PARAMS[]'");
       }
       std::string ids;
-      for (const auto& [id, camera] : cameras)
-        ids += (ids.empty() ? "" : ", ") + std::to_string(id);
+      for (const auto& entry : cameras) {
+        ids += (ids.empty() ? "" : ", ") + std::to_string(entry.first);
+      }
       uint32_t wanted = cameras.begin()->first;
       if (!selector.empty()) {
         const uint64_t id = IsInteger(selector) ? std::stoull(selector) : 0;
@@ -453,6 +471,7 @@ std::string CalibrationFormatName(CalibrationFormat format) {
 }
 
 CalibrationFormat DetectCalibrationFormat(const std::string& text, const std::string& source) {
+  CheckNoNulByte(text, source);
   size_t start = text.compare(0, 3, "\xEF\xBB\xBF") == 0 ? 3 : 0;
   start = text.find_first_not_of(" \t\r\n", start);
   if (start == std::string::npos) {
@@ -490,11 +509,10 @@ CalibrationFormat DetectCalibrationFormat(const std::string& text, const std::st
   }
   const YAML::Node& root = loaded;
   if (root.IsMap()) {
-    static const std::regex kKalibrCamera("cam[0-9]+");
     bool has_evloc_key = false;
     for (const auto& entry : root) {
       const std::string key = entry.first.IsScalar() ? entry.first.Scalar() : std::string();
-      if (std::regex_match(key, kKalibrCamera) && entry.second.IsMap()) {
+      if (KalibrCameraIndex(key) >= 0 && entry.second.IsMap()) {
         return CalibrationFormat::kKalibrCamchain;
       }
       if (key == "model" || key == "intrinsics") has_evloc_key = true;
@@ -530,12 +548,10 @@ CameraRig ParseKalibrCamchain(const std::string& text, const std::string& source
   const YAML::Node root = LoadYamlMap(text, source);
   CameraRig rig;
   std::map<int, std::pair<std::string, YAML::Node>> by_index;
-  static const std::regex kCameraKey("cam([0-9]+)");
   for (const auto& entry : root) {
     const std::string key = entry.first.Scalar();
-    std::smatch match;
-    if (std::regex_match(key, match, kCameraKey) && match[1].length() <= 4) {
-      const int index = std::stoi(match[1]);
+    const int index = KalibrCameraIndex(key);
+    if (index >= 0) {
       if (by_index.count(index) != 0) {
         throw ParseError::AtLine(source, LineOf(entry.first),
                                  "camera '" + key + "' repeats '" + by_index[index].first + "'");
@@ -646,11 +662,11 @@ Camera ParseRosCameraInfo(const std::string& text, const std::string& source,
   return camera;
 }
 
-Camera ParseOpenCvCalibration(const std::string& text, const std::string& source, int width,
-                              int height, std::vector<std::string>* notes, bool* size_from_file) {
-  std::vector<std::string> ignored;
-  if (notes == nullptr) notes = &ignored;
-  if (size_from_file != nullptr) *size_from_file = true;
+namespace {
+
+// ParseOpenCvCalibration without the guard that turns OpenCV's exceptions into ParseErrors.
+Camera ReadOpenCvCalibration(const std::string& text, const std::string& source, int width,
+                             int height, std::vector<std::string>* notes, bool* size_from_file) {
   cv::FileStorage storage;
   try {
     if (!storage.open(text, cv::FileStorage::READ | cv::FileStorage::MEMORY) ||
@@ -661,6 +677,9 @@ Camera ParseOpenCvCalibration(const std::string& text, const std::string& source
     throw ParseError(source, "content", "cv::FileStorage cannot parse it: " + error.err);
   }
   const cv::FileNode root = storage.root();
+  if (!root.isMap()) {
+    throw ParseError(source, "root", "expected a map of named values at the top level");
+  }
   const auto find = [&](std::initializer_list<const char*> keys, std::string* found) {
     for (const char* key : keys) {
       const cv::FileNode node = root[key];
@@ -682,6 +701,25 @@ Camera ParseOpenCvCalibration(const std::string& text, const std::string& source
         node >> values;
         matrix = cv::Mat(values, true);
       } else {
+        // cv::FileNode >> cv::Mat trusts rows and cols (a garbled "cols" allocated gigabytes under
+        // the fuzzer): check the matrix node before OpenCV reads it.
+        if (!node.isMap() || !node["rows"].isInt() || !node["cols"].isInt() ||
+            !node["dt"].isString() || !node["data"].isSeq()) {
+          fail(key, "expected a matrix with rows, cols, dt and data (!!opencv-matrix)");
+        }
+        const int rows = node["rows"].operator int();
+        const int cols = node["cols"].operator int();
+        const std::string dt = node["dt"].string();
+        if (rows < 0 || cols < 0 || rows > kMaxMatrixSide || cols > kMaxMatrixSide ||
+            static_cast<size_t>(rows) * cols != node["data"].size()) {
+          fail(key, "rows x cols = " + std::to_string(rows) + " x " + std::to_string(cols) +
+                        " does not match the " + std::to_string(node["data"].size()) +
+                        " numbers of data (at most " + std::to_string(kMaxMatrixSide) + " x " +
+                        std::to_string(kMaxMatrixSide) + ")");
+        }
+        if (dt.size() != 1 || std::string("ucwsifd").find(dt[0]) == std::string::npos) {
+          fail(key, "dt '" + dt + "' is not a one-channel element type (d, f, i, ...)");
+        }
         node >> matrix;
       }
     } catch (const cv::Exception& error) {
@@ -765,6 +803,22 @@ Camera ParseOpenCvCalibration(const std::string& text, const std::string& source
     throw ParseError(source, "root", std::string("invalid camera: ") + error.what());
   }
   return camera;
+}
+
+}  // namespace
+
+Camera ParseOpenCvCalibration(const std::string& text, const std::string& source, int width,
+                              int height, std::vector<std::string>* notes, bool* size_from_file) {
+  std::vector<std::string> ignored;
+  if (notes == nullptr) notes = &ignored;
+  if (size_from_file != nullptr) *size_from_file = true;
+  CheckNoNulByte(text, source);
+  try {
+    return ReadOpenCvCalibration(text, source, width, height, notes, size_from_file);
+  } catch (const cv::Exception& error) {
+    // cv::FileNode asserts on unexpected node types (a sequence where a map is read, ...).
+    throw ParseError(source, "content", "cv::FileStorage cannot read it: " + error.err);
+  }
 }
 
 Calibration ParseCalibration(const std::string& text, const std::string& source,

@@ -441,6 +441,35 @@ TEST(OpenCvFileStorage, ASizeOnlyFromTheCallerAndRefusedCoefficients) {
       {"x.yml (OpenCV FileStorage YAML)", "no camera matrix"});
   ExpectError<ParseError>([&] { ParseCalibration("<opencv_storage><a>", "x.xml", "", 0, 0); },
                           {"x.xml (OpenCV FileStorage XML)", "cv::FileStorage cannot parse"});
+  // Found by evloc_calibration_fuzzer: a top-level sequence made cv::FileNode::operator[] throw a
+  // cv::Exception past the reader.
+  ExpectError<ParseError>([&] { ParseCalibration("%YAML:1.0\n- -\n", "s.yml", "", 0, 0); },
+                          {"s.yml (OpenCV FileStorage YAML)", "expected a map"});
+  // Found by the fuzzer: OpenCV 4.6's XML parser crashed (null pointer) on NUL bytes in the
+  // header; calibration files are text, so a NUL byte is refused before any parser runs.
+  const std::string with_nul =
+      std::string("<?xml ver=") + std::string(9, '\0') + "0\"?>\n<opencv_storage>\n";
+  ExpectError<ParseError>([&] { ParseCalibration(with_nul, "n.xml", "", 0, 0); },
+                          {"n.xml", "byte 10", "NUL byte"});
+  ExpectError<ParseError>([&] { ParseOpenCvCalibration(with_nul, "n.xml", 0, 0, nullptr); },
+                          {"n.xml", "NUL byte"});
+  // Found by the fuzzer: a garbled cols made cv::FileNode >> cv::Mat allocate gigabytes.
+  ExpectError<ParseError>(
+      [&] {
+        ParseCalibration(
+            "%YAML:1.0\nimage_width: 240\nimage_height: 180\ncamera_matrix: !!opencv-matrix\n"
+            "   rows: 3\n   cols: ,1\n   dt: d\n   data: [200, 0, 120, 0, 201, 90, 0, 0, 1]\n",
+            "g.yml", "", 0, 0);
+      },
+      {"g.yml (OpenCV FileStorage YAML)", "camera_matrix", "rows, cols, dt and data"});
+  ExpectError<ParseError>(
+      [&] {
+        ParseCalibration(
+            "%YAML:1.0\nimage_width: 240\nimage_height: 180\ncamera_matrix: !!opencv-matrix\n"
+            "   rows: 300000\n   cols: 300000\n   dt: d\n   data: [200, 0]\n",
+            "h.yml", "", 0, 0);
+      },
+      {"h.yml (OpenCV FileStorage YAML)", "does not match the 2 numbers"});
 }
 
 TEST(ColmapCameras, PicksACameraByIdAndRefusesUnrepresentableModels) {

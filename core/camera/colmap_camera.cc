@@ -6,6 +6,7 @@
 
 #include "core/camera/calibration_text.h"
 #include "core/common/error.h"
+#include "core/common/text_lines.h"
 
 namespace evloc {
 namespace {
@@ -41,14 +42,7 @@ std::string UnsupportedColmapModelReason(const std::string& model_name) {
 std::map<uint32_t, ColmapCamera> ParseColmapCameras(const std::string& text,
                                                     const std::string& source) {
   std::map<uint32_t, ColmapCamera> cameras;
-  std::istringstream lines(text);
-  std::string line;
-  int64_t line_number = 0;
-  while (std::getline(lines, line)) {
-    ++line_number;
-    if (!line.empty() && line.back() == '\r') line.pop_back();
-    const size_t first = line.find_first_not_of(" \t");
-    if (first == std::string::npos || line[first] == '#') continue;
+  ForEachDataLine(text, [&](int64_t line_number, const std::string& line) {
     std::istringstream fields(line);
     std::vector<std::string> tokens;
     for (std::string token; fields >> token;) tokens.push_back(token);
@@ -81,7 +75,7 @@ std::map<uint32_t, ColmapCamera> ParseColmapCameras(const std::string& text,
       throw ParseError::AtLine(source, line_number,
                                "duplicate CAMERA_ID " + std::to_string(camera.camera_id));
     }
-  }
+  });
   return cameras;
 }
 

@@ -11,6 +11,7 @@
 #include "core/camera/calibration_file.h"
 #include "core/common/error.h"
 #include "core/common/file_util.h"
+#include "core/common/text_lines.h"
 #include "core/dataset/aedat4_dataset.h"
 #include "core/dataset/rosbag_dataset.h"
 #include "core/dataset/tum_rgbd.h"
@@ -242,15 +243,8 @@ std::vector<TimedFile> ReadTimedFileList(const fs::path& list_path, const fs::pa
 
 std::vector<TimedFile> ParseTimedFileList(std::string_view text, const std::string& source_name,
                                           const fs::path& root) {
-  std::istringstream lines{std::string(text)};
-  std::string line;
   std::vector<TimedFile> files;
-  int64_t line_number = 0;
-  while (std::getline(lines, line)) {
-    ++line_number;
-    if (!line.empty() && line.back() == '\r') line.pop_back();
-    const size_t first = line.find_first_not_of(" \t");
-    if (first == std::string::npos || line[first] == '#') continue;
+  ForEachDataLine(text, [&](int64_t line_number, const std::string& line) {
     std::istringstream fields(line);
     std::string time_text;
     std::string relative;
@@ -271,7 +265,7 @@ std::vector<TimedFile> ParseTimedFileList(std::string_view text, const std::stri
                                "time " + time_text + " is not after the previous line's");
     }
     files.push_back({t_ns, root / relative});
-  }
+  });
   return files;
 }
 
