@@ -66,7 +66,9 @@ Inputs:
   --camera MODEL:PARAMS    fixed intrinsics, evloc convention (pixel centres at integers):
                            pinhole:fx,fy,cx,cy | radtan:fx,fy,cx,cy,k1,k2,p1,p2,k3 |
                            equidistant:fx,fy,cx,cy,k1,k2,k3,k4
-  --calib FILE             fixed intrinsics from an evloc YAML or an ECD calib.txt
+  --calib FILE[#CAM]       fixed intrinsics from a calibration file, format detected
+                           (docs/camera.md): evloc YAML, Kalibr camchain (#cam1), ROS
+                           camera_info, OpenCV YAML/XML, COLMAP cameras.txt (#ID), ECD calib.txt
   --known-poses FILE       world_from_cam per image: TUM `t tx ty tz qx qy qz qw` (needs
                            --images-list) or `IMAGE_NAME tx ty tz qx qy qz qw`; COLMAP only
                            triangulates (needs --camera or --calib)

@@ -9,6 +9,7 @@
 
 #include <opencv2/imgcodecs.hpp>
 
+#include "core/camera/calibration_file.h"
 #include "core/common/error.h"
 #include "core/common/file_util.h"
 #include "core/dataset/dataset.h"

@@ -66,19 +66,6 @@ std::string FormatDouble(double value) {
   return std::string(buffer, result.ptr);
 }
 
-// Number of parameters of each supported COLMAP model, and whether params[2..3] (or [1..2] for
-// single-focal models) are the principal point.
-int NumColmapParams(const std::string& model_name) {
-  if (model_name == "SIMPLE_PINHOLE") return 3;
-  if (model_name == "PINHOLE") return 4;
-  if (model_name == "SIMPLE_RADIAL") return 4;
-  if (model_name == "RADIAL") return 5;
-  if (model_name == "OPENCV") return 8;
-  if (model_name == "FULL_OPENCV") return 12;
-  if (model_name == "OPENCV_FISHEYE") return 8;
-  return -1;
-}
-
 }  // namespace
 
 double ColmapModel::MeanReprojectionError() const {
@@ -99,29 +86,7 @@ ColmapModel ReadColmapTextModel(const std::filesystem::path& directory) {
   ColmapModel model;
   {
     const std::filesystem::path path = directory / "cameras.txt";
-    const std::string source = path.string();
-    const std::vector<std::string> lines = ReadLines(path);
-    for (size_t i = 0; i < lines.size(); ++i) {
-      const int64_t line_number = static_cast<int64_t>(i) + 1;
-      if (IsCommentOrBlank(lines[i])) continue;
-      const std::vector<std::string> tokens = Tokenize(lines[i]);
-      if (tokens.size() < 4) {
-        throw ParseError::AtLine(source, line_number,
-                                 "expected CAMERA_ID MODEL WIDTH HEIGHT PARAMS[]");
-      }
-      ColmapCamera camera;
-      camera.camera_id = ParseInteger<uint32_t>(tokens[0], source, line_number, "CAMERA_ID");
-      camera.model_name = tokens[1];
-      camera.width = ParseInteger<int>(tokens[2], source, line_number, "WIDTH");
-      camera.height = ParseInteger<int>(tokens[3], source, line_number, "HEIGHT");
-      for (size_t k = 4; k < tokens.size(); ++k) {
-        camera.params.push_back(ParseDouble(tokens[k], source, line_number, "PARAMS"));
-      }
-      if (!model.cameras.emplace(camera.camera_id, camera).second) {
-        throw ParseError::AtLine(source, line_number,
-                                 "duplicate CAMERA_ID " + std::to_string(camera.camera_id));
-      }
-    }
+    model.cameras = ParseColmapCameras(ReadFileToString(path), path.string());
   }
   {
     const std::filesystem::path path = directory / "images.txt";
@@ -290,91 +255,6 @@ void WriteColmapTextModel(const std::filesystem::path& directory, const ColmapMo
       out << '\n';
     }
   });
-}
-
-Camera CameraFromColmap(const ColmapCamera& colmap_camera) {
-  const std::string& name = colmap_camera.model_name;
-  const int expected = NumColmapParams(name);
-  if (expected < 0) {
-    throw InvalidArgumentError("COLMAP camera model " + name +
-                               " is not supported (use PINHOLE, SIMPLE_PINHOLE, SIMPLE_RADIAL, "
-                               "RADIAL, OPENCV, FULL_OPENCV or OPENCV_FISHEYE)");
-  }
-  const std::vector<double>& p = colmap_camera.params;
-  if (static_cast<int>(p.size()) != expected) {
-    throw InvalidArgumentError("COLMAP camera model " + name + " takes " +
-                               std::to_string(expected) + " parameters, got " +
-                               std::to_string(p.size()));
-  }
-  Camera camera;
-  camera.width = colmap_camera.width;
-  camera.height = colmap_camera.height;
-  const bool single_focal = name == "SIMPLE_PINHOLE" || name == "SIMPLE_RADIAL" || name == "RADIAL";
-  if (single_focal) {
-    camera.fx = camera.fy = p[0];
-    camera.cx = p[1] - kColmapPixelOffset;
-    camera.cy = p[2] - kColmapPixelOffset;
-  } else {
-    camera.fx = p[0];
-    camera.fy = p[1];
-    camera.cx = p[2] - kColmapPixelOffset;
-    camera.cy = p[3] - kColmapPixelOffset;
-  }
-  if (name == "SIMPLE_PINHOLE" || name == "PINHOLE") {
-    camera.model = CameraModel::kPinhole;
-  } else if (name == "SIMPLE_RADIAL") {
-    camera.model = CameraModel::kRadialTangential;
-    camera.distortion = {p[3], 0.0, 0.0, 0.0, 0.0};
-  } else if (name == "RADIAL") {
-    camera.model = CameraModel::kRadialTangential;
-    camera.distortion = {p[3], p[4], 0.0, 0.0, 0.0};
-  } else if (name == "OPENCV") {
-    camera.model = CameraModel::kRadialTangential;
-    camera.distortion = {p[4], p[5], p[6], p[7], 0.0};
-  } else if (name == "FULL_OPENCV") {
-    if (p[9] != 0.0 || p[10] != 0.0 || p[11] != 0.0) {
-      throw InvalidArgumentError(
-          "COLMAP FULL_OPENCV cameras with rational coefficients k4..k6 are not supported");
-    }
-    camera.model = CameraModel::kRadialTangential;
-    camera.distortion = {p[4], p[5], p[6], p[7], p[8]};
-  } else {
-    camera.model = CameraModel::kEquidistant;
-    camera.distortion = {p[4], p[5], p[6], p[7]};
-  }
-  camera.Check();
-  return camera;
-}
-
-ColmapCamera ColmapCameraFromCamera(const Camera& camera, uint32_t camera_id) {
-  camera.Check();
-  ColmapCamera colmap_camera;
-  colmap_camera.camera_id = camera_id;
-  colmap_camera.width = camera.width;
-  colmap_camera.height = camera.height;
-  colmap_camera.params = {camera.fx, camera.fy, camera.cx + kColmapPixelOffset,
-                          camera.cy + kColmapPixelOffset};
-  const std::vector<double>& d = camera.distortion;
-  switch (camera.model) {
-    case CameraModel::kPinhole:
-      colmap_camera.model_name = "PINHOLE";
-      break;
-    case CameraModel::kRadialTangential:
-      if (d[4] == 0.0) {
-        colmap_camera.model_name = "OPENCV";
-        colmap_camera.params.insert(colmap_camera.params.end(), {d[0], d[1], d[2], d[3]});
-      } else {
-        colmap_camera.model_name = "FULL_OPENCV";
-        colmap_camera.params.insert(colmap_camera.params.end(),
-                                    {d[0], d[1], d[2], d[3], d[4], 0.0, 0.0, 0.0});
-      }
-      break;
-    case CameraModel::kEquidistant:
-      colmap_camera.model_name = "OPENCV_FISHEYE";
-      colmap_camera.params.insert(colmap_camera.params.end(), {d[0], d[1], d[2], d[3]});
-      break;
-  }
-  return colmap_camera;
 }
 
 std::string FormatColmapParams(const std::vector<double>& params) {

@@ -1,8 +1,9 @@
 // COLMAP sparse models in the TXT layout (cameras.txt, images.txt, points3D.txt) and the
-// conversion between COLMAP cameras and evloc cameras.
+// reader/writer of the camera parameters as COLMAP's command line takes them. A camera of
+// cameras.txt and its conversion to an evloc camera are core/camera/colmap_camera.h.
 // COLMAP places the centre of the top-left pixel at (0.5, 0.5); evloc places it at (0, 0). The
-// converters and readers here shift principal points and 2D observations by 0.5 so that every
-// value leaving this file follows the evloc convention (docs/mapper.md, "COLMAP conventions").
+// readers here shift 2D observations by 0.5 (kColmapPixelOffset) so that every value leaving this
+// file follows the evloc convention (docs/mapper.md, "COLMAP conventions").
 #pragma once
 
 #include <cstdint>
@@ -15,29 +16,13 @@
 #include <Eigen/Core>
 
 #include "core/camera/camera.h"
+#include "core/camera/colmap_camera.h"
 #include "core/geometry/rigid3.h"
 
 namespace evloc::mapper {
 
-// COLMAP's pixel convention minus evloc's: COLMAP places the top-left pixel centre at 0.5.
-inline constexpr double kColmapPixelOffset = 0.5;
-
 // Marks a 2D observation of images.txt that is not part of any 3D point (COLMAP writes -1).
 inline constexpr uint64_t kNoPoint3D = ~uint64_t{0};
-
-// One camera of cameras.txt, in COLMAP's own parameterisation and pixel convention.
-struct ColmapCamera {
-  // COLMAP camera id.
-  uint32_t camera_id = 0;
-  // COLMAP model name, e.g. "PINHOLE", "OPENCV", "SIMPLE_RADIAL".
-  std::string model_name;
-  // Image width, pixels.
-  int width = 0;
-  // Image height, pixels.
-  int height = 0;
-  // Model parameters in COLMAP order (principal point with top-left pixel centre at 0.5).
-  std::vector<double> params;
-};
 
 // One registered image of images.txt.
 struct ColmapImage {
@@ -101,15 +86,6 @@ ColmapModel ReadColmapTextModel(const std::filesystem::path& directory);
 // holds the pose line followed by the keypoint line (empty when the image has no keypoints), as
 // point_triangulator expects. Throws IoError when a file cannot be written.
 void WriteColmapTextModel(const std::filesystem::path& directory, const ColmapModel& model);
-
-// The evloc camera of a COLMAP camera. Supported models: SIMPLE_PINHOLE, PINHOLE, SIMPLE_RADIAL,
-// RADIAL, OPENCV, FULL_OPENCV (with k4 = k5 = k6 = 0) and OPENCV_FISHEYE. Throws
-// InvalidArgumentError for any other model or a wrong parameter count.
-Camera CameraFromColmap(const ColmapCamera& colmap_camera);
-
-// The COLMAP camera of an evloc camera: PINHOLE, OPENCV (radtan with k3 = 0), FULL_OPENCV (radtan
-// with k3 != 0) or OPENCV_FISHEYE. Throws InvalidArgumentError when the camera fails Check().
-ColmapCamera ColmapCameraFromCamera(const Camera& camera, uint32_t camera_id);
 
 // The parameters as COLMAP's --ImageReader.camera_params expects them: comma-separated, full
 // precision.

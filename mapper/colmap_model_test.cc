@@ -4,6 +4,7 @@
 
 #include <fstream>
 
+#include "core/camera/calibration_file.h"
 #include "core/common/error.h"
 #include "core/common/test_data.h"
 #include "mapper/colmap_runner.h"
@@ -101,40 +102,37 @@ TEST(ColmapModel, TrackToUnknownImageIsRejected) {
   std::filesystem::remove_all(directory);
 }
 
-TEST(ColmapCamera, PixelConventionsDifferByHalfAPixel) {
-  const Camera pinhole = CameraFromColmap({1, "PINHOLE", 640, 480, {500, 510, 320.5, 240.5}});
-  EXPECT_EQ(pinhole.model, CameraModel::kPinhole);
-  EXPECT_DOUBLE_EQ(pinhole.cx, 320.0);
-  EXPECT_DOUBLE_EQ(pinhole.cy, 240.0);
-  const ColmapCamera back = ColmapCameraFromCamera(pinhole, 4);
-  EXPECT_EQ(back.model_name, "PINHOLE");
-  EXPECT_EQ(back.camera_id, 4u);
-  EXPECT_EQ(back.params, (std::vector<double>{500, 510, 320.5, 240.5}));
-}
-
-TEST(ColmapCamera, ModelsMapBothWays) {
-  const Camera simple_radial = CameraFromColmap({1, "SIMPLE_RADIAL", 100, 80, {90, 50, 40, 0.1}});
-  EXPECT_EQ(simple_radial.model, CameraModel::kRadialTangential);
-  EXPECT_EQ(simple_radial.fx, simple_radial.fy);
-  EXPECT_EQ(simple_radial.distortion, (std::vector<double>{0.1, 0, 0, 0, 0}));
-
-  Camera radtan = Camera::Pinhole(100, 80, 90, 91, 49.5, 39.5);
+TEST(ColmapModel, TheCamerasTxtTheMapperWritesIsACalibrationFile) {
+  // evloc writes cameras.txt (WriteColmapTextModel, for COLMAP's point_triangulator); --calib
+  // reads it back to the same cameras, the radtan one through FULL_OPENCV.
+  Camera radtan =
+      Camera::Pinhole(240, 180, 199.092366542, 198.82882047, 132.192071378, 110.712660011);
   radtan.model = CameraModel::kRadialTangential;
-  radtan.distortion = {0.1, -0.02, 0.001, 0.002, 0.0};
-  EXPECT_EQ(ColmapCameraFromCamera(radtan, 1).model_name, "OPENCV");
-  EXPECT_EQ(CameraFromColmap(ColmapCameraFromCamera(radtan, 1)), radtan);
-  radtan.distortion[4] = 0.003;
-  EXPECT_EQ(ColmapCameraFromCamera(radtan, 1).model_name, "FULL_OPENCV");
-  EXPECT_EQ(CameraFromColmap(ColmapCameraFromCamera(radtan, 1)), radtan);
-
-  Camera fisheye = Camera::Pinhole(100, 80, 90, 91, 49.5, 39.5);
+  radtan.distortion = {-0.368436311798, 0.150947243557, -0.000296130534385, -0.000759431726241,
+                       0.0125};
+  Camera fisheye = Camera::Pinhole(346, 260, 163.2, 163.5, 172.9, 129.4);
   fisheye.model = CameraModel::kEquidistant;
-  fisheye.distortion = {0.01, 0.02, 0.03, 0.04};
-  EXPECT_EQ(ColmapCameraFromCamera(fisheye, 1).model_name, "OPENCV_FISHEYE");
-  EXPECT_EQ(CameraFromColmap(ColmapCameraFromCamera(fisheye, 1)), fisheye);
-
-  EXPECT_THROW(CameraFromColmap({1, "FOV", 100, 80, {90, 90, 50, 40, 0.1}}), InvalidArgumentError);
-  EXPECT_THROW(CameraFromColmap({1, "PINHOLE", 100, 80, {90, 50, 40}}), InvalidArgumentError);
+  fisheye.distortion = {-0.0273, 0.0401, -0.0297, 0.0089};
+  ColmapModel model;
+  model.cameras[1] = ColmapCameraFromCamera(radtan, 1);
+  model.cameras[2] = ColmapCameraFromCamera(fisheye, 2);
+  const std::filesystem::path directory = testing::MakeTempDir("colmap_calibration");
+  WriteColmapTextModel(directory, model);
+  const std::string cameras_txt = (directory / "cameras.txt").string();
+  const Camera read_radtan = ReadCalibrationFile(cameras_txt + "#1", 0, 0);
+  const Camera read_fisheye = ReadCalibrationFile(cameras_txt + "#2", 0, 0);
+  EXPECT_EQ(model.cameras.at(1).model_name, "FULL_OPENCV");
+  // The half-pixel shift there and back may change the last bit of the principal point.
+  for (const auto& [read, written] : {std::pair{read_radtan, radtan}, {read_fisheye, fisheye}}) {
+    EXPECT_EQ(read.model, written.model);
+    EXPECT_EQ(read.width, written.width);
+    EXPECT_EQ(read.fx, written.fx);
+    EXPECT_EQ(read.fy, written.fy);
+    EXPECT_NEAR(read.cx, written.cx, 1e-12);
+    EXPECT_NEAR(read.cy, written.cy, 1e-12);
+    EXPECT_EQ(read.distortion, written.distortion);
+  }
+  std::filesystem::remove_all(directory);
 }
 
 TEST(ColmapRunner, MissingExecutableIsAnIoError) {

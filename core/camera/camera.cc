@@ -11,11 +11,16 @@
 #include <set>
 #include <sstream>
 
+#include "core/camera/calibration_text.h"
 #include "core/common/error.h"
 #include "core/common/file_util.h"
 
 namespace evloc {
 namespace {
+
+using camera_text::FormatDouble;
+using camera_text::ParseDouble;
+using camera_text::ToLower;
 
 // Newton iterations of Undistort stop when the residual (normalised coordinates, or radians for
 // the equidistant angle) falls below this; 1e-12 is far below a micro-pixel for any real lens.
@@ -29,12 +34,6 @@ constexpr double kMaxEquidistantAngleMargin = 1e-6;
 constexpr double kEquidistantCentreRadius = 1e-10;
 // Largest accepted sensor side, pixels.
 constexpr int kMaxSensorSide = 65536;
-
-std::string ToLower(std::string text) {
-  std::transform(text.begin(), text.end(), text.begin(),
-                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
-  return text;
-}
 
 // The radtan distortion, its Jacobian, and whether the radial part is increasing at this radius.
 struct DistortionResult {
@@ -183,21 +182,6 @@ bool UndistortEquidistant(const std::vector<double>& coefficients, const Eigen::
   if (!converged || !(derivative > 0.0) || !(theta < max_theta)) return false;
   *undistorted = target * (std::tan(theta) / radius_distorted);
   return true;
-}
-
-// Parses a whole string as a finite or non-finite double; false when anything is left over.
-bool ParseDouble(const std::string& text, double* value) {
-  const char* begin = text.data();
-  const char* end = text.data() + text.size();
-  const auto [pointer, error] = std::from_chars(begin, end, *value);
-  return error == std::errc() && pointer == end;
-}
-
-// The shortest decimal text that reads back as exactly `value`.
-std::string FormatDouble(double value) {
-  std::array<char, 64> buffer;
-  const auto result = std::to_chars(buffer.data(), buffer.data() + buffer.size(), value);
-  return std::string(buffer.data(), result.ptr);
 }
 
 std::string JoinDoubles(const std::vector<double>& values) {
@@ -488,8 +472,15 @@ Camera ReadEcdCalibration(const std::filesystem::path& calib_txt, int width, int
     throw InvalidArgumentError("ReadEcdCalibration: image size " + std::to_string(width) + " x " +
                                std::to_string(height) + " must be positive");
   }
-  const std::string source = calib_txt.string();
-  const std::string content = ReadFileToString(calib_txt);
+  return ParseEcdCalibration(ReadFileToString(calib_txt), calib_txt.string(), width, height);
+}
+
+Camera ParseEcdCalibration(const std::string& content, const std::string& source, int width,
+                           int height) {
+  if (width <= 0 || height <= 0) {
+    throw InvalidArgumentError(source + ": image size " + std::to_string(width) + " x " +
+                               std::to_string(height) + " must be positive");
+  }
   static const std::array<const char*, 9> kFieldNames = {"fx", "fy", "cx", "cy", "k1",
                                                          "k2", "p1", "p2", "k3"};
   std::istringstream lines(content);
@@ -544,17 +535,6 @@ Camera ReadEcdCalibration(const std::filesystem::path& calib_txt, int width, int
                              std::string("invalid camera: ") + error.what());
   }
   return camera;
-}
-
-bool IsCameraYamlPath(const std::filesystem::path& path) {
-  std::string extension = path.extension().string();
-  std::transform(extension.begin(), extension.end(), extension.begin(),
-                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
-  return extension == ".yaml" || extension == ".yml";
-}
-
-Camera ReadCalibrationFile(const std::filesystem::path& path, int width, int height) {
-  return IsCameraYamlPath(path) ? ReadCameraYaml(path) : ReadEcdCalibration(path, width, height);
 }
 
 }  // namespace evloc

@@ -1,6 +1,7 @@
 // Camera models of evloc: pinhole, radial-tangential (OpenCV plumb_bob) and equidistant
 // (Kannala-Brandt, OpenCV fisheye), with analytic projection Jacobians, iterative
-// back-projection, and the calibration file formats (evloc YAML, ECD calib.txt).
+// back-projection, and evloc's own calibration files (evloc YAML, ECD calib.txt); the files of
+// other tools and the format detection of --calib: calibration_file.h.
 // Conventions: camera frame x right, y down, z forward; pixel centres at integer coordinates.
 // Formulas, parameter order and validity rules: docs/camera.md.
 #pragma once
@@ -120,12 +121,8 @@ void WriteCameraYaml(const std::filesystem::path& path, const Camera& camera);
 // malformed, InvalidArgumentError when width or height is not positive.
 Camera ReadEcdCalibration(const std::filesystem::path& calib_txt, int width, int height);
 
-// True when `path` names an evloc YAML camera: its extension is .yaml or .yml, in any case.
-bool IsCameraYamlPath(const std::filesystem::path& path);
-
-// Reads a calibration file the tools take with --calib: an evloc YAML camera when
-// IsCameraYamlPath (its own size is kept), else an ECD calib.txt of size width x height. Throws as
-// ReadCameraYaml and ReadEcdCalibration.
-Camera ReadCalibrationFile(const std::filesystem::path& path, int width, int height);
+// Parses the text of an ECD calib.txt; `source` names it in errors. Throws as ReadEcdCalibration.
+Camera ParseEcdCalibration(const std::string& content, const std::string& source, int width,
+                           int height);
 
 }  // namespace evloc

@@ -3,6 +3,7 @@
 #include <cstring>
 #include <sstream>
 
+#include "core/camera/calibration_file.h"
 #include "core/common/error.h"
 #include "core/common/file_util.h"
 #include "core/trajectory/tum_io.h"
@@ -43,16 +44,13 @@ Dataset ReadAedat4Dataset(const std::filesystem::path& path, const DatasetReader
     throw InvalidArgumentError(
         path.string() +
         ": an AEDAT4 file holds no camera calibration; give the camera with --calib FILE (an "
-        "evloc YAML camera, docs/camera.md, or an ECD calib.txt). Its streams are: " +
+        "evloc YAML camera, a Kalibr camchain, a ROS camera_info, an OpenCV or COLMAP file, or "
+        "an ECD calib.txt: docs/camera.md). Its streams are: " +
         file.DescribeStreams());
   }
   const std::optional<SensorSize> size = events != nullptr ? events->size : std::nullopt;
-  if (!size && !IsCameraYamlPath(streams.calibration)) {
-    throw InvalidArgumentError(path.string() + ": the events stream '" + streams.events +
-                               "' states no sensor size, so an ECD calib.txt (" +
-                               streams.calibration.string() +
-                               ") cannot be sized; give an evloc YAML camera with --calib");
-  }
+  // A calibration without an image size (ECD calib.txt) takes the events stream's; with neither,
+  // ReadCalibrationFile says so.
   dataset.camera =
       ReadCalibrationFile(streams.calibration, size ? size->width : 0, size ? size->height : 0);
   if (size && (dataset.camera.width != size->width || dataset.camera.height != size->height)) {

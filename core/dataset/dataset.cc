@@ -8,8 +8,10 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "core/camera/calibration_file.h"
 #include "core/common/error.h"
 #include "core/common/file_util.h"
+#include "core/common/text_lines.h"
 #include "core/dataset/aedat4_dataset.h"
 #include "core/dataset/rosbag_dataset.h"
 #include "core/dataset/tum_rgbd.h"
@@ -203,7 +205,8 @@ const char kRecordingFlagsUsage[] =
     "  --camera-info-topic T  bag topic of the calibration (default /dvs/camera_info)\n"
     "  --groundtruth-topic T  bag topic of the ground-truth PoseStamped (default "
     "/optitrack/davis)\n"
-    "  --calib FILE           AEDAT4: the camera (evloc YAML, or ECD calib.txt); required\n"
+    "  --calib FILE[#CAM]     AEDAT4: the camera, any format of docs/camera.md (evloc YAML,\n"
+    "                         Kalibr, ROS camera_info, OpenCV, COLMAP, ECD calib.txt); required\n"
     "  --groundtruth FILE     AEDAT4: ground truth world_from_cam, TUM (optional)\n";
 
 void DatasetReaderOptions::Check() const {
@@ -240,15 +243,8 @@ std::vector<TimedFile> ReadTimedFileList(const fs::path& list_path, const fs::pa
 
 std::vector<TimedFile> ParseTimedFileList(std::string_view text, const std::string& source_name,
                                           const fs::path& root) {
-  std::istringstream lines{std::string(text)};
-  std::string line;
   std::vector<TimedFile> files;
-  int64_t line_number = 0;
-  while (std::getline(lines, line)) {
-    ++line_number;
-    if (!line.empty() && line.back() == '\r') line.pop_back();
-    const size_t first = line.find_first_not_of(" \t");
-    if (first == std::string::npos || line[first] == '#') continue;
+  ForEachDataLine(text, [&](int64_t line_number, const std::string& line) {
     std::istringstream fields(line);
     std::string time_text;
     std::string relative;
@@ -269,7 +265,7 @@ std::vector<TimedFile> ParseTimedFileList(std::string_view text, const std::stri
                                "time " + time_text + " is not after the previous line's");
     }
     files.push_back({t_ns, root / relative});
-  }
+  });
   return files;
 }
 
@@ -294,7 +290,7 @@ Dataset ReadDataset(const fs::path& root, const DatasetReaderOptions& options) {
   Dataset dataset;
   dataset.root = root;
   if (fs::exists(root / dataset_files::kCalibYaml)) {
-    dataset.camera = ReadCameraYaml(root / dataset_files::kCalibYaml);
+    dataset.camera = ReadCalibrationFile(root / dataset_files::kCalibYaml, 0, 0);
   } else if (fs::exists(root / dataset_files::kCalibTxt)) {
     dataset.camera =
         ReadEcdCalibration(root / dataset_files::kCalibTxt, options.ecd_width, options.ecd_height);

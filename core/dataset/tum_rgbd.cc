@@ -6,6 +6,7 @@
 
 #include <opencv2/imgcodecs.hpp>
 
+#include "core/camera/calibration_file.h"
 #include "core/common/error.h"
 #include "core/trajectory/tum_io.h"
 
@@ -35,7 +36,7 @@ Dataset ReadTumRgbdDataset(const fs::path& root) {
   }
   CheckListedFilesExist(dataset);
   if (fs::exists(root / dataset_files::kCalibYaml)) {
-    dataset.camera = ReadCameraYaml(root / dataset_files::kCalibYaml);
+    dataset.camera = ReadCalibrationFile(root / dataset_files::kCalibYaml, 0, 0);
   } else if (fs::exists(root / dataset_files::kCalibTxt)) {
     if (dataset.images.empty()) {
       throw InvalidArgumentError("TUM RGB-D folder '" + root.string() +

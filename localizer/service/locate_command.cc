@@ -7,6 +7,7 @@
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 
+#include "core/camera/calibration_file.h"
 #include "core/common/cli.h"
 #include "core/common/error.h"
 
@@ -22,9 +23,11 @@ map's edges. The map needs relocalization data (map format v2).
 Options:
   --map MAP       the map: a .evmap file or a folder holding map.evmap (required)
   --image IMAGE   the query image, any format OpenCV reads (converted to grey) (required)
-  --calib CALIB   the camera: an evloc camera YAML (.yaml/.yml, its size must be the image's) or
-                  an ECD calib.txt ("fx fy cx cy k1 k2 p1 p2 k3") (required)
-  --size WxH      the image size of a calib.txt (default: the image's size)
+  --calib CALIB   the camera file, its format detected from the content (docs/camera.md): evloc
+                  YAML, Kalibr camchain (CALIB#cam1 picks a camera), ROS camera_info, OpenCV
+                  YAML/XML, COLMAP cameras.txt (CALIB#ID), ECD calib.txt; a size the file
+                  states must be the image's (required)
+  --size WxH      the image size of a file without one (calib.txt; default: the image's size)
   --json          print one JSON object: status, world_from_cam [tx ty tz qx qy qz qw] and
                   covariance (36, row-major) when FOUND, inliers, keyframe, score, reason
   --help          print this help
@@ -68,8 +71,9 @@ LocateCommand ParseLocateCommandLine(const std::vector<std::string>& arguments) 
 Camera ReadLocateCalibration(const LocateCommand& command, int image_width, int image_height) {
   const int width = command.width > 0 ? command.width : image_width;
   const int height = command.height > 0 ? command.height : image_height;
-  const Camera camera = ReadCalibrationFile(command.calib, width, height);
-  if (IsCameraYamlPath(command.calib) &&
+  const Calibration calibration = ReadCalibration(command.calib, width, height);
+  const Camera& camera = calibration.selected.camera;
+  if (calibration.size_from_file &&
       (camera.width != image_width || camera.height != image_height)) {
     throw InvalidArgumentError("the camera of '" + command.calib.string() + "' is " +
                                std::to_string(camera.width) + "x" + std::to_string(camera.height) +

@@ -3,10 +3,12 @@
 // NOT_FOUND with exit 3, bad command lines exit 2.
 #include "localizer/service/locate_command.h"
 
+#include <fstream>
 #include <sstream>
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
+#include <opencv2/core.hpp>
 
 #include "core/common/cli.h"
 #include "core/common/error.h"
@@ -38,7 +40,7 @@ std::pair<int, std::string> Locate(const Map& map, const std::vector<std::string
   return {code, out.str()};
 }
 
-TEST(LocateCommand, HeldOutTempleViewIsFoundWithBothCalibrationFormats) {
+TEST(LocateCommand, HeldOutTempleViewIsFoundWithEveryCalibrationFormat) {
   REQUIRE_TEMPLE();
   const auto& fixture = *SharedTemple();
   const fs::path directory = evloc::testing::MakeTempDir("locate_command");
@@ -49,11 +51,33 @@ TEST(LocateCommand, HeldOutTempleViewIsFoundWithBothCalibrationFormats) {
     calib.precision(17);
     calib << camera.fx << " " << camera.fy << " " << camera.cx << " " << camera.cy
           << " 0 0 0 0 0\n";
+    // The same camera in the calibration files of other tools (docs/camera.md): cam1 of a
+    // Kalibr rig, a ROS camera_info, an OpenCV FileStorage XML written by cv::FileStorage.
+    std::ofstream kalibr(directory / "camchain.yaml");
+    kalibr.precision(17);
+    for (int i = 0; i < 2; ++i) {
+      kalibr << "cam" << i << ":\n  camera_model: pinhole\n  distortion_model: none\n"
+             << "  distortion_coeffs: []\n  intrinsics: [" << (i == 0 ? 100.0 : camera.fx) << ", "
+             << camera.fy << ", " << camera.cx << ", " << camera.cy << "]\n  resolution: ["
+             << camera.width << ", " << camera.height << "]\n";
+    }
+    std::ofstream ros(directory / "ost.yaml");
+    ros.precision(17);
+    ros << "image_width: " << camera.width << "\nimage_height: " << camera.height
+        << "\ncamera_name: temple\ncamera_matrix:\n  rows: 3\n  cols: 3\n  data: [" << camera.fx
+        << ", 0, " << camera.cx << ", 0, " << camera.fy << ", " << camera.cy
+        << ", 0, 0, 1]\ndistortion_model: plumb_bob\ndistortion_coefficients:\n  rows: 1\n"
+        << "  cols: 5\n  data: [0, 0, 0, 0, 0]\n";
+    cv::FileStorage opencv((directory / "out_camera_data.xml").string(), cv::FileStorage::WRITE);
+    opencv << "image_width" << camera.width << "image_height" << camera.height << "camera_matrix"
+           << cv::Mat(cv::Matx33d(camera.CalibrationMatrix().data()).t())
+           << "distortion_coefficients" << cv::Mat::zeros(5, 1, CV_64F);
   }
   const auto parameters =
       evloc::testing::SharedDataFile(relocalization::testing::kTempleParameters);
   const fs::path image = parameters->parent_path() / fixture.temple.views[7].name;
-  for (const char* calib : {"camera.yaml", "calib.txt"}) {
+  for (const char* calib :
+       {"camera.yaml", "calib.txt", "camchain.yaml#cam1", "ost.yaml", "out_camera_data.xml"}) {
     const auto [code, out] =
         Locate(fixture.map, {"locate", "--map", "unused", "--image", image.string(), "--calib",
                              (directory / calib).string(), "--json"});

@@ -6,6 +6,7 @@
 
 #include <opencv2/imgcodecs.hpp>
 
+#include "core/camera/calibration_file.h"
 #include "core/common/error.h"
 #include "core/dataset/dataset.h"
 #include "core/events/ecd_text.h"
@@ -159,7 +160,7 @@ void RenderCommandOptions::Check() const {
 nlohmann::json RunRenderCommand(const RenderCommandOptions& options) {
   options.Check();
   const auto total_start = Clock::now();
-  const Camera camera = options.camera_yaml ? ReadCameraYaml(*options.camera_yaml)
+  const Camera camera = options.camera_yaml ? ReadCalibrationFile(*options.camera_yaml, 0, 0)
                                             : CameraPreset(options.camera_preset);
   Scene scene = options.scene_json ? LoadSceneJson(*options.scene_json) : MakeDefaultRoom();
   scene.Check();

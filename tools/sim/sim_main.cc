@@ -29,7 +29,8 @@ Usage:
 render options:
   --out DIR             output dataset folder (written as DIR.partial, renamed when complete)
   --camera NAME         default (640x480 pinhole, f=500 px) | davis240 (ECD DAVIS240C); default: default
-  --camera-yaml FILE    evloc camera YAML, overrides --camera
+  --camera-yaml FILE    a camera file (evloc YAML, Kalibr, ROS, OpenCV, COLMAP: docs/camera.md),
+                        overrides --camera
   --scene FILE          scene JSON (docs/sim-scene.md); default: the built-in room
   --motion NAME         slow | mid | fast | aggressive; default: mid
   --trajectory FILE     TUM trajectory replayed relative to its first pose instead of --motion
