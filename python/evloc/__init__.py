@@ -13,13 +13,14 @@ from evloc.trajectory import Trajectory
 from evloc.data import (Map, load_map, read_camera, check_camera, EventReader, open_events,
                         detect_event_format, Dataset, read_dataset, read_events)
 from evloc.tracking import Steps, TrackResult, Tracker, track_events, track_dataset
-from evloc.client import Client, Session, Pose, MapDescription, SessionEnd, encode_packed
+from evloc.client import (Client, Session, Pose, MapDescription, SessionEnd, LocateResult,
+                          ServiceError, encode_packed)
 
 __all__ = [
     "Error", "InvalidArgumentError", "IoError", "ParseError", "event_dtype", "Status",
     "Trajectory", "Map", "load_map", "read_camera", "check_camera", "EventReader", "open_events",
     "detect_event_format", "Dataset", "read_dataset", "read_events", "Steps", "TrackResult",
     "Tracker", "track_events", "track_dataset", "Client", "Session", "Pose", "MapDescription",
-    "SessionEnd", "encode_packed",
+    "SessionEnd", "LocateResult", "ServiceError", "encode_packed",
 ]
 __version__ = "0.1.0"

@@ -14,7 +14,6 @@ The gRPC stubs (evloc.localizer_pb2, evloc.localizer_pb2_grpc) are generated fro
 the package is built."""
 
 import collections
-import os
 import queue
 import random
 import threading
@@ -41,6 +40,23 @@ TRANSIENT_CODES = frozenset({grpc.StatusCode.UNAVAILABLE, grpc.StatusCode.CANCEL
                              grpc.StatusCode.ABORTED, grpc.StatusCode.UNKNOWN,
                              grpc.StatusCode.RESOURCE_EXHAUSTED})
 _CAMERA_MODELS = {"pinhole": 1, "radtan": 2, "equidistant": 3}
+
+
+def _fill_camera(camera, message):
+    """Fills an evloc.map_format.Camera message from a camera dict (evloc.Dataset.camera)."""
+    model = camera.get("model", "pinhole")
+    if model not in _CAMERA_MODELS:
+        raise ValueError(f"camera model {model!r} is not one of {sorted(_CAMERA_MODELS)}")
+    message.model = _CAMERA_MODELS[model]
+    for key in ("width", "height", "fx", "fy", "cx", "cy"):
+        setattr(message, key, camera[key])
+    message.distortion.extend(camera.get("distortion", []))
+
+
+def _pose_of(rigid):
+    """7 values tx ty tz qx qy qz qw of an evloc.map_format.Rigid3 message."""
+    return np.array([rigid.translation.x, rigid.translation.y, rigid.translation.z,
+                     rigid.rotation.x, rigid.rotation.y, rigid.rotation.z, rigid.rotation.w])
 
 
 def _stubs():
@@ -86,9 +102,7 @@ class Pose:
         self.t_ns = message.t_ns
         self.status = Status[api.TrackingStatus.Name(message.status)]
         if message.HasField("world_from_cam"):
-            r = message.world_from_cam
-            self.pose = np.array([r.translation.x, r.translation.y, r.translation.z,
-                                  r.rotation.x, r.rotation.y, r.rotation.z, r.rotation.w])
+            self.pose = _pose_of(message.world_from_cam)
         else:
             self.pose = None
         self.covariance = (np.array(message.covariance).reshape(6, 6)
@@ -144,6 +158,29 @@ class SessionEnd:
 
     def __repr__(self):
         return f"SessionEnd({self.poses} poses, {self.lost_poses} LOST, {self.events} events)"
+
+
+class LocateResult:
+    """The answer of Locate (docs/relocalization.md): found, status ("FOUND" / "NOT_FOUND"), pose
+    (7,) world_from_cam or None, covariance (6, 6) or None, inliers, keyframe, score, reason,
+    map_version, locate_ms."""
+
+    def __init__(self, message):
+        api, _ = _stubs()
+        self.status = api.LocateStatus.Name(message.status)
+        self.found = message.status == api.FOUND
+        self.pose = _pose_of(message.world_from_cam) if self.found else None
+        self.covariance = (np.array(message.covariance).reshape(6, 6)
+                           if self.found and len(message.covariance) == 36 else None)
+        self.inliers = message.inliers
+        self.keyframe = message.keyframe
+        self.score = message.score
+        self.reason = message.reason
+        self.map_version = message.map.version
+        self.locate_ms = message.locate_ms
+
+    def __repr__(self):
+        return f"LocateResult({self.status}, {self.inliers} inliers, {self.reason!r})"
 
 
 class Client:
@@ -206,6 +243,27 @@ class Client:
         except grpc.RpcError as error:
             raise ServiceError("ListMaps", error.code(), error.details()) from None
         return [MapDescription(m) for m in response.maps]
+
+    def locate(self, map_name, camera, image, timeout_s=30.0):
+        """Locates one image in a map with relocalization data (the Locate RPC): `image` is the
+        bytes of a PNG or JPEG file, or a 2-D uint8 array (grey). Returns a LocateResult; raises
+        ServiceError when the call fails."""
+        api, _ = _stubs()
+        request = api.LocateRequest(map_name=map_name)
+        _fill_camera(dict(camera), request.camera)
+        if isinstance(image, (bytes, bytearray)):
+            request.encoded = bytes(image)
+        else:
+            gray = np.ascontiguousarray(image, dtype=np.uint8)
+            if gray.ndim != 2:
+                raise ValueError("locate: image must be encoded bytes or a 2-D uint8 array")
+            request.gray.height, request.gray.width = gray.shape
+            request.gray.pixels = gray.tobytes()
+        try:
+            response = self._stub.Locate(request, metadata=self._metadata, timeout=timeout_s)
+        except grpc.RpcError as error:
+            raise ServiceError("Locate", error.code(), error.details()) from None
+        return LocateResult(response)
 
     def session(self, map_name, camera, initial_pose=None, initial_t_ns=0, **options):
         """A tracking session (use it in a `with`); see Session for the options."""
@@ -286,15 +344,7 @@ class Session:
         request = api.TrackRequest()
         start = request.start
         start.map_name = self._map_name
-        camera = self._camera
-        model = camera.get("model", "pinhole")
-        if model not in _CAMERA_MODELS:
-            raise ValueError(f"Session: camera model {model!r} is not one of "
-                             f"{sorted(_CAMERA_MODELS)}")
-        start.camera.model = _CAMERA_MODELS[model]
-        for key in ("width", "height", "fx", "fy", "cx", "cy"):
-            setattr(start.camera, key, camera[key])
-        start.camera.distortion.extend(camera.get("distortion", []))
+        _fill_camera(self._camera, start.camera)
         if pose is not None:
             r = start.initial_world_from_cam
             r.translation.x, r.translation.y, r.translation.z = (float(v) for v in pose[:3])

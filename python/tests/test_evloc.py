@@ -362,3 +362,33 @@ def test_packed_encoding_layout():
                     (640).to_bytes(2, "little") + (479).to_bytes(2, "little"))
     with pytest.raises(ValueError):
         evloc.encode_packed(np.array([99]), np.array([0]), np.array([0]), np.array([1]), 100)
+
+# -------------------------------------------------------------------------------------- example
+
+
+def test_example_tracks_and_plots(simulated, tmp_path):
+    out = tmp_path / "example"
+    completed = subprocess.run(
+        [sys.executable, os.path.join(PROJECT_ROOT, "examples", "python", "track_and_plot.py"),
+         "--out", str(out), "--dataset", str(simulated), "--map", str(simulated / "gt_map"),
+         "--build", os.environ.get("EVLOC_BUILD_DIR", os.path.join(PROJECT_ROOT, "build"))],
+        check=True, capture_output=True, text=True)
+    assert "steps TRACKING" in completed.stdout
+    png = (out / "trajectory.png").read_bytes()
+    assert png.startswith(b"\x89PNG") and len(png) > 20000
+    # The estimate as evo reads a TUM file (plain columns), scored here and by evloc-eval: the
+    # same position RMSE (ground truth interpolated at the estimate's times, no alignment).
+    table = np.loadtxt(out / "estimate.txt", comments="#")
+    truth = np.loadtxt(simulated / "groundtruth.txt", comments="#")
+    interpolated = np.stack([np.interp(table[:, 0], truth[:, 0], truth[:, k]) for k in (1, 2, 3)],
+                            axis=1)
+    rmse_cm = 100 * np.sqrt(np.mean(np.sum((table[:, 1:4] - interpolated) ** 2, axis=1)))
+    report = tmp_path / "eval.json"
+    subprocess.run([tool("tools/eval/evloc-eval"), "--align", "none", "--gt",
+                    str(simulated / "groundtruth.txt"), "--est", str(out / "estimate.txt"),
+                    "--json", str(report)], check=True, stdout=subprocess.DEVNULL)
+    scores = json.loads(report.read_text())
+    assert scores["matched_poses"] == len(table)
+    assert abs(scores["ate_t_rmse_cm"] - rmse_cm) < 1e-6, (scores["ate_t_rmse_cm"], rmse_cm)
+    assert f"position RMSE {rmse_cm:.2f} cm" in completed.stdout
+    assert rmse_cm < 2.0
