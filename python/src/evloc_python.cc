@@ -503,22 +503,35 @@ PYBIND11_MODULE(_evloc, m) {
   using namespace evloc::python;
   m.doc() = "evloc's offline library (maps, events, datasets, tracking); see the evloc package.";
 
-  // Errors: the messages are evloc's, unchanged.
-  static py::exception<Error> error(m, "Error", PyExc_RuntimeError);
-  static py::exception<InvalidArgumentError> invalid(m, "InvalidArgumentError", PyExc_ValueError);
-  static py::exception<ParseError> parse(m, "ParseError", PyExc_ValueError);
-  static py::exception<IoError> io(m, "IoError", PyExc_OSError);
+  // Errors: the messages are evloc's, unchanged. Every one is an evloc.Error, and also the
+  // builtin a Python caller expects (ValueError for bad values and files, OSError for I/O).
+  const auto new_exception = [&m](const char* name, std::vector<PyObject*> bases) {
+    py::tuple base_tuple(bases.size());
+    for (size_t i = 0; i < bases.size(); ++i) {
+      base_tuple[i] = py::reinterpret_borrow<py::object>(bases[i]);
+    }
+    const std::string full_name = std::string("evloc._evloc.") + name;
+    py::object type = py::reinterpret_steal<py::object>(
+        PyErr_NewException(full_name.c_str(), base_tuple.ptr(), nullptr));
+    if (!type) throw py::error_already_set();
+    m.attr(name) = type;
+    return type.release().ptr();  // kept for the module's lifetime
+  };
+  static PyObject* const error = new_exception("Error", {PyExc_RuntimeError});
+  static PyObject* const invalid = new_exception("InvalidArgumentError", {error, PyExc_ValueError});
+  static PyObject* const parse = new_exception("ParseError", {error, PyExc_ValueError});
+  static PyObject* const io = new_exception("IoError", {error, PyExc_OSError});
   py::register_exception_translator([](std::exception_ptr pointer) {
     try {
       if (pointer) std::rethrow_exception(pointer);
     } catch (const InvalidArgumentError& e) {
-      invalid(e.what());
+      PyErr_SetString(invalid, e.what());
     } catch (const ParseError& e) {
-      parse(e.what());
+      PyErr_SetString(parse, e.what());
     } catch (const IoError& e) {
-      io(e.what());
+      PyErr_SetString(io, e.what());
     } catch (const Error& e) {
-      error(e.what());
+      PyErr_SetString(error, e.what());
     }
   });
 

@@ -41,6 +41,8 @@ def test_map_errors_are_evloc_messages(tmp_path, simulated):
     with pytest.raises(evloc.ParseError, match="broken.evmap"):
         evloc.load_map(broken)
     assert issubclass(evloc.ParseError, ValueError) and issubclass(evloc.IoError, OSError)
+    assert all(issubclass(e, evloc.Error) for e in (evloc.IoError, evloc.ParseError,
+                                                    evloc.InvalidArgumentError))
 
 # --------------------------------------------------------------------------------------- events
 
@@ -392,3 +394,60 @@ def test_example_tracks_and_plots(simulated, tmp_path):
     assert abs(scores["ate_t_rmse_cm"] - rmse_cm) < 1e-6, (scores["ate_t_rmse_cm"], rmse_cm)
     assert f"position RMSE {rmse_cm:.2f} cm" in completed.stdout
     assert rmse_cm < 2.0
+
+
+@pytest.mark.skipif(os.environ.get("EVLOC_LONG_TESTS") != "1",
+                    reason="long (simulates and maps with COLMAP, about 1.5 min): ctest -L long "
+                           "runs it as evloc_python_example_long_test")
+def test_example_from_nothing_simulates_maps_tracks_and_plots(tmp_path):
+    out = tmp_path / "example"
+    completed = subprocess.run(
+        [sys.executable, os.path.join(PROJECT_ROOT, "examples", "python", "track_and_plot.py"),
+         "--out", str(out), "--build",
+         os.environ.get("EVLOC_BUILD_DIR", os.path.join(PROJECT_ROOT, "build"))],
+        check=True, capture_output=True, text=True)
+    m = evloc.load_map(out / "map")
+    assert m.summary()["num_keyframes"] == 10 and m.num_points > 10000
+    rmse_cm = float(completed.stdout.split("position RMSE ")[1].split(" cm")[0])
+    assert rmse_cm < 2.0, completed.stdout
+    assert (out / "trajectory.png").stat().st_size > 20000
+
+
+def test_random_inputs_give_errors_never_crashes(simulated, tmp_path):
+    """Random arrays, poses, cameras, options and file bytes through the bindings: each call
+    returns or raises one of the documented exceptions (a crash would end the test process)."""
+    rng = np.random.default_rng(7)
+    m = evloc.load_map(simulated / "gt_map")
+    camera = evloc.read_dataset(simulated).camera
+    allowed = (evloc.Error, ValueError, TypeError, OverflowError, KeyError)
+    outcomes = {"ok": 0, "error": 0}
+    for case in range(120):
+        n = int(rng.integers(0, 2000))
+        t = np.sort(rng.integers(-10**9, 10**9, n)) if rng.random() < 0.8 else \
+            rng.integers(-10**12, 10**12, n)
+        events = (t, rng.integers(-5, 700, n), rng.integers(-5, 500, n), rng.integers(-2, 3, n))
+        pose = rng.normal(size=7) if rng.random() < 0.5 else np.r_[rng.normal(size=3), 0, 0, 0, 1]
+        options = {}
+        if rng.random() < 0.3:
+            options[str(rng.choice(["rate", "tau", "max_points", "variant", "polarity"]))] = \
+                rng.choice(["-1", "0", "abc", "1e9", "EVT-PR", "on", "nan"])
+        cam = dict(camera)
+        if rng.random() < 0.2:
+            bad_values = [-1, 0, "fisheye", [1.0], float("nan"), 70000]
+            cam[str(rng.choice(["fx", "width", "model", "distortion"]))] = \
+                bad_values[int(rng.integers(0, len(bad_values)))]
+        try:
+            evloc.track_events(m, cam, events, pose, int(rng.integers(-10**9, 10**9)), **options)
+            outcomes["ok"] += 1
+        except allowed:
+            outcomes["error"] += 1
+        data = rng.integers(0, 256, int(rng.integers(0, 400))).astype(np.uint8).tobytes()
+        header = [b"", b"% evt 3.0\n% end\n", b"\x89HDF\r\n\x1a\n", b"#!AER-DAT4.0\r\n",
+                  b"#ROSBAG V2.0\n", b"EVB1"][case % 6]
+        path = tmp_path / f"random_{case}.dat"
+        path.write_bytes(header + data)
+        try:
+            evloc.read_events(path)
+        except allowed:
+            pass
+    assert outcomes["ok"] > 0 and outcomes["error"] > 0, outcomes
