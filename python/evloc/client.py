@@ -354,9 +354,10 @@ class Session:
         start.client_name = self._client_name
         return request
 
-    def _open(self, pose, t_ns, resend):
-        """Starts a stream with a SessionStart at (pose, t_ns) and `resend` packets; returns the
-        response iterator after SessionStarted. Raises grpc.RpcError."""
+    def _open(self, pose, t_ns, resume):
+        """Starts a stream with a SessionStart at (pose, t_ns) and, when `resume`, the packets
+        sent since resume_prime_ms before t_ns; returns the response iterator after
+        SessionStarted. Raises grpc.RpcError."""
         requests = queue.Queue()
         requests.put(self._start_request(pose, t_ns))
 
@@ -383,6 +384,10 @@ class Session:
             self._max_in_flight = max(1, min(first.started.queue_capacity // 2, 5))
             self._unconfirmed.clear()
             api, _ = _stubs()
+            # Under the lock that send() takes: no packet is sent between this copy of the
+            # history and the switch to the new stream.
+            resend = [(end, packet) for end, packet in self._history
+                      if end > t_ns - self._prime_ns] if resume else []
             for end_t_ns, packet in resend:
                 requests.put(api.TrackRequest(events=packet))
                 self._unconfirmed.append(end_t_ns)
@@ -392,7 +397,7 @@ class Session:
 
     def __enter__(self):
         try:
-            responses = self._open(self._start_pose, self._start_t_ns, [])
+            responses = self._open(self._start_pose, self._start_t_ns, False)
         except grpc.RpcError as error:
             raise ServiceError("SessionStart", error.code(), error.details()) from None
         self._session_started_at = time.monotonic()
@@ -468,10 +473,8 @@ class Session:
                         t_ns, pose = self._last_pose
                     else:
                         t_ns, pose = self._start_t_ns, self._start_pose
-                    resend = [(end, packet) for end, packet in self._history
-                              if end > t_ns - self._prime_ns]
                 try:
-                    responses = self._open(pose, t_ns, resend)
+                    responses = self._open(pose, t_ns, True)
                 except (grpc.RpcError, ServiceError) as error:
                     code = error.code() if isinstance(error, grpc.RpcError) else error.code
                     pushback = self._pushback(error) if isinstance(error, grpc.RpcError) else None
