@@ -219,6 +219,12 @@ struct PyMap {
   }
 };
 
+// `map` with its visibility index built (in the Python object too, for the next tracker).
+PyMap WithVisibility(PyMap& map) {
+  map.Visibility();
+  return map;
+}
+
 template <typename Vector>
 py::array_t<float> Vector3Array(const std::vector<Vector>& values) {
   py::array_t<float> out({static_cast<py::ssize_t>(values.size()), py::ssize_t{3}});
@@ -441,8 +447,9 @@ py::dict ResultToDict(const tracking::OfflineTrackingResult& result) {
 // A live tracker over a map, fed events chunk by chunk.
 class PyTracker {
  public:
-  PyTracker(PyMap map, const py::dict& camera, const std::vector<std::string>& flags)
-      : map_(std::move(map)),
+  // `map` is the Python object's: its visibility index is built once and shared.
+  PyTracker(PyMap& map, const py::dict& camera, const std::vector<std::string>& flags)
+      : map_(WithVisibility(map)),
         camera_(CameraFromDict(camera)),
         options_(TrackingOptionsFromFlags(flags)) {
     tracker_ = std::make_unique<tracking::Tracker>(*map_.map, map_.Visibility(), camera_,
@@ -734,7 +741,7 @@ PYBIND11_MODULE(_evloc, m) {
       [](const std::vector<std::string>& flags) { TrackingOptionsFromFlags(flags); },
       py::arg("flags"));
   py::class_<PyTracker>(m, "Tracker", "The tracker of evloc-track and the service.")
-      .def(py::init<PyMap, const py::dict&, const std::vector<std::string>&>(), py::arg("map"),
+      .def(py::init<PyMap&, const py::dict&, const std::vector<std::string>&>(), py::arg("map"),
            py::arg("camera"), py::arg("flags"))
       .def("reset", &PyTracker::Reset, py::arg("pose"), py::arg("t_ns"))
       .def("start_without_pose", &PyTracker::StartWithoutPose, py::arg("t_ns"))
@@ -744,7 +751,7 @@ PYBIND11_MODULE(_evloc, m) {
       .def_property_readonly("status", &PyTracker::status);
   m.def(
       "track_events",
-      [](PyMap map, const py::dict& camera, const Int64Array& t_ns, const Uint16Array& x,
+      [](PyMap& map, const py::dict& camera, const Int64Array& t_ns, const Uint16Array& x,
          const Uint16Array& y, const Int8Array& polarity, const py::object& initial_pose,
          int64_t initial_t_ns, const std::vector<std::string>& flags) {
         const Camera checked_camera = CameraFromDict(camera);
