@@ -451,3 +451,47 @@ def test_random_inputs_give_errors_never_crashes(simulated, tmp_path):
         except allowed:
             pass
     assert outcomes["ok"] > 0 and outcomes["error"] > 0, outcomes
+
+
+def test_client_with_tls_and_a_token(maps_folder, simulated, tmp_path):
+    """The server with TLS (a CA made here with openssl) and bearer tokens: the client with the
+    CA and a token file lists the maps and tracks; a wrong token is UNAUTHENTICATED."""
+    def openssl(*arguments):
+        subprocess.run(["openssl", *arguments], check=True, capture_output=True)
+
+    ca, server_key, server_csr, server_crt = (tmp_path / n for n in
+                                              ("ca.crt", "server.key", "server.csr", "server.crt"))
+    openssl("req", "-x509", "-newkey", "ec", "-pkeyopt", "ec_paramgen_curve:prime256v1", "-nodes",
+            "-days", "1", "-subj", "/CN=test-ca", "-keyout", str(tmp_path / "ca.key"), "-out",
+            str(ca))
+    (tmp_path / "server.ext").write_text("subjectAltName=DNS:localhost,IP:127.0.0.1\n")
+    openssl("req", "-newkey", "ec", "-pkeyopt", "ec_paramgen_curve:prime256v1", "-nodes", "-subj",
+            "/CN=localhost", "-keyout", str(server_key), "-out", str(server_csr))
+    openssl("x509", "-req", "-days", "1", "-in", str(server_csr), "-CA", str(ca), "-CAkey",
+            str(tmp_path / "ca.key"), "-CAcreateserial", "-extfile", str(tmp_path / "server.ext"),
+            "-out", str(server_crt))
+    tokens = tmp_path / "tokens.txt"
+    tokens.write_text("s3cret-token-for-the-test *\n")
+    tokens.chmod(0o600)
+    token_file = tmp_path / "token.txt"
+    token_file.write_text("s3cret-token-for-the-test\n")
+    server = Server(maps_folder, tmp_path / "tls.log",
+                    extra=("--tls-cert", str(server_crt), "--tls-key", str(server_key),
+                           "--auth-tokens", str(tokens)))
+    try:
+        dataset = evloc.read_dataset(simulated)
+        events = dataset.events().read_all()[:300000]
+        t0, pose = dataset.initial_pose()
+        address = f"localhost:{server.port}"
+        with evloc.Client(address, token_file=token_file, tls={"ca": ca}) as client:
+            assert [m.name for m in client.list_maps()] == ["room"]
+            with client.session("room", dataset.camera, initial_pose=pose, initial_t_ns=t0) as s:
+                stream(s, events)
+                s.close()
+                updates = list(s.poses())
+            assert updates and all(u.status == evloc.Status.TRACKING for u in updates)
+        with evloc.Client(address, token="wrong", tls={"ca": ca}) as client:
+            with pytest.raises(evloc.ServiceError, match="UNAUTHENTICATED"):
+                client.list_maps()
+    finally:
+        server.stop()
