@@ -2,6 +2,7 @@
 #   make test   install missing packages, configure (Release with assertions), build, run every test
 #   make build  configure and build only
 #   make demo   end to end on built-in data (see docs/demo.md)
+#   make python build, then install the Python package evloc into .venv (see docs/python.md)
 #   make bench  build and run the benchmarks
 #   make fuzz   build the libFuzzer targets with clang (see docs/reliability.md)
 #   make clean  remove build outputs
@@ -18,7 +19,7 @@ CMAKE_FLAGS := -DCMAKE_BUILD_TYPE=Release -DEVLOC_ASSERTIONS=ON
 CCACHE_FLAGS = $$(command -v ccache >/dev/null 2>&1 && \
   echo -DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_C_COMPILER_LAUNCHER=ccache)
 
-.PHONY: deps configure build test test-long bench fuzz demo clean format
+.PHONY: deps configure build test test-long bench fuzz demo python clean format
 
 deps:
 	@scripts/install-deps.sh
@@ -47,6 +48,15 @@ fuzz: deps
 
 demo: build
 	@BUILD_DIR=$(BUILD_DIR) scripts/demo.sh
+
+# The Python package (docs/python.md): a venv that sees Debian's numpy, grpcio and protobuf, and
+# pip without build isolation (offline: setuptools and wheel are Debian's too).
+VENV ?= .venv
+python: build
+	@test -x $(VENV)/bin/python || /usr/bin/python3 -m venv --system-site-packages $(VENV)
+	@EVLOC_BUILD_DIR=$(abspath $(BUILD_DIR)) $(VENV)/bin/pip install --quiet --no-build-isolation \
+	  --no-index --force-reinstall --no-deps ./python
+	@echo "make python: the evloc package is installed in $(VENV); run $(VENV)/bin/python"
 
 clean:
 	rm -rf $(BUILD_DIR) build-fuzz

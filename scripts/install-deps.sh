@@ -19,8 +19,11 @@ PACKAGES=(
   libssl-dev
   # tests and benchmarks
   libgtest-dev libgmock-dev libbenchmark-dev
-  # python client example and its test
-  python3 python3-grpcio python3-protobuf python3-numpy
+  # the Python package (python/: bindings, client, pytest tests) and its example
+  python3 python3-grpcio python3-protobuf python3-numpy python3-dev pybind11-dev
+  python3-pytest python3-venv python3-pip python3-setuptools python3-wheel
+  # an independent writer of DSEC HDF5 files for the package's reader tests
+  python3-h5py
   # the independent writer of the bag tests (core/events/testing/write_test_bags.py)
   python3-rosbag python3-roslz4
   # the independent writer of the AEDAT4 tests (core/events/testing/write_test_aedat4.py)

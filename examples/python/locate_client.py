@@ -1,4 +1,4 @@
-#!/usr/bin/python3
+#!/usr/bin/env python3
 """Locates one image in a map through the evloc localizer's Locate RPC (docs/api.md).
 
 A client that does not know where it is (a robot booting in a car park, a tracker that lost the
@@ -15,8 +15,7 @@ Input:
                               "fx": 500, "fy": 500, "cx": 319.5, "cy": 239.5,
                               "distortion": []}}
 
-The Python stubs come from proto/evloc/*.proto, as for localizer_client.py (--stubs DIR, or
-generated into a temporary folder with protoc and grpc_python_plugin).
+It uses the evloc package (docs/python.md): evloc.Client.locate.
 
 Exit codes: 0 FOUND, 3 NOT_FOUND, 1 the call failed (the gRPC status is printed), 2 bad usage.
 """
@@ -26,8 +25,10 @@ import json
 import os
 import sys
 
+import evloc
+
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from localizer_client import add_token_arguments, auth_metadata, fill_camera, stubs  # noqa: E402
+from localizer_client import add_token_arguments, client_of  # noqa: E402
 
 EXIT_FOUND, EXIT_FAILED, EXIT_NOT_FOUND = 0, 1, 3
 
@@ -38,8 +39,6 @@ def main():
     parser.add_argument("--map", required=True, help="map name (ListMaps)")
     parser.add_argument("--image", required=True, help="PNG or JPEG image")
     parser.add_argument("--camera", required=True, help="JSON file with the image's camera")
-    parser.add_argument("--stubs", help="folder with the generated evloc/*_pb2*.py modules")
-    parser.add_argument("--protoc", default="protoc", help="protoc used to generate the stubs")
     add_token_arguments(parser)
     parser.add_argument("--timeout", type=float, default=30, help="deadline of the call, seconds")
     parser.add_argument("--write-session", metavar="FILE",
@@ -48,36 +47,27 @@ def main():
                         help="with --write-session: the session time of the image, ns")
     args = parser.parse_args()
 
-    import grpc  # pylint: disable=import-outside-toplevel
-
     with open(args.camera, encoding="utf-8") as file:
         camera = json.load(file)["camera"]
     with open(args.image, "rb") as file:
         image = file.read()
 
-    api, api_grpc = stubs(args.stubs, args.protoc)
-    request = api.LocateRequest(map_name=args.map, encoded=image)
-    fill_camera(camera, request.camera)
-    stub = api_grpc.LocalizerStub(grpc.insecure_channel(args.server))
-    metadata = auth_metadata(parser, args)
     try:
-        response = stub.Locate(request, metadata=metadata, timeout=args.timeout)
-    except grpc.RpcError as error:
-        print(f"locate failed: {error.code().name}: {error.details()}", file=sys.stderr)
+        with client_of(parser, args) as client:
+            result = client.locate(args.map, camera, image, timeout_s=args.timeout)
+    except evloc.ServiceError as error:
+        print(f"locate failed: {error}", file=sys.stderr)
         return EXIT_FAILED
 
-    found = response.status == api.FOUND
-    answer = {"status": api.LocateStatus.Name(response.status)}
-    if found:
-        p = response.world_from_cam
-        answer["world_from_cam"] = [p.translation.x, p.translation.y, p.translation.z,
-                                    p.rotation.x, p.rotation.y, p.rotation.z, p.rotation.w]
-        answer["covariance"] = list(response.covariance)
-    answer.update({"inliers": response.inliers, "keyframe": response.keyframe,
-                   "score": response.score, "reason": response.reason,
-                   "map_version": response.map.version, "locate_ms": response.locate_ms})
+    answer = {"status": result.status}
+    if result.found:
+        answer["world_from_cam"] = [float(v) for v in result.pose]
+        answer["covariance"] = [float(v) for v in result.covariance.reshape(-1)]
+    answer.update({"inliers": result.inliers, "keyframe": result.keyframe,
+                   "score": result.score, "reason": result.reason,
+                   "map_version": result.map_version, "locate_ms": result.locate_ms})
     print(json.dumps(answer))
-    if found and args.write_session:
+    if result.found and args.write_session:
         t, q = answer["world_from_cam"][:3], answer["world_from_cam"][3:]
         session = {"camera": camera, "initial_t_ns": args.t_ns,
                    "initial_world_from_cam": {"t": t, "q": [q[3], q[0], q[1], q[2]]}}
@@ -85,7 +75,7 @@ def main():
         with open(partial, "w", encoding="utf-8") as file:
             json.dump(session, file)
         os.replace(partial, args.write_session)
-    return EXIT_FOUND if found else EXIT_NOT_FOUND
+    return EXIT_FOUND if result.found else EXIT_NOT_FOUND
 
 
 if __name__ == "__main__":

@@ -1,7 +1,9 @@
 // Runs the Python examples (examples/python/localizer_client.py, locate_client.py) with
-// /usr/bin/python3 against a real server on loopback (skipped, with the reason, when Python lacks
-// grpcio or protobuf, or when the stub generator is missing; the Locate example also needs the
-// shared data's temple photos).
+// /usr/bin/python3 and the evloc package (python/, built here into a temporary folder by its
+// setup.py: the module of this build and stubs generated from proto/) against a real server on
+// loopback (skipped, with the reason, when Python lacks grpcio, protobuf or numpy, or when the
+// package cannot be built: no pybind11 module or stub generator; the Locate example also needs
+// the shared data's temple photos).
 #include <gtest/gtest.h>
 
 #include <fstream>
@@ -21,9 +23,9 @@ namespace evloc::service {
 namespace {
 
 constexpr char kPython[] = "/usr/bin/python3";
-constexpr char kPlugin[] = "/usr/bin/grpc_python_plugin";
 
-// The reason the Python examples cannot run here, or "" when they can.
+// The reason the Python examples cannot run here, or "" when they can: Python without grpcio,
+// protobuf or numpy, or a build without the package's module (no pybind11-dev).
 std::string MissingPython() {
   std::string output;
   if (::evloc::testing::RunShellCommand(
@@ -31,10 +33,29 @@ std::string MissingPython() {
     return std::string(kPython) + " lacks grpcio, protobuf or numpy (Debian: python3-grpcio " +
            "python3-protobuf python3-numpy): " + output;
   }
-  if (!std::filesystem::exists(kPlugin)) {
-    return std::string(kPlugin) + " is missing (Debian: protobuf-compiler-grpc)";
+  if (::evloc::testing::RunShellCommand("ls '" EVLOC_BUILD_DIR "'/python/_evloc*.so 2>&1",
+                                        &output) != 0) {
+    return "this build has no evloc Python module (build/python/_evloc*.so; needs pybind11-dev "
+           "and python3-dev, scripts/install-deps.sh)";
   }
   return "";
+}
+
+// The start of a command line running an example with the evloc package, built (once per test
+// program) into a temporary folder by the package's setup.py; a failure to build it fails the
+// test.
+std::string PythonWithPackage() {
+  static const testing::TemporaryFolder folder;  // removed when the program ends
+  static const std::string failure = [] {
+    const std::string command = "cd python && EVLOC_BUILD_DIR='" EVLOC_BUILD_DIR "' " +
+                                std::string(kPython) + " setup.py -q build_py --build-lib '" +
+                                folder.path().string() + "' 2>&1";
+    std::string output;
+    if (::evloc::testing::RunShellCommand(command, &output) == 0) return std::string();
+    return "the evloc package cannot be built (" + command + "): " + output;
+  }();
+  EXPECT_EQ(failure, "");
+  return "PYTHONPATH='" + folder.path().string() + "' " + kPython;
 }
 
 // The "camera" object of the examples' JSON for a pinhole camera.
@@ -68,10 +89,10 @@ int RunLocalizerClient(const std::filesystem::path& folder, const LocalizerServe
     }
   }
   const std::string command =
-      std::string(kPython) +
+      PythonWithPackage() +
       " examples/python/localizer_client.py --server 127.0.0.1:" + std::to_string(server.port()) +
       " --map " + map_name + " --session '" + (folder / "session.json").string() + "' --events '" +
-      (folder / "events.txt").string() + "' --rate 200 --protoc '" EVLOC_PROTOC "' 2>&1";
+      (folder / "events.txt").string() + "' --rate 200 2>&1";
   return ::evloc::testing::RunShellCommand(command, output);
 }
 
@@ -133,10 +154,10 @@ TEST(PythonLocateExample, FindsAHeldOutViewAndNotAnotherScene) {
   cv::imwrite((folder.path() / "query.png").string(), temple->temple.images[7]);
   const auto locate = [&](const std::filesystem::path& image, std::string* output) {
     return ::evloc::testing::RunShellCommand(
-        std::string(kPython) + " examples/python/locate_client.py --server 127.0.0.1:" +
+        PythonWithPackage() + " examples/python/locate_client.py --server 127.0.0.1:" +
             std::to_string(server.port()) + " --map temple --image '" + image.string() +
             "' --camera '" + (folder.path() / "camera.json").string() + "' --write-session '" +
-            (folder.path() / "session.json").string() + "' --protoc '" EVLOC_PROTOC "' 2>&1",
+            (folder.path() / "session.json").string() + "' 2>&1",
         output);
   };
   std::string output;
