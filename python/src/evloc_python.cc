@@ -19,6 +19,7 @@
 #include <utility>
 #include <vector>
 
+#include "core/camera/calibration_file.h"
 #include "core/camera/camera.h"
 #include "core/common/error.h"
 #include "core/dataset/dataset.h"
@@ -630,7 +631,9 @@ PYBIND11_MODULE(_evloc, m) {
         return CameraToDict(ReadCalibrationFile(path, width, height));
       },
       py::arg("path"), py::arg("width") = 0, py::arg("height") = 0,
-      "Reads a calibration file (calib.yaml, or an ECD calib.txt with width and height).");
+      "Reads a calibration file in any format --calib reads (evloc YAML, ECD calib.txt with width\n"
+      "and height, Kalibr camchain FILE#camN, ROS camera_info, OpenCV FileStorage, COLMAP\n"
+      "cameras.txt FILE#ID; docs/camera.md).");
   m.def(
       "check_camera", [](const py::dict& camera) { return CameraToDict(CameraFromDict(camera)); },
       py::arg("camera"), "Checks a camera dict as evloc does and returns it completed.");
