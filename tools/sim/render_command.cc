@@ -150,6 +150,30 @@ void RenderCommandOptions::Check() const {
   if (!(ground_truth_rate_hz >= 200)) {
     throw InvalidArgumentError("render: the ground-truth rate must be at least 200 Hz.");
   }
+  if (carpark && scene_json) {
+    throw InvalidArgumentError("render: --scene takes one scene: carpark or a JSON file.");
+  }
+  if (!carpark && (time_of_day || path)) {
+    throw InvalidArgumentError(
+        "render: --time-of-day and --path need --scene carpark (a JSON scene sets its daylight, "
+        "sky and point_lights itself).");
+  }
+  if (path && trajectory_file) {
+    throw InvalidArgumentError("render: --path and --trajectory exclude each other.");
+  }
+  if (path && *path != "vehicle" && *path != "pedestrian") {
+    throw InvalidArgumentError("render: unknown --path '" + *path +
+                               "'; expected vehicle or pedestrian.");
+  }
+  if (!(speed_m_per_s > 0) || !std::isfinite(speed_m_per_s)) {
+    throw InvalidArgumentError("render: --speed must be a positive speed in m/s.");
+  }
+  if (!(path_start_m >= 0) || !std::isfinite(path_start_m)) {
+    throw InvalidArgumentError("render: --path-start must be a distance >= 0 in metres.");
+  }
+  if (!(map_spacing_m > 0) || !std::isfinite(map_spacing_m)) {
+    throw InvalidArgumentError("render: --map-spacing must be a positive distance in metres.");
+  }
   if (!(keyframe_interval_s > 0) || !(max_pixel_motion_px > 0)) {
     throw InvalidArgumentError(
         "render: keyframe interval and pixel motion bound must be positive.");
@@ -161,12 +185,30 @@ nlohmann::json RunRenderCommand(const RenderCommandOptions& options) {
   const auto total_start = Clock::now();
   const Camera camera = options.camera_yaml ? ReadCameraYaml(*options.camera_yaml)
                                             : CameraPreset(options.camera_preset);
-  Scene scene = options.scene_json ? LoadSceneJson(*options.scene_json) : MakeDefaultRoom();
+  std::optional<CarPark> park;
+  Scene scene;
+  if (options.carpark) {
+    CarParkOptions park_options;
+    park_options.seed = options.site_seed;
+    park = MakeCarPark(park_options);
+    if (options.time_of_day) ApplyTimeOfDay(*options.time_of_day, park->lamps, &park->scene);
+    scene = park->scene;
+  } else {
+    scene = options.scene_json ? LoadSceneJson(*options.scene_json) : MakeDefaultRoom();
+  }
   scene.Check();
   const Viewpoint viewpoint = DefaultViewpoint(scene);
 
   std::unique_ptr<CameraMotion> motion;
-  if (options.trajectory_file) {
+  if (options.path) {
+    PathMotionOptions path_options =
+        *options.path == "vehicle"
+            ? VehiclePathOptions(park->drive_route, options.speed_m_per_s, options.seed)
+            : PedestrianPathOptions(park->walk_route, options.seed);
+    path_options.start_m = options.path_start_m;
+    path_options.duration_s = options.duration_s;
+    motion = std::make_unique<PathMotion>(path_options);
+  } else if (options.trajectory_file) {
     const Trajectory recorded = ReadTumTrajectory(*options.trajectory_file);
     std::optional<int64_t> duration_ns;
     if (options.duration_s)
@@ -221,7 +263,9 @@ nlohmann::json RunRenderCommand(const RenderCommandOptions& options) {
   for (int64_t t = 0; t <= motion->duration_ns(); t += keyframe_step) {
     keyframes.push_back(motion->WorldFromCam(t));
   }
-  const Map map = BuildGroundTruthMap(scene, camera, keyframes, GroundTruthMapOptions());
+  GroundTruthMapOptions map_options;
+  map_options.point_spacing_m = options.map_spacing_m;
+  const Map map = BuildGroundTruthMap(scene, camera, keyframes, map_options);
   SaveMap(writer.staging_dir() / dataset_files::kGroundTruthMap, map);
   WritePly(writer.staging_dir() / dataset_files::kGroundTruthPly, map);
   const double map_seconds = SecondsSince(map_start);
@@ -232,8 +276,19 @@ nlohmann::json RunRenderCommand(const RenderCommandOptions& options) {
       {"tool", "evloc-sim render"},
       {"options",
        {{"camera", options.camera_yaml ? options.camera_yaml->string() : options.camera_preset},
-        {"scene", options.scene_json ? options.scene_json->string() : "default room"},
-        {"motion", options.trajectory_file ? "trajectory" : MotionProfileName(options.motion)},
+        {"scene", options.carpark      ? "carpark"
+                  : options.scene_json ? options.scene_json->string()
+                                       : "default room"},
+        {"site_seed", options.site_seed},
+        {"time_of_day", options.time_of_day ? TimeOfDayName(*options.time_of_day) : ""},
+        {"motion", options.path              ? *options.path
+                   : options.trajectory_file ? "trajectory"
+                                             : MotionProfileName(options.motion)},
+        {"speed_m_per_s", options.path == "vehicle" ? options.speed_m_per_s
+                          : options.path            ? 1.4
+                                                    : 0.0},
+        {"path_start_m", options.path_start_m},
+        {"map_spacing_m", options.map_spacing_m},
         {"trajectory_file", options.trajectory_file ? options.trajectory_file->string() : ""},
         {"duration_s", duration_s},
         {"fps", options.fps},

@@ -11,6 +11,7 @@
 #include <nlohmann/json.hpp>
 
 #include "core/camera/camera.h"
+#include "tools/sim/carpark.h"
 #include "tools/sim/events_from_frames.h"
 #include "tools/sim/frame_sensor.h"
 #include "tools/sim/motion.h"
@@ -30,8 +31,22 @@ struct RenderCommandOptions {
   std::string camera_preset = "default";
   // Camera YAML file overriding the preset.
   std::optional<std::filesystem::path> camera_yaml;
-  // Scene JSON; the default room when unset.
+  // Scene JSON; the default room when unset (and no built-in site is asked for).
   std::optional<std::filesystem::path> scene_json;
+  // The built-in car park site (`--scene carpark`, docs/sim-scene.md) instead of a room or JSON.
+  bool carpark = false;
+  // Seed of the car park's layout (`--site-seed`): the same site for every run with it.
+  uint64_t site_seed = 1;
+  // Time of day of the car park (`--time-of-day`): daylight, sky and street lamps.
+  std::optional<TimeOfDay> time_of_day;
+  // Path through the car park instead of --motion (`--path vehicle|pedestrian`).
+  std::optional<std::string> path;
+  // Vehicle speed along the route, m/s (`--speed`).
+  double speed_m_per_s = 5;
+  // Where along the route the path starts, metres (`--path-start`).
+  double path_start_m = 0;
+  // Spacing of the ground-truth map's points along every edge, metres (`--map-spacing`).
+  double map_spacing_m = 0.01;
   // Motion preset (used when no trajectory file is given).
   MotionProfile motion = MotionProfile::kMid;
   // TUM trajectory replayed instead of the preset motion.
@@ -73,7 +88,9 @@ struct RenderCommandOptions {
   EsimOptions PixelOptions() const;
 
   // Throws InvalidArgumentError for an empty output path, non-positive duration, fps, rates or
-  // intervals, a ground-truth rate below 200 Hz, an unknown sensor, a bad noise rate or hot-pixel
+  // intervals, a scene JSON with the car park, a time of day or path without the car park, a path
+  // with --trajectory, an unknown path, a non-positive speed or map spacing or a negative path
+  // start, a ground-truth rate below 200 Hz, an unknown sensor, a bad noise rate or hot-pixel
   // fraction or cutoff, or --clean with a noise, hot-pixel or cutoff override.
   void Check() const;
 };

@@ -30,7 +30,16 @@ render options:
   --out DIR             output dataset folder (written as DIR.partial, renamed when complete)
   --camera NAME         default (640x480 pinhole, f=500 px) | davis240 (ECD DAVIS240C); default: default
   --camera-yaml FILE    evloc camera YAML, overrides --camera
-  --scene FILE          scene JSON (docs/sim-scene.md); default: the built-in room
+  --scene FILE|carpark  scene JSON (docs/sim-scene.md), or carpark: the generated 200 m x 200 m
+                        car park site; default: the built-in room
+  --site-seed N         seed of the car park's layout; default 1
+  --time-of-day NAME    car park lighting: day | dusk | night (street lamps on at dusk and night);
+                        default: day
+  --path NAME           car park path instead of --motion: vehicle (forward camera 1.5 m up along
+                        the serpentine route through the lanes) | pedestrian (hand-held, 1.4 m/s)
+  --speed M/S           vehicle speed along the route; default 5
+  --path-start M        where along the route the path starts, metres; default 0
+  --map-spacing M       spacing of the ground-truth map's points along edges; default 0.01
   --motion NAME         slow | mid | fast | aggressive; default: mid
   --trajectory FILE     TUM trajectory replayed relative to its first pose instead of --motion
   --duration S          seconds; default 10 for --motion, the whole file for --trajectory
@@ -86,23 +95,39 @@ std::map<std::string, std::string> ParseFlags(const std::vector<std::string>& ar
 }
 
 int RunRender(const std::vector<std::string>& args) {
-  const auto flags =
-      ParseFlags(args,
-                 {"--out", "--camera", "--camera-yaml", "--scene", "--motion", "--trajectory",
-                  "--duration", "--fps", "--lighting", "--seed", "--render-motion", "--sensor",
-                  "--noise-rate", "--hot-pixels", "--cutoff"},
-                 {"--clean", "--events-txt", "--force"});
+  const auto flags = ParseFlags(
+      args, {"--out",           "--camera",      "--camera-yaml", "--scene",      "--motion",
+             "--trajectory",    "--duration",    "--fps",         "--lighting",   "--seed",
+             "--render-motion", "--sensor",      "--noise-rate",  "--hot-pixels", "--cutoff",
+             "--site-seed",     "--time-of-day", "--path",        "--speed",      "--path-start",
+             "--map-spacing"},
+      {"--clean", "--events-txt", "--force"});
   evloc::sim::RenderCommandOptions options;
   if (!flags.contains("--out")) throw UsageError("render needs --out DIR.");
   if (flags.contains("--motion") && flags.contains("--trajectory")) {
     throw UsageError("--motion and --trajectory exclude each other.");
+  }
+  if (flags.contains("--motion") && flags.contains("--path")) {
+    throw UsageError("--motion and --path exclude each other.");
   }
   for (const auto& [flag, value] : flags) {
     try {
       if (flag == "--out") options.out_dir = value;
       if (flag == "--camera") options.camera_preset = value;
       if (flag == "--camera-yaml") options.camera_yaml = value;
-      if (flag == "--scene") options.scene_json = value;
+      if (flag == "--scene") {
+        if (value == "carpark") {
+          options.carpark = true;
+        } else {
+          options.scene_json = value;
+        }
+      }
+      if (flag == "--site-seed") options.site_seed = ParseUnsignedFlag(flag, value);
+      if (flag == "--time-of-day") options.time_of_day = evloc::sim::ParseTimeOfDay(value);
+      if (flag == "--path") options.path = value;
+      if (flag == "--speed") options.speed_m_per_s = ParseDoubleFlag(flag, value);
+      if (flag == "--path-start") options.path_start_m = ParseDoubleFlag(flag, value);
+      if (flag == "--map-spacing") options.map_spacing_m = ParseDoubleFlag(flag, value);
       if (flag == "--motion") options.motion = evloc::sim::ParseMotionProfile(value);
       if (flag == "--trajectory") options.trajectory_file = value;
       if (flag == "--duration") options.duration_s = ParseDoubleFlag(flag, value);

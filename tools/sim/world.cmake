@@ -3,6 +3,7 @@
 add_library(evloc_sim_world
   ${CMAKE_CURRENT_LIST_DIR}/scene.cc
   ${CMAKE_CURRENT_LIST_DIR}/scene_json.cc
+  ${CMAKE_CURRENT_LIST_DIR}/carpark.cc
   ${CMAKE_CURRENT_LIST_DIR}/renderer.cc
   ${CMAKE_CURRENT_LIST_DIR}/ground_truth_map.cc)
 target_include_directories(evloc_sim_world PUBLIC ${PROJECT_SOURCE_DIR})
