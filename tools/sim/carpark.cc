@@ -373,6 +373,42 @@ CarPark MakeCarPark(const CarParkOptions& options) {
   }
   for (const BoxSpec& island : islands) AddBox(island, &scene);
 
+  // Zebra crossings across every lane at both ends of the bays, and a boundary wall (pillars and a
+  // coping) along the south, east and west edges: what a driver sees at a lane end.
+  for (double lane_y : park.lane_y) {
+    for (double x0 : {park.bays_min_x - 4.5, park.bays_max_x + 0.5}) {
+      paint.push_back(TextureLayer::Stripes(Vector2d(x0, lane_y - kLaneWidth / 2),
+                                            Vector2d(x0 + 4, lane_y + kLaneWidth / 2), 1.0, 0.5, 1,
+                                            kPaint));
+    }
+  }
+  const double wall_height = 1.6, wall_thickness = 0.3;
+  Texture wall;
+  wall.base = Color(0.5f, 0.32f, 0.24f);
+  // A coping band along the top (no brick courses: a fine repetitive pattern facing the
+  // direction of travel makes the distance to the wall ambiguous, docs/sim-scene.md).
+  wall.layers.push_back(TextureLayer::Rectangle(Vector2d(0, wall_height - 0.15),
+                                                Vector2d(2 * kSiteHalf, wall_height),
+                                                Color(0.7f, 0.65f, 0.6f)));
+  for (double u = 0; u < 2 * kSiteHalf; u += 4) {
+    wall.layers.push_back(
+        TextureLayer::Rectangle(Vector2d(u, 0), Vector2d(u + 0.4, wall_height), Gray(0.6f)));
+  }
+  wall.layers.push_back(
+      TextureLayer::Rectangle(Vector2d(0, 0), Vector2d(2 * kSiteHalf, 0.3), Gray(0.35f)));
+  const double inner = kSiteHalf - 0.5;
+  AddBox(GroundBox("wall_south", Vector3d(-inner, -inner, 0),
+                   Vector3d(inner, -inner + wall_thickness, wall_height), 0, wall),
+         &scene);
+  AddBox(GroundBox("wall_east", Vector3d(inner - wall_thickness, -inner + wall_thickness, 0),
+                   Vector3d(inner, south + options.modules * kModuleDepth, wall_height), 0, wall),
+         &scene);
+  AddBox(GroundBox(
+             "wall_west", Vector3d(-inner, -inner + wall_thickness, 0),
+             Vector3d(-inner + wall_thickness, south + options.modules * kModuleDepth, wall_height),
+             0, wall),
+         &scene);
+
   // Buildings along the north edge, trees along the south, east and west edges.
   const double north = south + options.modules * kModuleDepth + 6;
   for (double x = -kSiteHalf + 5; x + 20 <= kSiteHalf - 5;) {
@@ -384,12 +420,12 @@ CarPark MakeCarPark(const CarParkOptions& options) {
     x = right + random.Uniform(5, 9);
   }
   for (double t = -kSiteHalf + 4; t < kSiteHalf - 4; t += 10) {
-    AddTree("tree_s_" + std::to_string(static_cast<int>(t)), Vector2d(t, -kSiteHalf + 4), 0,
+    AddTree("tree_s_" + std::to_string(static_cast<int>(t)), Vector2d(t, -kSiteHalf + 3.5), 0,
             &random, &scene);
     if (t < north - 4) {
-      AddTree("tree_e_" + std::to_string(static_cast<int>(t)), Vector2d(kSiteHalf - 3, t), 0,
+      AddTree("tree_e_" + std::to_string(static_cast<int>(t)), Vector2d(kSiteHalf - 3.2, t), 0,
               &random, &scene);
-      AddTree("tree_w_" + std::to_string(static_cast<int>(t)), Vector2d(-kSiteHalf + 3, t), 0,
+      AddTree("tree_w_" + std::to_string(static_cast<int>(t)), Vector2d(-kSiteHalf + 3.2, t), 0,
               &random, &scene);
     }
   }

@@ -174,6 +174,7 @@ void RenderCommandOptions::Check() const {
   if (!(map_spacing_m > 0) || !std::isfinite(map_spacing_m)) {
     throw InvalidArgumentError("render: --map-spacing must be a positive distance in metres.");
   }
+  if (carpark) site.Check();
   if (!(keyframe_interval_s > 0) || !(max_pixel_motion_px > 0)) {
     throw InvalidArgumentError(
         "render: keyframe interval and pixel motion bound must be positive.");
@@ -188,9 +189,7 @@ nlohmann::json RunRenderCommand(const RenderCommandOptions& options) {
   std::optional<CarPark> park;
   Scene scene;
   if (options.carpark) {
-    CarParkOptions park_options;
-    park_options.seed = options.site_seed;
-    park = MakeCarPark(park_options);
+    park = MakeCarPark(options.site);
     if (options.time_of_day) ApplyTimeOfDay(*options.time_of_day, park->lamps, &park->scene);
     scene = park->scene;
   } else {
@@ -279,7 +278,7 @@ nlohmann::json RunRenderCommand(const RenderCommandOptions& options) {
         {"scene", options.carpark      ? "carpark"
                   : options.scene_json ? options.scene_json->string()
                                        : "default room"},
-        {"site_seed", options.site_seed},
+        {"site_seed", options.site.seed},
         {"time_of_day", options.time_of_day ? TimeOfDayName(*options.time_of_day) : ""},
         {"motion", options.path              ? *options.path
                    : options.trajectory_file ? "trajectory"

@@ -35,8 +35,9 @@ struct RenderCommandOptions {
   std::optional<std::filesystem::path> scene_json;
   // The built-in car park site (`--scene carpark`, docs/sim-scene.md) instead of a room or JSON.
   bool carpark = false;
-  // Seed of the car park's layout (`--site-seed`): the same site for every run with it.
-  uint64_t site_seed = 1;
+  // The car park's layout: its seed (`--site-seed`: the same site for every run with it) and,
+  // for tests, a smaller site (fewer modules and bays).
+  CarParkOptions site;
   // Time of day of the car park (`--time-of-day`): daylight, sky and street lamps.
   std::optional<TimeOfDay> time_of_day;
   // Path through the car park instead of --motion (`--path vehicle|pedestrian`).

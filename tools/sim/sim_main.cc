@@ -122,7 +122,7 @@ int RunRender(const std::vector<std::string>& args) {
           options.scene_json = value;
         }
       }
-      if (flag == "--site-seed") options.site_seed = ParseUnsignedFlag(flag, value);
+      if (flag == "--site-seed") options.site.seed = ParseUnsignedFlag(flag, value);
       if (flag == "--time-of-day") options.time_of_day = evloc::sim::ParseTimeOfDay(value);
       if (flag == "--path") options.path = value;
       if (flag == "--speed") options.speed_m_per_s = ParseDoubleFlag(flag, value);

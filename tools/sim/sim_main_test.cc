@@ -66,6 +66,16 @@ TEST(EvlocSimCli, BadFlagValuesFailWithAClearMessage) {
        {"render --out " + out + " --noise-rate -1", "--noise-rate must be a rate >= 0"},
        {"render --out " + out + " --clean --hot-pixels 0.01", "drop --noise-rate, --hot-pixels"},
        {"render --out " + out + " --cutoff -5", "--cutoff must be a frequency >= 0"},
+       {"render --out " + out + " --time-of-day night", "need --scene carpark"},
+       {"render --out " + out + " --path vehicle", "need --scene carpark"},
+       {"render --out " + out + " --scene carpark --time-of-day noon", "day, dusk or night"},
+       {"render --out " + out + " --scene carpark --path bus", "expected vehicle or pedestrian"},
+       {"render --out " + out + " --scene carpark --path vehicle --motion mid",
+        "--motion and --path exclude each other"},
+       {"render --out " + out + " --scene carpark --path vehicle --speed 0", "--speed must be"},
+       {"render --out " + out + " --scene carpark --map-spacing -1", "--map-spacing must be"},
+       {"render --out " + out + " --scene carpark --path vehicle --duration 1000",
+        "shorten the duration"},
        {"render", "needs --out"},
        {"explode", "unknown command"}});
   EXPECT_FALSE(fs::exists(out));

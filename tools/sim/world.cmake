@@ -15,6 +15,7 @@ evloc_add_test(NAME evloc_sim_world_test
   SOURCES ${CMAKE_CURRENT_LIST_DIR}/scene_test.cc
           ${CMAKE_CURRENT_LIST_DIR}/renderer_test.cc
           ${CMAKE_CURRENT_LIST_DIR}/ground_truth_map_test.cc
+          ${CMAKE_CURRENT_LIST_DIR}/carpark_test.cc
   LIBS evloc_sim_world evloc_common opencv_imgproc opencv_imgcodecs)
 
 # Render-speed benchmark: prints the time per frame of the default room (docs/sim-scene.md).
