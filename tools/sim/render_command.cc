@@ -5,6 +5,7 @@
 #include <memory>
 
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "core/common/error.h"
 #include "core/dataset/dataset.h"
@@ -352,6 +353,82 @@ void EventsFromFramesCommandOptions::Check() const {
     throw InvalidArgumentError("events-from-frames: --ecd-size must be positive.");
   }
   conversion.Check();
+}
+
+void SurveyCommandOptions::Check() const {
+  if (out_dir.empty()) throw InvalidArgumentError("survey: --out is required.");
+  if (survey != "walk" && survey != "car") {
+    throw InvalidArgumentError("survey: unknown --survey '" + survey + "'; expected walk or car.");
+  }
+  if (!(spacing_m > 0) || !std::isfinite(spacing_m)) {
+    throw InvalidArgumentError("survey: --spacing must be a positive distance in metres.");
+  }
+  if (!(start_m >= 0) || !std::isfinite(start_m)) {
+    throw InvalidArgumentError("survey: --path-start must be a distance >= 0 in metres.");
+  }
+  if (max_photos && *max_photos < 1) {
+    throw InvalidArgumentError("survey: --max-photos must be at least 1.");
+  }
+  site.Check();
+}
+
+nlohmann::json RunSurveyCommand(const SurveyCommandOptions& options) {
+  options.Check();
+  const auto start = Clock::now();
+  const Camera camera = options.camera_yaml ? ReadCameraYaml(*options.camera_yaml)
+                                            : CameraPreset(options.camera_preset);
+  CarPark park = MakeCarPark(options.site);
+  if (options.time_of_day) ApplyTimeOfDay(*options.time_of_day, park.lamps, &park.scene);
+  const bool walk = options.survey == "walk";
+  PathMotionOptions path = walk ? PedestrianPathOptions(park.survey_walk_route, options.seed)
+                                : VehiclePathOptions(park.drive_route, 3.0, options.seed);
+  if (!walk) path.height_m = 2.0;
+  path.start_m = options.start_m;
+  const PathMotion motion(path);
+  const double available_m = motion.length_m() - options.start_m;
+  int photos = static_cast<int>(std::floor(available_m / options.spacing_m)) + 1;
+  if (options.max_photos) photos = std::min(photos, *options.max_photos);
+
+  DatasetWriter writer(options.out_dir, DatasetWriterOptions{options.force});
+  writer.WriteCamera(camera);
+  const Renderer renderer(park.scene, camera);
+  Trajectory poses;
+  cv::Mat gray, rgb, depth, bgr8;
+  const double seconds_per_photo = options.spacing_m / path.speed_m_per_s;
+  for (int k = 0; k < photos; ++k) {
+    const auto t_ns = static_cast<int64_t>(std::llround(k * seconds_per_photo * 1e9));
+    Rigid3d world_from_cam = motion.WorldFromCam(std::min(t_ns, motion.duration_ns()));
+    if (walk) {
+      // Looking left, ahead and right in turn (about world z).
+      const double yaw = (k % 3 - 1) * -40.0 * M_PI / 180;
+      world_from_cam.rotation =
+          (Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()) * world_from_cam.rotation).normalized();
+    }
+    renderer.Render(world_from_cam, &gray, &rgb, &depth);
+    cv::Mat rgb8;
+    rgb.convertTo(rgb8, CV_8UC3, 255.0);
+    cv::cvtColor(rgb8, bgr8, cv::COLOR_RGB2BGR);
+    writer.AddImage(t_ns, bgr8);
+    writer.AddDepth(t_ns, depth);
+    poses.Append(TimedPose{t_ns, world_from_cam});
+  }
+  writer.WriteGroundTruth(poses);
+  const nlohmann::json info = {
+      {"tool", "evloc-sim survey"},
+      {"options",
+       {{"survey", options.survey},
+        {"camera", options.camera_yaml ? options.camera_yaml->string() : options.camera_preset},
+        {"site_seed", options.site.seed},
+        {"time_of_day", options.time_of_day ? TimeOfDayName(*options.time_of_day) : "day"},
+        {"spacing_m", options.spacing_m},
+        {"path_start_m", options.start_m},
+        {"seed", options.seed}}},
+      {"camera", CameraJson(camera)},
+      {"counts", {{"photos", photos}, {"path_length_m", motion.length_m()}}},
+      {"timings_s", {{"total", SecondsSince(start)}}}};
+  writer.WriteInfo(info);
+  writer.Commit();
+  return info;
 }
 
 nlohmann::json RunEventsFromFramesCommand(const EventsFromFramesCommandOptions& options) {

@@ -99,6 +99,42 @@ struct RenderCommandOptions {
 // Runs `render`; returns the info.json written. Throws the library's typed errors.
 nlohmann::json RunRenderCommand(const RenderCommandOptions& options);
 
+// Options of `evloc-sim survey`: the photos a mapping team takes of the car park, with their
+// exact poses, as a dataset the mapper builds from (`evloc-mapper build --known-poses`).
+struct SurveyCommandOptions {
+  // Output dataset folder.
+  std::filesystem::path out_dir;
+  // Camera preset name (ignored when camera_yaml is set).
+  std::string camera_preset = "default";
+  // Camera YAML file overriding the preset.
+  std::optional<std::filesystem::path> camera_yaml;
+  // The car park's layout (its seed: `--site-seed`).
+  CarParkOptions site;
+  // Time of day (`--time-of-day`); day when unset.
+  std::optional<TimeOfDay> time_of_day;
+  // "walk": hand-held photos 1.4 m up along the survey loops (one per lane), alternately looking
+  // 40 degrees left, ahead and 40 degrees right; "car": a mapping car's forward camera 2 m up
+  // along the vehicle route (`--survey`).
+  std::string survey = "walk";
+  // Distance between two photos along the path, metres (`--spacing`).
+  double spacing_m = 2.0;
+  // Where along the path the survey starts, metres (`--path-start`).
+  double start_m = 0;
+  // At most this many photos (`--max-photos`); the whole path when unset.
+  std::optional<int> max_photos;
+  // Seed of the walk's gait and the car's vibrations.
+  uint64_t seed = 1;
+  // Replace an existing non-empty output folder.
+  bool force = false;
+
+  // Throws InvalidArgumentError for an empty output path, an unknown survey, a non-positive
+  // spacing or photo count, or a negative start.
+  void Check() const;
+};
+
+// Runs `survey`; returns the info.json written.
+nlohmann::json RunSurveyCommand(const SurveyCommandOptions& options);
+
 // Options of `evloc-sim events-from-frames`.
 struct EventsFromFramesCommandOptions {
   // Input dataset folder (evloc-sim output or an ECD folder with images.txt).

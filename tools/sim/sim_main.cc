@@ -24,6 +24,7 @@ constexpr char kUsage[] = R"(evloc-sim: simulate an event camera dataset (docs/s
 Usage:
   evloc-sim render --out DIR [options]
   evloc-sim events-from-frames --in DATASET --out DIR [options]
+  evloc-sim survey --out DIR [options]
   evloc-sim --help
 
 render options:
@@ -60,6 +61,16 @@ render options:
                         hot pixels, low-pass or read-out limit
   --events-txt          also write events.txt (ECD text format)
   --force               replace an existing non-empty output folder
+
+survey options (photos of the car park with exact poses, for evloc-mapper build --known-poses):
+  --out DIR             output dataset folder (images, depth, groundtruth.txt, calib.yaml)
+  --survey NAME         walk (hand-held, 1.4 m up, loops along every lane, looking left, ahead and
+                        right in turn) | car (a mapping car's forward camera, 2 m up, along the
+                        vehicle route); default: walk
+  --spacing M           metres between two photos along the path; default 2
+  --path-start M        where along the path the survey starts, metres; default 0
+  --max-photos N        at most N photos; default: the whole path
+  --camera, --camera-yaml, --site-seed, --time-of-day, --seed, --force   as for render
 
 events-from-frames options:
   --in DATASET          input folder with images.txt (evloc-sim output or ECD)
@@ -170,6 +181,50 @@ int RunRender(const std::vector<std::string>& args) {
   return 0;
 }
 
+int RunSurvey(const std::vector<std::string>& args) {
+  const auto flags =
+      ParseFlags(args,
+                 {"--out", "--survey", "--spacing", "--path-start", "--max-photos", "--camera",
+                  "--camera-yaml", "--site-seed", "--time-of-day", "--seed"},
+                 {"--force"});
+  if (!flags.contains("--out")) throw UsageError("survey needs --out DIR.");
+  evloc::sim::SurveyCommandOptions options;
+  for (const auto& [flag, value] : flags) {
+    try {
+      if (flag == "--out") options.out_dir = value;
+      if (flag == "--survey") options.survey = value;
+      if (flag == "--spacing") options.spacing_m = ParseDoubleFlag(flag, value);
+      if (flag == "--path-start") options.start_m = ParseDoubleFlag(flag, value);
+      if (flag == "--max-photos") {
+        options.max_photos = static_cast<int>(
+            std::min<uint64_t>(ParseUnsignedFlag(flag, value), static_cast<uint64_t>(1) << 30));
+      }
+      if (flag == "--camera") options.camera_preset = value;
+      if (flag == "--camera-yaml") options.camera_yaml = value;
+      if (flag == "--site-seed") options.site.seed = ParseUnsignedFlag(flag, value);
+      if (flag == "--time-of-day") options.time_of_day = evloc::sim::ParseTimeOfDay(value);
+      if (flag == "--seed") options.seed = ParseUnsignedFlag(flag, value);
+      if (flag == "--force") options.force = true;
+    } catch (const UsageError&) {
+      throw;
+    } catch (const InvalidArgumentError& error) {
+      throw UsageError(flag + ": " + error.what());
+    }
+  }
+  if (!options.camera_yaml) {
+    try {
+      evloc::sim::CameraPreset(options.camera_preset);
+    } catch (const InvalidArgumentError& error) {
+      throw UsageError(std::string("--camera: ") + error.what());
+    }
+  }
+  options.Check();
+  const auto info = evloc::sim::RunSurveyCommand(options);
+  std::cout << "evloc-sim survey: wrote " << options.out_dir.string() << ": "
+            << info["counts"]["photos"] << " photos in " << info["timings_s"]["total"] << " s\n";
+  return 0;
+}
+
 int RunEventsFromFrames(const std::vector<std::string>& args) {
   const auto flags =
       ParseFlags(args, {"--in", "--out", "--ecd-size", "--contrast", "--gamma", "--seed"},
@@ -218,6 +273,7 @@ int main(int argc, char** argv) {
     try {
       if (args[0] == "render") return RunRender(rest);
       if (args[0] == "events-from-frames") return RunEventsFromFrames(rest);
+      if (args[0] == "survey") return RunSurvey(rest);
     } catch (const UsageError&) {
       throw;
     } catch (const InvalidArgumentError& error) {
@@ -225,6 +281,7 @@ int main(int argc, char** argv) {
       // without --force) is a bad command line too (docs/simulator.md).
       throw UsageError(error.what());
     }
-    throw UsageError("unknown command '" + args[0] + "'; expected render or events-from-frames.");
+    throw UsageError("unknown command '" + args[0] +
+                     "'; expected render, survey or events-from-frames.");
   });
 }

@@ -21,3 +21,7 @@ evloc_add_test(NAME evloc_sim_world_test
 # Render-speed benchmark: prints the time per frame of the default room (docs/sim-scene.md).
 add_executable(evloc_sim_render_benchmark ${CMAKE_CURRENT_LIST_DIR}/render_benchmark.cc)
 target_link_libraries(evloc_sim_render_benchmark PRIVATE evloc_sim_world)
+
+# libFuzzer target (built with -DEVLOC_FUZZ=ON, `make fuzz`); see docs/reliability.md.
+evloc_add_fuzzer(NAME evloc_scene_json_fuzzer
+  SOURCES ${CMAKE_CURRENT_LIST_DIR}/fuzz/scene_json_fuzzer.cc LIBS evloc_sim_world evloc_common)
