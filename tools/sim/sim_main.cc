@@ -105,6 +105,30 @@ std::map<std::string, std::string> ParseFlags(const std::vector<std::string>& ar
   return flags;
 }
 
+// Calls `apply(flag, value)` for every flag; an invalid value becomes a UsageError naming the flag.
+template <typename Apply>
+void ForEachFlag(const std::map<std::string, std::string>& flags, const Apply& apply) {
+  for (const auto& [flag, value] : flags) {
+    try {
+      apply(flag, value);
+    } catch (const UsageError&) {
+      throw;
+    } catch (const InvalidArgumentError& error) {
+      throw UsageError(flag + ": " + error.what());
+    }
+  }
+}
+
+// Throws a UsageError for an unknown --camera preset (unless a camera YAML replaces it).
+void RequireKnownCamera(bool has_camera_yaml, const std::string& preset) {
+  if (has_camera_yaml) return;
+  try {
+    evloc::sim::CameraPreset(preset);
+  } catch (const InvalidArgumentError& error) {
+    throw UsageError(std::string("--camera: ") + error.what());
+  }
+}
+
 int RunRender(const std::vector<std::string>& args) {
   const auto flags = ParseFlags(
       args, {"--out",           "--camera",      "--camera-yaml", "--scene",      "--motion",
@@ -121,54 +145,42 @@ int RunRender(const std::vector<std::string>& args) {
   if (flags.contains("--motion") && flags.contains("--path")) {
     throw UsageError("--motion and --path exclude each other.");
   }
-  for (const auto& [flag, value] : flags) {
-    try {
-      if (flag == "--out") options.out_dir = value;
-      if (flag == "--camera") options.camera_preset = value;
-      if (flag == "--camera-yaml") options.camera_yaml = value;
-      if (flag == "--scene") {
-        if (value == "carpark") {
-          options.carpark = true;
-        } else {
-          options.scene_json = value;
-        }
+  ForEachFlag(flags, [&](const std::string& flag, const std::string& value) {
+    if (flag == "--out") options.out_dir = value;
+    if (flag == "--camera") options.camera_preset = value;
+    if (flag == "--camera-yaml") options.camera_yaml = value;
+    if (flag == "--scene") {
+      if (value == "carpark") {
+        options.carpark = true;
+      } else {
+        options.scene_json = value;
       }
-      if (flag == "--site-seed") options.site.seed = ParseUnsignedFlag(flag, value);
-      if (flag == "--time-of-day") options.time_of_day = evloc::sim::ParseTimeOfDay(value);
-      if (flag == "--path") options.path = value;
-      if (flag == "--speed") options.speed_m_per_s = ParseDoubleFlag(flag, value);
-      if (flag == "--path-start") options.path_start_m = ParseDoubleFlag(flag, value);
-      if (flag == "--map-spacing") options.map_spacing_m = ParseDoubleFlag(flag, value);
-      if (flag == "--motion") options.motion = evloc::sim::ParseMotionProfile(value);
-      if (flag == "--trajectory") options.trajectory_file = value;
-      if (flag == "--duration") options.duration_s = ParseDoubleFlag(flag, value);
-      if (flag == "--fps") options.fps = ParseDoubleFlag(flag, value);
-      if (flag == "--lighting") options.lighting = evloc::sim::ParseLightingCondition(value);
-      if (flag == "--seed") options.seed = ParseUnsignedFlag(flag, value);
-      if (flag == "--render-motion") options.max_render_motion_px = ParseDoubleFlag(flag, value);
-      if (flag == "--sensor") {
-        evloc::sim::SensorPreset(value);
-        options.sensor = value;
-      }
-      if (flag == "--noise-rate") options.noise_rate_hz = ParseDoubleFlag(flag, value);
-      if (flag == "--hot-pixels") options.hot_pixel_fraction = ParseDoubleFlag(flag, value);
-      if (flag == "--cutoff") options.photoreceptor_cutoff_hz = ParseDoubleFlag(flag, value);
-      if (flag == "--clean") options.clean = true;
-      if (flag == "--events-txt") options.events_txt = true;
-      if (flag == "--force") options.force = true;
-    } catch (const UsageError&) {
-      throw;
-    } catch (const InvalidArgumentError& error) {
-      throw UsageError(flag + ": " + error.what());
     }
-  }
-  if (!options.camera_yaml) {
-    try {
-      evloc::sim::CameraPreset(options.camera_preset);
-    } catch (const InvalidArgumentError& error) {
-      throw UsageError(std::string("--camera: ") + error.what());
+    if (flag == "--site-seed") options.site.seed = ParseUnsignedFlag(flag, value);
+    if (flag == "--time-of-day") options.time_of_day = evloc::sim::ParseTimeOfDay(value);
+    if (flag == "--path") options.path = value;
+    if (flag == "--speed") options.speed_m_per_s = ParseDoubleFlag(flag, value);
+    if (flag == "--path-start") options.path_start_m = ParseDoubleFlag(flag, value);
+    if (flag == "--map-spacing") options.map_spacing_m = ParseDoubleFlag(flag, value);
+    if (flag == "--motion") options.motion = evloc::sim::ParseMotionProfile(value);
+    if (flag == "--trajectory") options.trajectory_file = value;
+    if (flag == "--duration") options.duration_s = ParseDoubleFlag(flag, value);
+    if (flag == "--fps") options.fps = ParseDoubleFlag(flag, value);
+    if (flag == "--lighting") options.lighting = evloc::sim::ParseLightingCondition(value);
+    if (flag == "--seed") options.seed = ParseUnsignedFlag(flag, value);
+    if (flag == "--render-motion") options.max_render_motion_px = ParseDoubleFlag(flag, value);
+    if (flag == "--sensor") {
+      evloc::sim::SensorPreset(value);
+      options.sensor = value;
     }
-  }
+    if (flag == "--noise-rate") options.noise_rate_hz = ParseDoubleFlag(flag, value);
+    if (flag == "--hot-pixels") options.hot_pixel_fraction = ParseDoubleFlag(flag, value);
+    if (flag == "--cutoff") options.photoreceptor_cutoff_hz = ParseDoubleFlag(flag, value);
+    if (flag == "--clean") options.clean = true;
+    if (flag == "--events-txt") options.events_txt = true;
+    if (flag == "--force") options.force = true;
+  });
+  RequireKnownCamera(options.camera_yaml.has_value(), options.camera_preset);
   options.Check();
   const auto info = evloc::sim::RunRenderCommand(options);
   std::cout << "evloc-sim render: wrote " << options.out_dir.string() << ": "
@@ -189,35 +201,23 @@ int RunSurvey(const std::vector<std::string>& args) {
                  {"--force"});
   if (!flags.contains("--out")) throw UsageError("survey needs --out DIR.");
   evloc::sim::SurveyCommandOptions options;
-  for (const auto& [flag, value] : flags) {
-    try {
-      if (flag == "--out") options.out_dir = value;
-      if (flag == "--survey") options.survey = value;
-      if (flag == "--spacing") options.spacing_m = ParseDoubleFlag(flag, value);
-      if (flag == "--path-start") options.start_m = ParseDoubleFlag(flag, value);
-      if (flag == "--max-photos") {
-        options.max_photos = static_cast<int>(
-            std::min<uint64_t>(ParseUnsignedFlag(flag, value), static_cast<uint64_t>(1) << 30));
-      }
-      if (flag == "--camera") options.camera_preset = value;
-      if (flag == "--camera-yaml") options.camera_yaml = value;
-      if (flag == "--site-seed") options.site.seed = ParseUnsignedFlag(flag, value);
-      if (flag == "--time-of-day") options.time_of_day = evloc::sim::ParseTimeOfDay(value);
-      if (flag == "--seed") options.seed = ParseUnsignedFlag(flag, value);
-      if (flag == "--force") options.force = true;
-    } catch (const UsageError&) {
-      throw;
-    } catch (const InvalidArgumentError& error) {
-      throw UsageError(flag + ": " + error.what());
+  ForEachFlag(flags, [&](const std::string& flag, const std::string& value) {
+    if (flag == "--out") options.out_dir = value;
+    if (flag == "--survey") options.survey = value;
+    if (flag == "--spacing") options.spacing_m = ParseDoubleFlag(flag, value);
+    if (flag == "--path-start") options.start_m = ParseDoubleFlag(flag, value);
+    if (flag == "--max-photos") {
+      options.max_photos = static_cast<int>(
+          std::min<uint64_t>(ParseUnsignedFlag(flag, value), static_cast<uint64_t>(1) << 30));
     }
-  }
-  if (!options.camera_yaml) {
-    try {
-      evloc::sim::CameraPreset(options.camera_preset);
-    } catch (const InvalidArgumentError& error) {
-      throw UsageError(std::string("--camera: ") + error.what());
-    }
-  }
+    if (flag == "--camera") options.camera_preset = value;
+    if (flag == "--camera-yaml") options.camera_yaml = value;
+    if (flag == "--site-seed") options.site.seed = ParseUnsignedFlag(flag, value);
+    if (flag == "--time-of-day") options.time_of_day = evloc::sim::ParseTimeOfDay(value);
+    if (flag == "--seed") options.seed = ParseUnsignedFlag(flag, value);
+    if (flag == "--force") options.force = true;
+  });
+  RequireKnownCamera(options.camera_yaml.has_value(), options.camera_preset);
   options.Check();
   const auto info = evloc::sim::RunSurveyCommand(options);
   std::cout << "evloc-sim survey: wrote " << options.out_dir.string() << ": "
