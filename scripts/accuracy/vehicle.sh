@@ -68,7 +68,7 @@ run, result = sys.argv[1], sys.argv[2]
 e = json.load(open(result + "/eval.json"))
 s = json.load(open(result + "/stats.json"))
 print("| %s | %.2f | %.3f | %.1f | %.2f | %.3f | %d / %d | %.2f |" % (
-    run, ate["rmse"], rot["rmse"], ate["max"], rpe["rmse"], e["coverage"],
-    s["lost_steps"], s["steps"], s["median_step_ms"]))
+    run, e["ate_t_rmse_cm"], e["ate_r_rmse_deg"], e["ate_t_max_cm"], e["rpe_t_rmse_cm_s"],
+    e["coverage"], s["lost_steps"], s["steps"], s["median_step_ms"]))
 EOF
 done
