@@ -286,6 +286,14 @@ Options:
   --decay-trail PX       adaptive decay: tau = PX / the median image speed of the map points,
                          within [--min-tau, --tau] (default 1; 0: a fixed tau; docs/tracking.md)
   --min-tau SECONDS      the shortest adaptive decay time (default 0.005)
+  --reselect-translation M
+                         select the map points again when the predicted pose moved more than
+                         M metres since the last selection (default 0.05; a vehicle: 0.5)
+  --min-depth M          map points nearer than M metres are not selected (default 0.1)
+  --max-depth M          map points farther than M metres are not selected (default 50)
+  --decay-quantile Q     the adaptive decay divides the trail by this quantile of the points'
+                         image speeds (default 0.5, the median; 0.9 for a vehicle's forward
+                         camera, docs/tracking.md "Vehicle speed")
   --polarity-band DEG    neutral band around 90 degrees between gradient and flow (default 30)
   --min-flow PX          predicted flows per step shorter than this give no polarity (default 0.05)
   --two-stage on|off     with polarity: an unsigned solve first, then the signed one from its
@@ -412,6 +420,14 @@ TrackCommandOptions ParseTrackCommandLine(const std::vector<std::string>& argume
       tracker.decay_trail_px = ParseDoubleFlag(flag, value);
     } else if (flag == "--min-tau") {
       tracker.min_decay_time_s = ParseDoubleFlag(flag, value);
+    } else if (flag == "--decay-quantile") {
+      tracker.decay_speed_quantile = ParseDoubleFlag(flag, value);
+    } else if (flag == "--reselect-translation") {
+      tracker.reselect_translation_m = ParseDoubleFlag(flag, value);
+    } else if (flag == "--min-depth") {
+      tracker.min_depth_m = ParseDoubleFlag(flag, value);
+    } else if (flag == "--max-depth") {
+      tracker.max_depth_m = ParseDoubleFlag(flag, value);
     } else if (flag == "--velocity-window") {
       tracker.velocity_window_s = ParseDoubleFlag(flag, value);
     } else if (flag == "--polarity-band") {

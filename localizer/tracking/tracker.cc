@@ -221,8 +221,8 @@ double Tracker::StepDecayTimeNs() const {
       motion_.velocity_span_ns() == 0) {
     return longest_ns;
   }
-  // The median image speed of (up to 256 of) the selected points at the last pose, from the
-  // displacement over 1 ms of the constant-velocity motion.
+  // The decay_speed_quantile image speed (the median by default) of (up to 256 of) the selected
+  // points at the last pose, from the displacement over 1 ms of the constant-velocity motion.
   constexpr double kProbeS = 1e-3;
   const Rigid3d cam_from_world = motion_.last_world_from_cam().Inverse();
   const Rigid3d moved_cam_from_world =
@@ -241,8 +241,13 @@ double Tracker::StepDecayTimeNs() const {
     speeds.push_back((after - before).norm() / kProbeS);
   }
   if (speeds.empty()) return longest_ns;
-  std::nth_element(speeds.begin(), speeds.begin() + speeds.size() / 2, speeds.end());
-  const double speed_px_s = speeds[speeds.size() / 2];
+  const size_t rank =
+      options_.decay_speed_quantile == 0.5
+          ? speeds.size() / 2
+          : std::min(speeds.size() - 1, static_cast<size_t>(std::floor(
+                                            options_.decay_speed_quantile * (speeds.size() - 1))));
+  std::nth_element(speeds.begin(), speeds.begin() + rank, speeds.end());
+  const double speed_px_s = speeds[rank];
   if (speed_px_s <= 0) return longest_ns;
   return std::clamp(options_.decay_trail_px / speed_px_s * 1e9, options_.min_decay_time_s * 1e9,
                     longest_ns);

@@ -54,6 +54,8 @@ void TrackerOptions::Check() const {
           "decay_trail_px must be finite and >= 0 (0 = a fixed decay time).");
   Require(Positive(min_decay_time_s) && min_decay_time_s <= decay_time_s,
           "min_decay_time_s must be positive and at most decay_time_s.");
+  Require(decay_speed_quantile > 0 && decay_speed_quantile <= 1,
+          "decay_speed_quantile must lie within (0, 1] (0.5: the median image speed).");
   Require(!events_per_step || *events_per_step >= 1, "events_per_step must be at least 1.");
   Require(Positive(decay_time_s), "decay_time_s must be positive.");
   Require(std::isfinite(empty_threshold) && empty_threshold > 0 && empty_threshold < 1,

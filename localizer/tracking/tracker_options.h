@@ -112,6 +112,12 @@ struct TrackerOptions {
   double decay_trail_px = 1.0;
   // The shortest adaptive decay time, seconds.
   double min_decay_time_s = 0.005;
+  // Which quantile of the selected points' image speeds the adaptive decay divides the trail by,
+  // in (0, 1]: 0.5 = the median. Forward motion (a vehicle) needs a high one: the points near
+  // the focus of expansion barely move while the near ones, which fix the translation, sweep
+  // the image; the median then gives the longest tau and their edges smear (docs/tracking.md,
+  // "Vehicle speed").
+  double decay_speed_quantile = 0.5;
   // Pixels with T <= this count as empty (field value 1) and as inactive for the ANNF.
   double empty_threshold = 0.1;
   // Smooth the field 1 - T with the 5x5 binomial (Gaussian) kernel.

@@ -199,6 +199,10 @@ std::vector<GroundTruthEdgePoint> SampleGroundTruthEdges(const Scene& scene,
   if (!options.include_creases) return points;
 
   // Creases: sample each quad's outline and find the surface meeting it there.
+  std::vector<Eigen::AlignedBox3d> boxes(scene.surfaces.size());
+  for (size_t b = 0; b < scene.surfaces.size(); ++b) {
+    for (const Eigen::Vector3d& corner : scene.surfaces[b].Corners()) boxes[b].extend(corner);
+  }
   for (size_t a = 0; a < scene.surfaces.size(); ++a) {
     const Surface& surface_a = scene.surfaces[a];
     const Eigen::Vector3d normal_a = surface_a.Normal();
@@ -206,16 +210,12 @@ std::vector<GroundTruthEdgePoint> SampleGroundTruthEdges(const Scene& scene,
         Eigen::Vector2d(0, 0), Eigen::Vector2d(surface_a.width, 0),
         Eigen::Vector2d(surface_a.width, surface_a.height), Eigen::Vector2d(0, surface_a.height)};
     // Surfaces that may touch this one (bounding boxes overlap).
-    Eigen::AlignedBox3d box_a;
-    for (const Eigen::Vector3d& corner : surface_a.Corners()) box_a.extend(corner);
+    Eigen::AlignedBox3d box_a = boxes[a];
     box_a.extend(box_a.min() - Eigen::Vector3d::Constant(1e-4));
     box_a.extend(box_a.max() + Eigen::Vector3d::Constant(1e-4));
     std::vector<size_t> neighbours;
     for (size_t b = 0; b < scene.surfaces.size(); ++b) {
-      if (b == a) continue;
-      Eigen::AlignedBox3d box_b;
-      for (const Eigen::Vector3d& corner : scene.surfaces[b].Corners()) box_b.extend(corner);
-      if (box_a.intersects(box_b)) neighbours.push_back(b);
+      if (b != a && box_a.intersects(boxes[b])) neighbours.push_back(b);
     }
     for (int edge = 0; edge < 4; ++edge) {
       const BoundaryCurve curve{false, corners[edge], corners[(edge + 1) % 4]};
@@ -280,6 +280,13 @@ bool IsPointUnoccluded(const Scene& scene, const Eigen::Vector3d& camera_center,
   return !hit || hit->distance >= 1 - 1e-6;
 }
 
+bool IsPointUnoccluded(const SurfaceIndex& index, const Eigen::Vector3d& camera_center,
+                       const Eigen::Vector3d& point) {
+  const Eigen::Vector3d direction = point - camera_center;
+  const std::optional<RayHit> hit = index.CastRay(camera_center, direction, 1e-9);
+  return !hit || hit->distance >= 1 - 1e-6;
+}
+
 Map BuildGroundTruthMap(const Scene& scene, const Camera& camera,
                         const std::vector<Rigid3d>& keyframe_world_from_cam,
                         const GroundTruthMapOptions& options) {
@@ -292,6 +299,7 @@ Map BuildGroundTruthMap(const Scene& scene, const Camera& camera,
   }
   const std::vector<GroundTruthEdgePoint> edges = SampleGroundTruthEdges(scene, options);
 
+  const SurfaceIndex index(scene);
   // visible[k][i]: keyframe k sees edge point i.
   const size_t num_keyframes = keyframe_world_from_cam.size();
   std::vector<std::vector<uint8_t>> visible(num_keyframes, std::vector<uint8_t>(edges.size(), 0));
@@ -303,7 +311,7 @@ Map BuildGroundTruthMap(const Scene& scene, const Camera& camera,
         Eigen::Vector2d pixel;
         if (!camera.Project(cam_from_world * edges[i].position, &pixel)) continue;
         if (!camera.IsInside(pixel, options.visibility_margin_px)) continue;
-        if (IsPointUnoccluded(scene, center, edges[i].position)) visible[k][i] = 1;
+        if (IsPointUnoccluded(index, center, edges[i].position)) visible[k][i] = 1;
       }
     });
   }

@@ -13,6 +13,7 @@
 #include "core/camera/camera.h"
 #include "core/geometry/rigid3.h"
 #include "maps/map.h"
+#include "tools/sim/renderer.h"
 #include "tools/sim/scene.h"
 
 namespace evloc::sim {
@@ -81,6 +82,9 @@ std::vector<GroundTruthEdgePoint> SampleGroundTruthEdges(const Scene& scene,
 // reaching the point (a relative tolerance of 1e-6 lets surfaces through the point itself count
 // as not occluding).
 bool IsPointUnoccluded(const Scene& scene, const Eigen::Vector3d& camera_center,
+                       const Eigen::Vector3d& point);
+// The same through a surface index (site-scale scenes).
+bool IsPointUnoccluded(const SurfaceIndex& index, const Eigen::Vector3d& camera_center,
                        const Eigen::Vector3d& point);
 
 // The exact semi-dense map of `scene`: the points of SampleGroundTruthEdges, with gradient

@@ -106,6 +106,169 @@ Eigen::Quaterniond LookAtRotation(const Eigen::Vector3d& position, const Eigen::
   return Eigen::Quaterniond(rotation).normalized();
 }
 
+namespace {
+
+double SumOfVibrations(const std::vector<Vibration>& vibrations, double t_s) {
+  double sum = 0;
+  for (const Vibration& v : vibrations) {
+    sum += v.amplitude * std::sin(2 * std::numbers::pi * v.frequency_hz * t_s + v.phase);
+  }
+  return sum;
+}
+
+// `count` sinusoids with seeded frequencies in [low_hz, high_hz] and phases, amplitudes summing to
+// `total`.
+std::vector<Vibration> SeededVibration(std::mt19937_64* rng, int count, double total, double low_hz,
+                                       double high_hz) {
+  std::uniform_real_distribution<double> frequency(low_hz, high_hz), phase(0, 2 * std::numbers::pi),
+      share(0.5, 1.0);
+  std::vector<Vibration> vibrations(count);
+  double shares = 0;
+  for (Vibration& v : vibrations) {
+    v.frequency_hz = frequency(*rng);
+    v.phase = phase(*rng);
+    v.amplitude = share(*rng);
+    shares += v.amplitude;
+  }
+  for (Vibration& v : vibrations) v.amplitude *= total / shares;
+  return vibrations;
+}
+
+std::vector<Vibration> Concatenate(std::vector<Vibration> a, const std::vector<Vibration>& b) {
+  a.insert(a.end(), b.begin(), b.end());
+  return a;
+}
+
+}  // namespace
+
+void PathMotionOptions::Check() const {
+  if (route.size() < 2)
+    throw InvalidArgumentError("PathMotion: the route needs at least 2 points.");
+  for (const Eigen::Vector2d& point : route) {
+    if (!point.allFinite())
+      throw InvalidArgumentError("PathMotion: the route has a non-finite point.");
+  }
+  if (!(speed_m_per_s > 0) || !std::isfinite(speed_m_per_s)) {
+    throw InvalidArgumentError("PathMotion: the speed must be positive.");
+  }
+  if (!(height_m > 0) || !std::isfinite(height_m) || !(heading_window_m > 0)) {
+    throw InvalidArgumentError("PathMotion: height and heading window must be positive.");
+  }
+  if (duration_s && !(*duration_s > 0 && std::isfinite(*duration_s))) {
+    throw InvalidArgumentError("PathMotion: the duration must be positive.");
+  }
+  if (!(start_m >= 0) || !std::isfinite(start_m) || !std::isfinite(pitch_down_deg) ||
+      !std::isfinite(yaw_offset_deg)) {
+    throw InvalidArgumentError(
+        "PathMotion: start, pitch and yaw offset must be finite, start >= 0.");
+  }
+  for (const auto* list : {&pitch_vibration, &roll_vibration, &yaw_vibration, &height_vibration}) {
+    for (const Vibration& v : *list) {
+      if (!std::isfinite(v.amplitude) || !std::isfinite(v.frequency_hz) ||
+          !std::isfinite(v.phase)) {
+        throw InvalidArgumentError("PathMotion: vibrations must be finite.");
+      }
+    }
+  }
+}
+
+PathMotionOptions VehiclePathOptions(std::vector<Eigen::Vector2d> route, double speed_m_per_s,
+                                     uint64_t seed) {
+  PathMotionOptions options;
+  options.route = std::move(route);
+  options.speed_m_per_s = speed_m_per_s;
+  options.height_m = 1.5;
+  options.pitch_down_deg = 5;
+  std::mt19937_64 rng(seed * 104729 + 3);
+  options.pitch_vibration = Concatenate(SeededVibration(&rng, 3, 0.3, 1.0, 3.0),
+                                        SeededVibration(&rng, 2, 0.03, 11.0, 15.0));
+  options.roll_vibration = Concatenate(SeededVibration(&rng, 3, 0.3, 1.0, 3.0),
+                                       SeededVibration(&rng, 2, 0.03, 11.0, 15.0));
+  options.yaw_vibration = SeededVibration(&rng, 2, 0.1, 0.5, 2.0);
+  options.height_vibration = Concatenate(SeededVibration(&rng, 3, 0.005, 1.0, 3.0),
+                                         SeededVibration(&rng, 2, 0.002, 11.0, 15.0));
+  return options;
+}
+
+PathMotionOptions PedestrianPathOptions(std::vector<Eigen::Vector2d> route, uint64_t seed) {
+  PathMotionOptions options;
+  options.route = std::move(route);
+  options.speed_m_per_s = 1.4;
+  options.height_m = 1.4;
+  options.pitch_down_deg = 8;
+  std::mt19937_64 rng(seed * 7727 + 11);
+  std::uniform_real_distribution<double> phase(0, 2 * std::numbers::pi);
+  const double stride_hz = 0.95;
+  options.height_vibration = {Vibration{0.025, 2 * stride_hz, phase(rng)}};
+  options.roll_vibration =
+      Concatenate({Vibration{1.5, stride_hz, phase(rng)}}, SeededVibration(&rng, 3, 0.5, 2.0, 6.0));
+  options.yaw_vibration =
+      Concatenate({Vibration{2.5, stride_hz, phase(rng)}}, SeededVibration(&rng, 3, 1.0, 0.2, 3.0));
+  options.pitch_vibration = Concatenate({Vibration{1.0, 2 * stride_hz, phase(rng)}},
+                                        SeededVibration(&rng, 3, 1.0, 0.2, 3.0));
+  return options;
+}
+
+PathMotion::PathMotion(PathMotionOptions options) : options_(std::move(options)) {
+  options_.Check();
+  cumulative_.reserve(options_.route.size());
+  cumulative_.push_back(0);
+  for (size_t i = 1; i < options_.route.size(); ++i) {
+    cumulative_.push_back(cumulative_.back() + (options_.route[i] - options_.route[i - 1]).norm());
+  }
+  const double available = length_m() - options_.start_m;
+  if (!(available > 0)) {
+    throw InvalidArgumentError("PathMotion: the start (" + std::to_string(options_.start_m) +
+                               " m) lies beyond the route's end (" + std::to_string(length_m()) +
+                               " m).");
+  }
+  const double duration_s = options_.duration_s.value_or(available / options_.speed_m_per_s);
+  if (duration_s * options_.speed_m_per_s > available + 1e-9) {
+    throw InvalidArgumentError("PathMotion: " + std::to_string(duration_s) + " s at " +
+                               std::to_string(options_.speed_m_per_s) + " m/s needs " +
+                               std::to_string(duration_s * options_.speed_m_per_s) +
+                               " m of route, but only " + std::to_string(available) +
+                               " m remain after the start; shorten the duration.");
+  }
+  duration_ns_ = static_cast<int64_t>(std::llround(duration_s * 1e9));
+}
+
+Eigen::Vector2d PathMotion::PointAt(double s) const {
+  s = std::clamp(s, 0.0, length_m());
+  const auto upper = std::upper_bound(cumulative_.begin(), cumulative_.end(), s);
+  if (upper == cumulative_.end()) return options_.route.back();
+  const size_t i = static_cast<size_t>(upper - cumulative_.begin());
+  const double piece = cumulative_[i] - cumulative_[i - 1];
+  const double alpha = piece > 0 ? (s - cumulative_[i - 1]) / piece : 0;
+  return options_.route[i - 1] + alpha * (options_.route[i] - options_.route[i - 1]);
+}
+
+Rigid3d PathMotion::WorldFromCam(int64_t t_ns) const {
+  const double t_s = std::clamp<int64_t>(t_ns, 0, duration_ns_) * 1e-9;
+  const double s = options_.start_m + options_.speed_m_per_s * t_s;
+  const Eigen::Vector2d at = PointAt(s);
+  const double half = options_.heading_window_m / 2;
+  Eigen::Vector2d along = PointAt(s + half) - PointAt(s - half);
+  if (along.norm() < 1e-9) along = options_.route.back() - options_.route.front();
+  const double deg = std::numbers::pi / 180;
+  const double heading =
+      std::atan2(along.y(), along.x()) +
+      (options_.yaw_offset_deg + SumOfVibrations(options_.yaw_vibration, t_s)) * deg;
+  const double pitch =
+      (options_.pitch_down_deg + SumOfVibrations(options_.pitch_vibration, t_s)) * deg;
+  const Eigen::Vector3d position(
+      at.x(), at.y(), options_.height_m + SumOfVibrations(options_.height_vibration, t_s));
+  const Eigen::Vector3d forward(std::cos(heading) * std::cos(pitch),
+                                std::sin(heading) * std::cos(pitch), -std::sin(pitch));
+  const Eigen::Quaterniond base =
+      LookAtRotation(position, position + forward, Eigen::Vector3d::UnitZ());
+  // Roll about the optical axis.
+  const double roll = SumOfVibrations(options_.roll_vibration, t_s) * deg;
+  const Eigen::Quaterniond rotation =
+      base * Eigen::Quaterniond(Eigen::AngleAxisd(roll, Eigen::Vector3d::UnitZ()));
+  return Rigid3d(rotation.normalized(), position);
+}
+
 void SmoothMotionOptions::Check() const {
   if (!std::isfinite(duration_s) || duration_s <= 0) {
     throw InvalidArgumentError("Motion duration must be positive, got " +

@@ -136,6 +136,75 @@ class RecordedMotion : public CameraMotion {
   int64_t duration_ns_;
 };
 
+// One sinusoid of a vibration: amplitude * sin(2 pi frequency t + phase).
+struct Vibration {
+  // Amplitude (degrees for angles, metres for heights).
+  double amplitude = 0;
+  // Frequency, Hz.
+  double frequency_hz = 1;
+  // Phase, radians.
+  double phase = 0;
+};
+
+// A camera carried along a 2D route over flat ground at constant speed: a vehicle's forward
+// camera or a pedestrian's hand-held one. The optical axis follows the route's heading (smoothed
+// over `heading_window_m`) turned by `yaw_offset_deg`, tilted down by `pitch_down_deg`; pitch,
+// roll, yaw and height vibrate by sums of sinusoids (docs/simulator.md, "Paths").
+struct PathMotionOptions {
+  // The route, world (x, y) metres, at least two points, densely sampled (ResamplePolyline).
+  std::vector<Eigen::Vector2d> route;
+  // Speed along the route, m/s.
+  double speed_m_per_s = 5;
+  // Camera height above the ground (z = 0), metres.
+  double height_m = 1.5;
+  // Where along the route the motion starts, metres.
+  double start_m = 0;
+  // Duration, seconds; unset: until the end of the route.
+  std::optional<double> duration_s;
+  // Downward tilt of the optical axis, degrees.
+  double pitch_down_deg = 5;
+  // Turn of the optical axis from the heading, degrees (positive: to the left, about world z).
+  double yaw_offset_deg = 0;
+  // The heading is the direction between the route points this far behind and ahead, metres.
+  double heading_window_m = 2;
+  // Vibrations of pitch, roll and yaw (degrees) and of the height (metres).
+  std::vector<Vibration> pitch_vibration, roll_vibration, yaw_vibration, height_vibration;
+
+  // Throws InvalidArgumentError for a route of fewer than 2 points or non-finite points, a
+  // non-positive speed, height, window or duration, a start outside the route, or non-finite
+  // vibrations.
+  void Check() const;
+};
+
+// The vehicle preset: a camera 1.5 m up, 5 degrees down, at `speed_m_per_s`, with the small
+// pitch/roll of a car body on its suspension (about 0.3 degrees at 1-3 Hz) and a faint engine and
+// road vibration (0.03 degrees, 2 mm at 11-15 Hz), seeded.
+PathMotionOptions VehiclePathOptions(std::vector<Eigen::Vector2d> route, double speed_m_per_s,
+                                     uint64_t seed);
+// The pedestrian preset: a hand-held camera 1.4 m up, 8 degrees down, at 1.4 m/s with the gait's
+// bob (2.5 cm at twice the 0.95 Hz stride), roll and yaw sway (1.5 and 2.5 degrees at the stride)
+// and hand jitter, seeded.
+PathMotionOptions PedestrianPathOptions(std::vector<Eigen::Vector2d> route, uint64_t seed);
+
+// A camera moving along a route (PathMotionOptions).
+class PathMotion : public CameraMotion {
+ public:
+  // Throws InvalidArgumentError when the options fail Check() or the route is shorter than the
+  // distance the duration needs.
+  explicit PathMotion(PathMotionOptions options);
+  Rigid3d WorldFromCam(int64_t t_ns) const override;
+  int64_t duration_ns() const override { return duration_ns_; }
+  // The route point at arc length `s` metres (clamped to the route).
+  Eigen::Vector2d PointAt(double s) const;
+  // The route's length, metres.
+  double length_m() const { return cumulative_.back(); }
+
+ private:
+  PathMotionOptions options_;
+  std::vector<double> cumulative_;
+  int64_t duration_ns_ = 0;
+};
+
 // Measured peak speeds of a motion, by finite differences at `step_ns`.
 PeakSpeeds MeasurePeakSpeeds(const CameraMotion& motion, int64_t step_ns = 1'000'000);
 

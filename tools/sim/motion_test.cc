@@ -103,5 +103,75 @@ TEST(MotionProfile, ParsesNamesAndRejectsOthers) {
   EXPECT_THROW(ParseMotionProfile("medium"), InvalidArgumentError);
 }
 
+// An L-shaped route: 30 m east, then 30 m north (a sharp corner the heading window smooths).
+std::vector<Eigen::Vector2d> LRoute() {
+  std::vector<Eigen::Vector2d> route;
+  for (int i = 0; i <= 300; ++i) route.emplace_back(0.1 * i, 0);
+  for (int i = 1; i <= 300; ++i) route.emplace_back(30, 0.1 * i);
+  return route;
+}
+
+TEST(PathMotion, MovesAtTheSpeedAlongTheRouteLookingAhead) {
+  for (double speed : {5.0, 10.0}) {
+    PathMotionOptions options = VehiclePathOptions(LRoute(), speed, 1);
+    options.duration_s = 5.0;
+    const PathMotion motion(options);
+    EXPECT_EQ(motion.duration_ns(), 5'000'000'000);
+    EXPECT_NEAR(motion.length_m(), 60.0, 1e-9);
+    // On the first straight (t <= 2.5 s at 10 m/s): x = speed * t, y = 0, z = 1.5 m +- 7 mm, the
+    // optical axis east and 5 degrees down within the vibrations (0.33 degrees).
+    for (double t : {0.0, 0.5, 1.0, 2.0}) {
+      const Rigid3d pose = motion.WorldFromCam(static_cast<int64_t>(t * 1e9));
+      EXPECT_NEAR(pose.translation.x(), speed * t, 1e-9);
+      EXPECT_NEAR(pose.translation.y(), 0.0, 1e-9);
+      EXPECT_NEAR(pose.translation.z(), 1.5, 0.0071);
+      const Eigen::Vector3d axis = pose.rotation * Eigen::Vector3d::UnitZ();
+      EXPECT_NEAR(std::atan2(axis.y(), axis.x()) * 180 / M_PI, 0.0, 0.15) << t;
+      EXPECT_NEAR(std::asin(-axis.z()) * 180 / M_PI, 5.0, 0.34) << t;
+      // Image rows point down: the camera y axis has a negative world z.
+      EXPECT_LT((pose.rotation * Eigen::Vector3d::UnitY()).z(), -0.9);
+    }
+    const PeakSpeeds peak = MeasurePeakSpeeds(motion);
+    EXPECT_NEAR(peak.linear_m_per_s, speed, 0.03 * speed);
+  }
+  // After the corner the axis points north.
+  PathMotionOptions options = VehiclePathOptions(LRoute(), 5, 1);
+  const PathMotion motion(options);
+  const Rigid3d late = motion.WorldFromCam(motion.duration_ns() - 200'000'000);
+  const Eigen::Vector3d axis = late.rotation * Eigen::Vector3d::UnitZ();
+  EXPECT_NEAR(std::atan2(axis.y(), axis.x()) * 180 / M_PI, 90.0, 0.2);
+}
+
+TEST(PathMotion, PedestrianWalksAtWalkingPaceWithAGaitBob) {
+  const PathMotion motion(PedestrianPathOptions(LRoute(), 3));
+  EXPECT_NEAR(motion.duration_ns() * 1e-9, 60.0 / 1.4, 1e-6);
+  double lowest = 10, highest = 0;
+  for (int64_t t = 0; t < 10'000'000'000; t += 10'000'000) {
+    const double z = motion.WorldFromCam(t).translation.z();
+    lowest = std::min(lowest, z);
+    highest = std::max(highest, z);
+  }
+  EXPECT_NEAR(highest - lowest, 0.05, 0.002);  // a 2.5 cm bob either way
+  EXPECT_NEAR((lowest + highest) / 2, 1.4, 0.002);
+}
+
+TEST(PathMotion, RejectsBadOptions) {
+  PathMotionOptions options = VehiclePathOptions(LRoute(), 5, 1);
+  options.duration_s = 13.0;  // 65 m on a 60 m route
+  EXPECT_THROW(PathMotion{options}, InvalidArgumentError);
+  options.duration_s.reset();
+  options.start_m = 61;
+  EXPECT_THROW(PathMotion{options}, InvalidArgumentError);
+  options.start_m = 0;
+  options.speed_m_per_s = 0;
+  EXPECT_THROW(PathMotion{options}, InvalidArgumentError);
+  options.speed_m_per_s = 5;
+  options.route.resize(1);
+  EXPECT_THROW(PathMotion{options}, InvalidArgumentError);
+  options = VehiclePathOptions(LRoute(), 5, 1);
+  options.pitch_vibration.push_back(Vibration{NAN, 1, 0});
+  EXPECT_THROW(PathMotion{options}, InvalidArgumentError);
+}
+
 }  // namespace
 }  // namespace evloc::sim

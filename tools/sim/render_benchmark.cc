@@ -1,11 +1,18 @@
-// Prints the render time per frame of the default room (docs/sim-scene.md, "Measured speed").
-// Usage: evloc_sim_render_benchmark [width height frames]
+// Prints the render time per frame of the default room or of the car park site
+// (docs/sim-scene.md, "Measured speed").
+// Usage: evloc_sim_render_benchmark [width height frames [room|carpark|carpark-night]]
+// The room: a 360 degree pan from its camera region's centre. The car park: a forward camera
+// 1.5 m above the route, tilted 5 degrees down, over the first lane and its turn.
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <ctime>
 
+#include <string>
+
+#include "tools/sim/carpark.h"
 #include "tools/sim/renderer.h"
 
 int main(int argc, char** argv) {
@@ -13,7 +20,20 @@ int main(int argc, char** argv) {
   const int width = argc > 2 ? std::atoi(argv[1]) : 640;
   const int height = argc > 2 ? std::atoi(argv[2]) : 480;
   const int frames = argc > 3 ? std::atoi(argv[3]) : 200;
-  const evloc::sim::Scene room = evloc::sim::MakeDefaultRoom();
+  const std::string scene_name = argc > 4 ? argv[4] : "room";
+  if (scene_name != "room" && scene_name != "carpark" && scene_name != "carpark-night") {
+    std::fprintf(stderr, "unknown scene '%s': expected room, carpark or carpark-night\n",
+                 scene_name.c_str());
+    return 2;
+  }
+  evloc::sim::CarPark park;
+  if (scene_name != "room") {
+    park = evloc::sim::MakeCarPark();
+    if (scene_name == "carpark-night") {
+      evloc::sim::ApplyTimeOfDay(evloc::sim::TimeOfDay::kNight, park.lamps, &park.scene);
+    }
+  }
+  const evloc::sim::Scene room = scene_name == "room" ? evloc::sim::MakeDefaultRoom() : park.scene;
   const evloc::Camera camera = evloc::Camera::Pinhole(width, height, 0.5 * width, 0.5 * width,
                                                       0.5 * (width - 1), 0.5 * (height - 1));
   const auto construct_start = std::chrono::steady_clock::now();
@@ -26,14 +46,24 @@ int main(int argc, char** argv) {
   const Eigen::Vector3d centre = room.camera_region.center();
   const std::clock_t cpu_start = std::clock();
   for (int i = 0; i < frames; ++i) {
-    // A slow pan around the room, slightly tilted down.
-    const double yaw = 2 * M_PI * i / frames;
-    const Eigen::Vector3d forward(std::sin(yaw) * std::cos(0.3), std::cos(yaw) * std::cos(0.3),
-                                  -std::sin(0.3));
+    // A slow pan around the room, slightly tilted down; or a drive along the route.
+    double yaw = 2 * M_PI * i / frames, pitch = 0.3;
+    Eigen::Vector3d position = centre;
+    if (scene_name != "room") {
+      const size_t route_index =
+          std::min(park.drive_route.size() - 2, static_cast<size_t>(2000.0 * i / frames));
+      const Eigen::Vector2d at = park.drive_route[route_index];
+      const Eigen::Vector2d along = park.drive_route[route_index + 1] - at;
+      position = Eigen::Vector3d(at.x(), at.y(), 1.5);
+      yaw = std::atan2(along.x(), along.y());
+      pitch = 5 * M_PI / 180;
+    }
+    const Eigen::Vector3d forward(std::sin(yaw) * std::cos(pitch), std::cos(yaw) * std::cos(pitch),
+                                  -std::sin(pitch));
     const Eigen::Vector3d right = forward.cross(Eigen::Vector3d::UnitZ()).normalized();
     Eigen::Matrix3d rotation;
     rotation << right, forward.cross(right), forward;
-    const evloc::Rigid3d pose(Eigen::Quaterniond(rotation), centre);
+    const evloc::Rigid3d pose(Eigen::Quaterniond(rotation), position);
     evloc::sim::RenderStats stats;
     const auto start = std::chrono::steady_clock::now();
     renderer.Render(pose, &gray, nullptr, nullptr, &stats);

@@ -5,6 +5,7 @@
 #include <memory>
 
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "core/camera/calibration_file.h"
 #include "core/common/error.h"
@@ -151,6 +152,31 @@ void RenderCommandOptions::Check() const {
   if (!(ground_truth_rate_hz >= 200)) {
     throw InvalidArgumentError("render: the ground-truth rate must be at least 200 Hz.");
   }
+  if (carpark && scene_json) {
+    throw InvalidArgumentError("render: --scene takes one scene: carpark or a JSON file.");
+  }
+  if (!carpark && (time_of_day || path)) {
+    throw InvalidArgumentError(
+        "render: --time-of-day and --path need --scene carpark (a JSON scene sets its daylight, "
+        "sky and point_lights itself).");
+  }
+  if (path && trajectory_file) {
+    throw InvalidArgumentError("render: --path and --trajectory exclude each other.");
+  }
+  if (path && *path != "vehicle" && *path != "pedestrian") {
+    throw InvalidArgumentError("render: unknown --path '" + *path +
+                               "'; expected vehicle or pedestrian.");
+  }
+  if (!(speed_m_per_s > 0) || !std::isfinite(speed_m_per_s)) {
+    throw InvalidArgumentError("render: --speed must be a positive speed in m/s.");
+  }
+  if (!(path_start_m >= 0) || !std::isfinite(path_start_m)) {
+    throw InvalidArgumentError("render: --path-start must be a distance >= 0 in metres.");
+  }
+  if (!(map_spacing_m > 0) || !std::isfinite(map_spacing_m)) {
+    throw InvalidArgumentError("render: --map-spacing must be a positive distance in metres.");
+  }
+  if (carpark) site.Check();
   if (!(keyframe_interval_s > 0) || !(max_pixel_motion_px > 0)) {
     throw InvalidArgumentError(
         "render: keyframe interval and pixel motion bound must be positive.");
@@ -162,12 +188,28 @@ nlohmann::json RunRenderCommand(const RenderCommandOptions& options) {
   const auto total_start = Clock::now();
   const Camera camera = options.camera_yaml ? ReadCalibrationFile(*options.camera_yaml, 0, 0)
                                             : CameraPreset(options.camera_preset);
-  Scene scene = options.scene_json ? LoadSceneJson(*options.scene_json) : MakeDefaultRoom();
+  std::optional<CarPark> park;
+  Scene scene;
+  if (options.carpark) {
+    park = MakeCarPark(options.site);
+    if (options.time_of_day) ApplyTimeOfDay(*options.time_of_day, park->lamps, &park->scene);
+    scene = park->scene;
+  } else {
+    scene = options.scene_json ? LoadSceneJson(*options.scene_json) : MakeDefaultRoom();
+  }
   scene.Check();
   const Viewpoint viewpoint = DefaultViewpoint(scene);
 
   std::unique_ptr<CameraMotion> motion;
-  if (options.trajectory_file) {
+  if (options.path) {
+    PathMotionOptions path_options =
+        *options.path == "vehicle"
+            ? VehiclePathOptions(park->drive_route, options.speed_m_per_s, options.seed)
+            : PedestrianPathOptions(park->walk_route, options.seed);
+    path_options.start_m = options.path_start_m;
+    path_options.duration_s = options.duration_s;
+    motion = std::make_unique<PathMotion>(path_options);
+  } else if (options.trajectory_file) {
     const Trajectory recorded = ReadTumTrajectory(*options.trajectory_file);
     std::optional<int64_t> duration_ns;
     if (options.duration_s)
@@ -222,7 +264,9 @@ nlohmann::json RunRenderCommand(const RenderCommandOptions& options) {
   for (int64_t t = 0; t <= motion->duration_ns(); t += keyframe_step) {
     keyframes.push_back(motion->WorldFromCam(t));
   }
-  const Map map = BuildGroundTruthMap(scene, camera, keyframes, GroundTruthMapOptions());
+  GroundTruthMapOptions map_options;
+  map_options.point_spacing_m = options.map_spacing_m;
+  const Map map = BuildGroundTruthMap(scene, camera, keyframes, map_options);
   SaveMap(writer.staging_dir() / dataset_files::kGroundTruthMap, map);
   WritePly(writer.staging_dir() / dataset_files::kGroundTruthPly, map);
   const double map_seconds = SecondsSince(map_start);
@@ -233,8 +277,19 @@ nlohmann::json RunRenderCommand(const RenderCommandOptions& options) {
       {"tool", "evloc-sim render"},
       {"options",
        {{"camera", options.camera_yaml ? options.camera_yaml->string() : options.camera_preset},
-        {"scene", options.scene_json ? options.scene_json->string() : "default room"},
-        {"motion", options.trajectory_file ? "trajectory" : MotionProfileName(options.motion)},
+        {"scene", options.carpark      ? "carpark"
+                  : options.scene_json ? options.scene_json->string()
+                                       : "default room"},
+        {"site_seed", options.site.seed},
+        {"time_of_day", options.time_of_day ? TimeOfDayName(*options.time_of_day) : ""},
+        {"motion", options.path              ? *options.path
+                   : options.trajectory_file ? "trajectory"
+                                             : MotionProfileName(options.motion)},
+        {"speed_m_per_s", options.path == "vehicle" ? options.speed_m_per_s
+                          : options.path            ? 1.4
+                                                    : 0.0},
+        {"path_start_m", options.path_start_m},
+        {"map_spacing_m", options.map_spacing_m},
         {"trajectory_file", options.trajectory_file ? options.trajectory_file->string() : ""},
         {"duration_s", duration_s},
         {"fps", options.fps},
@@ -299,6 +354,82 @@ void EventsFromFramesCommandOptions::Check() const {
     throw InvalidArgumentError("events-from-frames: --ecd-size must be positive.");
   }
   conversion.Check();
+}
+
+void SurveyCommandOptions::Check() const {
+  if (out_dir.empty()) throw InvalidArgumentError("survey: --out is required.");
+  if (survey != "walk" && survey != "car") {
+    throw InvalidArgumentError("survey: unknown --survey '" + survey + "'; expected walk or car.");
+  }
+  if (!(spacing_m > 0) || !std::isfinite(spacing_m)) {
+    throw InvalidArgumentError("survey: --spacing must be a positive distance in metres.");
+  }
+  if (!(start_m >= 0) || !std::isfinite(start_m)) {
+    throw InvalidArgumentError("survey: --path-start must be a distance >= 0 in metres.");
+  }
+  if (max_photos && *max_photos < 1) {
+    throw InvalidArgumentError("survey: --max-photos must be at least 1.");
+  }
+  site.Check();
+}
+
+nlohmann::json RunSurveyCommand(const SurveyCommandOptions& options) {
+  options.Check();
+  const auto start = Clock::now();
+  const Camera camera = options.camera_yaml ? ReadCameraYaml(*options.camera_yaml)
+                                            : CameraPreset(options.camera_preset);
+  CarPark park = MakeCarPark(options.site);
+  if (options.time_of_day) ApplyTimeOfDay(*options.time_of_day, park.lamps, &park.scene);
+  const bool walk = options.survey == "walk";
+  PathMotionOptions path = walk ? PedestrianPathOptions(park.survey_walk_route, options.seed)
+                                : VehiclePathOptions(park.drive_route, 3.0, options.seed);
+  if (!walk) path.height_m = 2.0;
+  path.start_m = options.start_m;
+  const PathMotion motion(path);
+  const double available_m = motion.length_m() - options.start_m;
+  int photos = static_cast<int>(std::floor(available_m / options.spacing_m)) + 1;
+  if (options.max_photos) photos = std::min(photos, *options.max_photos);
+
+  DatasetWriter writer(options.out_dir, DatasetWriterOptions{options.force});
+  writer.WriteCamera(camera);
+  const Renderer renderer(park.scene, camera);
+  Trajectory poses;
+  cv::Mat gray, rgb, depth, bgr8;
+  const double seconds_per_photo = options.spacing_m / path.speed_m_per_s;
+  for (int k = 0; k < photos; ++k) {
+    const auto t_ns = static_cast<int64_t>(std::llround(k * seconds_per_photo * 1e9));
+    Rigid3d world_from_cam = motion.WorldFromCam(std::min(t_ns, motion.duration_ns()));
+    if (walk) {
+      // Looking left, ahead and right in turn (about world z).
+      const double yaw = (k % 3 - 1) * -40.0 * M_PI / 180;
+      world_from_cam.rotation =
+          (Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()) * world_from_cam.rotation).normalized();
+    }
+    renderer.Render(world_from_cam, &gray, &rgb, &depth);
+    cv::Mat rgb8;
+    rgb.convertTo(rgb8, CV_8UC3, 255.0);
+    cv::cvtColor(rgb8, bgr8, cv::COLOR_RGB2BGR);
+    writer.AddImage(t_ns, bgr8);
+    writer.AddDepth(t_ns, depth);
+    poses.Append(TimedPose{t_ns, world_from_cam});
+  }
+  writer.WriteGroundTruth(poses);
+  const nlohmann::json info = {
+      {"tool", "evloc-sim survey"},
+      {"options",
+       {{"survey", options.survey},
+        {"camera", options.camera_yaml ? options.camera_yaml->string() : options.camera_preset},
+        {"site_seed", options.site.seed},
+        {"time_of_day", options.time_of_day ? TimeOfDayName(*options.time_of_day) : "day"},
+        {"spacing_m", options.spacing_m},
+        {"path_start_m", options.start_m},
+        {"seed", options.seed}}},
+      {"camera", CameraJson(camera)},
+      {"counts", {{"photos", photos}, {"path_length_m", motion.length_m()}}},
+      {"timings_s", {{"total", SecondsSince(start)}}}};
+  writer.WriteInfo(info);
+  writer.Commit();
+  return info;
 }
 
 nlohmann::json RunEventsFromFramesCommand(const EventsFromFramesCommandOptions& options) {

@@ -11,6 +11,7 @@
 #include <nlohmann/json.hpp>
 
 #include "core/camera/camera.h"
+#include "tools/sim/carpark.h"
 #include "tools/sim/events_from_frames.h"
 #include "tools/sim/frame_sensor.h"
 #include "tools/sim/motion.h"
@@ -30,8 +31,23 @@ struct RenderCommandOptions {
   std::string camera_preset = "default";
   // Camera YAML file overriding the preset.
   std::optional<std::filesystem::path> camera_yaml;
-  // Scene JSON; the default room when unset.
+  // Scene JSON; the default room when unset (and no built-in site is asked for).
   std::optional<std::filesystem::path> scene_json;
+  // The built-in car park site (`--scene carpark`, docs/sim-scene.md) instead of a room or JSON.
+  bool carpark = false;
+  // The car park's layout: its seed (`--site-seed`: the same site for every run with it) and,
+  // for tests, a smaller site (fewer modules and bays).
+  CarParkOptions site;
+  // Time of day of the car park (`--time-of-day`): daylight, sky and street lamps.
+  std::optional<TimeOfDay> time_of_day;
+  // Path through the car park instead of --motion (`--path vehicle|pedestrian`).
+  std::optional<std::string> path;
+  // Vehicle speed along the route, m/s (`--speed`).
+  double speed_m_per_s = 5;
+  // Where along the route the path starts, metres (`--path-start`).
+  double path_start_m = 0;
+  // Spacing of the ground-truth map's points along every edge, metres (`--map-spacing`).
+  double map_spacing_m = 0.01;
   // Motion preset (used when no trajectory file is given).
   MotionProfile motion = MotionProfile::kMid;
   // TUM trajectory replayed instead of the preset motion.
@@ -73,13 +89,51 @@ struct RenderCommandOptions {
   EsimOptions PixelOptions() const;
 
   // Throws InvalidArgumentError for an empty output path, non-positive duration, fps, rates or
-  // intervals, a ground-truth rate below 200 Hz, an unknown sensor, a bad noise rate or hot-pixel
+  // intervals, a scene JSON with the car park, a time of day or path without the car park, a path
+  // with --trajectory, an unknown path, a non-positive speed or map spacing or a negative path
+  // start, a ground-truth rate below 200 Hz, an unknown sensor, a bad noise rate or hot-pixel
   // fraction or cutoff, or --clean with a noise, hot-pixel or cutoff override.
   void Check() const;
 };
 
 // Runs `render`; returns the info.json written. Throws the library's typed errors.
 nlohmann::json RunRenderCommand(const RenderCommandOptions& options);
+
+// Options of `evloc-sim survey`: the photos a mapping team takes of the car park, with their
+// exact poses, as a dataset the mapper builds from (`evloc-mapper build --known-poses`).
+struct SurveyCommandOptions {
+  // Output dataset folder.
+  std::filesystem::path out_dir;
+  // Camera preset name (ignored when camera_yaml is set).
+  std::string camera_preset = "default";
+  // Camera YAML file overriding the preset.
+  std::optional<std::filesystem::path> camera_yaml;
+  // The car park's layout (its seed: `--site-seed`).
+  CarParkOptions site;
+  // Time of day (`--time-of-day`); day when unset.
+  std::optional<TimeOfDay> time_of_day;
+  // "walk": hand-held photos 1.4 m up along the survey loops (one per lane), alternately looking
+  // 40 degrees left, ahead and 40 degrees right; "car": a mapping car's forward camera 2 m up
+  // along the vehicle route (`--survey`).
+  std::string survey = "walk";
+  // Distance between two photos along the path, metres (`--spacing`).
+  double spacing_m = 2.0;
+  // Where along the path the survey starts, metres (`--path-start`).
+  double start_m = 0;
+  // At most this many photos (`--max-photos`); the whole path when unset.
+  std::optional<int> max_photos;
+  // Seed of the walk's gait and the car's vibrations.
+  uint64_t seed = 1;
+  // Replace an existing non-empty output folder.
+  bool force = false;
+
+  // Throws InvalidArgumentError for an empty output path, an unknown survey, a non-positive
+  // spacing or photo count, or a negative start.
+  void Check() const;
+};
+
+// Runs `survey`; returns the info.json written.
+nlohmann::json RunSurveyCommand(const SurveyCommandOptions& options);
 
 // Options of `evloc-sim events-from-frames`.
 struct EventsFromFramesCommandOptions {

@@ -14,6 +14,8 @@ namespace evloc::sim {
 namespace {
 
 constexpr int kTileSize = 16;
+// Tiles per side of a culling block.
+constexpr int kBlockTiles = 4;
 // Tiles whose cone is wider than this test every surface (the pyramid test needs < 90 degrees).
 constexpr double kMaxTileHalfAngle = 1.4;
 
@@ -27,6 +29,8 @@ struct CameraSurface {
   const Surface* surface = nullptr;
   const IndexedTexture* texture = nullptr;
   int index = -1;
+  // daylight * shading: the light factor when the scene has no point lights.
+  float daylight_factor = 1;
 };
 
 // The nearest hit of the ray t * ray (t = z in the camera frame, since ray.z = 1) among
@@ -64,6 +68,41 @@ double AngleBetweenRays(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
   return std::atan2(a.cross(b).norm(), a.dot(b));
 }
 
+// Appends to `kept` the surfaces of `input` that may meet a ray of the cone (axis, half_angle):
+// a surface is culled when its four corners lie outside one plane of the square pyramid
+// circumscribing the cone (conservative). A cone wider than kMaxTileHalfAngle keeps everything.
+void CullToCone(const Eigen::Vector3d& axis, double half_angle,
+                const std::vector<CameraSurface>& surfaces, const std::vector<int>& input,
+                std::vector<int>* kept) {
+  if (half_angle > kMaxTileHalfAngle) {
+    kept->insert(kept->end(), input.begin(), input.end());
+    return;
+  }
+  const Eigen::Vector3d b1 = axis.unitOrthogonal();
+  const Eigen::Vector3d b2 = axis.cross(b1);
+  const double c = std::cos(half_angle), s = std::sin(half_angle);
+  const std::array<Eigen::Vector3d, 4> planes = {c * b1 - s * axis, -c * b1 - s * axis,
+                                                 c * b2 - s * axis, -c * b2 - s * axis};
+  for (int index : input) {
+    const CameraSurface& surface = surfaces[index];
+    bool culled = false;
+    for (const Eigen::Vector3d& plane : planes) {
+      bool all_outside = true;
+      for (const Eigen::Vector3d& corner : surface.corners) {
+        if (plane.dot(corner) <= 0) {
+          all_outside = false;
+          break;
+        }
+      }
+      if (all_outside) {
+        culled = true;
+        break;
+      }
+    }
+    if (!culled) kept->push_back(index);
+  }
+}
+
 }  // namespace
 
 void RenderOptions::Check() const {
@@ -79,21 +118,140 @@ void RenderOptions::Check() const {
   }
 }
 
+namespace {
+
+// The ray-plane-rectangle test shared by CastRay and SurfaceIndex::CastRay: true (and `hit`
+// filled) when the ray meets `surface` at a distance in (min_distance, max_distance).
+bool HitSurface(const Surface& surface, int index, const Eigen::Vector3d& origin,
+                const Eigen::Vector3d& direction, double min_distance, double max_distance,
+                RayHit* hit) {
+  const Eigen::Vector3d normal = surface.Normal();
+  const double denominator = normal.dot(direction);
+  if (std::abs(denominator) < 1e-15) return false;
+  const double distance = normal.dot(surface.origin - origin) / denominator;
+  if (!(distance > min_distance) || !(distance < max_distance)) return false;
+  const Eigen::Vector3d offset = origin + distance * direction - surface.origin;
+  const double u = offset.dot(surface.u_axis);
+  const double v = offset.dot(surface.v_axis);
+  if (u < 0 || u > surface.width || v < 0 || v > surface.height) return false;
+  *hit = RayHit{index, distance, Eigen::Vector2d(u, v)};
+  return true;
+}
+
+// The parameter interval (t_min, t_max) of the ray inside `box` intersected with the given one;
+// false when empty.
+bool RayBoxInterval(const Eigen::AlignedBox3d& box, const Eigen::Vector3d& origin,
+                    const Eigen::Vector3d& inverse_direction, double* t_min, double* t_max) {
+  for (int axis = 0; axis < 3; ++axis) {
+    double t0 = (box.min()[axis] - origin[axis]) * inverse_direction[axis];
+    double t1 = (box.max()[axis] - origin[axis]) * inverse_direction[axis];
+    if (std::isnan(t0) || std::isnan(t1)) {
+      // Direction 0 along this axis with the origin on a slab plane: inside when within.
+      if (origin[axis] < box.min()[axis] || origin[axis] > box.max()[axis]) return false;
+      continue;
+    }
+    if (t0 > t1) std::swap(t0, t1);
+    *t_min = std::max(*t_min, t0);
+    *t_max = std::min(*t_max, t1);
+    if (*t_min > *t_max) return false;
+  }
+  return true;
+}
+
+constexpr int kLeafSurfaces = 4;
+
+}  // namespace
+
 std::optional<RayHit> CastRay(const Scene& scene, const Eigen::Vector3d& origin,
                               const Eigen::Vector3d& direction, double min_distance) {
   std::optional<RayHit> best;
   for (size_t i = 0; i < scene.surfaces.size(); ++i) {
-    const Surface& surface = scene.surfaces[i];
-    const Eigen::Vector3d normal = surface.Normal();
-    const double denominator = normal.dot(direction);
-    if (std::abs(denominator) < 1e-15) continue;
-    const double distance = normal.dot(surface.origin - origin) / denominator;
-    if (!(distance > min_distance) || (best && distance >= best->distance)) continue;
-    const Eigen::Vector3d offset = origin + distance * direction - surface.origin;
-    const double u = offset.dot(surface.u_axis);
-    const double v = offset.dot(surface.v_axis);
-    if (u < 0 || u > surface.width || v < 0 || v > surface.height) continue;
-    best = RayHit{static_cast<int>(i), distance, Eigen::Vector2d(u, v)};
+    RayHit hit;
+    const double limit = best ? best->distance : std::numeric_limits<double>::infinity();
+    if (HitSurface(scene.surfaces[i], static_cast<int>(i), origin, direction, min_distance, limit,
+                   &hit)) {
+      best = hit;
+    }
+  }
+  return best;
+}
+
+SurfaceIndex::SurfaceIndex(const Scene& scene) : scene_(scene) {
+  boxes_.reserve(scene.surfaces.size());
+  for (const Surface& surface : scene.surfaces) {
+    Eigen::AlignedBox3d box;
+    for (const Eigen::Vector3d& corner : surface.Corners()) box.extend(corner);
+    // Padding: flat boxes must not lose a ray through rounding.
+    const double pad = 1e-6 * (1 + box.max().cwiseAbs().maxCoeff());
+    box.min().array() -= pad;
+    box.max().array() += pad;
+    boxes_.push_back(box);
+  }
+  order_.resize(scene.surfaces.size());
+  for (size_t i = 0; i < order_.size(); ++i) order_[i] = static_cast<int>(i);
+  nodes_.reserve(2 * order_.size() / kLeafSurfaces + 2);
+  if (!order_.empty()) Build(0, static_cast<int>(order_.size()));
+}
+
+int SurfaceIndex::Build(int first, int count) {
+  const int index = static_cast<int>(nodes_.size());
+  nodes_.emplace_back();
+  Eigen::AlignedBox3d box;
+  for (int i = first; i < first + count; ++i) box.extend(boxes_[order_[i]]);
+  nodes_[index].box = box;
+  if (count <= kLeafSurfaces) {
+    nodes_[index].first = first;
+    nodes_[index].count = count;
+    return index;
+  }
+  int axis = 0;
+  box.sizes().maxCoeff(&axis);
+  const int middle = first + count / 2;
+  std::nth_element(order_.begin() + first, order_.begin() + middle, order_.begin() + first + count,
+                   [&](int a, int b) {
+                     const double ca = boxes_[a].center()[axis], cb = boxes_[b].center()[axis];
+                     return ca < cb || (ca == cb && a < b);
+                   });
+  Build(first, middle - first);  // the left child is index + 1
+  const int right = Build(middle, first + count - middle);
+  nodes_[index].right = right;
+  return index;
+}
+
+std::optional<RayHit> SurfaceIndex::CastRay(const Eigen::Vector3d& origin,
+                                            const Eigen::Vector3d& direction,
+                                            double min_distance) const {
+  std::optional<RayHit> best;
+  if (nodes_.empty()) return best;
+  const Eigen::Vector3d inverse = direction.cwiseInverse();
+  int stack[128];
+  int size = 0;
+  stack[size++] = 0;
+  while (size > 0) {
+    const Node& node = nodes_[stack[--size]];
+    double t_min = -std::numeric_limits<double>::infinity();
+    double t_max = best ? best->distance : std::numeric_limits<double>::infinity();
+    if (!RayBoxInterval(node.box, origin, inverse, &t_min, &t_max)) continue;
+    if (t_max < min_distance) continue;
+    if (node.count > 0) {
+      for (int i = node.first; i < node.first + node.count; ++i) {
+        const int surface = order_[i];
+        // Ties go to the lowest surface index, as in the brute-force CastRay.
+        RayHit hit;
+        const double limit =
+            best ? std::nextafter(best->distance, std::numeric_limits<double>::infinity())
+                 : std::numeric_limits<double>::infinity();
+        if (HitSurface(scene_.surfaces[surface], surface, origin, direction, min_distance, limit,
+                       &hit) &&
+            (!best || hit.distance < best->distance || surface < best->surface_index)) {
+          best = hit;
+        }
+      }
+    } else {
+      const int left = static_cast<int>(&node - nodes_.data()) + 1;
+      stack[size++] = node.right;
+      stack[size++] = left;
+    }
   }
   return best;
 }
@@ -188,6 +346,40 @@ Renderer::Renderer(const Scene& scene, const Camera& camera, RenderOptions optio
       tiles_.push_back(tile);
     }
   }
+  // Blocks of kBlockTiles x kBlockTiles tiles, each with a cone containing its tiles' cones.
+  const int tile_columns = (width + kTileSize - 1) / kTileSize;
+  const int tile_rows = (height + kTileSize - 1) / kTileSize;
+  tile_block_.assign(tiles_.size(), 0);
+  for (int by = 0; by < tile_rows; by += kBlockTiles) {
+    for (int bx = 0; bx < tile_columns; bx += kBlockTiles) {
+      Block block;
+      Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+      std::vector<int> members;
+      for (int ty = by; ty < std::min(tile_rows, by + kBlockTiles); ++ty) {
+        for (int tx = bx; tx < std::min(tile_columns, bx + kBlockTiles); ++tx) {
+          const int index = ty * tile_columns + tx;
+          tile_block_[index] = static_cast<int>(blocks_.size());
+          if (tiles_[index].valid) {
+            members.push_back(index);
+            sum += tiles_[index].axis;
+          }
+        }
+      }
+      if (!members.empty() && sum.norm() > 1e-9) {
+        block.axis = sum.normalized();
+        for (int index : members) {
+          block.half_angle =
+              std::max(block.half_angle,
+                       AngleBetweenRays(block.axis, tiles_[index].axis) + tiles_[index].half_angle);
+        }
+        block.valid = true;
+      } else if (!members.empty()) {
+        block.half_angle = M_PI;  // keeps every surface
+        block.valid = true;
+      }
+      blocks_.push_back(block);
+    }
+  }
 }
 
 void Renderer::Render(const Rigid3d& world_from_cam, cv::Mat* gray, cv::Mat* rgb, cv::Mat* depth,
@@ -214,7 +406,18 @@ void Renderer::Render(const Rigid3d& world_from_cam, cv::Mat* gray, cv::Mat* rgb
     s.surface = &surface;
     s.texture = &textures_[i];
     s.index = static_cast<int>(i);
+    s.daylight_factor = static_cast<float>(scene_.daylight * surface.shading);
   }
+  // The irradiance of a hit: albedo times the light factor, clamped to 1.
+  const bool lamps = !scene_.point_lights.empty();
+  const Eigen::Vector3d camera_center = world_from_cam.translation;
+  auto shade = [&](const CameraSurface& surface, const Eigen::Vector2d& uv, const Color& albedo) {
+    const float factor =
+        lamps ? scene_.LightFactorAt(*surface.surface, surface.surface->PointAt(uv.x(), uv.y()),
+                                     camera_center)
+              : surface.daylight_factor;
+    return Color((albedo * factor).cwiseMin(1.0f));
+  };
 
   gray->create(height, width, CV_32FC1);
   if (rgb != nullptr) rgb->create(height, width, CV_32FC3);
@@ -223,7 +426,18 @@ void Renderer::Render(const Rigid3d& world_from_cam, cv::Mat* gray, cv::Mat* rgb
   std::vector<uint8_t> near_edge(static_cast<size_t>(width) * height, 0);
   std::vector<std::vector<int>> tile_candidates(tiles_.size());
   const double near_z = options_.near_clip_m;
-  const Color background = Gray(options_.background);
+  // Culling: the surfaces not wholly behind the near plane, then per block of tiles, then per
+  // tile from its block's list.
+  std::vector<int> in_front;
+  in_front.reserve(surfaces.size());
+  for (const CameraSurface& surface : surfaces) {
+    bool all_behind = true;
+    for (const Eigen::Vector3d& corner : surface.corners) all_behind &= corner.z() <= near_z;
+    if (!all_behind) in_front.push_back(surface.index);
+  }
+  std::vector<std::vector<int>> block_candidates(blocks_.size());
+  const Color background =
+      Gray(std::min(1.0f, options_.background + static_cast<float>(scene_.sky * scene_.daylight)));
 
   auto run = [&](int count, const std::function<void(int)>& body) {
     if (options_.parallel) {
@@ -240,45 +454,20 @@ void Renderer::Render(const Rigid3d& world_from_cam, cv::Mat* gray, cv::Mat* rgb
     if (rgb != nullptr) rgb->at<cv::Vec3f>(y, x) = cv::Vec3f(color[0], color[1], color[2]);
   };
 
+  run(static_cast<int>(blocks_.size()), [&](int block_index) {
+    const Block& block = blocks_[block_index];
+    if (block.valid) {
+      CullToCone(block.axis, block.half_angle, surfaces, in_front, &block_candidates[block_index]);
+    }
+  });
+
   // Pass 1: cull surfaces per tile, cast the pixel-centre rays.
   run(static_cast<int>(tiles_.size()), [&](int tile_index) {
     const Tile& tile = tiles_[tile_index];
     std::vector<int>& candidates = tile_candidates[tile_index];
     if (tile.valid) {
-      const bool test_all = tile.half_angle > kMaxTileHalfAngle;
-      // Square pyramid around the cone: planes through the camera centre tilted by the
-      // half-angle from the axis; a surface whose corners all lie outside one plane is culled.
-      Eigen::Vector3d b1 = tile.axis.unitOrthogonal();
-      Eigen::Vector3d b2 = tile.axis.cross(b1);
-      const double c = std::cos(tile.half_angle), s = std::sin(tile.half_angle);
-      const std::array<Eigen::Vector3d, 4> planes = {
-          c * b1 - s * tile.axis, -c * b1 - s * tile.axis, c * b2 - s * tile.axis,
-          -c * b2 - s * tile.axis};
-      for (const CameraSurface& surface : surfaces) {
-        bool culled = false;
-        if (!test_all) {
-          for (const Eigen::Vector3d& plane : planes) {
-            bool all_outside = true;
-            for (const Eigen::Vector3d& corner : surface.corners) {
-              if (plane.dot(corner) <= 0) {
-                all_outside = false;
-                break;
-              }
-            }
-            if (all_outside) {
-              culled = true;
-              break;
-            }
-          }
-        }
-        // Culled too when the whole quad lies behind the near plane.
-        if (!culled) {
-          bool all_behind = true;
-          for (const Eigen::Vector3d& corner : surface.corners) all_behind &= corner.z() <= near_z;
-          culled = all_behind;
-        }
-        if (!culled) candidates.push_back(surface.index);
-      }
+      CullToCone(tile.axis, tile.half_angle, surfaces, block_candidates[tile_block_[tile_index]],
+                 &candidates);
     }
     for (int y = tile.y0; y < tile.y1; ++y) {
       for (int x = tile.x0; x < tile.x1; ++x) {
@@ -307,7 +496,7 @@ void Renderer::Render(const Rigid3d& world_from_cam, cv::Mat* gray, cv::Mat* rgb
         const Color albedo = surface.texture->ColorAt(hit.uv, footprint, &near);
         near = near || hit.uv.x() < footprint || hit.uv.x() > surface.width - footprint ||
                hit.uv.y() < footprint || hit.uv.y() > surface.height - footprint;
-        write_pixel(x, y, albedo * surface.surface->shading);
+        write_pixel(x, y, shade(surface, hit.uv, albedo));
         if (depth != nullptr) depth->at<float>(y, x) = static_cast<float>(hit.z);
         hit_surface[pixel] = surface.index;
         near_edge[pixel] = near ? 1 : 0;
@@ -351,7 +540,7 @@ void Renderer::Render(const Rigid3d& world_from_cam, cv::Mat* gray, cv::Mat* rgb
                 sum += background;
               } else {
                 const CameraSurface& surface = surfaces[hit.candidate];
-                sum += surface.texture->ColorAt(hit.uv) * surface.surface->shading;
+                sum += shade(surface, hit.uv, surface.texture->ColorAt(hit.uv));
               }
             }
           }

@@ -26,7 +26,8 @@ struct RenderOptions {
   bool parallel = true;
   // Rays hitting a surface closer than this to the camera centre are ignored, metres.
   double near_clip_m = 1e-3;
-  // Irradiance of pixels whose ray hits nothing, in [0, 1].
+  // Irradiance of pixels whose ray hits nothing, in [0, 1], added to the scene's sky
+  // (Scene::sky * Scene::daylight; the sum clamped to 1).
   float background = 0.0f;
 
   // Throws InvalidArgumentError when supersampling is outside [1, 8], near_clip_m is not positive
@@ -57,6 +58,34 @@ struct RayHit {
 // or nullopt. Brute force over all surfaces; for occlusion queries and tests.
 std::optional<RayHit> CastRay(const Scene& scene, const Eigen::Vector3d& origin,
                               const Eigen::Vector3d& direction, double min_distance = 0);
+
+// A bounding-volume hierarchy over a scene's surfaces for ray queries at site scale (thousands of
+// surfaces): the same nearest hit as CastRay, visiting only the surfaces whose boxes the ray
+// meets.
+class SurfaceIndex {
+ public:
+  // Indexes `scene`, which must outlive the index and stay unchanged.
+  explicit SurfaceIndex(const Scene& scene);
+  // The nearest hit of origin + t * direction with t > min_distance (as CastRay).
+  std::optional<RayHit> CastRay(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction,
+                                double min_distance = 0) const;
+  // The scene indexed.
+  const Scene& scene() const { return scene_; }
+
+ private:
+  struct Node {
+    Eigen::AlignedBox3d box;
+    // Leaves: [first, first + count) in order_; inner nodes: children left and left + 1... the
+    // right child's index is `right`.
+    int first = 0, count = 0, right = -1;
+  };
+  int Build(int first, int count);
+
+  const Scene& scene_;
+  std::vector<Eigen::AlignedBox3d> boxes_;
+  std::vector<int> order_;
+  std::vector<Node> nodes_;
+};
 
 // Renders one scene through one camera. Construction precomputes every sample ray through the
 // lens model (Camera::Unproject), so each Render only intersects rays with surfaces. Render is
@@ -112,6 +141,20 @@ class Renderer {
   std::vector<Eigen::Vector2f> sample_rays_;
   // Tiles covering the image, row-major.
   std::vector<Tile> tiles_;
+  // A block of 4 x 4 tiles with a cone containing its tiles' cones: surfaces are culled per
+  // block first, then per tile from the block's list (the cost grows with the surfaces a block
+  // sees, not with the scene).
+  struct Block {
+    // Unit cone axis.
+    Eigen::Vector3d axis = Eigen::Vector3d::UnitZ();
+    // Cone half-angle, radians.
+    double half_angle = 0;
+    // False when no tile of the block is valid.
+    bool valid = false;
+  };
+  std::vector<Block> blocks_;
+  // The block of each tile.
+  std::vector<int> tile_block_;
 };
 
 }  // namespace evloc::sim

@@ -428,8 +428,35 @@ void Scene::UpdateBounds() {
   }
 }
 
+float Scene::LightFactorAt(const Surface& surface, const Eigen::Vector3d& point,
+                           const Eigen::Vector3d& viewer) const {
+  double factor = daylight * surface.shading;
+  if (point_lights.empty()) return static_cast<float>(factor);
+  Eigen::Vector3d normal = surface.Normal();
+  if (normal.dot(viewer - point) < 0) normal = -normal;
+  for (const PointLight& light : point_lights) {
+    const Eigen::Vector3d to_light = light.position - point;
+    const double cosine_times_distance = normal.dot(to_light);
+    if (cosine_times_distance <= 0) continue;
+    const double distance_squared = std::max(to_light.squaredNorm(), 1e-6);
+    factor +=
+        light.intensity * cosine_times_distance / (distance_squared * std::sqrt(distance_squared));
+  }
+  return static_cast<float>(factor);
+}
+
 void Scene::Check() const {
   if (surfaces.empty()) throw InvalidArgumentError("scene '" + name + "' has no surface");
+  if (!(daylight >= 0 && daylight <= 1) || !(sky >= 0 && sky <= 1)) {
+    throw InvalidArgumentError("scene '" + name + "': daylight and sky must lie within [0, 1]");
+  }
+  for (size_t i = 0; i < point_lights.size(); ++i) {
+    if (!point_lights[i].position.allFinite() || !std::isfinite(point_lights[i].intensity) ||
+        point_lights[i].intensity < 0) {
+      throw InvalidArgumentError("scene '" + name + "': point light " + std::to_string(i) +
+                                 " needs a finite position and an intensity >= 0");
+    }
+  }
   for (const Surface& surface : surfaces) surface.Check();
   if (camera_region.isEmpty() || !camera_region.min().allFinite() ||
       !camera_region.max().allFinite()) {
@@ -483,21 +510,6 @@ void AddBox(const BoxSpec& box, Scene* scene) {
 }
 
 namespace {
-
-// A deterministic pseudo-random generator (64-bit LCG) for scene layout.
-class LayoutRandom {
- public:
-  explicit LayoutRandom(uint64_t seed) : state_(seed) {}
-  // Uniform in [low, high).
-  double Uniform(double low, double high) {
-    state_ = state_ * 6364136223846793005ULL + 1442695040888963407ULL;
-    const double unit = static_cast<double>(state_ >> 11) / static_cast<double>(1ULL << 53);
-    return low + (high - low) * unit;
-  }
-
- private:
-  uint64_t state_;
-};
 
 // Appends a poster: a frame, a background and text-like rows of word blocks.
 void AddPoster(const Eigen::Vector2d& min, const Eigen::Vector2d& max, const Color& paper,

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <array>
+#include <cstdint>
 #include <filesystem>
 #include <string>
 #include <vector>
@@ -191,6 +192,16 @@ struct Lighting {
   float ShadingFor(const Eigen::Vector3d& normal) const;
 };
 
+// A point light (a street lamp): irradiance intensity * cos(incidence) / distance^2 on the side of
+// a surface that faces it (no shadows: the light passes through other surfaces).
+struct PointLight {
+  // Position, world metres.
+  Eigen::Vector3d position = Eigen::Vector3d::Zero();
+  // Radiant intensity: the irradiance at 1 m on a surface facing the light, in the units of the
+  // rendered irradiance (1 = white paper under the scene's full daylight).
+  double intensity = 1;
+};
+
 // A textured scene.
 struct Scene {
   // Name, for messages and provenance.
@@ -203,11 +214,26 @@ struct Scene {
   Eigen::AlignedBox3d camera_region;
   // The lighting used to shade boxes and quads without explicit shading.
   Lighting lighting;
+  // Scale of the daylight (sun and sky, i.e. every surface's `shading`), in [0, 1]: 1 by day,
+  // small at night. The rendered irradiance at a point is
+  // min(1, albedo * (daylight * shading + sum of the point lights' irradiance)).
+  double daylight = 1;
+  // Irradiance of rays that hit nothing (the sky) at full daylight, in [0, 1]; rendered scaled by
+  // `daylight`.
+  double sky = 0;
+  // Point lights (street lamps); none by default.
+  std::vector<PointLight> point_lights;
 
   // Sets `bounds` to the bounding box of all surface corners.
   void UpdateBounds();
-  // Throws InvalidArgumentError when the scene has no surface, a surface is invalid, or the
-  // camera region is empty or non-finite.
+  // The light factor at `point` (world) of `surface`, seen from `viewer` (world; the lights
+  // shine on the side of the surface facing the viewer only when they lie on that side too):
+  // daylight * shading + the point lights' irradiance. Multiply by the albedo and clamp to 1.
+  float LightFactorAt(const Surface& surface, const Eigen::Vector3d& point,
+                      const Eigen::Vector3d& viewer) const;
+  // Throws InvalidArgumentError when the scene has no surface, a surface is invalid, the
+  // camera region is empty or non-finite, daylight or sky lie outside [0, 1], or a point light
+  // is non-finite or has a negative intensity.
   void Check() const;
 };
 
@@ -228,6 +254,22 @@ struct BoxSpec {
   std::array<Texture, 6> face_textures;
   // Whether to emit the -z face (false for boxes resting on a surface, where it is never seen).
   bool bottom_face = true;
+};
+
+// A deterministic pseudo-random generator (64-bit LCG) for scene layout: the same seed gives the
+// same numbers on every platform.
+class LayoutRandom {
+ public:
+  explicit LayoutRandom(uint64_t seed) : state_(seed) {}
+  // Uniform in [low, high).
+  double Uniform(double low, double high) {
+    state_ = state_ * 6364136223846793005ULL + 1442695040888963407ULL;
+    const double unit = static_cast<double>(state_ >> 11) / static_cast<double>(1ULL << 53);
+    return low + (high - low) * unit;
+  }
+
+ private:
+  uint64_t state_;
 };
 
 // Appends the faces of `box` to `scene`, shaded by scene->lighting. Throws InvalidArgumentError

@@ -247,6 +247,26 @@ Scene ParseSceneJson(const std::string& text, const std::string& source) {
     }
   }
   scene.camera_region = reader.Box(reader.Require(document, "camera_region", ""), "/camera_region");
+  if (const auto daylight = document.find("daylight"); daylight != document.end()) {
+    scene.daylight = reader.Number(*daylight, "/daylight");
+    if (!(scene.daylight >= 0 && scene.daylight <= 1))
+      reader.Fail("/daylight", "must lie within [0, 1]");
+  }
+  if (const auto sky = document.find("sky"); sky != document.end()) {
+    scene.sky = reader.Number(*sky, "/sky");
+    if (!(scene.sky >= 0 && scene.sky <= 1)) reader.Fail("/sky", "must lie within [0, 1]");
+  }
+  if (const auto lights = document.find("point_lights"); lights != document.end()) {
+    if (!lights->is_array()) reader.Fail("/point_lights", "expected an array of point lights");
+    for (size_t i = 0; i < lights->size(); ++i) {
+      const std::string path = "/point_lights/" + std::to_string(i);
+      PointLight light;
+      light.position = reader.VectorField<3>((*lights)[i], "position", path);
+      light.intensity = reader.NumberField((*lights)[i], "intensity", path);
+      if (!(light.intensity >= 0)) reader.Fail(path + "/intensity", "must be >= 0");
+      scene.point_lights.push_back(light);
+    }
+  }
 
   if (const auto quads = document.find("quads"); quads != document.end()) {
     if (!quads->is_array()) reader.Fail("/quads", "expected an array of quads");
@@ -339,6 +359,13 @@ std::string SceneToJson(const Scene& scene) {
                           {"ambient", scene.lighting.ambient}};
   document["camera_region"] = {{"min", VectorToJson(scene.camera_region.min())},
                                {"max", VectorToJson(scene.camera_region.max())}};
+  document["daylight"] = scene.daylight;
+  document["sky"] = scene.sky;
+  document["point_lights"] = Json::array();
+  for (const PointLight& light : scene.point_lights) {
+    document["point_lights"].push_back(
+        {{"position", VectorToJson(light.position)}, {"intensity", light.intensity}});
+  }
   document["quads"] = Json::array();
   for (const Surface& surface : scene.surfaces) {
     Json quad;

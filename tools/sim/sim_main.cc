@@ -24,6 +24,7 @@ constexpr char kUsage[] = R"(evloc-sim: simulate an event camera dataset (docs/s
 Usage:
   evloc-sim render --out DIR [options]
   evloc-sim events-from-frames --in DATASET --out DIR [options]
+  evloc-sim survey --out DIR [options]
   evloc-sim --help
 
 render options:
@@ -31,7 +32,16 @@ render options:
   --camera NAME         default (640x480 pinhole, f=500 px) | davis240 (ECD DAVIS240C); default: default
   --camera-yaml FILE    a camera file (evloc YAML, Kalibr, ROS, OpenCV, COLMAP: docs/camera.md),
                         overrides --camera
-  --scene FILE          scene JSON (docs/sim-scene.md); default: the built-in room
+  --scene FILE|carpark  scene JSON (docs/sim-scene.md), or carpark: the generated 200 m x 200 m
+                        car park site; default: the built-in room
+  --site-seed N         seed of the car park's layout; default 1
+  --time-of-day NAME    car park lighting: day | dusk | night (street lamps on at dusk and night);
+                        default: day
+  --path NAME           car park path instead of --motion: vehicle (forward camera 1.5 m up along
+                        the serpentine route through the lanes) | pedestrian (hand-held, 1.4 m/s)
+  --speed M/S           vehicle speed along the route; default 5
+  --path-start M        where along the route the path starts, metres; default 0
+  --map-spacing M       spacing of the ground-truth map's points along edges; default 0.01
   --motion NAME         slow | mid | fast | aggressive; default: mid
   --trajectory FILE     TUM trajectory replayed relative to its first pose instead of --motion
   --duration S          seconds; default 10 for --motion, the whole file for --trajectory
@@ -52,6 +62,16 @@ render options:
                         hot pixels, low-pass or read-out limit
   --events-txt          also write events.txt (ECD text format)
   --force               replace an existing non-empty output folder
+
+survey options (photos of the car park with exact poses, for evloc-mapper build --known-poses):
+  --out DIR             output dataset folder (images, depth, groundtruth.txt, calib.yaml)
+  --survey NAME         walk (hand-held, 1.4 m up, loops along every lane, looking left, ahead and
+                        right in turn) | car (a mapping car's forward camera, 2 m up, along the
+                        vehicle route); default: walk
+  --spacing M           metres between two photos along the path; default 2
+  --path-start M        where along the path the survey starts, metres; default 0
+  --max-photos N        at most N photos; default: the whole path
+  --camera, --camera-yaml, --site-seed, --time-of-day, --seed, --force   as for render
 
 events-from-frames options:
   --in DATASET          input folder with images.txt (evloc-sim output or ECD)
@@ -86,54 +106,82 @@ std::map<std::string, std::string> ParseFlags(const std::vector<std::string>& ar
   return flags;
 }
 
-int RunRender(const std::vector<std::string>& args) {
-  const auto flags =
-      ParseFlags(args,
-                 {"--out", "--camera", "--camera-yaml", "--scene", "--motion", "--trajectory",
-                  "--duration", "--fps", "--lighting", "--seed", "--render-motion", "--sensor",
-                  "--noise-rate", "--hot-pixels", "--cutoff"},
-                 {"--clean", "--events-txt", "--force"});
-  evloc::sim::RenderCommandOptions options;
-  if (!flags.contains("--out")) throw UsageError("render needs --out DIR.");
-  if (flags.contains("--motion") && flags.contains("--trajectory")) {
-    throw UsageError("--motion and --trajectory exclude each other.");
-  }
+// Calls `apply(flag, value)` for every flag; an invalid value becomes a UsageError naming the flag.
+template <typename Apply>
+void ForEachFlag(const std::map<std::string, std::string>& flags, const Apply& apply) {
   for (const auto& [flag, value] : flags) {
     try {
-      if (flag == "--out") options.out_dir = value;
-      if (flag == "--camera") options.camera_preset = value;
-      if (flag == "--camera-yaml") options.camera_yaml = value;
-      if (flag == "--scene") options.scene_json = value;
-      if (flag == "--motion") options.motion = evloc::sim::ParseMotionProfile(value);
-      if (flag == "--trajectory") options.trajectory_file = value;
-      if (flag == "--duration") options.duration_s = ParseDoubleFlag(flag, value);
-      if (flag == "--fps") options.fps = ParseDoubleFlag(flag, value);
-      if (flag == "--lighting") options.lighting = evloc::sim::ParseLightingCondition(value);
-      if (flag == "--seed") options.seed = ParseUnsignedFlag(flag, value);
-      if (flag == "--render-motion") options.max_render_motion_px = ParseDoubleFlag(flag, value);
-      if (flag == "--sensor") {
-        evloc::sim::SensorPreset(value);
-        options.sensor = value;
-      }
-      if (flag == "--noise-rate") options.noise_rate_hz = ParseDoubleFlag(flag, value);
-      if (flag == "--hot-pixels") options.hot_pixel_fraction = ParseDoubleFlag(flag, value);
-      if (flag == "--cutoff") options.photoreceptor_cutoff_hz = ParseDoubleFlag(flag, value);
-      if (flag == "--clean") options.clean = true;
-      if (flag == "--events-txt") options.events_txt = true;
-      if (flag == "--force") options.force = true;
+      apply(flag, value);
     } catch (const UsageError&) {
       throw;
     } catch (const InvalidArgumentError& error) {
       throw UsageError(flag + ": " + error.what());
     }
   }
-  if (!options.camera_yaml) {
-    try {
-      evloc::sim::CameraPreset(options.camera_preset);
-    } catch (const InvalidArgumentError& error) {
-      throw UsageError(std::string("--camera: ") + error.what());
-    }
+}
+
+// Throws a UsageError for an unknown --camera preset (unless a camera YAML replaces it).
+void RequireKnownCamera(bool has_camera_yaml, const std::string& preset) {
+  if (has_camera_yaml) return;
+  try {
+    evloc::sim::CameraPreset(preset);
+  } catch (const InvalidArgumentError& error) {
+    throw UsageError(std::string("--camera: ") + error.what());
   }
+}
+
+int RunRender(const std::vector<std::string>& args) {
+  const auto flags = ParseFlags(
+      args, {"--out",           "--camera",      "--camera-yaml", "--scene",      "--motion",
+             "--trajectory",    "--duration",    "--fps",         "--lighting",   "--seed",
+             "--render-motion", "--sensor",      "--noise-rate",  "--hot-pixels", "--cutoff",
+             "--site-seed",     "--time-of-day", "--path",        "--speed",      "--path-start",
+             "--map-spacing"},
+      {"--clean", "--events-txt", "--force"});
+  evloc::sim::RenderCommandOptions options;
+  if (!flags.contains("--out")) throw UsageError("render needs --out DIR.");
+  if (flags.contains("--motion") && flags.contains("--trajectory")) {
+    throw UsageError("--motion and --trajectory exclude each other.");
+  }
+  if (flags.contains("--motion") && flags.contains("--path")) {
+    throw UsageError("--motion and --path exclude each other.");
+  }
+  ForEachFlag(flags, [&](const std::string& flag, const std::string& value) {
+    if (flag == "--out") options.out_dir = value;
+    if (flag == "--camera") options.camera_preset = value;
+    if (flag == "--camera-yaml") options.camera_yaml = value;
+    if (flag == "--scene") {
+      if (value == "carpark") {
+        options.carpark = true;
+      } else {
+        options.scene_json = value;
+      }
+    }
+    if (flag == "--site-seed") options.site.seed = ParseUnsignedFlag(flag, value);
+    if (flag == "--time-of-day") options.time_of_day = evloc::sim::ParseTimeOfDay(value);
+    if (flag == "--path") options.path = value;
+    if (flag == "--speed") options.speed_m_per_s = ParseDoubleFlag(flag, value);
+    if (flag == "--path-start") options.path_start_m = ParseDoubleFlag(flag, value);
+    if (flag == "--map-spacing") options.map_spacing_m = ParseDoubleFlag(flag, value);
+    if (flag == "--motion") options.motion = evloc::sim::ParseMotionProfile(value);
+    if (flag == "--trajectory") options.trajectory_file = value;
+    if (flag == "--duration") options.duration_s = ParseDoubleFlag(flag, value);
+    if (flag == "--fps") options.fps = ParseDoubleFlag(flag, value);
+    if (flag == "--lighting") options.lighting = evloc::sim::ParseLightingCondition(value);
+    if (flag == "--seed") options.seed = ParseUnsignedFlag(flag, value);
+    if (flag == "--render-motion") options.max_render_motion_px = ParseDoubleFlag(flag, value);
+    if (flag == "--sensor") {
+      evloc::sim::SensorPreset(value);
+      options.sensor = value;
+    }
+    if (flag == "--noise-rate") options.noise_rate_hz = ParseDoubleFlag(flag, value);
+    if (flag == "--hot-pixels") options.hot_pixel_fraction = ParseDoubleFlag(flag, value);
+    if (flag == "--cutoff") options.photoreceptor_cutoff_hz = ParseDoubleFlag(flag, value);
+    if (flag == "--clean") options.clean = true;
+    if (flag == "--events-txt") options.events_txt = true;
+    if (flag == "--force") options.force = true;
+  });
+  RequireKnownCamera(options.camera_yaml.has_value(), options.camera_preset);
   options.Check();
   const auto info = evloc::sim::RunRenderCommand(options);
   std::cout << "evloc-sim render: wrote " << options.out_dir.string() << ": "
@@ -143,6 +191,38 @@ int RunRender(const std::vector<std::string>& args) {
             << info["counts"]["hot_pixel_events"] << "), " << info["counts"]["frames"]
             << " frames, " << info["counts"]["renders"] << " renders in "
             << info["timings_s"]["total"] << " s\n";
+  return 0;
+}
+
+int RunSurvey(const std::vector<std::string>& args) {
+  const auto flags =
+      ParseFlags(args,
+                 {"--out", "--survey", "--spacing", "--path-start", "--max-photos", "--camera",
+                  "--camera-yaml", "--site-seed", "--time-of-day", "--seed"},
+                 {"--force"});
+  if (!flags.contains("--out")) throw UsageError("survey needs --out DIR.");
+  evloc::sim::SurveyCommandOptions options;
+  ForEachFlag(flags, [&](const std::string& flag, const std::string& value) {
+    if (flag == "--out") options.out_dir = value;
+    if (flag == "--survey") options.survey = value;
+    if (flag == "--spacing") options.spacing_m = ParseDoubleFlag(flag, value);
+    if (flag == "--path-start") options.start_m = ParseDoubleFlag(flag, value);
+    if (flag == "--max-photos") {
+      options.max_photos = static_cast<int>(
+          std::min<uint64_t>(ParseUnsignedFlag(flag, value), static_cast<uint64_t>(1) << 30));
+    }
+    if (flag == "--camera") options.camera_preset = value;
+    if (flag == "--camera-yaml") options.camera_yaml = value;
+    if (flag == "--site-seed") options.site.seed = ParseUnsignedFlag(flag, value);
+    if (flag == "--time-of-day") options.time_of_day = evloc::sim::ParseTimeOfDay(value);
+    if (flag == "--seed") options.seed = ParseUnsignedFlag(flag, value);
+    if (flag == "--force") options.force = true;
+  });
+  RequireKnownCamera(options.camera_yaml.has_value(), options.camera_preset);
+  options.Check();
+  const auto info = evloc::sim::RunSurveyCommand(options);
+  std::cout << "evloc-sim survey: wrote " << options.out_dir.string() << ": "
+            << info["counts"]["photos"] << " photos in " << info["timings_s"]["total"] << " s\n";
   return 0;
 }
 
@@ -194,6 +274,7 @@ int main(int argc, char** argv) {
     try {
       if (args[0] == "render") return RunRender(rest);
       if (args[0] == "events-from-frames") return RunEventsFromFrames(rest);
+      if (args[0] == "survey") return RunSurvey(rest);
     } catch (const UsageError&) {
       throw;
     } catch (const InvalidArgumentError& error) {
@@ -201,6 +282,7 @@ int main(int argc, char** argv) {
       // without --force) is a bad command line too (docs/simulator.md).
       throw UsageError(error.what());
     }
-    throw UsageError("unknown command '" + args[0] + "'; expected render or events-from-frames.");
+    throw UsageError("unknown command '" + args[0] +
+                     "'; expected render, survey or events-from-frames.");
   });
 }

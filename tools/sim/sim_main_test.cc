@@ -66,6 +66,16 @@ TEST(EvlocSimCli, BadFlagValuesFailWithAClearMessage) {
        {"render --out " + out + " --noise-rate -1", "--noise-rate must be a rate >= 0"},
        {"render --out " + out + " --clean --hot-pixels 0.01", "drop --noise-rate, --hot-pixels"},
        {"render --out " + out + " --cutoff -5", "--cutoff must be a frequency >= 0"},
+       {"render --out " + out + " --time-of-day night", "need --scene carpark"},
+       {"render --out " + out + " --path vehicle", "need --scene carpark"},
+       {"render --out " + out + " --scene carpark --time-of-day noon", "day, dusk or night"},
+       {"render --out " + out + " --scene carpark --path bus", "expected vehicle or pedestrian"},
+       {"render --out " + out + " --scene carpark --path vehicle --motion mid",
+        "--motion and --path exclude each other"},
+       {"render --out " + out + " --scene carpark --path vehicle --speed 0", "--speed must be"},
+       {"render --out " + out + " --scene carpark --map-spacing -1", "--map-spacing must be"},
+       {"render --out " + out + " --scene carpark --path vehicle --duration 1000",
+        "shorten the duration"},
        {"render", "needs --out"},
        {"explode", "unknown command"}});
   EXPECT_FALSE(fs::exists(out));
@@ -174,6 +184,33 @@ TEST(EvlocSimCli, IdealIsTheDefaultAndTheRealisticPixelSeesTheLight) {
   EXPECT_LT(dark["signal_events"].get<double>(), 0.9 * bright["signal_events"].get<double>());
   EXPECT_NE(evloc::ReadFileToString(dir / "bright" / "events.evb"),
             evloc::ReadFileToString(dir / "dark" / "events.evb"));
+  fs::remove_all(dir);
+}
+
+// The survey: photos of the car park with their exact poses, a dataset the reader (and so the
+// mapper's --images-list / --known-poses) takes; bad survey flags are bad command lines.
+TEST(EvlocSimCli, SurveyWritesPhotosWithExactPosesAsADataset) {
+  const fs::path dir = evloc::testing::MakeTempDir("sim_cli_survey");
+  const std::string out = (dir / "survey").string();
+  ExpectBadCommandLines({{"survey --out " + out + " --survey drone", "expected walk or car"},
+                         {"survey --out " + out + " --spacing 0", "--spacing must be"},
+                         {"survey --out " + out + " --max-photos 0", "--max-photos must be"},
+                         {"survey", "needs --out"}});
+  const RunResult result = RunSim("survey --out " + out +
+                                  " --survey car --spacing 1.5 --max-photos 3 --camera davis240");
+  ASSERT_EQ(result.exit_code, 0) << result.output;
+  const evloc::Dataset dataset = evloc::ReadDataset(out);
+  ASSERT_EQ(dataset.images.size(), 3u);
+  ASSERT_TRUE(dataset.ground_truth.has_value());
+  ASSERT_EQ(dataset.ground_truth->size(), 3u);
+  // The mapping car drives at 3 m/s: photos 0.5 s and 1.5 m apart, 2 m up, along the route.
+  EXPECT_NEAR(dataset.images[1].t_ns * 1e-9, 0.5, 1e-9);
+  const auto first = dataset.ground_truth->Lookup(dataset.images[0].t_ns);
+  const auto second = dataset.ground_truth->Lookup(dataset.images[1].t_ns);
+  ASSERT_TRUE(first && second);
+  EXPECT_NEAR((second->translation - first->translation).head<2>().norm(), 1.5, 1e-3);
+  EXPECT_NEAR(first->translation.z(), 2.0, 0.01);
+  EXPECT_EQ(dataset.camera.width, 240);
   fs::remove_all(dir);
 }
 
