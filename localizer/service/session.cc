@@ -1,6 +1,7 @@
 #include "localizer/service/session.h"
 
 #include <algorithm>
+#include <cmath>
 #include <cstring>
 #include <string>
 
@@ -65,6 +66,7 @@ api::MapDescription DescribeMap(const MapDescriptionData& map) {
   high->set_z(info.bounding_box_max.z());
   description.set_content_crc32c(info.content_crc32c);
   description.set_file_bytes(map.summary.file_bytes);
+  if (info.geo_anchor) *description.mutable_geo_anchor() = GeoAnchorToProto(*info.geo_anchor);
   return description;
 }
 
@@ -72,7 +74,8 @@ api::MapDescription DescribeMap(const LoadedMap& map) {
   return DescribeMap(DescribeLoadedMap(map));
 }
 
-api::PoseUpdate PoseUpdateFromEstimate(const tracking::PoseEstimate& estimate) {
+api::PoseUpdate PoseUpdateFromEstimate(const tracking::PoseEstimate& estimate,
+                                       const GeoReference* geo) {
   api::PoseUpdate update;
   update.set_t_ns(estimate.t_ns);
   switch (estimate.status) {
@@ -97,6 +100,19 @@ api::PoseUpdate PoseUpdateFromEstimate(const tracking::PoseEstimate& estimate) {
     *update.mutable_world_from_cam() = RigidToProto(estimate.world_from_cam);
     for (int row = 0; row < 6; ++row) {
       for (int col = 0; col < 6; ++col) update.add_covariance(estimate.covariance(row, col));
+    }
+    if (geo) {
+      const GeoPose pose = geo->PoseFromMap(estimate.world_from_cam);
+      api::GeodeticPose* geodetic = update.mutable_geodetic();
+      geodetic->set_latitude_deg(pose.position.latitude_deg);
+      geodetic->set_longitude_deg(pose.position.longitude_deg);
+      geodetic->set_altitude_m(pose.position.altitude_m);
+      geodetic->set_heading_deg(pose.heading_deg);
+      geodetic->set_pitch_deg(pose.pitch_deg);
+      geodetic->set_heading_from_image_up(pose.heading_from_image_up);
+      geodetic->mutable_enu()->set_x(pose.enu.x());
+      geodetic->mutable_enu()->set_y(pose.enu.y());
+      geodetic->mutable_enu()->set_z(pose.enu.z());
     }
   }
   auto* quality = update.mutable_quality();
@@ -397,8 +413,35 @@ grpc::Status RequestValidator::Accept(const api::TrackRequest& request, SessionI
         session_t_ns_ = std::max(session_t_ns_, t_ns);
         break;
       }
+      case api::TrackRequest::kGnssFix: {
+        const api::GnssFix& fix = request.gnss_fix();
+        CheckSpan(fix.t_ns(), "GnssFix: t_ns");
+        const std::optional<int64_t> last = decoder_.end_t_ns();
+        if (last && fix.t_ns() < *last) {
+          return InvalidArgument("GnssFix at " + std::to_string(fix.t_ns()) +
+                                 " ns lies before the end of the last packet (" +
+                                 std::to_string(*last) + " ns)");
+        }
+        item->kind = SessionItem::Kind::kGnssFix;
+        item->gnss = {fix.latitude_deg(), fix.longitude_deg(), fix.altitude_m()};
+        CheckGeodeticPoint(item->gnss, "GnssFix");
+        for (const auto& [name, value] :
+             {std::pair{"horizontal_accuracy_m", fix.horizontal_accuracy_m()},
+              {"vertical_accuracy_m", fix.vertical_accuracy_m()}}) {
+          if (!std::isfinite(value) || value <= 0.0 || value > kMaxGnssAccuracyM) {
+            return InvalidArgument(std::string("GnssFix.") + name + " " + std::to_string(value) +
+                                   " is outside (0, " + std::to_string(kMaxGnssAccuracyM) + "] m");
+          }
+        }
+        item->gnss_horizontal_accuracy_m = fix.horizontal_accuracy_m();
+        item->gnss_vertical_accuracy_m = fix.vertical_accuracy_m();
+        item->t_ns = fix.t_ns();
+        session_t_ns_ = std::max(session_t_ns_, item->t_ns);
+        break;
+      }
       default:
-        return InvalidArgument("an empty TrackRequest (set start, events, frame or pose_hint)");
+        return InvalidArgument(
+            "an empty TrackRequest (set start, events, frame, pose_hint or gnss_fix)");
     }
   } catch (const InvalidArgumentError& error) {
     return InvalidArgument(error.what());
@@ -443,6 +486,8 @@ SessionTracker::SessionTracker(std::shared_ptr<const LoadedMap> map,
     : map_(std::move(map)),
       settings_(settings),
       tracker_(map_->map, map_->visibility.get(), settings.camera, settings.tracker),
+      geo_(map_->map.geo_anchor ? std::optional<GeoReference>(std::in_place, *map_->map.geo_anchor)
+                                : std::nullopt),
       takes_frames_(settings.tracker.input == tracking::TrackerInput::kFrames),
       advanced_t_ns_(settings.initial_t_ns) {
   if (takes_frames_) StartTracker();
@@ -466,6 +511,10 @@ void SessionTracker::StartTracker() {
 std::vector<tracking::PoseEstimate> SessionTracker::Process(const SessionItem& item,
                                                             const StopFunction& stop) {
   if (stopped_) return {};
+  if (gnss_prior_t_ns_ && item.t_ns - *gnss_prior_t_ns_ > kGnssPriorLifetimeNs) {
+    tracker_.ClearSearchPrior();  // the fix is too old to narrow a search
+    gnss_prior_t_ns_.reset();
+  }
   switch (item.kind) {
     case SessionItem::Kind::kEvents:
       return AddEvents(item.events, item.t_ns, stop);
@@ -487,6 +536,19 @@ std::vector<tracking::PoseEstimate> SessionTracker::Process(const SessionItem& i
       started_ = true;
       advanced_t_ns_ = std::max(advanced_t_ns_, item.t_ns);
       return {};
+    case SessionItem::Kind::kGnssFix: {
+      if (!geo_) throw InvalidArgumentError("GnssFix for a map without a geo anchor");
+      // The fix's and the anchor's uncertainties, combined.
+      const GeoAnchor& anchor = geo_->anchor();
+      const double sigma =
+          std::sqrt(item.gnss_horizontal_accuracy_m * item.gnss_horizontal_accuracy_m +
+                    item.gnss_vertical_accuracy_m * item.gnss_vertical_accuracy_m +
+                    anchor.horizontal_sigma_m * anchor.horizontal_sigma_m +
+                    anchor.vertical_sigma_m * anchor.vertical_sigma_m);
+      tracker_.SetSearchPrior(geo_->MapFromGeodetic(item.gnss), kGnssPriorSigmas * sigma);
+      gnss_prior_t_ns_ = item.t_ns;
+      return {};
+    }
   }
   return {};
 }

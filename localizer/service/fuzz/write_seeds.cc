@@ -104,7 +104,8 @@ Camera SmallCamera() { return Camera::Pinhole(80, 60, 62.5, 62.5, 39.5, 29.5); }
 // that the first one primes the surfaces); with `pose_hint` a PoseHint and an empty packet in the
 // middle; with `filters` every noise filter on, the hot-pixel learning period (1 ms) ending within
 // the seed's windows.
-std::string RequestsSeed(api::EventEncoding encoding, bool pose_hint, bool filters = false) {
+std::string RequestsSeed(api::EventEncoding encoding, bool pose_hint, bool filters = false,
+                         bool gnss_fix = false) {
   const int64_t start_ns = testing::kInitialTimeNs - kWindowNs;
   std::string seed;
   api::TrackRequest start = testing::TestSessionStart();
@@ -122,6 +123,7 @@ std::string RequestsSeed(api::EventEncoding encoding, bool pose_hint, bool filte
     filter->set_background_activity_window_s(0.0005);
     filter->set_background_activity_include_self(true);
   }
+  if (gnss_fix) start.mutable_start()->set_map_name(kAnchoredTestMapName);
   AppendRecord(start.SerializeAsString(), &seed);
   std::vector<EventBuffer> windows = Windows(start_ns);
   for (EventBuffer& window : windows) {
@@ -140,6 +142,20 @@ std::string RequestsSeed(api::EventEncoding encoding, bool pose_hint, bool filte
     packet->set_time_base_ns(window_start);
     packet->set_end_t_ns(window_start + kWindowNs);
     AppendRecord(request.SerializeAsString(), &seed);
+    if (gnss_fix && i == 0) {
+      // A fix at the true position (through the anchor), 3 m horizontal, 5 m vertical.
+      const GeoReference reference(*AnchoredTestMap().geo_anchor);
+      const GeodeticPoint position = reference.GeodeticFromMap(
+          tracking::testing::SmoothMotion(window_start + kWindowNs).translation);
+      api::TrackRequest fix;
+      fix.mutable_gnss_fix()->set_latitude_deg(position.latitude_deg);
+      fix.mutable_gnss_fix()->set_longitude_deg(position.longitude_deg);
+      fix.mutable_gnss_fix()->set_altitude_m(position.altitude_m);
+      fix.mutable_gnss_fix()->set_horizontal_accuracy_m(3.0);
+      fix.mutable_gnss_fix()->set_vertical_accuracy_m(5.0);
+      fix.mutable_gnss_fix()->set_t_ns(window_start + kWindowNs);
+      AppendRecord(fix.SerializeAsString(), &seed);
+    }
     if (pose_hint && i == packets.size() / 2) {
       api::TrackRequest hint;
       hint.mutable_pose_hint()->set_t_ns(window_start + kWindowNs);
@@ -200,6 +216,8 @@ int Main(int argc, char** argv) {
   WriteFile(out / "requests" / "packed_filters",
             RequestsSeed(api::EVENT_ENCODING_PACKED, true, /*filters=*/true));
   WriteFile(out / "requests" / "frames", FrameSeed());
+  WriteFile(out / "requests" / "packed_gnss_fix",
+            RequestsSeed(api::EVENT_ENCODING_PACKED, false, false, true));
   fs::create_directories(out / "locate");
   const std::vector<api::LocateRequest> locate = LocateSeedRequests();
   for (size_t i = 0; i < locate.size(); ++i) {
