@@ -50,6 +50,9 @@ void GeoAlignmentOptions::Check() const {
   if (!std::isfinite(max_scale_deviation) || max_scale_deviation < 0.0) {
     throw InvalidArgumentError("geo alignment: max_scale_deviation must be a finite value >= 0");
   }
+  if (!(max_rotation_sigma_rad > 0.0)) {
+    throw InvalidArgumentError("geo alignment: max_rotation_sigma_rad must be > 0");
+  }
 }
 
 GeoAlignment AlignMapToGeodetic(const std::vector<GeoCorrespondence>& correspondences,
@@ -211,12 +214,32 @@ GeoAlignment AlignMapToGeodetic(const std::vector<GeoCorrespondence>& correspond
   const double dof_correction = 3.0 * n > 6.0 ? std::sqrt(3.0 * n / (3.0 * n - 6.0)) : 0.0;
   result.anchor.horizontal_sigma_m = result.horizontal_rms_m * dof_correction / std::sqrt(n);
   result.anchor.vertical_sigma_m = result.vertical_rms_m * dof_correction / std::sqrt(n);
-  if (std::abs(result.scale - 1.0) > options.max_scale_deviation) {
+  // The scale's standard error: the per-axis residual spread over sqrt(n) x the map points' RMS
+  // distance from their centroid.
+  const Eigen::Matrix3Xd inlier_map_points = Select(map_points, inliers);
+  const double spread = std::sqrt((inlier_map_points.colwise() - inlier_map_points.rowwise().mean())
+                                      .colwise()
+                                      .squaredNorm()
+                                      .mean());
+  result.scale_sigma = spread > 0.0 ? result.rms_m / std::sqrt(3.0 * n) / spread : 0.0;
+  result.rotation_sigma_rad = result.scale_sigma;
+  const double scale_deviation = std::abs(result.scale - 1.0);
+  if (scale_deviation > options.max_scale_deviation && scale_deviation > 4.0 * result.scale_sigma) {
     throw InvalidArgumentError(
         "geo alignment: the map's scale differs from the WGS84 points' by a factor " +
         std::to_string(result.scale) + " (at most 1 +- " +
         std::to_string(options.max_scale_deviation) +
+        ", or 4 standard errors: " + std::to_string(4.0 * result.scale_sigma) +
         "); the map is not metric (COLMAP without reference positions?) or the points are wrong");
+  }
+  if (result.rotation_sigma_rad > options.max_rotation_sigma_rad) {
+    throw InvalidArgumentError(
+        "geo alignment: the points' residuals (" + std::to_string(result.rms_m) +
+        " m RMS) are too large for their spread (" + std::to_string(spread) +
+        " m RMS from their centroid) to orient the map (rotation standard error " +
+        std::to_string(result.rotation_sigma_rad) + " rad, at most " +
+        std::to_string(options.max_rotation_sigma_rad) +
+        "); give the anchor (--geo-anchor with a heading) or points farther apart");
   }
   result.anchor.Check();
   return result;
@@ -230,7 +253,7 @@ std::string FormatGeoAlignment(const GeoAlignment& alignment) {
        << ", residual rms " << alignment.rms_m << " m (horizontal " << alignment.horizontal_rms_m
        << " m, vertical " << alignment.vertical_rms_m << " m), median " << alignment.median_m
        << " m, max " << alignment.max_m << " m, similarity scale " << std::setprecision(5)
-       << alignment.scale;
+       << alignment.scale << " +- " << alignment.scale_sigma;
   return text.str();
 }
 

@@ -36,11 +36,17 @@ struct GeoAlignmentOptions {
   // Fewest inliers accepted.
   size_t min_inliers = 3;
   // Largest accepted |s - 1| for the scale s of a similarity fit on the inliers (a metric map
-  // has s = 1 up to the points' noise; a larger deviation means the map or the points are wrong).
+  // has s = 1 up to the points' noise; a larger deviation means the map or the points are wrong),
+  // unless it is within 4 standard errors of the scale (noisy points over a small site: the
+  // residual spread per axis over sqrt(n) times the points' RMS distance from their centroid).
   double max_scale_deviation = 0.05;
+  // Largest accepted standard error of the fitted rotation, radians (the residual spread per
+  // axis over sqrt(n) times the points' RMS distance from their centroid): beyond it the points
+  // are too noisy for their spread to orient the map (3 m GNSS over a room).
+  double max_rotation_sigma_rad = 0.1;
 
   // Throws InvalidArgumentError unless threshold > 0 and finite, iterations >= 1,
-  // min_inliers >= 3 and max_scale_deviation finite and >= 0.
+  // min_inliers >= 3, max_scale_deviation finite and >= 0 and max_rotation_sigma_rad > 0.
   void Check() const;
 };
 
@@ -49,8 +55,12 @@ struct GeoAlignment {
   // The anchor: origin at the centroid of the inlier points (ECEF mean), enu_from_map the rigid
   // fit, sigmas from the residuals (standard error of the fit at the centroid).
   GeoAnchor anchor;
-  // Scale of a similarity fit on the same inliers (a diagnostic: the anchor is rigid).
+  // Scale of a similarity fit on the same inliers (a diagnostic: the anchor is rigid), and its
+  // standard error from the residuals.
   double scale = 1.0;
+  double scale_sigma = 0.0;
+  // Standard error of the fitted rotation, radians (the same ratio as scale_sigma).
+  double rotation_sigma_rad = 0.0;
   // Per correspondence: inside the inlier threshold after the final fit.
   std::vector<bool> inliers;
   // Per correspondence: the geodetic point minus the aligned map point, in the anchor's ENU
