@@ -1,5 +1,6 @@
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <cstring>
 #include <fstream>
 #include <functional>
@@ -217,6 +218,28 @@ TEST_F(MapIoTest, FormatVersion1FileStillLoads) {
   SaveMap(path_, map);
   EXPECT_EQ(ReadMapFileHeader(path_).format_version, 2u);
   EXPECT_EQ(ComputeMapContentChecksum(LoadMap(path_)), 0x7a0bb2aeu);
+}
+
+// maps/testdata/anchored_small.evmap: v1_small.evmap given an anchor by `evloc-mapper georef
+// --map maps/testdata/v1_small.evmap --geo-anchor 46.5191,6.5668,372.5,30 --out ...` (the
+// writer of the first anchored maps, kept as a file future readers must read).
+TEST_F(MapIoTest, AFileWrittenWithAnAnchorLoadsAndLists) {
+  const std::filesystem::path path = testing::SourceDir() / "maps/testdata/anchored_small.evmap";
+  const Map map = LoadMap(path);
+  EXPECT_EQ(map.size(), 300u);
+  ASSERT_TRUE(map.geo_anchor.has_value());
+  EXPECT_EQ(map.geo_anchor->origin.latitude_deg, 46.5191);
+  EXPECT_EQ(map.geo_anchor->origin.longitude_deg, 6.5668);
+  EXPECT_EQ(map.geo_anchor->origin.altitude_m, 372.5);
+  EXPECT_EQ(map.geo_anchor->source, "given");
+  // Heading 30: the map's +y axis points 30 degrees east of north.
+  const Eigen::Vector3d y_axis = map.geo_anchor->enu_from_map * Eigen::Vector3d::UnitY();
+  EXPECT_NEAR(y_axis.x(), 0.5, 1e-12);
+  EXPECT_NEAR(y_axis.y(), std::sqrt(3.0) / 2, 1e-12);
+  EXPECT_EQ(ComputeMapContentChecksum(map), 0x7a0bb2aeu);  // v1_small's: the anchor is not content
+  const MapFileSummary summary = ReadMapFileSummary(path);
+  ASSERT_TRUE(summary.info.geo_anchor.has_value());
+  EXPECT_EQ(summary.info.geo_anchor->origin.altitude_m, 372.5);
 }
 
 TEST_F(MapIoTest, CorruptedRelocalizationFieldsAreRefused) {
