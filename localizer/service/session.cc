@@ -74,6 +74,29 @@ api::MapDescription DescribeMap(const LoadedMap& map) {
   return DescribeMap(DescribeLoadedMap(map));
 }
 
+GnssPrior GnssPriorFromProto(const api::GnssFix& fix, const std::string& what) {
+  GnssPrior prior;
+  prior.position = {fix.latitude_deg(), fix.longitude_deg(), fix.altitude_m()};
+  CheckGeodeticPoint(prior.position, what);
+  for (const auto& [name, value] : {std::pair{"horizontal_accuracy_m", fix.horizontal_accuracy_m()},
+                                    {"vertical_accuracy_m", fix.vertical_accuracy_m()}}) {
+    if (!std::isfinite(value) || value <= 0.0 || value > kMaxGnssAccuracyM) {
+      throw InvalidArgumentError(what + "." + name + " " + std::to_string(value) +
+                                 " is outside (0, " + std::to_string(kMaxGnssAccuracyM) + "] m");
+    }
+  }
+  prior.horizontal_accuracy_m = fix.horizontal_accuracy_m();
+  prior.vertical_accuracy_m = fix.vertical_accuracy_m();
+  return prior;
+}
+
+double GnssSearchRadiusM(const GnssPrior& prior, const GeoAnchor& anchor) {
+  return kGnssPriorSigmas * std::sqrt(prior.horizontal_accuracy_m * prior.horizontal_accuracy_m +
+                                      prior.vertical_accuracy_m * prior.vertical_accuracy_m +
+                                      anchor.horizontal_sigma_m * anchor.horizontal_sigma_m +
+                                      anchor.vertical_sigma_m * anchor.vertical_sigma_m);
+}
+
 api::PoseUpdate PoseUpdateFromEstimate(const tracking::PoseEstimate& estimate,
                                        const GeoReference* geo) {
   api::PoseUpdate update;
@@ -423,18 +446,7 @@ grpc::Status RequestValidator::Accept(const api::TrackRequest& request, SessionI
                                  std::to_string(*last) + " ns)");
         }
         item->kind = SessionItem::Kind::kGnssFix;
-        item->gnss = {fix.latitude_deg(), fix.longitude_deg(), fix.altitude_m()};
-        CheckGeodeticPoint(item->gnss, "GnssFix");
-        for (const auto& [name, value] :
-             {std::pair{"horizontal_accuracy_m", fix.horizontal_accuracy_m()},
-              {"vertical_accuracy_m", fix.vertical_accuracy_m()}}) {
-          if (!std::isfinite(value) || value <= 0.0 || value > kMaxGnssAccuracyM) {
-            return InvalidArgument(std::string("GnssFix.") + name + " " + std::to_string(value) +
-                                   " is outside (0, " + std::to_string(kMaxGnssAccuracyM) + "] m");
-          }
-        }
-        item->gnss_horizontal_accuracy_m = fix.horizontal_accuracy_m();
-        item->gnss_vertical_accuracy_m = fix.vertical_accuracy_m();
+        item->gnss = GnssPriorFromProto(fix, "GnssFix");
         item->t_ns = fix.t_ns();
         session_t_ns_ = std::max(session_t_ns_, item->t_ns);
         break;
@@ -538,14 +550,8 @@ std::vector<tracking::PoseEstimate> SessionTracker::Process(const SessionItem& i
       return {};
     case SessionItem::Kind::kGnssFix: {
       if (!geo_) throw InvalidArgumentError("GnssFix for a map without a geo anchor");
-      // The fix's and the anchor's uncertainties, combined.
-      const GeoAnchor& anchor = geo_->anchor();
-      const double sigma =
-          std::sqrt(item.gnss_horizontal_accuracy_m * item.gnss_horizontal_accuracy_m +
-                    item.gnss_vertical_accuracy_m * item.gnss_vertical_accuracy_m +
-                    anchor.horizontal_sigma_m * anchor.horizontal_sigma_m +
-                    anchor.vertical_sigma_m * anchor.vertical_sigma_m);
-      tracker_.SetSearchPrior(geo_->MapFromGeodetic(item.gnss), kGnssPriorSigmas * sigma);
+      tracker_.SetSearchPrior(geo_->MapFromGeodetic(item.gnss.position),
+                              GnssSearchRadiusM(item.gnss, geo_->anchor()));
       gnss_prior_t_ns_ = item.t_ns;
       return {};
     }

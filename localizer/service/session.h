@@ -27,6 +27,19 @@
 
 namespace evloc::service {
 
+// A validated GnssFix (TrackRequest.gnss_fix, LocateRequest.gnss_fix).
+struct GnssPrior {
+  // The WGS84 position.
+  GeodeticPoint position;
+  // One-sigma accuracies, metres.
+  double horizontal_accuracy_m = 0.0;
+  double vertical_accuracy_m = 0.0;
+};
+
+// Checks a GnssFix's position (CheckGeodeticPoint) and accuracies (finite, in (0,
+// kMaxGnssAccuracyM]); throws InvalidArgumentError naming `what` and the field.
+GnssPrior GnssPriorFromProto(const api::GnssFix& fix, const std::string& what);
+
 // Describes a loaded map for clients.
 api::MapDescription DescribeMap(const LoadedMap& map);
 // Describes a map from what the registry read of it (ListMaps, without loading it).
@@ -180,10 +193,8 @@ struct SessionItem {
   cv::Mat gray;
   // kPoseHint: the pose.
   Rigid3d world_from_cam;
-  // kGnssFix: the position and its one-sigma accuracies, metres.
-  GeodeticPoint gnss;
-  double gnss_horizontal_accuracy_m = 0.0;
-  double gnss_vertical_accuracy_m = 0.0;
+  // kGnssFix: the fix.
+  GnssPrior gnss;
   // kEvents: the packet's end_t_ns; kFrame: the frame time; kPoseHint: the hint time; ns.
   int64_t t_ns = 0;
 };
@@ -238,6 +249,10 @@ inline constexpr double kGnssPriorSigmas = 3.0;
 inline constexpr int64_t kGnssPriorLifetimeNs = 30'000'000'000;
 // Largest accepted GnssFix accuracy, metres.
 inline constexpr double kMaxGnssAccuracyM = 10000.0;
+
+// The radius of the search around a fix: kGnssPriorSigmas times the fix's and the anchor's
+// horizontal and vertical sigmas combined, metres.
+double GnssSearchRadiusM(const GnssPrior& prior, const GeoAnchor& anchor);
 
 // The tracker of one session and its start-up: events up to the initial time prime the time
 // surfaces, then the tracker is reset to the initial pose (exactly as the offline

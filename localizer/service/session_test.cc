@@ -543,8 +543,8 @@ TEST(RequestValidator, GnssFixesAreValidated) {
   const int64_t t = testing::kInitialTimeNs;
   ASSERT_TRUE(validator.Accept(GnssFixRequest(here, 3.0, t), &item).ok());
   EXPECT_EQ(item.kind, SessionItem::Kind::kGnssFix);
-  EXPECT_EQ(item.gnss.latitude_deg, 46.5191);
-  EXPECT_EQ(item.gnss_horizontal_accuracy_m, 3.0);
+  EXPECT_EQ(item.gnss.position.latitude_deg, 46.5191);
+  EXPECT_EQ(item.gnss.horizontal_accuracy_m, 3.0);
   const auto refused = [&](const api::TrackRequest& request, const std::string& fragment) {
     RequestValidator fresh(settings, SessionLimits{});
     const grpc::Status status = fresh.Accept(request, &item);
