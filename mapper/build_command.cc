@@ -98,6 +98,15 @@ Map:
   --no-relocalization      skip the relocalization data (landmarks, keyframe features,
                            vocabulary; format v2): a smaller map that cannot relocalize until
                            `evloc-mapper upgrade` adds it
+Geo-reference (docs/geo.md; one source at most):
+  --geo-anchor LAT,LON,ALT[,HEADING]  the map frame is the ENU frame at this WGS84 point
+                           (ellipsoid height), its +y axis at HEADING degrees from north
+                           (default 0)
+  --geo-points FILE        WGS84 positions of keyframe images or map points (docs/geo.md);
+                           the map is aligned to them robustly
+  --geo-exif               the GNSS tags in the photos' EXIF data; the camera centres are
+                           aligned to them robustly
+  --geo-inlier-threshold M  a point agrees with the alignment within M metres (default 10)
 Output:
   --quiet                  no progress output
   --help                   this text
@@ -122,6 +131,10 @@ BuildCommandLine ParseBuildCommandLine(const std::vector<std::string>& arguments
     }
     if (flag == "--no-relocalization") {
       options.relocalization = false;
+      continue;
+    }
+    if (flag == "--geo-exif") {
+      options.geo.exif = true;
       continue;
     }
     if (flag == "--fast-nondeterministic") {
@@ -175,6 +188,12 @@ BuildCommandLine ParseBuildCommandLine(const std::vector<std::string>& arguments
       options.keyframes.num_neighbours = ParseIntFlag(flag, value);
     } else if (flag == "--min-confirmations") {
       options.semidense.min_keyframe_confirmations = ParseIntFlag(flag, value);
+    } else if (flag == "--geo-anchor") {
+      options.geo.given = ParseGeoAnchorFlag(flag, value);
+    } else if (flag == "--geo-points") {
+      options.geo.points_file = value;
+    } else if (flag == "--geo-inlier-threshold") {
+      options.geo.alignment.inlier_threshold_m = ParseDoubleFlag(flag, value);
     } else if (flag == "--voxel-size") {
       options.merge.voxel_size = ParseDoubleFlag(flag, value);
     } else {
@@ -223,6 +242,8 @@ int RunBuildCommand(int argc, char** argv) {
                 << report.relocalization->bytes_added << " bytes";
     }
     std::cout << "\n";
+    if (report.geo_anchor)
+      std::cout << FormatGeoReference(*report.geo_anchor, report.geo_alignment, report.geo_inputs);
     if (!report.relocalization_warning.empty()) {
       // Printed even with --quiet: the map cannot relocalize.
       std::cerr << "evloc-mapper build: WARNING: the map has no relocalization data: "

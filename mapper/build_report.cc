@@ -60,6 +60,40 @@ double MapBuildReport::TotalCpuSeconds(const std::string& prefix) const {
   return total;
 }
 
+namespace {
+
+// The geo anchor and its alignment, or null.
+nlohmann::json GeoReferenceToJson(const MapBuildReport& report) {
+  if (!report.geo_anchor) return nullptr;
+  const GeoAnchor& anchor = *report.geo_anchor;
+  const Eigen::Quaterniond& q = anchor.enu_from_map.rotation;
+  const Eigen::Vector3d& t = anchor.enu_from_map.translation;
+  nlohmann::json json = {
+      {"source", anchor.source},
+      {"inputs", report.geo_inputs},
+      {"latitude_deg", anchor.origin.latitude_deg},
+      {"longitude_deg", anchor.origin.longitude_deg},
+      {"altitude_m", anchor.origin.altitude_m},
+      {"enu_from_map",
+       {{"rotation_wxyz", {q.w(), q.x(), q.y(), q.z()}}, {"translation", {t.x(), t.y(), t.z()}}}},
+      {"horizontal_sigma_m", anchor.horizontal_sigma_m},
+      {"vertical_sigma_m", anchor.vertical_sigma_m}};
+  if (report.geo_alignment) {
+    const GeoAlignment& alignment = *report.geo_alignment;
+    json["alignment"] = {{"points", alignment.inliers.size()},
+                         {"inliers", alignment.num_inliers},
+                         {"rms_m", alignment.rms_m},
+                         {"horizontal_rms_m", alignment.horizontal_rms_m},
+                         {"vertical_rms_m", alignment.vertical_rms_m},
+                         {"median_m", alignment.median_m},
+                         {"max_m", alignment.max_m},
+                         {"similarity_scale", alignment.scale}};
+  }
+  return json;
+}
+
+}  // namespace
+
 std::string MapBuildReportToJson(const MapBuildReport& report) {
   nlohmann::json json;
   json["images"] = report.num_images;
@@ -113,6 +147,7 @@ std::string MapBuildReportToJson(const MapBuildReport& report) {
     json["relocalization"] = nullptr;
   }
   json["relocalization_warning"] = report.relocalization_warning;
+  json["geo_reference"] = GeoReferenceToJson(report);
   nlohmann::json timings = nlohmann::json::array();
   for (const StageTiming& timing : report.timings) {
     timings.push_back({{"stage", timing.stage},

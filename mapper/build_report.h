@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "core/geo/geo_alignment.h"
 #include "core/geometry/rigid3.h"
 #include "mapper/relocalization_data.h"
 
@@ -100,6 +101,12 @@ struct MapBuildReport {
   std::optional<RelocalizationDataStatistics> relocalization;
   // Why the map has no relocalization data although it was asked for; empty otherwise.
   std::string relocalization_warning;
+  // The map's geo anchor (--geo-anchor, --geo-points, --geo-exif); nullopt without one.
+  std::optional<GeoAnchor> geo_anchor;
+  // The alignment behind it (--geo-points, --geo-exif).
+  std::optional<GeoAlignment> geo_alignment;
+  // What the anchor was computed from ("12 of 12 keyframe images with GNSS tags").
+  std::string geo_inputs;
   // Per-stage timings, in pipeline order.
   std::vector<StageTiming> timings;
   // Registered image poses in the output frame (world_from_cam), by image name.

@@ -26,6 +26,7 @@ void MapBuilderOptions::Check() const {
   merge.Check();
   relocalization_data.Check();
   alignment_limits.Check();
+  geo.Check();
 }
 
 MapBuildReport BuildMap(const MapBuilderOptions& options, ProgressListener* progress) {
@@ -51,7 +52,15 @@ MapBuildReport BuildMap(const MapBuilderOptions& options, ProgressListener* prog
   Map map = MergeKeyframePoints(options, views, std::move(lifted), sparse, clock, &report);
   // 8. Relocalization data: landmarks, keyframe features, vocabulary, global descriptors.
   AddRelocalizationData(options, clock, &map, &report);
-  // 9. The map directory, staged and renamed into place.
+  // 9. The geo anchor (before any output: a failed alignment writes nothing).
+  if (options.geo.Any()) {
+    GeoReferenceResult geo = GeoReferenceMap(map, options.image_dir, options.geo);
+    map.geo_anchor = geo.anchor;
+    report.geo_anchor = geo.anchor;
+    report.geo_alignment = std::move(geo.alignment);
+    report.geo_inputs = geo.inputs;
+  }
+  // 10. The map directory, staged and renamed into place.
   WriteOutputs(options, inputs, map, sparse, clock, &report);
   return report;
 }

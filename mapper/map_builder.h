@@ -18,6 +18,7 @@
 #include "mapper/build_inputs.h"
 #include "mapper/build_report.h"
 #include "mapper/colmap_runner.h"
+#include "mapper/georeference.h"
 #include "mapper/keyframe_selection.h"
 #include "mapper/map_merge.h"
 #include "mapper/pose_alignment.h"
@@ -74,6 +75,8 @@ struct MapBuilderOptions {
   int preview_keyframes = 4;
   // Command line recorded in the map's provenance.
   std::string command_line;
+  // The map's geo anchor: none, or one source (docs/geo.md).
+  GeoReferenceOptions geo;
 
   // Throws InvalidArgumentError on a bad or inconsistent value.
   void Check() const;

@@ -10,6 +10,7 @@
 #include "core/common/file_util.h"
 #include "core/common/provenance.h"
 #include "mapper/build_command.h"
+#include "mapper/georeference.h"
 #include "mapper/relocalization_data.h"
 #include "maps/map.h"
 #include "maps/map_directory.h"
@@ -61,6 +62,44 @@ const char kUpgradeHelp[] =
     "                  map already has\n"
     "  --threads N     threads for feature extraction and matching (default 2; same result)\n"
     "  --help          show this help\n";
+
+// Throws the UsageError of a subcommand's argument that none of its flags took.
+[[noreturn]] void RejectArgument(const std::string& argument) {
+  if (argument.rfind("-", 0) == 0) throw UsageError("unknown option '" + argument + "'");
+  throw UsageError("unexpected argument '" + argument + "'");
+}
+
+// The map a command reads and rewrites (upgrade, georef): the resolved .evmap file and, when it
+// is rewritten in place (no OUT), the map's writer lock (the one evloc-mapper build and import-pcd
+// take) held throughout, so that a concurrent writer's map is neither lost nor mixed in.
+struct MapRewrite {
+  MapRewrite(const std::filesystem::path& map, const std::filesystem::path& out)
+      : source(ResolveMapFile(map)) {
+    if (out.empty()) {
+      lock.emplace(MapDirectoryLockFile(std::filesystem::absolute(source).parent_path()));
+    }
+  }
+  std::filesystem::path source;
+  std::optional<ScopedFileLock> lock;
+};
+
+// Where a command that rewrites a map writes it: OUT (a .evmap file, or a directory that gets
+// map.evmap), or the source itself when OUT is empty. Refuses an existing OUT without `force`.
+std::filesystem::path RewriteTarget(const std::filesystem::path& source,
+                                    const std::filesystem::path& out, bool force) {
+  namespace fs = std::filesystem;
+  if (out.empty()) return source;
+  std::error_code error;
+  const fs::path target =
+      fs::is_directory(out, error) || out.extension() != ".evmap" ? out / kMapFileName : out;
+  if (fs::exists(target, error) && !force) {
+    throw InvalidArgumentError("'" + target.string() +
+                               "' exists; choose another --out or pass "
+                               "--force to replace it");
+  }
+  if (!target.parent_path().empty()) fs::create_directories(target.parent_path(), error);
+  return target;
+}
 
 const char kTileHelp[] =
     "usage: evloc-mapper tile --map MAP --out SITE [--tile-size M] [--overlap M]\n"
@@ -114,10 +153,8 @@ int Tile(const std::vector<std::string>& arguments, const std::string& command_l
       options.name = value();
     } else if (argument == "--force") {
       options.overwrite = true;
-    } else if (argument.rfind("-", 0) == 0) {
-      throw UsageError("unknown option '" + argument + "'");
     } else {
-      throw UsageError("unexpected argument '" + argument + "'");
+      RejectArgument(argument);
     }
   }
   if (map_path.empty()) throw UsageError("tile needs --map MAP");
@@ -186,10 +223,8 @@ UpgradeCommandOptions ParseUpgradeOptions(const std::vector<std::string>& argume
       options.force = true;
     } else if (argument == "--threads") {
       options.threads = ParseIntFlag(argument, value());
-    } else if (argument.rfind("-", 0) == 0) {
-      throw UsageError("unknown option '" + argument + "'");
     } else {
-      throw UsageError("unexpected argument '" + argument + "'");
+      RejectArgument(argument);
     }
   }
   options.Check();
@@ -204,12 +239,8 @@ int Upgrade(const std::vector<std::string>& arguments, const std::string& comman
     return 0;
   }
   namespace fs = std::filesystem;
-  const fs::path source = ResolveMapFile(options.map);
-  // An in-place upgrade reads, extends and replaces the map: it holds the map's writer lock
-  // (the one evloc-mapper build and import-pcd take) throughout, so that a concurrent writer's
-  // map is neither lost nor mixed in.
-  std::optional<ScopedFileLock> lock;
-  if (options.out.empty()) lock.emplace(MapDirectoryLockFile(fs::absolute(source).parent_path()));
+  const MapRewrite rewrite(options.map, options.out);
+  const fs::path& source = rewrite.source;
   const MapFileHeader header = ReadMapFileHeader(source);
   Map map = LoadMap(source);
   if (map.relocalization && !options.force) {
@@ -218,17 +249,7 @@ int Upgrade(const std::vector<std::string>& arguments, const std::string& comman
                                "compute it again");
   }
   std::error_code error;
-  fs::path target = source;
-  if (!options.out.empty()) {
-    target = fs::is_directory(options.out, error) || options.out.extension() != ".evmap"
-                 ? options.out / kMapFileName
-                 : options.out;
-    if (fs::exists(target, error) && !options.force) {
-      throw InvalidArgumentError("'" + target.string() +
-                                 "' exists; choose another --out or pass "
-                                 "--force to replace it");
-    }
-  }
+  const fs::path target = RewriteTarget(source, options.out, options.force);
   const fs::path backup = source.string() + ".v" + std::to_string(header.format_version) + ".bak";
   if (options.out.empty() && fs::exists(backup, error) && !options.force) {
     throw InvalidArgumentError("the backup '" + backup.string() +
@@ -244,8 +265,6 @@ int Upgrade(const std::vector<std::string>& arguments, const std::string& comman
   if (options.out.empty()) {
     // The old file stays readable under MAP.v1.bak; the new one replaces MAP atomically.
     WriteFileAtomically(backup, ReadFileToString(source));
-  } else if (!target.parent_path().empty()) {
-    fs::create_directories(target.parent_path(), error);
   }
   SaveMap(target, map);
   out << "upgraded " << source.string() << " (format " << header.format_version << ", "
@@ -255,6 +274,121 @@ int Upgrade(const std::vector<std::string>& arguments, const std::string& comman
       << " keyframe features of " << statistics.num_features_extracted << ", "
       << statistics.bytes_added << " bytes of relocalization data\n";
   if (options.out.empty()) out << "the previous map is kept as " << backup.string() << "\n";
+  return 0;
+}
+
+const char kGeorefHelp[] =
+    "usage: evloc-mapper georef --map MAP (--geo-anchor LAT,LON,ALT[,HEADING] | --geo-points FILE\n"
+    "                           | --geo-exif --images DIR) [--out OUT] [--force]\n"
+    "                           [--geo-inlier-threshold M]\n"
+    "\n"
+    "Adds a geo anchor (docs/geo.md) to a map, or replaces its anchor (with --force): where the\n"
+    "map frame is on the Earth, so that poses are also reported in WGS84. MAP is a map directory\n"
+    "or a .evmap file. In place by default (the map is replaced atomically; its content version,\n"
+    "the content CRC32C, does not change: the anchor is not part of it); with --out the map is\n"
+    "written to OUT (a .evmap file, or a directory that gets map.evmap) and MAP is left alone.\n"
+    "\n"
+    "  --map MAP                  the map\n"
+    "  --geo-anchor LAT,LON,ALT[,HEADING]  the map frame is the ENU frame at this WGS84 point\n"
+    "                             (degrees, metres above the ellipsoid), its +y axis at HEADING\n"
+    "                             degrees clockwise from north (default 0)\n"
+    "  --geo-points FILE          WGS84 positions of keyframe images or map points; the map is\n"
+    "                             aligned to them robustly (RANSAC, then least squares)\n"
+    "  --geo-exif                 the GNSS tags in the EXIF data of the keyframe images\n"
+    "  --images DIR               folder of the images the map was built from (--geo-exif)\n"
+    "  --geo-inlier-threshold M   a point agrees with the alignment within M metres (default 10)\n"
+    "  --out OUT                  write the map here instead of in place\n"
+    "  --force                    replace an existing anchor or OUT\n"
+    "  --help                     show this help\n";
+
+// The options of `georef`, one field per flag.
+struct GeorefCommandOptions {
+  // The map (directory or .evmap file).
+  std::filesystem::path map;
+  // Folder of the keyframe images (--geo-exif).
+  std::filesystem::path images;
+  // Where to write; empty: in place.
+  std::filesystem::path out;
+  // Replace an existing anchor or output.
+  bool force = false;
+  // The anchor's source.
+  mapper::GeoReferenceOptions geo;
+  // --help was given.
+  bool help = false;
+
+  // Throws UsageError unless --map and exactly one source are given (--geo-exif with --images).
+  void Check() const {
+    if (map.empty()) throw UsageError("georef needs --map MAP");
+    if (!geo.Any()) throw UsageError("georef needs --geo-anchor, --geo-points or --geo-exif");
+    if (geo.exif && images.empty()) throw UsageError("--geo-exif needs --images DIR");
+    try {
+      geo.Check();
+    } catch (const InvalidArgumentError& error) {
+      throw UsageError(error.what());
+    }
+  }
+};
+
+GeorefCommandOptions ParseGeorefOptions(const std::vector<std::string>& arguments) {
+  GeorefCommandOptions options;
+  for (size_t i = 0; i < arguments.size(); ++i) {
+    const std::string& argument = arguments[i];
+    const auto value = [&]() -> const std::string& { return TakeFlagValue(arguments, &i); };
+    if (argument == "--help" || argument == "-h") {
+      options.help = true;
+      return options;
+    } else if (argument == "--map") {
+      options.map = value();
+    } else if (argument == "--images") {
+      options.images = value();
+    } else if (argument == "--out") {
+      options.out = value();
+    } else if (argument == "--force") {
+      options.force = true;
+    } else if (argument == "--geo-anchor") {
+      options.geo.given = mapper::ParseGeoAnchorFlag(argument, value());
+    } else if (argument == "--geo-points") {
+      options.geo.points_file = value();
+    } else if (argument == "--geo-exif") {
+      options.geo.exif = true;
+    } else if (argument == "--geo-inlier-threshold") {
+      options.geo.alignment.inlier_threshold_m = ParseDoubleFlag(argument, value());
+    } else {
+      RejectArgument(argument);
+    }
+  }
+  options.Check();
+  return options;
+}
+
+int Georef(const std::vector<std::string>& arguments, const std::string& command_line,
+           std::ostream& out) {
+  const GeorefCommandOptions options = ParseCommandLine(ParseGeorefOptions, arguments);
+  if (options.help) {
+    out << kGeorefHelp;
+    return 0;
+  }
+  namespace fs = std::filesystem;
+  const MapRewrite rewrite(options.map, options.out);
+  const fs::path& source = rewrite.source;
+  Map map = LoadMap(source);
+  if (map.geo_anchor && !options.force) {
+    throw InvalidArgumentError("'" + source.string() + "' already has a geo anchor (source " +
+                               map.geo_anchor->source + "); pass --force to replace it");
+  }
+  const fs::path target = RewriteTarget(source, options.out, options.force);
+  mapper::GeoReferenceResult result = mapper::GeoReferenceMap(map, options.images, options.geo);
+  map.geo_anchor = result.anchor;
+  map.provenance.command_line += " ; " + command_line;
+  if (options.geo.points_file) {
+    map.provenance.inputs.push_back(
+        fs::absolute(*options.geo.points_file).lexically_normal().string());
+  }
+  SaveMap(target, map);
+  out << "wrote " << target.string() << " (content CRC32C " << std::hex << std::setw(8)
+      << std::setfill('0') << ComputeMapContentChecksum(map) << std::dec << std::setfill(' ')
+      << ", unchanged by the anchor)\n";
+  out << mapper::FormatGeoReference(result.anchor, result.alignment, result.inputs);
   return 0;
 }
 
@@ -397,6 +531,12 @@ int RunUpgradeCommand(const std::vector<std::string>& arguments, const std::stri
                     [&] { return Upgrade(arguments, command_line, out); });
 }
 
+int RunGeorefCommand(const std::vector<std::string>& arguments, const std::string& command_line,
+                     std::ostream& out, std::ostream& err) {
+  return RunGuarded("evloc-mapper georef", err,
+                    [&] { return Georef(arguments, command_line, out); });
+}
+
 int RunTileCommand(const std::vector<std::string>& arguments, const std::string& command_line,
                    std::ostream& out, std::ostream& err) {
   return RunGuarded("evloc-mapper tile", err, [&] { return Tile(arguments, command_line, out); });
@@ -423,6 +563,7 @@ const std::vector<MapperSubcommand>& MapperSubcommands() {
   static const std::vector<MapperSubcommand> subcommands = {
       {"build", "build a map from images (COLMAP or known poses, semi-dense edges)",
        RunBuildSubcommand},
+      {"georef", "add or replace the geo anchor of a map (WGS84; docs/geo.md)", RunGeorefCommand},
       {"import-pcd", "import a Canny-EVT PCD map into a map directory", RunImportPcdCommand},
       {"info", "verify and summarise a map", RunInfoCommand},
       {"upgrade", "add relocalization data (format v2) to a v1 map from its images",

@@ -41,6 +41,10 @@ int RunUpgradeCommand(const std::vector<std::string>& arguments, const std::stri
 // `evloc-mapper tile --map MAP --out SITE [...]`: splits a map into a site of tiles (maps/site.h).
 int RunTileCommand(const std::vector<std::string>& arguments, const std::string& command_line,
                    std::ostream& out, std::ostream& err);
+// `evloc-mapper georef --map MAP (--geo-anchor ... | --geo-points FILE | --geo-exif --images DIR)
+// [--out OUT] [--force]`: adds or replaces a map's geo anchor (docs/geo.md).
+int RunGeorefCommand(const std::vector<std::string>& arguments, const std::string& command_line,
+                     std::ostream& out, std::ostream& err);
 
 // `evloc-mapper info MAP` (a map directory or a .evmap file).
 int RunInfoCommand(const std::vector<std::string>& arguments, const std::string& command_line,

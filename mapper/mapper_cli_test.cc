@@ -18,6 +18,7 @@
 #include "core/common/file_util.h"
 #include "core/common/test_data.h"
 #include "mapper/relocalization_data.h"
+#include "mapper/testing/mapper_cli_runner.h"
 #include "mapper/testing/middlebury_map.h"
 #include "maps/map.h"
 #include "maps/map_directory.h"
@@ -26,24 +27,8 @@
 namespace evloc {
 namespace {
 
-// The outcome of one CLI run.
-struct CliResult {
-  int exit_code = -1;
-  std::string out;
-  std::string err;
-};
-
-CliResult RunCli(std::vector<std::string> arguments) {
-  arguments.insert(arguments.begin(), "evloc-mapper");
-  std::vector<const char*> argv;
-  for (const std::string& argument : arguments) argv.push_back(argument.c_str());
-  std::ostringstream out, err;
-  CliResult result;
-  result.exit_code = RunMapperCli(static_cast<int>(argv.size()), argv.data(), out, err);
-  result.out = out.str();
-  result.err = err.str();
-  return result;
-}
+using testing::CliResult;
+using testing::RunCli;
 
 bool Contains(const std::string& text, const std::string& fragment) {
   return text.find(fragment) != std::string::npos;

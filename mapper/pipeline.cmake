@@ -3,6 +3,7 @@
 # Included from mapper/CMakeLists.txt.
 find_package(PCL 1.13 REQUIRED COMPONENTS common kdtree filters)
 find_package(SQLite3 REQUIRED)
+find_package(exiv2 CONFIG REQUIRED)
 
 add_library(evloc_mapper_pipeline
   ${CMAKE_CURRENT_LIST_DIR}/colmap_model.cc
@@ -20,14 +21,15 @@ add_library(evloc_mapper_pipeline
   ${CMAKE_CURRENT_LIST_DIR}/build_report.cc
   ${CMAKE_CURRENT_LIST_DIR}/map_preview.cc
   ${CMAKE_CURRENT_LIST_DIR}/relocalization_data.cc
+  ${CMAKE_CURRENT_LIST_DIR}/georeference.cc
   ${CMAKE_CURRENT_LIST_DIR}/map_builder.cc
   ${CMAKE_CURRENT_LIST_DIR}/build_command.cc)
 target_include_directories(evloc_mapper_pipeline PUBLIC ${PROJECT_SOURCE_DIR})
 target_link_libraries(evloc_mapper_pipeline
-  PUBLIC evloc_maps evloc_camera evloc_geometry evloc_common evloc_features opencv_core opencv_imgproc
+  PUBLIC evloc_maps evloc_geo evloc_camera evloc_geometry evloc_common evloc_features opencv_core opencv_imgproc
          opencv_imgcodecs
   PRIVATE evloc_dataset evloc_trajectory nlohmann_json::nlohmann_json SQLite::SQLite3
-          Threads::Threads opencv_calib3d ${PCL_LIBRARIES})
+          Threads::Threads opencv_calib3d exiv2lib ${PCL_LIBRARIES})
 # PCL headers are included by map_merge.cc only; SYSTEM keeps their warnings out.
 target_include_directories(evloc_mapper_pipeline SYSTEM PRIVATE ${PCL_INCLUDE_DIRS})
 target_compile_definitions(evloc_mapper_pipeline PRIVATE ${PCL_DEFINITIONS})

@@ -155,6 +155,7 @@ void Map::Check() const {
     }
   }
   CheckRelocalizationData(*this);
+  if (geo_anchor) geo_anchor->Check();
 }
 
 void CheckRelocalizationData(const Map& map) {
@@ -363,6 +364,7 @@ MapInfo SummarizeMap(const Map& map) {
       info.num_relocalization_features += features.keypoints.size();
     }
   }
+  info.geo_anchor = map.geo_anchor;
   info.provenance = map.provenance;
   for (const Camera& camera : map.cameras) {
     std::ostringstream text;
@@ -421,6 +423,16 @@ std::string FormatMapInfo(const MapInfo& info) {
          << " keyframe features, " << info.num_vocabulary_words << " vocabulary words";
   } else {
     text << "none (format v1 or imported; evloc-mapper upgrade adds it)";
+  }
+  text << "\ngeo anchor:       ";
+  if (info.geo_anchor) {
+    const GeoAnchor& anchor = *info.geo_anchor;
+    text << std::setprecision(8) << anchor.origin.latitude_deg << ", "
+         << anchor.origin.longitude_deg << std::setprecision(3) << ", " << anchor.origin.altitude_m
+         << " m (WGS84), source " << anchor.source << ", sigma " << anchor.horizontal_sigma_m
+         << " m horizontal, " << anchor.vertical_sigma_m << " m vertical";
+  } else {
+    text << "none (evloc-mapper georef adds one)";
   }
   text << "\ncameras:          " << info.num_cameras << "\n";
   for (size_t i = 0; i < info.camera_descriptions.size(); ++i) {

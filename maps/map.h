@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "core/camera/camera.h"
+#include "core/geo/geo_anchor.h"
 #include "core/geometry/rigid3.h"
 
 namespace evloc {
@@ -103,6 +104,8 @@ struct Map {
   MapProvenance provenance;
   // Relocalization data (format v2); nullopt for v1 and imported maps.
   std::optional<RelocalizationData> relocalization;
+  // Where the map is on the Earth (docs/geo.md); nullopt for a map without geo-reference.
+  std::optional<GeoAnchor> geo_anchor;
 
   // Number of points.
   size_t size() const { return positions.size(); }
@@ -117,7 +120,8 @@ struct Map {
   // sigmas and magnitudes are finite and >= 0; source keyframes are valid indices or
   // kNoKeyframe; keyframe poses are finite with unit quaternions, camera indices valid, visible
   // points valid and strictly increasing; every camera passes Camera::Check(); and, with
-  // relocalization data, CheckRelocalizationData(*this).
+  // relocalization data, CheckRelocalizationData(*this); and a geo anchor passes
+  // GeoAnchor::Check().
   void Check() const;
 };
 
@@ -146,8 +150,9 @@ inline constexpr float kGradientNormTolerance = 1e-3f;
 inline constexpr double kGlobalDescriptorNormTolerance = 1e-3;
 
 // CRC32C (Castagnoli) of the map content (points, cameras, keyframes, then the relocalization data
-// when present; not provenance) in the canonical little-endian layout of docs/map-format.md.
-// Equal content gives an equal value; a map without relocalization data has its v1 value.
+// when present; not provenance, not the geo anchor: readers older than the anchor load anchored
+// maps) in the canonical little-endian layout of docs/map-format.md. Equal content gives an equal
+// value; a map without relocalization data has its v1 value.
 uint32_t ComputeMapContentChecksum(const Map& map);
 
 // Writes `map` to a .evmap file (header + protobuf payload, docs/map-format.md), atomically: a
@@ -227,6 +232,8 @@ struct MapInfo {
   size_t num_relocalization_features = 0;
   // Words of the relocalization vocabulary.
   size_t num_vocabulary_words = 0;
+  // The map's geo anchor, if it has one.
+  std::optional<GeoAnchor> geo_anchor;
   // Format version the map is (or would be) stored with.
   uint32_t format_version = kMapFormatVersion;
   // Provenance of the map.
@@ -252,7 +259,8 @@ struct MapFileSummary {
   // Size of the file, bytes.
   uint64_t file_bytes = 0;
   // As SummarizeMap gives them: num_points, num_keyframes, the bounding box, content_crc32c (the
-  // checksum the file declares), has_relocalization and format_version; the rest is left unset.
+  // checksum the file declares), has_relocalization, geo_anchor and format_version; the rest is
+  // left unset.
   MapInfo info;
 };
 

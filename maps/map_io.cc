@@ -260,23 +260,48 @@ std::string SummaryFieldProblem(const pb::Summary& summary) {
   return "";
 }
 
-pb::Summary ReadSummaryField(::google::protobuf::io::CodedInputStream& in,
-                             const std::function<ParseError(const std::string&)>& invalid) {
-  constexpr uint32_t kMaxSummaryBytes = 4096;
+// The message of a length-delimited field (`name`) whose tag `in` has just read, of at most
+// `max_bytes`; throws what `invalid(problem)` returns when it is truncated, too long or not a
+// `Message`.
+template <typename Message>
+Message ReadBoundedMessageField(::google::protobuf::io::CodedInputStream& in,
+                                const std::function<ParseError(const std::string&)>& invalid,
+                                const std::string& name, uint32_t max_bytes) {
   uint32_t length = 0;
-  if (!in.ReadVarint32(&length)) throw invalid("truncated summary field");
-  if (length > kMaxSummaryBytes) {
-    throw invalid("summary field of " + std::to_string(length) + " bytes (at most " +
-                  std::to_string(kMaxSummaryBytes) + ")");
+  if (!in.ReadVarint32(&length)) throw invalid("truncated " + name);
+  if (length > max_bytes) {
+    throw invalid(name + " of " + std::to_string(length) + " bytes (at most " +
+                  std::to_string(max_bytes) + ")");
   }
   std::string bytes;
-  pb::Summary summary;
-  if (!in.ReadString(&bytes, static_cast<int>(length))) throw invalid("truncated summary field");
-  if (!summary.ParseFromString(bytes)) throw invalid("summary field is not a Summary message");
+  Message message;
+  if (!in.ReadString(&bytes, static_cast<int>(length))) throw invalid("truncated " + name);
+  if (!message.ParseFromString(bytes)) {
+    throw invalid(name + " is not a " + Message::descriptor()->name() + " message");
+  }
+  return message;
+}
+
+pb::Summary ReadSummaryField(::google::protobuf::io::CodedInputStream& in,
+                             const std::function<ParseError(const std::string&)>& invalid) {
+  const auto summary = ReadBoundedMessageField<pb::Summary>(in, invalid, "summary field", 4096);
   if (const std::string problem = SummaryFieldProblem(summary); !problem.empty()) {
     throw invalid("summary field: " + problem);
   }
   return summary;
+}
+
+// The geo anchor of a payload's geo_anchor field whose tag `in` has just read, with
+// GeoAnchorFromProto's checks; throws what `invalid(problem)` returns.
+GeoAnchor ReadGeoAnchorField(::google::protobuf::io::CodedInputStream& in,
+                             const std::function<ParseError(const std::string&)>& invalid) {
+  // An anchor is about 100 bytes.
+  const auto stored = ReadBoundedMessageField<pb::GeoAnchor>(in, invalid, "geo_anchor field", 1024);
+  try {
+    return GeoAnchorFromProto(stored, "geo_anchor");
+  } catch (const InvalidArgumentError& error) {
+    throw invalid(error.what());
+  }
 }
 
 // a * b, or nullopt when the product does not fit in 64 bits (a forged count).
@@ -405,6 +430,13 @@ Map FromProto(const pb::MapFile& file, const std::string& source) {
   if (file.has_relocalization()) {
     map.relocalization = RelocalizationFromProto(file.relocalization(), payload_error);
   }
+  if (file.has_geo_anchor()) {
+    try {
+      map.geo_anchor = GeoAnchorFromProto(file.geo_anchor(), "geo_anchor");
+    } catch (const InvalidArgumentError& error) {
+      throw payload_error(error.what());
+    }
+  }
   return map;
 }
 
@@ -484,11 +516,16 @@ Map ParsePayload(MapFileHeader header, std::string_view payload, const std::stri
 
 void SaveMap(const std::filesystem::path& path, const Map& map) {
   map.Check();
-  // The summary first, then the map: a summary reader stops after the first field.
+  // The summary first, then the geo anchor, then the map: a summary reader stops after them.
   const pb::MapFile file = ToProto(map);
   pb::MapFile summary_only;
   *summary_only.mutable_summary() = SummaryOf(map, file);
   std::string payload = summary_only.SerializeAsString();
+  if (map.geo_anchor) {
+    pb::MapFile anchor_only;
+    *anchor_only.mutable_geo_anchor() = GeoAnchorToProto(*map.geo_anchor);
+    anchor_only.AppendToString(&payload);
+  }
   if (!file.AppendToString(&payload)) {
     throw InvalidArgumentError("cannot serialise map for '" + path.string() +
                                "': the payload exceeds the protobuf limit of 2 GiB");
@@ -563,7 +600,8 @@ MapFileSummary ReadMapFileSummary(const std::filesystem::path& path) {
     if (!in.ReadVarint32(&length)) throw invalid(std::string("truncated ") + field);
     return static_cast<int>(length);
   };
-  // A file written by SaveMap starts with its summary field: the rest is not read.
+  // A file written by SaveMap starts with its summary field (and geo anchor): the rest is not
+  // read.
   uint32_t tag = in.ReadTag();
   if (WireFormat::GetTagFieldNumber(tag) == 9 &&
       WireFormat::GetTagWireType(tag) == WireFormat::WIRETYPE_LENGTH_DELIMITED) {
@@ -578,6 +616,12 @@ MapFileSummary ReadMapFileSummary(const std::filesystem::path& path) {
     }
     summary.info.has_relocalization = stored.has_relocalization();
     summary.info.content_crc32c = stored.content_crc32c();
+    // And the geo anchor SaveMap writes right after it.
+    tag = in.ReadTag();
+    if (WireFormat::GetTagFieldNumber(tag) == 10 &&
+        WireFormat::GetTagWireType(tag) == WireFormat::WIRETYPE_LENGTH_DELIMITED) {
+      summary.info.geo_anchor = ReadGeoAnchorField(in, invalid);
+    }
     return summary;
   }
   for (; tag != 0; tag = in.ReadTag()) {
@@ -615,6 +659,10 @@ MapFileSummary ReadMapFileSummary(const std::filesystem::path& path) {
       read = true;
     } else if (field == 7 && wire_type == WireFormat::WIRETYPE_FIXED32) {
       read = in.ReadLittleEndian32(&summary.info.content_crc32c);
+    } else if (field == 10 && wire_type == WireFormat::WIRETYPE_LENGTH_DELIMITED) {
+      // The last occurrence (protobuf would merge several; LoadMap checks the merged one).
+      summary.info.geo_anchor = ReadGeoAnchorField(in, invalid);
+      read = true;
     } else {
       // As protobuf: a known field with another wire type is an unknown field.
       if (field == 8 && wire_type == WireFormat::WIRETYPE_LENGTH_DELIMITED) {

@@ -1,5 +1,6 @@
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <cstring>
 #include <fstream>
 #include <functional>
@@ -217,6 +218,28 @@ TEST_F(MapIoTest, FormatVersion1FileStillLoads) {
   SaveMap(path_, map);
   EXPECT_EQ(ReadMapFileHeader(path_).format_version, 2u);
   EXPECT_EQ(ComputeMapContentChecksum(LoadMap(path_)), 0x7a0bb2aeu);
+}
+
+// maps/testdata/anchored_small.evmap: v1_small.evmap given an anchor by `evloc-mapper georef
+// --map maps/testdata/v1_small.evmap --geo-anchor 46.5191,6.5668,372.5,30 --out ...` (the
+// writer of the first anchored maps, kept as a file future readers must read).
+TEST_F(MapIoTest, AFileWrittenWithAnAnchorLoadsAndLists) {
+  const std::filesystem::path path = testing::SourceDir() / "maps/testdata/anchored_small.evmap";
+  const Map map = LoadMap(path);
+  EXPECT_EQ(map.size(), 300u);
+  ASSERT_TRUE(map.geo_anchor.has_value());
+  EXPECT_EQ(map.geo_anchor->origin.latitude_deg, 46.5191);
+  EXPECT_EQ(map.geo_anchor->origin.longitude_deg, 6.5668);
+  EXPECT_EQ(map.geo_anchor->origin.altitude_m, 372.5);
+  EXPECT_EQ(map.geo_anchor->source, "given");
+  // Heading 30: the map's +y axis points 30 degrees east of north.
+  const Eigen::Vector3d y_axis = map.geo_anchor->enu_from_map * Eigen::Vector3d::UnitY();
+  EXPECT_NEAR(y_axis.x(), 0.5, 1e-12);
+  EXPECT_NEAR(y_axis.y(), std::sqrt(3.0) / 2, 1e-12);
+  EXPECT_EQ(ComputeMapContentChecksum(map), 0x7a0bb2aeu);  // v1_small's: the anchor is not content
+  const MapFileSummary summary = ReadMapFileSummary(path);
+  ASSERT_TRUE(summary.info.geo_anchor.has_value());
+  EXPECT_EQ(summary.info.geo_anchor->origin.altitude_m, 372.5);
 }
 
 TEST_F(MapIoTest, CorruptedRelocalizationFieldsAreRefused) {
@@ -621,6 +644,98 @@ TEST_F(MapIoTest, InvalidMapIsNotWritten) {
   EXPECT_THROW(SaveMap(path_, map), InvalidArgumentError);
   EXPECT_FALSE(std::filesystem::exists(path_));
   EXPECT_TRUE(std::filesystem::is_empty(directory_));
+}
+
+}  // namespace
+}  // namespace evloc
+
+namespace evloc {
+namespace {
+
+GeoAnchor MakeAnchor() {
+  GeoAnchor anchor;
+  anchor.origin = {47.376887, 8.541694, 408.25};
+  anchor.enu_from_map = Rigid3d(Eigen::Quaterniond(0.9, 0.1, -0.05, 0.4), {12.5, -3.0, 0.75});
+  anchor.source = kGeoAnchorSourceSurvey;
+  anchor.horizontal_sigma_m = 0.02;
+  anchor.vertical_sigma_m = 0.05;
+  return anchor;
+}
+
+// A map with a geo anchor: saved, loaded bit for bit, listed (the summary reader reads the
+// anchor written right after the summary field), shown by FormatMapInfo; its content checksum is
+// that of the same map without the anchor (readers older than the anchor verify it without).
+TEST_F(MapIoTest, GeoAnchorRoundTripsAndIsListedWithoutChangingTheContentChecksum) {
+  Map map = MakeRelocalizationMap();
+  const uint32_t crc_without = ComputeMapContentChecksum(map);
+  map.geo_anchor = MakeAnchor();
+  EXPECT_EQ(ComputeMapContentChecksum(map), crc_without);
+  SaveMap(path_, map);
+  const Map loaded = LoadMap(path_);
+  ASSERT_TRUE(loaded.geo_anchor.has_value());
+  const GeoAnchor& anchor = *loaded.geo_anchor;
+  EXPECT_EQ(anchor.origin.latitude_deg, map.geo_anchor->origin.latitude_deg);
+  EXPECT_EQ(anchor.origin.longitude_deg, map.geo_anchor->origin.longitude_deg);
+  EXPECT_EQ(anchor.origin.altitude_m, map.geo_anchor->origin.altitude_m);
+  EXPECT_EQ(anchor.enu_from_map.rotation.coeffs(), map.geo_anchor->enu_from_map.rotation.coeffs());
+  EXPECT_EQ(anchor.enu_from_map.translation, map.geo_anchor->enu_from_map.translation);
+  EXPECT_EQ(anchor.source, "survey");
+  EXPECT_EQ(anchor.horizontal_sigma_m, 0.02);
+  EXPECT_EQ(anchor.vertical_sigma_m, 0.05);
+
+  // The summary reader stops after the summary and the anchor: damage everything after them.
+  std::string bytes = ReadFileToString(path_);
+  map_format::MapFile prefix;
+  ASSERT_TRUE(prefix.ParseFromString(bytes.substr(kMapFileHeaderSize)));
+  map_format::MapFile summary_and_anchor;
+  *summary_and_anchor.mutable_summary() = prefix.summary();
+  *summary_and_anchor.mutable_geo_anchor() = prefix.geo_anchor();
+  const size_t prefix_end = kMapFileHeaderSize + summary_and_anchor.ByteSizeLong();
+  EXPECT_EQ(bytes.substr(kMapFileHeaderSize, summary_and_anchor.ByteSizeLong()),
+            summary_and_anchor.SerializeAsString());
+  std::fill(bytes.begin() + static_cast<std::ptrdiff_t>(prefix_end), bytes.end(), '\xff');
+  const MapFileSummary summary = ReadMapFileSummary(WriteVariant(bytes, "damaged.evmap"));
+  ASSERT_TRUE(summary.info.geo_anchor.has_value());
+  EXPECT_EQ(summary.info.geo_anchor->origin.latitude_deg, 47.376887);
+  EXPECT_EQ(summary.info.content_crc32c, crc_without);
+
+  const std::string text = FormatMapInfo(SummarizeMap(loaded));
+  EXPECT_NE(
+      text.find("geo anchor:       47.37688700, 8.54169400, 408.250 m (WGS84), source survey"),
+      std::string::npos)
+      << text;
+
+  // What a reader that does not know field 10 sees: the same map, checksums and summary valid.
+  const auto stripped = WriteEditedPayload(
+      [](map_format::MapFile& file) { file.clear_geo_anchor(); }, "stripped.evmap", map);
+  const Map without = LoadMap(stripped);
+  EXPECT_FALSE(without.geo_anchor.has_value());
+  EXPECT_EQ(ComputeMapContentChecksum(without), crc_without);
+  EXPECT_NE(FormatMapInfo(SummarizeMap(without)).find("geo anchor:       none"), std::string::npos);
+}
+
+TEST_F(MapIoTest, InvalidGeoAnchorsAreRefusedNamingTheField) {
+  Map map = MakeMap();
+  map.geo_anchor = MakeAnchor();
+  const auto edited = [&](const std::string& name,
+                          const std::function<void(map_format::GeoAnchor&)>& change) {
+    return WriteEditedPayload(
+        [&](map_format::MapFile& file) { change(*file.mutable_geo_anchor()); }, name, map);
+  };
+  auto path = edited("latitude.evmap", [](auto& anchor) { anchor.set_latitude_deg(91.0); });
+  ExpectParseError([&] { LoadMap(path); }, {path.string(), "geo_anchor", "latitude 91"});
+  ExpectParseError([&] { ReadMapFileSummary(path); }, {"geo_anchor", "latitude 91"});
+  path = edited("source.evmap", [](auto& anchor) { anchor.set_source("guess"); });
+  ExpectParseError([&] { LoadMap(path); }, {"geo_anchor", "source 'guess'"});
+  path = edited("sigma.evmap", [](auto& anchor) { anchor.set_vertical_sigma_m(-1.0); });
+  ExpectParseError([&] { LoadMap(path); }, {"geo_anchor", "vertical_sigma_m"});
+  path = edited("rotation.evmap",
+                [](auto& anchor) { anchor.mutable_enu_from_map()->mutable_rotation()->set_w(7); });
+  ExpectParseError([&] { LoadMap(path); }, {"geo_anchor.enu_from_map", "unit quaternion"});
+  // SaveMap refuses an invalid anchor before writing anything.
+  map.geo_anchor->origin.longitude_deg = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_THROW(SaveMap(directory_ / "never.evmap", map), InvalidArgumentError);
+  EXPECT_FALSE(std::filesystem::exists(directory_ / "never.evmap"));
 }
 
 }  // namespace

@@ -13,6 +13,9 @@ PACKAGES=(
   libbz2-dev liblz4-dev libflatbuffers-dev flatbuffers-compiler libzstd-dev
   # mapping
   colmap libceres-dev libpcl-dev
+  # geo-reference (core/geo: WGS84, ECEF, ENU) and the GNSS tags of photos (mapper --geo-exif;
+  # exiv2: the command line checks the tags the tests write)
+  libgeographiclib-dev libexiv2-dev exiv2
   # service
   libgrpc++-dev libprotobuf-dev protobuf-compiler protobuf-compiler-grpc
   # token digests (SHA-256, CRYPTO_memcmp) and TLS file checks: OpenSSL libcrypto

@@ -13,6 +13,7 @@
 #include "core/dataset/dataset.h"
 #include "core/dataset/pose_text.h"
 #include "core/events/event_reader.h"
+#include "core/geo/geo_trajectory.h"
 #include "core/trajectory/tum_io.h"
 #include "localizer/offline/debug_images.h"
 #include "localizer/offline/odometry_track.h"
@@ -108,8 +109,17 @@ double Median(std::vector<double> values) {
 // Writes the trajectory, the statistics (--stats) and the summary line of a run.
 void WriteTrackOutputs(const TrackCommandOptions& options, const std::string& variant,
                        const std::string& mode, const OfflineTrackingResult& result,
-                       std::ostream& log) {
+                       std::ostream& log, const std::optional<GeoAnchor>& anchor = std::nullopt) {
   WriteTumTrajectory(options.output_path, result.trajectory);
+  if (options.geo_path) {
+    const GeoReference reference(*anchor);  // RunTrackCommand checked that the map has one
+    std::vector<TimedGeoPose> poses;
+    poses.reserve(result.trajectory.size());
+    for (const TimedPose& pose : result.trajectory.poses()) {
+      poses.push_back({pose.t_ns, reference.PoseFromMap(pose.world_from_cam)});
+    }
+    WriteGeoTrajectory(*options.geo_path, *anchor, poses);
+  }
 
   std::vector<double> step_ms;
   for (const PoseEstimate& step : result.steps) step_ms.push_back(step.timings.total_ms);
@@ -219,6 +229,9 @@ void TrackCommandOptions::Check() const {
   if (start_s && (!std::isfinite(*start_s) || *start_s < 0)) {
     throw InvalidArgumentError("--start must be a number of seconds >= 0");
   }
+  if (geo_path && odometry) {
+    throw InvalidArgumentError("--geo needs a map with a geo anchor; --mode vo and devo have none");
+  }
   if (no_initial_pose && (tracking.tracker.input != TrackerInput::kEvents || odometry)) {
     throw InvalidArgumentError("--init-pose none needs --mode events (the search works on events)");
   }
@@ -251,6 +264,9 @@ Options:
                          (.bag) or an AEDAT4 file (.aedat4)
                          (required)
   --out PATH             output TUM trajectory (required)
+  --geo PATH             also write the trajectory in WGS84: time, latitude, longitude,
+                         altitude, heading, pitch and the ENU position per pose (docs/geo.md);
+                         the map needs a geo anchor (evloc-mapper georef)
   --init-pose "tx ty tz qx qy qz qw" | none
                          initial world_from_cam; default: the dataset's first ground-truth pose
                          (at --start: the ground truth then; required when the dataset has no
@@ -449,6 +465,8 @@ TrackCommandOptions ParseTrackCommandLine(const std::vector<std::string>& argume
       tracker.max_mean_residual = ParseDoubleFlag(flag, value);
     } else if (flag == "--stats") {
       options.stats_path = value;
+    } else if (flag == "--geo") {
+      options.geo_path = value;
     } else if (flag == "--debug-dir") {
       options.debug_dir = value;
     } else if (flag == "--debug-every") {
@@ -522,6 +540,9 @@ OfflineTrackingResult RunTrackCommand(const TrackCommandOptions& options, std::o
                         events_mode, log);
   }
   const Map map = LoadMap(ResolveMapFile(options.map_path));
+  if (options.geo_path && !map.geo_anchor) {
+    throw InvalidArgumentError(MissingGeoAnchorMessage(options.map_path.string()));
+  }
   const VisibilityIndex visibility(map);
   if (!options.quiet) {
     log << "evloc-track: map " << options.map_path.string() << " (" << map.size() << " points, "
@@ -579,7 +600,7 @@ OfflineTrackingResult RunTrackCommand(const TrackCommandOptions& options, std::o
                                 initial_t_ns, tracking, on_step);
   }
   WriteTrackOutputs(options, options.tracking.tracker.VariantName(),
-                    events_mode ? "events" : "frames", result, log);
+                    events_mode ? "events" : "frames", result, log, map.geo_anchor);
   return result;
 }
 

@@ -47,6 +47,8 @@ struct TrackCommandOptions {
   std::optional<double> blackout_begin_s;
   // ...to this many seconds after it.
   std::optional<double> blackout_end_s;
+  // The trajectory in WGS84 (--geo FILE; docs/geo.md): needs a map with a geo anchor.
+  std::optional<std::filesystem::path> geo_path;
   // Per-step statistics as JSON (--stats).
   std::optional<std::filesystem::path> stats_path;
   // Folder for debug pictures (--debug-dir).

@@ -83,6 +83,11 @@ void LocateOptions::Check() const {
   pose.Check();
   verification.Check();
   if (top_k < 1) throw InvalidArgumentError("LocateOptions: top_k must be at least 1");
+  if (search_center && (!search_center->allFinite() || !(search_radius_m > 0.0) ||
+                        !std::isfinite(search_radius_m))) {
+    throw InvalidArgumentError(
+        "LocateOptions: a search centre must be finite and its radius finite and positive");
+  }
   if (verification.input != tracking::TrackerInput::kFrames) {
     throw InvalidArgumentError("LocateOptions: the verification tracker must take frames");
   }
@@ -132,13 +137,28 @@ LocateResult LocateImage(const Map& map, const VisibilityIndex& visibility,
   const int dimension = static_cast<int>(kRelocalizationDescriptorBytes);
   const features::Vocabulary vocabulary = features::Vocabulary::FromVector(
       static_cast<int>(data.vocabulary.size()) / dimension, dimension, data.vocabulary);
+  // The keyframes retrieval may return: all, or those within the search prior's radius.
   std::vector<std::vector<float>> database;
+  std::vector<int> database_keyframes;
   database.reserve(data.keyframes.size());
-  for (const KeyframeFeatures& keyframe : data.keyframes) {
-    database.push_back(keyframe.global_descriptor);
+  for (size_t k = 0; k < data.keyframes.size(); ++k) {
+    if (options.search_center &&
+        (map.keyframes[k].cam_from_world.Inverse().translation - *options.search_center).norm() >
+            options.search_radius_m) {
+      continue;
+    }
+    database.push_back(data.keyframes[k].global_descriptor);
+    database_keyframes.push_back(static_cast<int>(k));
   }
-  const std::vector<features::RetrievalHit> hits =
+  if (database.empty()) {
+    result.reason = "no keyframe of the map lies within " +
+                    std::to_string(options.search_radius_m) + " m of the search prior";
+    result.keyframe = -1;
+    return result;
+  }
+  std::vector<features::RetrievalHit> hits =
       features::Retrieve(vocabulary.EncodeVlad(query), database, options.top_k);
+  for (features::RetrievalHit& hit : hits) hit.index = database_keyframes[hit.index];
   result.keyframe = hits.front().index;
   result.retrieval_similarity = hits.front().similarity;
 

@@ -6,6 +6,7 @@
 // it. Expected failures are NOT_FOUND results with a reason, never exceptions.
 #pragma once
 
+#include <optional>
 #include <string>
 
 #include <opencv2/core/mat.hpp>
@@ -29,6 +30,11 @@ struct LocateOptions {
   features::MatchOptions matching;
   // Keyframes retrieved by global descriptor and matched against.
   int top_k = 5;
+  // When set, only keyframes whose camera centre lies within search_radius_m of this position
+  // (map frame, metres) are retrieved: a GNSS prior (docs/geo.md).
+  std::optional<Eigen::Vector3d> search_center;
+  // Radius around search_center, metres (> 0 when it is set).
+  double search_radius_m = 0.0;
   // The absolute pose solver; its min_inliers and min_inlier_ratio are the acceptance thresholds
   // of the PnP stage (below: the measured defaults of docs/relocalization.md).
   AbsolutePoseOptions pose = DefaultPoseOptions();

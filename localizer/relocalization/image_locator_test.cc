@@ -158,3 +158,41 @@ TEST(LocateImage, BadImagesAndOptionsAreRejected) {
 
 }  // namespace
 }  // namespace evloc::relocalization
+
+namespace evloc::relocalization {
+namespace {
+
+// A search prior (a GNSS fix through the map's anchor, docs/geo.md) restricts retrieval to the
+// keyframes near it: around the true position the view is still found; 10 m away no keyframe is
+// retrieved and the reason says so.
+TEST(LocateImage, ASearchPriorRestrictsRetrievalToNearbyKeyframes) {
+  REQUIRE_TEMPLE();
+  const TempleFixture& fixture = *Temple();
+  const int query = 5;
+  const Rigid3d truth = fixture.temple.views[query].cam_from_world.Inverse();
+  LocateOptions near;
+  near.search_center = truth.translation;
+  near.search_radius_m = 0.5;
+  const LocateResult found =
+      LocateImage(fixture.map, fixture.temple.camera, fixture.temple.images[query], near);
+  EXPECT_EQ(found.status, LocateStatus::kFound) << found.reason;
+  ASSERT_GE(found.keyframe, 0);
+  EXPECT_LE((fixture.map.keyframes[found.keyframe].cam_from_world.Inverse().translation -
+             truth.translation)
+                .norm(),
+            0.5);
+  LocateOptions far = near;
+  far.search_center = truth.translation + Eigen::Vector3d(10, 0, 0);
+  const LocateResult not_found =
+      LocateImage(fixture.map, fixture.temple.camera, fixture.temple.images[query], far);
+  EXPECT_EQ(not_found.status, LocateStatus::kNotFound);
+  EXPECT_NE(not_found.reason.find("no keyframe of the map lies within 0.5"), std::string::npos)
+      << not_found.reason;
+  LocateOptions bad = near;
+  bad.search_radius_m = 0.0;
+  EXPECT_THROW(LocateImage(fixture.map, fixture.temple.camera, fixture.temple.images[query], bad),
+               InvalidArgumentError);
+}
+
+}  // namespace
+}  // namespace evloc::relocalization

@@ -18,6 +18,7 @@
 
 #include "core/common/error.h"
 #include "core/common/file_util.h"
+#include "core/geo/geo_trajectory.h"
 #include "evloc/localizer.grpc.pb.h"
 #include "localizer/service/bounded_queue.h"
 #include "localizer/service/client_text.h"
@@ -1013,6 +1014,11 @@ class TrackCall final : public TrackReactor,
     const auto dequeued = Clock::now();
     std::vector<tracking::PoseEstimate> estimates;
     item_cpu_start_s_ = ThreadCpuSeconds();
+    if (item.item.kind == SessionItem::Kind::kGnssFix && !tracker_->geo()) {
+      FailFromWorker({grpc::StatusCode::FAILED_PRECONDITION,
+                      "GnssFix: " + MissingGeoAnchorMessage(start_.map_name())});
+      return;
+    }
     try {
       estimates = tracker_->Process(item.item, [this] { return ShouldStop(); });
     } catch (const std::exception& error) {
@@ -1035,7 +1041,7 @@ class TrackCall final : public TrackReactor,
     SendPendingNotice();
     for (const tracking::PoseEstimate& estimate : estimates) {
       api::TrackResponse response;
-      *response.mutable_pose() = PoseUpdateFromEstimate(estimate);
+      *response.mutable_pose() = PoseUpdateFromEstimate(estimate, tracker_->geo());
       const bool no_estimate = tracking::HasNoEstimate(estimate.status);
       ++poses_;
       lost_poses_ += no_estimate ? 1 : 0;

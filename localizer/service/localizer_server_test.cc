@@ -1066,3 +1066,43 @@ TEST_F(LocalizerServerTest, ASiteSessionNeedsAnInitialPoseAndIntactTiles) {
 
 }  // namespace
 }  // namespace evloc::service
+
+namespace evloc::service {
+namespace {
+
+// A GnssFix on a map without a geo anchor ends the session with FAILED_PRECONDITION naming the
+// remedy (docs/api.md, docs/geo.md); the test map has no anchor, and SessionStarted says so.
+TEST_F(LocalizerServerTest, GnssFixOnAMapWithoutAnAnchorIsRefused) {
+  StartServer();
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(60));
+  auto stream = stub_->Track(&context);
+  ASSERT_TRUE(stream->Write(TestSessionStart()));
+  api::TrackRequest fix;
+  fix.mutable_gnss_fix()->set_latitude_deg(46.5);
+  fix.mutable_gnss_fix()->set_longitude_deg(6.5);
+  fix.mutable_gnss_fix()->set_altitude_m(400);
+  fix.mutable_gnss_fix()->set_horizontal_accuracy_m(3);
+  fix.mutable_gnss_fix()->set_vertical_accuracy_m(5);
+  fix.mutable_gnss_fix()->set_t_ns(testing::kInitialTimeNs);
+  stream->Write(fix);
+  stream->WritesDone();
+  api::TrackResponse response;
+  bool started = false;
+  while (stream->Read(&response)) {
+    if (response.has_started()) {
+      started = true;
+      EXPECT_FALSE(response.started().map().has_geo_anchor());
+    }
+    EXPECT_FALSE(response.has_pose());
+  }
+  EXPECT_TRUE(started);
+  const grpc::Status status = stream->Finish();
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::FAILED_PRECONDITION);
+  EXPECT_NE(status.error_message().find("has no geo anchor"), std::string::npos)
+      << status.error_message();
+  EXPECT_NE(status.error_message().find("evloc-mapper georef"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace evloc::service

@@ -6,6 +6,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "core/common/error.h"
+#include "core/geo/geo_trajectory.h"
 #include "localizer/service/session.h"
 #include "proto/convert/proto_convert.h"
 
@@ -175,8 +176,20 @@ grpc::Status LocateInLoadedMap(const api::LocateRequest& request, const LoadedMa
       return {grpc::StatusCode::FAILED_PRECONDITION,
               "map '" + map.name + "': " + relocalization::kNoRelocalizationDataMessage};
     }
+    relocalization::LocateOptions located = options;
+    if (request.has_gnss_fix()) {
+      // Only the keyframes near the fix are retrieved (docs/geo.md, "GNSS prior").
+      const GnssPrior prior = GnssPriorFromProto(request.gnss_fix(), "LocateRequest.gnss_fix");
+      if (!map.map.geo_anchor) {
+        return {grpc::StatusCode::FAILED_PRECONDITION,
+                "LocateRequest.gnss_fix: " + MissingGeoAnchorMessage(map.name)};
+      }
+      const GeoReference reference(*map.map.geo_anchor);
+      located.search_center = reference.MapFromGeodetic(prior.position);
+      located.search_radius_m = GnssSearchRadiusM(prior, *map.map.geo_anchor);
+    }
     *response = LocateResponseFromResult(
-        relocalization::LocateImage(map.map, *map.visibility, camera, gray, options));
+        relocalization::LocateImage(map.map, *map.visibility, camera, gray, located));
     *response->mutable_map() = DescribeMap(map);
   } catch (const Error&) {
     return StatusOfCurrentException(map.name);

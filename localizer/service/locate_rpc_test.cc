@@ -189,3 +189,55 @@ TEST(LocateRpc, ServerAnswersWithStatusesAndKeepsServing) {
 
 }  // namespace
 }  // namespace evloc::service
+
+namespace evloc::service {
+namespace {
+
+// LocateRequest.gnss_fix (docs/geo.md): on an anchored map the view is found with a fix at its
+// true position; a fix 20 m away retrieves nothing (NOT_FOUND, with the reason); a map without an
+// anchor answers FAILED_PRECONDITION, and a malformed fix INVALID_ARGUMENT.
+TEST(LocateRpc, AGnssFixRestrictsRetrievalOnAnAnchoredMap) {
+  REQUIRE_TEMPLE();
+  const auto& fixture = *SharedTemple();
+  LoadedMap anchored;
+  anchored.name = "temple_geo";
+  anchored.map = fixture.map;
+  GeoAnchor anchor;
+  anchor.origin = {46.5191, 6.5668, 372.0};
+  anchored.map.geo_anchor = anchor;
+  anchored.info = SummarizeMap(anchored.map);
+  anchored.visibility = std::make_unique<VisibilityIndex>(anchored.map);
+  const GeoReference reference(anchor);
+  const Rigid3d truth = fixture.temple.views[7].cam_from_world.Inverse();
+  const auto locate = [&](const LoadedMap& map, const Eigen::Vector3d& at, double accuracy,
+                          api::LocateResponse* response) {
+    api::LocateRequest request = Request(fixture.temple.images[7], true);
+    const GeodeticPoint position = reference.GeodeticFromMap(at);
+    request.mutable_gnss_fix()->set_latitude_deg(position.latitude_deg);
+    request.mutable_gnss_fix()->set_longitude_deg(position.longitude_deg);
+    request.mutable_gnss_fix()->set_altitude_m(position.altitude_m);
+    request.mutable_gnss_fix()->set_horizontal_accuracy_m(accuracy);
+    request.mutable_gnss_fix()->set_vertical_accuracy_m(accuracy);
+    return LocateInLoadedMap(request, map, kMaxPixels, relocalization::LocateOptions(), response);
+  };
+  api::LocateResponse response;
+  grpc::Status status = locate(anchored, truth.translation, 0.1, &response);
+  ASSERT_TRUE(status.ok()) << status.error_message();
+  EXPECT_EQ(response.status(), api::FOUND) << response.reason();
+  EXPECT_TRUE(response.map().has_geo_anchor());
+  status = locate(anchored, truth.translation + Eigen::Vector3d(20, 0, 0), 0.1, &response);
+  ASSERT_TRUE(status.ok()) << status.error_message();
+  EXPECT_EQ(response.status(), api::NOT_FOUND);
+  EXPECT_NE(response.reason().find("search prior"), std::string::npos) << response.reason();
+  status = locate(TempleLoadedMap(), truth.translation, 0.1, &response);
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::FAILED_PRECONDITION);
+  EXPECT_NE(status.error_message().find("has no geo anchor"), std::string::npos);
+  status = locate(anchored, truth.translation, -1.0, &response);
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_NE(status.error_message().find("LocateRequest.gnss_fix.horizontal_accuracy_m"),
+            std::string::npos)
+      << status.error_message();
+}
+
+}  // namespace
+}  // namespace evloc::service

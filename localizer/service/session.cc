@@ -1,6 +1,7 @@
 #include "localizer/service/session.h"
 
 #include <algorithm>
+#include <cmath>
 #include <cstring>
 #include <string>
 
@@ -66,6 +67,7 @@ api::MapDescription DescribeMap(const MapDescriptionData& map) {
   high->set_z(info.bounding_box_max.z());
   description.set_content_crc32c(info.content_crc32c);
   description.set_file_bytes(map.summary.file_bytes);
+  if (info.geo_anchor) *description.mutable_geo_anchor() = GeoAnchorToProto(*info.geo_anchor);
   return description;
 }
 
@@ -73,7 +75,31 @@ api::MapDescription DescribeMap(const LoadedMap& map) {
   return DescribeMap(DescribeLoadedMap(map));
 }
 
-api::PoseUpdate PoseUpdateFromEstimate(const tracking::PoseEstimate& estimate) {
+GnssPrior GnssPriorFromProto(const api::GnssFix& fix, const std::string& what) {
+  GnssPrior prior;
+  prior.position = {fix.latitude_deg(), fix.longitude_deg(), fix.altitude_m()};
+  CheckGeodeticPoint(prior.position, what);
+  for (const auto& [name, value] : {std::pair{"horizontal_accuracy_m", fix.horizontal_accuracy_m()},
+                                    {"vertical_accuracy_m", fix.vertical_accuracy_m()}}) {
+    if (!std::isfinite(value) || value <= 0.0 || value > kMaxGnssAccuracyM) {
+      throw InvalidArgumentError(what + "." + name + " " + std::to_string(value) +
+                                 " is outside (0, " + std::to_string(kMaxGnssAccuracyM) + "] m");
+    }
+  }
+  prior.horizontal_accuracy_m = fix.horizontal_accuracy_m();
+  prior.vertical_accuracy_m = fix.vertical_accuracy_m();
+  return prior;
+}
+
+double GnssSearchRadiusM(const GnssPrior& prior, const GeoAnchor& anchor) {
+  return kGnssPriorSigmas * std::sqrt(prior.horizontal_accuracy_m * prior.horizontal_accuracy_m +
+                                      prior.vertical_accuracy_m * prior.vertical_accuracy_m +
+                                      anchor.horizontal_sigma_m * anchor.horizontal_sigma_m +
+                                      anchor.vertical_sigma_m * anchor.vertical_sigma_m);
+}
+
+api::PoseUpdate PoseUpdateFromEstimate(const tracking::PoseEstimate& estimate,
+                                       const GeoReference* geo) {
   api::PoseUpdate update;
   update.set_t_ns(estimate.t_ns);
   switch (estimate.status) {
@@ -98,6 +124,19 @@ api::PoseUpdate PoseUpdateFromEstimate(const tracking::PoseEstimate& estimate) {
     *update.mutable_world_from_cam() = RigidToProto(estimate.world_from_cam);
     for (int row = 0; row < 6; ++row) {
       for (int col = 0; col < 6; ++col) update.add_covariance(estimate.covariance(row, col));
+    }
+    if (geo) {
+      const GeoPose pose = geo->PoseFromMap(estimate.world_from_cam);
+      api::GeodeticPose* geodetic = update.mutable_geodetic();
+      geodetic->set_latitude_deg(pose.position.latitude_deg);
+      geodetic->set_longitude_deg(pose.position.longitude_deg);
+      geodetic->set_altitude_m(pose.position.altitude_m);
+      geodetic->set_heading_deg(pose.heading_deg);
+      geodetic->set_pitch_deg(pose.pitch_deg);
+      geodetic->set_heading_from_image_up(pose.heading_from_image_up);
+      geodetic->mutable_enu()->set_x(pose.enu.x());
+      geodetic->mutable_enu()->set_y(pose.enu.y());
+      geodetic->mutable_enu()->set_z(pose.enu.z());
     }
   }
   auto* quality = update.mutable_quality();
@@ -407,8 +446,24 @@ grpc::Status RequestValidator::Accept(const api::TrackRequest& request, SessionI
         session_t_ns_ = std::max(session_t_ns_, t_ns);
         break;
       }
+      case api::TrackRequest::kGnssFix: {
+        const api::GnssFix& fix = request.gnss_fix();
+        CheckSpan(fix.t_ns(), "GnssFix: t_ns");
+        const std::optional<int64_t> last = decoder_.end_t_ns();
+        if (last && fix.t_ns() < *last) {
+          return InvalidArgument("GnssFix at " + std::to_string(fix.t_ns()) +
+                                 " ns lies before the end of the last packet (" +
+                                 std::to_string(*last) + " ns)");
+        }
+        item->kind = SessionItem::Kind::kGnssFix;
+        item->gnss = GnssPriorFromProto(fix, "GnssFix");
+        item->t_ns = fix.t_ns();
+        session_t_ns_ = std::max(session_t_ns_, item->t_ns);
+        break;
+      }
       default:
-        return InvalidArgument("an empty TrackRequest (set start, events, frame or pose_hint)");
+        return InvalidArgument(
+            "an empty TrackRequest (set start, events, frame, pose_hint or gnss_fix)");
     }
   } catch (const InvalidArgumentError& error) {
     return InvalidArgument(error.what());
@@ -474,6 +529,8 @@ SessionTracker::SessionTracker(std::shared_ptr<const LoadedMap> map,
       source_(SessionMapSource(*map_, settings)),
       tiled_(dynamic_cast<tracking::TiledMapSource*>(source_.get())),
       tracker_(*source_, settings.camera, settings.tracker),
+      geo_(map_->map.geo_anchor ? std::optional<GeoReference>(std::in_place, *map_->map.geo_anchor)
+                                : std::nullopt),
       takes_frames_(settings.tracker.input == tracking::TrackerInput::kFrames),
       advanced_t_ns_(settings.initial_t_ns) {
   if (takes_frames_) StartTracker();
@@ -502,6 +559,10 @@ void SessionTracker::StartTracker() {
 std::vector<tracking::PoseEstimate> SessionTracker::Process(const SessionItem& item,
                                                             const StopFunction& stop) {
   if (stopped_) return {};
+  if (gnss_prior_t_ns_ && item.t_ns - *gnss_prior_t_ns_ > kGnssPriorLifetimeNs) {
+    tracker_.ClearSearchPrior();  // the fix is too old to narrow a search
+    gnss_prior_t_ns_.reset();
+  }
   switch (item.kind) {
     case SessionItem::Kind::kEvents:
       return AddEvents(item.events, item.t_ns, stop);
@@ -524,6 +585,13 @@ std::vector<tracking::PoseEstimate> SessionTracker::Process(const SessionItem& i
       started_ = true;
       advanced_t_ns_ = std::max(advanced_t_ns_, item.t_ns);
       return {};
+    case SessionItem::Kind::kGnssFix: {
+      if (!geo_) throw InvalidArgumentError("GnssFix for a map without a geo anchor");
+      tracker_.SetSearchPrior(geo_->MapFromGeodetic(item.gnss.position),
+                              GnssSearchRadiusM(item.gnss, geo_->anchor()));
+      gnss_prior_t_ns_ = item.t_ns;
+      return {};
+    }
   }
   return {};
 }

@@ -19,6 +19,7 @@
 #include "core/camera/camera.h"
 #include "core/events/event.h"
 #include "core/events/prophesee_decoder.h"
+#include "core/geo/geo_anchor.h"
 #include "core/geometry/rigid3.h"
 #include "evloc/localizer.pb.h"
 #include "localizer/service/map_registry.h"
@@ -27,12 +28,26 @@
 
 namespace evloc::service {
 
+// A validated GnssFix (TrackRequest.gnss_fix, LocateRequest.gnss_fix).
+struct GnssPrior {
+  // The WGS84 position.
+  GeodeticPoint position;
+  // One-sigma accuracies, metres.
+  double horizontal_accuracy_m = 0.0;
+  double vertical_accuracy_m = 0.0;
+};
+
+// Checks a GnssFix's position (CheckGeodeticPoint) and accuracies (finite, in (0,
+// kMaxGnssAccuracyM]); throws InvalidArgumentError naming `what` and the field.
+GnssPrior GnssPriorFromProto(const api::GnssFix& fix, const std::string& what);
+
 // Describes a loaded map for clients.
 api::MapDescription DescribeMap(const LoadedMap& map);
 // Describes a map from what the registry read of it (ListMaps, without loading it).
 api::MapDescription DescribeMap(const MapDescriptionData& map);
 // A PoseUpdate for a tracker step (latency_us left at 0: set when handed to the transport).
-api::PoseUpdate PoseUpdateFromEstimate(const tracking::PoseEstimate& estimate);
+api::PoseUpdate PoseUpdateFromEstimate(const tracking::PoseEstimate& estimate,
+                                       const GeoReference* geo = nullptr);
 
 // Validates raw grey pixels (`what` names them in errors) against the camera's size and returns
 // them (CV_8UC1, a copy). Throws InvalidArgumentError for a size mismatch or a wrong byte count.
@@ -170,6 +185,8 @@ struct SessionItem {
     kFrame,
     // A PoseHint: reset to `world_from_cam` at `t_ns`.
     kPoseHint,
+    // A GnssFix: `gnss` at `t_ns`, a prior for the next relocalizations.
+    kGnssFix,
   };
   // The kind of request.
   Kind kind = Kind::kEvents;
@@ -179,6 +196,8 @@ struct SessionItem {
   cv::Mat gray;
   // kPoseHint: the pose.
   Rigid3d world_from_cam;
+  // kGnssFix: the fix.
+  GnssPrior gnss;
   // kEvents: the packet's end_t_ns; kFrame: the frame time; kPoseHint: the hint time; ns.
   int64_t t_ns = 0;
 };
@@ -225,6 +244,19 @@ class RequestValidator {
   std::optional<int64_t> latest_t_ns_;
 };
 
+// A GnssFix narrows the relocalization search to the viewpoints within this many sigmas (the
+// fix's and the anchor's accuracies combined) of it.
+inline constexpr double kGnssPriorSigmas = 3.0;
+// A fix stops narrowing the search this long after its time (session time), ns: a vehicle at
+// 10 m/s has moved 300 m.
+inline constexpr int64_t kGnssPriorLifetimeNs = 30'000'000'000;
+// Largest accepted GnssFix accuracy, metres.
+inline constexpr double kMaxGnssAccuracyM = 10000.0;
+
+// The radius of the search around a fix: kGnssPriorSigmas times the fix's and the anchor's
+// horizontal and vertical sigmas combined, metres.
+double GnssSearchRadiusM(const GnssPrior& prior, const GeoAnchor& anchor);
+
 // The tracker of one session and its start-up: events up to the initial time prime the time
 // surfaces, then the tracker is reset to the initial pose (exactly as the offline
 // TrackEventStream does, so both give the same poses). Not thread-safe.
@@ -253,6 +285,9 @@ class SessionTracker {
 
   // True when the session tracks frames.
   bool takes_frames() const { return takes_frames_; }
+  // The map's geo reference, or null when the map has no geo anchor (GnssFix items are then
+  // refused before Process: the server answers FAILED_PRECONDITION).
+  const GeoReference* geo() const { return geo_ ? &*geo_ : nullptr; }
   // True once `stop` ended a Process call early.
   bool stopped() const { return stopped_; }
   // Session time the tracker has been advanced to (steps ran up to it), ns.
@@ -276,6 +311,9 @@ class SessionTracker {
   std::unique_ptr<tracking::MapSource> source_;
   tracking::TiledMapSource* tiled_ = nullptr;
   tracking::Tracker tracker_;
+  std::optional<GeoReference> geo_;
+  // Session time of the GNSS fix behind the tracker's search prior, ns.
+  std::optional<int64_t> gnss_prior_t_ns_;
   bool takes_frames_ = false;
   bool started_ = false;
   bool stopped_ = false;

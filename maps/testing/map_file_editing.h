@@ -29,11 +29,11 @@ inline std::string WithPayload(std::string file_bytes, const std::string& payloa
   return file_bytes.substr(0, kMapFileHeaderSize) + payload;
 }
 
-// The bytes of a .evmap file whose payload `edit` changed (its summary field, if it keeps one,
-// written first as SaveMap does; an edit that clears it makes a file of an earlier writer), with
-// the header's version set to `version` (0: kept) and valid payload and header checksums (the
-// content checksum is what the edit leaves). Returns an empty string when `file_bytes` has no
-// parsable payload.
+// The bytes of a .evmap file whose payload `edit` changed (its summary field and geo anchor, if it
+// keeps them, written first as SaveMap does; an edit that clears it makes a file of an earlier
+// writer), with the header's version set to `version` (0: kept) and valid payload and header
+// checksums (the content checksum is what the edit leaves). Returns an empty string when
+// `file_bytes` has no parsable payload.
 inline std::string EditMapPayload(std::string file_bytes,
                                   const std::function<void(map_format::MapFile&)>& edit,
                                   uint32_t version = 0) {
@@ -43,11 +43,16 @@ inline std::string EditMapPayload(std::string file_bytes,
     return "";
   }
   edit(file);
-  // As SaveMap writes it: the summary field (when the edited file has one) first.
+  // As SaveMap writes it: the summary field (when the edited file has one) first, then the geo
+  // anchor (when it has one).
   map_format::MapFile summary_only;
   if (file.has_summary()) {
     *summary_only.mutable_summary() = file.summary();
     file.clear_summary();
+  }
+  if (file.has_geo_anchor()) {
+    *summary_only.mutable_geo_anchor() = file.geo_anchor();
+    file.clear_geo_anchor();
   }
   return WithPayload(std::move(file_bytes),
                      summary_only.SerializeAsString() + file.SerializeAsString(), version);

@@ -125,4 +125,34 @@ map_format::Rigid3 RigidToProto(const Rigid3d& pose) {
   return result;
 }
 
+GeoAnchor GeoAnchorFromProto(const map_format::GeoAnchor& anchor, std::string_view what) {
+  GeoAnchor result;
+  result.origin = {anchor.latitude_deg(), anchor.longitude_deg(), anchor.altitude_m()};
+  if (anchor.has_enu_from_map()) {
+    result.enu_from_map =
+        RigidFromProtoExact(anchor.enu_from_map(), std::string(what) + ".enu_from_map");
+  }
+  result.source = anchor.source();
+  result.horizontal_sigma_m = anchor.horizontal_sigma_m();
+  result.vertical_sigma_m = anchor.vertical_sigma_m();
+  try {
+    result.Check();
+  } catch (const InvalidArgumentError& error) {
+    throw InvalidArgumentError(std::string(what) + ": " + error.what());
+  }
+  return result;
+}
+
+map_format::GeoAnchor GeoAnchorToProto(const GeoAnchor& anchor) {
+  map_format::GeoAnchor result;
+  result.set_latitude_deg(anchor.origin.latitude_deg);
+  result.set_longitude_deg(anchor.origin.longitude_deg);
+  result.set_altitude_m(anchor.origin.altitude_m);
+  *result.mutable_enu_from_map() = RigidToProto(anchor.enu_from_map);
+  result.set_source(anchor.source);
+  result.set_horizontal_sigma_m(anchor.horizontal_sigma_m);
+  result.set_vertical_sigma_m(anchor.vertical_sigma_m);
+  return result;
+}
+
 }  // namespace evloc

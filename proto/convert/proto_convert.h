@@ -1,12 +1,13 @@
 // Conversions between the map-format protobuf messages shared by the map file and the service API
-// (evloc/map.proto: Camera, Rigid3) and the core types (Camera, Rigid3d), with the one set of
-// checks every reader applies: the map reader (maps/map_io.cc), the service (SessionStart, pose
-// hints) and its clients (PoseUpdates).
+// (evloc/map.proto: Camera, Rigid3, GeoAnchor) and the core types (Camera, Rigid3d, GeoAnchor),
+// with the one set of checks every reader applies: the map reader (maps/map_io.cc), the service
+// (SessionStart, pose hints) and its clients (PoseUpdates).
 #pragma once
 
 #include <string_view>
 
 #include "core/camera/camera.h"
+#include "core/geo/geo_anchor.h"
 #include "core/geometry/rigid3.h"
 #include "evloc/map.pb.h"
 
@@ -33,5 +34,12 @@ Rigid3d RigidFromProto(const map_format::Rigid3& pose, std::string_view what);
 Rigid3d RigidFromProtoExact(const map_format::Rigid3& pose, std::string_view what);
 // Converts a pose to protobuf (bit for bit).
 map_format::Rigid3 RigidToProto(const Rigid3d& pose);
+
+// Converts a protobuf geo anchor: an absent enu_from_map is the identity; enu_from_map is kept
+// bit for bit (RigidFromProtoExact: the map's content checksum covers it) and the result must pass
+// GeoAnchor::Check(). Throws InvalidArgumentError whose message starts with `what`.
+GeoAnchor GeoAnchorFromProto(const map_format::GeoAnchor& anchor, std::string_view what);
+// Converts a geo anchor to protobuf (every field, enu_from_map bit for bit).
+map_format::GeoAnchor GeoAnchorToProto(const GeoAnchor& anchor);
 
 }  // namespace evloc

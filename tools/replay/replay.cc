@@ -23,6 +23,7 @@
 #include "core/dataset/pose_text.h"
 #include "core/events/event_reader.h"
 #include "core/events/evt3_encoder.h"
+#include "core/geo/geo_trajectory.h"
 #include "core/trajectory/tum_io.h"
 #include "evloc/localizer.grpc.pb.h"
 #include "localizer/wire/packed_events.h"
@@ -199,12 +200,28 @@ struct SentPacket {
   Clock::time_point sent;
 };
 
+// The geodetic pose of an update that carries one.
+TimedGeoPose GeoPoseFromProto(const api::PoseUpdate& update) {
+  const api::GeodeticPose& geodetic = update.geodetic();
+  TimedGeoPose timed;
+  timed.t_ns = update.t_ns();
+  timed.pose.position = {geodetic.latitude_deg(), geodetic.longitude_deg(), geodetic.altitude_m()};
+  timed.pose.heading_deg = geodetic.heading_deg();
+  timed.pose.pitch_deg = geodetic.pitch_deg();
+  timed.pose.heading_from_image_up = geodetic.heading_from_image_up();
+  timed.pose.enu = {geodetic.enu().x(), geodetic.enu().y(), geodetic.enu().z()};
+  return timed;
+}
+
 // State shared between the sending loop and the response reader: the figures of every session,
 // and the flow control of the current one.
 struct SharedState {
   std::mutex mutex;
   std::condition_variable pose_arrived;
   std::vector<TimedPose> poses;
+  // The poses' geodetic forms (PoseUpdate.geodetic), and the map's anchor (SessionStarted).
+  std::vector<TimedGeoPose> geo_poses;
+  std::optional<GeoAnchor> geo_anchor;
   std::vector<bool> tracking;
   std::vector<double> client_latency_us;
   std::vector<double> server_latency_us;
@@ -424,6 +441,11 @@ grpc::Status Replayer::RunSession(const TimedPose& start, bool resumed, SessionO
     return finish();
   }
   outcome->started = true;
+  if (response.started().map().has_geo_anchor()) {
+    std::lock_guard<std::mutex> lock(shared_.mutex);
+    shared_.geo_anchor =
+        GeoAnchorFromProto(response.started().map().geo_anchor(), "SessionStarted.map.geo_anchor");
+  }
   backoff_.SessionStarted(Clock::now());
   if (!schedule_start_) schedule_start_ = Clock::now();
   log_ << "evloc-replay: session " << response.started().session_id() << " on map "
@@ -466,6 +488,7 @@ grpc::Status Replayer::RunSession(const TimedPose& start, bool resumed, SessionO
         } else {
           const TimedPose timed{pose.t_ns(), RigidFromProto(pose.world_from_cam(), "PoseUpdate")};
           shared_.poses.push_back(timed);
+          if (pose.has_geodetic()) shared_.geo_poses.push_back(GeoPoseFromProto(pose));
           shared_.tracking.push_back(pose.status() == api::TRACKING);
           if (pose.status() == api::LOST) ++shared_.lost;
           if (pose.status() == api::TRACKING && !shared_.first_tracking_t_ns) {
@@ -705,6 +728,14 @@ ReplayResult Replayer::Run() {
   result.server_overhead_p99_us = Percentile(shared_.server_overhead_us, 0.99);
   result.step_p50_ms = Percentile(shared_.step_ms, 0.5);
   WriteTumTrajectory(options_.output, result.trajectory);
+  if (options_.geo_output) {
+    if (!shared_.geo_anchor) {
+      throw InvalidArgumentError(MissingGeoAnchorMessage(options_.map_name) +
+                                 " (the TUM trajectory " + options_.output.string() +
+                                 " was written)");
+    }
+    WriteGeoTrajectory(*options_.geo_output, *shared_.geo_anchor, shared_.geo_poses);
+  }
   if (options_.report) WriteReplayReport(*options_.report, result);
   log_ << "evloc-replay: sent " << result.events_sent << " events in " << result.packets_sent
        << " packets, received " << result.trajectory.size() << " poses (" << result.lost_poses
@@ -950,6 +981,9 @@ Options:
   --lb pick_first|round_robin
                          gRPC load balancing over the addresses of --server (default pick_first)
   --report FILE          write the figures as JSON (events, poses, outages, latency)
+  --geo FILE             also write the poses in WGS84 as the server sends them (time,
+                         latitude, longitude, altitude, heading, pitch, ENU; docs/geo.md); the
+                         map needs a geo anchor
   --health-check         only ask the server's grpc.health.v1 service; exit 0 when SERVING
   --health-timeout S     deadline of --health-check (default 5)
   --health-service NAME  the service --health-check asks for: "" (default) the server's overall
@@ -1044,6 +1078,8 @@ ReplayCommand ParseReplayCommandLine(const std::vector<std::string>& arguments) 
       options.lb_policy = value;
     } else if (flag == "--report") {
       options.report = value;
+    } else if (flag == "--geo") {
+      options.geo_output = value;
     } else if (flag == "--health-timeout") {
       command.health_timeout_s = ParseDoubleFlag(flag, value);
     } else if (flag == "--health-service") {

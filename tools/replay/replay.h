@@ -112,6 +112,8 @@ struct ReplayOptions {
   std::string lb_policy;
   // JSON file for the figures of the replay, written when it completes (--report).
   std::optional<std::filesystem::path> report;
+  // The received poses in WGS84 (--geo FILE; docs/geo.md): the map needs a geo anchor.
+  std::optional<std::filesystem::path> geo_output;
 
   // Throws InvalidArgumentError naming the first invalid field.
   void Check() const;

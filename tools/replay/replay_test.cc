@@ -14,6 +14,7 @@
 #include "core/dataset/dataset.h"
 #include "core/events/evb.h"
 #include "core/events/event_reader.h"
+#include "core/geo/geo_trajectory.h"
 #include "localizer/offline/offline_tracking.h"
 #include "localizer/service/localizer_server.h"
 #include "localizer/service/testing/service_fixture.h"
@@ -482,6 +483,50 @@ TEST_F(ReplayTest, WithoutReconnectAVanishedServerFailsTheReplay) {
   std::ostringstream log;
   EXPECT_THROW(RunReplay(options, log), Error);
   EXPECT_EQ(log.str().find("reconnect"), std::string::npos) << log.str();
+}
+
+}  // namespace
+}  // namespace evloc::replay
+
+namespace evloc::replay {
+namespace {
+
+// evloc-replay --geo (docs/geo.md): with an anchored map the server's geodetic poses are written
+// and equal the offline conversion (the same estimates through the same anchor) byte for byte;
+// without an anchor the replay fails with the remedy, after writing its TUM trajectory.
+TEST_F(ReplayTest, GeoOutputHasTheOfflineGeodeticPoses) {
+  GeoAnchor anchor;
+  anchor.origin = {-33.8568, 151.2153, 25.0};
+  anchor.enu_from_map =
+      Rigid3d(Eigen::Quaterniond(Eigen::AngleAxisd(0.4, Eigen::Vector3d::UnitZ())), {10, 5, 0});
+  anchor.source = kGeoAnchorSourceSurvey;
+  Map anchored = fixture::TestMap();
+  anchored.geo_anchor = anchor;
+  fixture::WriteTestMap(folder_.path() / "maps", "anchored", anchored);
+  ReplayOptions options = Options();
+  options.map_name = "anchored";
+  options.geo_output = folder_.path() / "geo.txt";
+  std::ostringstream log;
+  const ReplayResult result = RunReplay(options, log);
+  const auto offline = Offline();
+  ExpectSameTrajectory(result.trajectory, offline.trajectory);
+  const GeoReference reference(anchor);
+  std::vector<TimedGeoPose> expected;
+  for (const TimedPose& pose : result.trajectory.poses()) {
+    expected.push_back({pose.t_ns, reference.PoseFromMap(pose.world_from_cam)});
+  }
+  EXPECT_EQ(ReadFileToString(*options.geo_output), FormatGeoTrajectory(anchor, expected));
+
+  ReplayOptions plain = Options();
+  plain.geo_output = folder_.path() / "plain_geo.txt";
+  try {
+    RunReplay(plain, log);
+    FAIL() << "--geo on a map without an anchor";
+  } catch (const InvalidArgumentError& error) {
+    EXPECT_NE(std::string(error.what()).find("has no geo anchor"), std::string::npos);
+  }
+  EXPECT_TRUE(std::filesystem::exists(plain.output));
+  EXPECT_FALSE(std::filesystem::exists(*plain.geo_output));
 }
 
 }  // namespace

@@ -63,6 +63,10 @@ inline std::shared_ptr<const LoadedMap> LocateFuzzMap(bool with_relocalization) 
     }
     data.keyframes = {keyframe_features};
     map.relocalization = std::move(data);
+    // And a geo anchor, so that LocateRequest.gnss_fix reaches the restricted retrieval.
+    GeoAnchor anchor;
+    anchor.origin = {46.5191, 6.5668, 372.0};
+    map.geo_anchor = anchor;
   }
   map.Check();
   loaded->content_crc32c = ComputeMapContentChecksum(map);
@@ -72,8 +76,8 @@ inline std::shared_ptr<const LoadedMap> LocateFuzzMap(bool with_relocalization) 
   return loaded;
 }
 
-// Seed requests: the keyframe image as raw pixels, PNG and JPEG on "v2", as raw pixels on "v1",
-// and one without an image.
+// Seed requests: the keyframe image as raw pixels, PNG and JPEG on "v2", raw pixels with a GNSS
+// fix on "v2", as raw pixels on "v1", and one without an image.
 inline std::vector<api::LocateRequest> LocateSeedRequests() {
   const cv::Mat image = LocateFuzzKeyframeImage();
   api::LocateRequest base;
@@ -93,6 +97,14 @@ inline std::vector<api::LocateRequest> LocateSeedRequests() {
     encoded.set_encoded(std::string(bytes.begin(), bytes.end()));
     requests.push_back(encoded);
   }
+  // With a GNSS fix at the map's origin (3 m, 5 m).
+  api::LocateRequest with_fix = raw;
+  with_fix.mutable_gnss_fix()->set_latitude_deg(46.5191);
+  with_fix.mutable_gnss_fix()->set_longitude_deg(6.5668);
+  with_fix.mutable_gnss_fix()->set_altitude_m(372.0);
+  with_fix.mutable_gnss_fix()->set_horizontal_accuracy_m(3.0);
+  with_fix.mutable_gnss_fix()->set_vertical_accuracy_m(5.0);
+  requests.push_back(with_fix);
   raw.set_map_name("v1");
   requests.push_back(raw);
   requests.push_back(base);

@@ -1,11 +1,11 @@
 // libFuzzer target: the Locate RPC's request handling without the network (docs/reliability.md
 // §4): a serialized LocateRequest through LocateInLoadedMap, exactly as the server's handler runs
 // it after the registry found the map; map_name "v1" picks the map without relocalization data,
-// any other name the map with it (locate_fuzz_common.h). Seeds: evloc_session_fuzz_seeds
-// OUT_DIR/locate.
-// Oracles (abort): no exception escapes; the status is OK, INVALID_ARGUMENT or (only for the v1
-// map) FAILED_PRECONDITION; an OK response is FOUND with a finite unit-quaternion pose and 36
-// finite covariance values, or NOT_FOUND without a pose and with a reason.
+// any other name the map with it and a geo anchor (locate_fuzz_common.h). Seeds:
+// evloc_session_fuzz_seeds OUT_DIR/locate. Oracles (abort): no exception escapes; the status is OK,
+// INVALID_ARGUMENT or (only for the v1 map, which has neither relocalization data nor a geo anchor)
+// FAILED_PRECONDITION; an OK response is FOUND with a finite unit-quaternion pose and 36 finite
+// covariance values, or NOT_FOUND without a pose and with a reason.
 #include <cmath>
 #include <cstdint>
 

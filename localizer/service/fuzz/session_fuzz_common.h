@@ -17,6 +17,7 @@
 #include "core/events/event.h"
 #include "evloc/localizer.pb.h"
 #include "localizer/service/session.h"
+#include "localizer/service/testing/service_fixture.h"
 
 namespace evloc::service::fuzz {
 
@@ -91,6 +92,17 @@ inline void AppendRecord(const std::string& record, std::string* out) {
     out->push_back(static_cast<char>(byte));
   } while (length != 0);
   out->append(record);
+}
+
+// The anchored copy of the test map that the requests target serves beside it.
+inline constexpr char kAnchoredTestMapName[] = "rectangles_geo";
+inline Map AnchoredTestMap() {
+  Map map = testing::TestMap();
+  GeoAnchor anchor;
+  anchor.origin = {46.5191, 6.5668, 372.0};
+  anchor.horizontal_sigma_m = 0.5;
+  map.geo_anchor = anchor;
+  return map;
 }
 
 // Aborts unless `status` is OK or has one of the `allowed` codes with a message (the documented

@@ -31,6 +31,8 @@ MapRegistry& Registry() {
   static testing::TemporaryFolder folder;
   static MapRegistry registry = [] {
     testing::WriteTestMap(folder.path(), testing::kTestMapName, testing::TestMap());
+    // The same map with a geo anchor, for GnssFix requests (docs/geo.md).
+    testing::WriteTestMap(folder.path(), kAnchoredTestMapName, AnchoredTestMap());
     return MapRegistry(MapRegistryOptions{folder.path()});
   }();
   return registry;
@@ -81,6 +83,8 @@ int Run(const uint8_t* data, size_t size) {
     EVLOC_FUZZ_REQUIRE(status.error_code() != grpc::StatusCode::FAILED_PRECONDITION ||
                        request.has_start());
     if (!status.ok()) return 0;  // The session ends with the first error.
+    // The server ends a session whose map has no anchor at a GnssFix (FAILED_PRECONDITION).
+    if (item.kind == SessionItem::Kind::kGnssFix && !session.tracker->geo()) return 0;
     std::vector<tracking::PoseEstimate> estimates;
     try {
       estimates = session.tracker->Process(item);

@@ -104,9 +104,10 @@ Camera SmallCamera() { return Camera::Pinhole(80, 60, 62.5, 62.5, 39.5, 29.5); }
 // EventPackets (coordinates scaled to the small camera; from 0.1 ms before the initial time, so
 // that the first one primes the surfaces); with `pose_hint` a PoseHint and an empty packet in the
 // middle; with `filters` every noise filter on, the hot-pixel learning period (1 ms) ending within
-// the seed's windows; with `velocity` an initial velocity (a resumed session).
+// the seed's windows; with `velocity` an initial velocity (a resumed session); with `gnss_fix`
+// the session tracks the anchored map.
 std::string RequestsSeed(api::EventEncoding encoding, bool pose_hint, bool filters = false,
-                         bool velocity = false) {
+                         bool velocity = false, bool gnss_fix = false) {
   const int64_t start_ns = testing::kInitialTimeNs - kWindowNs;
   std::string seed;
   api::TrackRequest start = testing::TestSessionStart();
@@ -128,6 +129,7 @@ std::string RequestsSeed(api::EventEncoding encoding, bool pose_hint, bool filte
     *start.mutable_start()->mutable_initial_velocity() =
         wire::TwistToProto((Vector6d() << 0.2, -0.1, 0.05, 0.3, 0.1, -0.2).finished());
   }
+  if (gnss_fix) start.mutable_start()->set_map_name(kAnchoredTestMapName);
   AppendRecord(start.SerializeAsString(), &seed);
   std::vector<EventBuffer> windows = Windows(start_ns);
   for (EventBuffer& window : windows) {
@@ -146,6 +148,20 @@ std::string RequestsSeed(api::EventEncoding encoding, bool pose_hint, bool filte
     packet->set_time_base_ns(window_start);
     packet->set_end_t_ns(window_start + kWindowNs);
     AppendRecord(request.SerializeAsString(), &seed);
+    if (gnss_fix && i == 0) {
+      // A fix at the true position (through the anchor), 3 m horizontal, 5 m vertical.
+      const GeoReference reference(*AnchoredTestMap().geo_anchor);
+      const GeodeticPoint position = reference.GeodeticFromMap(
+          tracking::testing::SmoothMotion(window_start + kWindowNs).translation);
+      api::TrackRequest fix;
+      fix.mutable_gnss_fix()->set_latitude_deg(position.latitude_deg);
+      fix.mutable_gnss_fix()->set_longitude_deg(position.longitude_deg);
+      fix.mutable_gnss_fix()->set_altitude_m(position.altitude_m);
+      fix.mutable_gnss_fix()->set_horizontal_accuracy_m(3.0);
+      fix.mutable_gnss_fix()->set_vertical_accuracy_m(5.0);
+      fix.mutable_gnss_fix()->set_t_ns(window_start + kWindowNs);
+      AppendRecord(fix.SerializeAsString(), &seed);
+    }
     if (pose_hint && i == packets.size() / 2) {
       api::TrackRequest hint;
       hint.mutable_pose_hint()->set_t_ns(window_start + kWindowNs);
@@ -209,6 +225,9 @@ int Main(int argc, char** argv) {
             RequestsSeed(api::EVENT_ENCODING_PACKED, false, /*filters=*/false,
                          /*velocity=*/true));
   WriteFile(out / "requests" / "frames", FrameSeed());
+  WriteFile(out / "requests" / "packed_gnss_fix",
+            RequestsSeed(api::EVENT_ENCODING_PACKED, false, /*filters=*/false, /*velocity=*/false,
+                         /*gnss_fix=*/true));
   fs::create_directories(out / "locate");
   const std::vector<api::LocateRequest> locate = LocateSeedRequests();
   for (size_t i = 0; i < locate.size(); ++i) {
