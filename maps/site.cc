@@ -16,6 +16,7 @@
 #include "core/common/provenance.h"
 #include "evloc/site.pb.h"
 #include "maps/crc32c.h"
+#include "proto/convert/proto_convert.h"
 
 namespace evloc {
 namespace {
@@ -417,6 +418,8 @@ Map ExtractTile(const Map& map, const TileGrid& grid, TileIndex index, uint64_t*
                 uint64_t* core_keyframes) {
   Map tile;
   tile.cameras = map.cameras;
+  // Each tile is a self-contained map, geo-referenced like the map it comes from.
+  tile.geo_anchor = map.geo_anchor;
   tile.provenance = map.provenance;
   // The points the tile holds, in their order.
   std::vector<uint32_t> new_index(map.size(), kNoKeyframe);
@@ -553,7 +556,11 @@ SiteManifest TileMap(const Map& map, const std::filesystem::path& directory,
   manifest.name = options.name.empty() ? directory.filename().string() : options.name;
   if (manifest.name.empty())
     manifest.name = std::filesystem::absolute(directory).parent_path().filename().string();
+  // The site's anchor: the one given, else the map's own.
   manifest.geo_anchor = options.geo_anchor;
+  if (manifest.geo_anchor.empty() && map.geo_anchor) {
+    manifest.geo_anchor = GeoAnchorToProto(*map.geo_anchor).SerializeAsString();
+  }
   manifest.grid = grid;
   manifest.source_content_crc32c = ComputeMapContentChecksum(map);
   manifest.provenance.tool = "evloc-mapper tile";

@@ -170,7 +170,7 @@ struct TilingOptions {
   std::optional<Eigen::Vector2d> origin;
   // Site name written into the manifest (the folder name when empty).
   std::string name;
-  // Serialized GeoAnchor to carry into the manifest (empty: none).
+  // Serialized GeoAnchor to carry into the manifest (empty: the map's own anchor, if it has one).
   std::string geo_anchor;
   // Replace the site of a folder that already holds one; otherwise refuse.
   bool overwrite = false;

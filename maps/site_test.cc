@@ -11,6 +11,7 @@
 #include "core/common/error.h"
 #include "core/common/file_util.h"
 #include "core/common/test_data.h"
+#include "evloc/map.pb.h"
 #include "maps/map_directory.h"
 #include "maps/synthetic_map.h"
 
@@ -170,6 +171,32 @@ TEST_F(SiteTest, TilesKeepTheirKeyframesFeaturesAndLandmarks) {
     }
   }
   EXPECT_GT(features_kept, 0u);
+}
+
+// A geo-referenced map gives a geo-referenced site: the manifest carries the map's anchor, and
+// every tile (a self-contained map) carries it too.
+TEST_F(SiteTest, TheMapsGeoAnchorGoesIntoTheManifestAndEveryTile) {
+  EXPECT_TRUE(manifest_.geo_anchor.empty());
+  Map anchored = map_;
+  GeoAnchor anchor;
+  anchor.origin.latitude_deg = 46.5191;
+  anchor.origin.longitude_deg = 6.5668;
+  anchor.origin.altitude_m = 372.5;
+  anchor.horizontal_sigma_m = 0.02;
+  anchored.geo_anchor = anchor;
+  const SiteManifest manifest = TileMap(anchored, root_ / "anchored", options_);
+  map_format::GeoAnchor carried;
+  ASSERT_TRUE(carried.ParseFromString(ReadSiteManifest(root_ / "anchored").geo_anchor));
+  EXPECT_EQ(carried.latitude_deg(), 46.5191);
+  EXPECT_EQ(carried.longitude_deg(), 6.5668);
+  EXPECT_EQ(carried.altitude_m(), 372.5);
+  EXPECT_EQ(carried.horizontal_sigma_m(), 0.02);
+  ASSERT_FALSE(manifest.tiles.empty());
+  for (size_t t = 0; t < manifest.tiles.size(); ++t) {
+    const Map tile = LoadTile(root_ / "anchored", manifest, t);
+    ASSERT_TRUE(tile.geo_anchor.has_value()) << "tile " << t;
+    EXPECT_EQ(tile.geo_anchor->origin.altitude_m, 372.5);
+  }
 }
 
 TEST_F(SiteTest, DamagedManifestsAreRefusedWithTheirPosition) {
