@@ -274,12 +274,14 @@ class Session:
     """One Track stream. Options: step_rate_hz, variant, max_points (TrackingOptions);
     packet_ms (window of a packet, default 1 ms as evloc-replay), client_name, and the reconnect
     of evloc-replay: reconnect (attempts per outage, default 0: fail at once), backoff_ms (100),
-    backoff_max_ms (2000), reconnect_max_s (60), stable_s (10), resume_prime_ms (100), seed."""
+    backoff_max_ms (2000), reconnect_max_s (60), stable_s (10), resume_prime_ms (100),
+    resume_velocity_ms (100: a resumed session starts with the velocity of the last TRACKING poses
+    within it, as evloc-replay --resume-velocity-ms; 0: at rest), seed."""
 
     def __init__(self, client, map_name, camera, initial_pose, initial_t_ns, *, step_rate_hz=None,
                  variant=None, max_points=None, packet_ms=1.0, client_name="evloc-python",
                  reconnect=0, backoff_ms=100.0, backoff_max_ms=2000.0, reconnect_max_s=60.0,
-                 stable_s=10.0, resume_prime_ms=100.0, seed=None):
+                 stable_s=10.0, resume_prime_ms=100.0, resume_velocity_ms=100.0, seed=None):
         api, _ = _stubs()
         self._client = client
         self._map_name = map_name
@@ -304,6 +306,11 @@ class Session:
         self._reconnect_max_s = float(reconnect_max_s)
         self._stable_s = float(stable_s)
         self._prime_ns = int(round(resume_prime_ms * 1e6))
+        if not 0 <= resume_velocity_ms <= 1000:
+            raise ValueError("Session: resume_velocity_ms must be in [0, 1000]")
+        self._velocity_ns = int(round(resume_velocity_ms * 1e6))
+        # (t_ns, pose values) of the trailing run of TRACKING poses within the velocity window.
+        self._tracking_run = collections.deque()
         self._random = random.Random(seed)
         self._start_pose = None if initial_pose is None else self._pose_values(initial_pose)
         self._start_t_ns = int(initial_t_ns)
@@ -339,7 +346,24 @@ class Session:
         return pose
 
     # -- the stream ------------------------------------------------------------------------
-    def _start_request(self, pose, t_ns):
+    def _resume_velocity(self):
+        """The twist of the trailing TRACKING poses over the velocity window (evloc-replay's
+        ResumeVelocity), or None when the last two poses are not both TRACKING. Under the lock."""
+        run = self._tracking_run
+        if self._velocity_ns == 0 or len(run) < 2:
+            return None
+        newest_t, newest = run[-1]
+        older_t, older = run[0]
+        for t_ns, pose in reversed(run):
+            older_t, older = t_ns, pose
+            if newest_t - t_ns >= self._velocity_ns:
+                break
+        if newest_t <= older_t:
+            return None
+        from evloc._native import _evloc  # pylint: disable=import-outside-toplevel
+        return _evloc.body_twist(older, newest, (newest_t - older_t) * 1e-9)
+
+    def _start_request(self, pose, t_ns, velocity=None):
         api, _ = _stubs()
         request = api.TrackRequest()
         start = request.start
@@ -349,17 +373,21 @@ class Session:
             r = start.initial_world_from_cam
             r.translation.x, r.translation.y, r.translation.z = (float(v) for v in pose[:3])
             r.rotation.x, r.rotation.y, r.rotation.z, r.rotation.w = (float(v) for v in pose[3:])
+        if pose is not None and velocity is not None:
+            v = start.initial_velocity
+            v.linear.x, v.linear.y, v.linear.z = (float(x) for x in velocity[:3])
+            v.angular.x, v.angular.y, v.angular.z = (float(x) for x in velocity[3:])
         start.initial_t_ns = int(t_ns)
         start.options.CopyFrom(self._options)
         start.client_name = self._client_name
         return request
 
-    def _open(self, pose, t_ns, resume):
+    def _open(self, pose, t_ns, resume, velocity=None):
         """Starts a stream with a SessionStart at (pose, t_ns) and, when `resume`, the packets
         sent since resume_prime_ms before t_ns; returns the response iterator after
         SessionStarted. Raises grpc.RpcError."""
         requests = queue.Queue()
-        requests.put(self._start_request(pose, t_ns))
+        requests.put(self._start_request(pose, t_ns, velocity))
 
         def iterate():
             while True:
@@ -423,6 +451,13 @@ class Session:
                         with self._lock:
                             if update.pose is not None:
                                 self._last_pose = (update.t_ns, update.pose)
+                            if update.pose is not None and update.status == Status.TRACKING:
+                                self._tracking_run.append((update.t_ns, update.pose))
+                                while (len(self._tracking_run) > 2 and update.t_ns -
+                                       self._tracking_run[1][0] >= self._velocity_ns):
+                                    self._tracking_run.popleft()
+                            else:
+                                self._tracking_run.clear()
                             while self._unconfirmed and self._unconfirmed[0] <= update.t_ns:
                                 self._unconfirmed.popleft()
                             horizon = update.t_ns - self._prime_ns
@@ -473,8 +508,9 @@ class Session:
                         t_ns, pose = self._last_pose
                     else:
                         t_ns, pose = self._start_t_ns, self._start_pose
+                    velocity = self._resume_velocity()
                 try:
-                    responses = self._open(pose, t_ns, True)
+                    responses = self._open(pose, t_ns, True, velocity)
                 except (grpc.RpcError, ServiceError) as error:
                     code = error.code() if isinstance(error, grpc.RpcError) else error.code
                     pushback = self._pushback(error) if isinstance(error, grpc.RpcError) else None

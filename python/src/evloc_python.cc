@@ -608,6 +608,24 @@ PYBIND11_MODULE(_evloc, m) {
       .def("summary", &SummaryOf, "The map's summary (evloc-mapper info's figures) as a dict.");
 
   m.def(
+      "body_twist",
+      [](const py::array_t<double, py::array::c_style | py::array::forcecast>& older,
+         const py::array_t<double, py::array::c_style | py::array::forcecast>& newer, double dt_s) {
+        if (!(std::isfinite(dt_s) && dt_s > 0)) {
+          throw InvalidArgumentError("body_twist: dt_s must be finite and positive");
+        }
+        const Vector6d twist = LogSE3(PoseFromArray(older, "body_twist: older").Inverse() *
+                                      PoseFromArray(newer, "body_twist: newer")) /
+                               dt_s;
+        py::array_t<double> out(6);
+        for (int i = 0; i < 6; ++i) out.mutable_data()[i] = twist[i];
+        return out;
+      },
+      py::arg("older"), py::arg("newer"), py::arg("dt_s"),
+      "The body-frame twist per second (vx vy vz wx wy wz, camera frame) that moves `older` to\n"
+      "`newer` in dt_s seconds: newer = older * exp(dt_s * twist), as the tracker's motion model\n"
+      "and SessionStart.initial_velocity define it.");
+  m.def(
       "load_map",
       [](const std::filesystem::path& path) {
         std::filesystem::path file;

@@ -495,3 +495,23 @@ def test_client_with_tls_and_a_token(maps_folder, simulated, tmp_path):
                 client.list_maps()
     finally:
         server.stop()
+
+
+def test_body_twist_is_the_motion_models_twist():
+    """body_twist inverts newer = older * exp(dt * twist) (the resumed session's velocity)."""
+    older = np.array([1.0, 2.0, 3.0, 0.0, 0.0, 0.0, 1.0])
+    # 0.05 rad of yaw in 0.1 s: 0.5 rad/s about the camera z axis.
+    angle = 0.05
+    newer_rotation = [0.0, 0.0, np.sin(angle / 2), np.cos(angle / 2)]
+    twist = evloc._native._evloc.body_twist(older, older, 0.1)
+    assert np.all(twist == 0)
+    # Pure translation: the twist is the displacement per second in the camera frame.
+    shifted = older.copy()
+    shifted[0] += 0.1
+    np.testing.assert_allclose(evloc._native._evloc.body_twist(older, shifted, 0.1),
+                               [1, 0, 0, 0, 0, 0], atol=1e-12)
+    turned = np.concatenate([older[:3], newer_rotation])
+    np.testing.assert_allclose(evloc._native._evloc.body_twist(older, turned, 0.1),
+                               [0, 0, 0, 0, 0, 0.5], atol=1e-12)
+    with pytest.raises(evloc.Error):
+        evloc._native._evloc.body_twist(older, shifted, 0.0)
