@@ -5,11 +5,10 @@
 #include <cmath>
 #include <string>
 
-#include <time.h>
-
 #include <opencv2/imgproc.hpp>
 
 #include "core/common/error.h"
+#include "core/common/thread_cpu_time.h"
 #include "localizer/tracking/point_selection.h"
 #include "localizer/tracking/registration.h"
 #include "maps/edge_lifting.h"
@@ -18,11 +17,7 @@ namespace evloc::odometry {
 namespace {
 
 // The CPU time of the calling thread, milliseconds.
-double ThreadCpuMilliseconds() {
-  timespec now{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &now);
-  return static_cast<double>(now.tv_sec) * 1e3 + static_cast<double>(now.tv_nsec) * 1e-6;
-}
+double ThreadCpuMilliseconds() { return static_cast<double>(ThreadCpuTimeNs()) * 1e-6; }
 
 }  // namespace
 

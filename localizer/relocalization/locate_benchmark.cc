@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "core/common/thread_cpu_time.h"
 #include "localizer/relocalization/image_locator.h"
 #include "localizer/relocalization/testing/temple_map.h"
 
@@ -25,11 +26,7 @@ double Percentile(std::vector<double> values, double fraction) {
 }
 
 // CPU time of this thread, milliseconds.
-double ThreadCpuMs() {
-  timespec now{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &now);
-  return now.tv_sec * 1e3 + now.tv_nsec * 1e-6;
-}
+double ThreadCpuMs() { return static_cast<double>(ThreadCpuTimeNs()) * 1e-6; }
 
 // CPU times of every locate, milliseconds.
 std::vector<double>& CpuTimes() {

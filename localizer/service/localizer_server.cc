@@ -18,6 +18,7 @@
 
 #include "core/common/error.h"
 #include "core/common/file_util.h"
+#include "core/common/thread_cpu_time.h"
 #include "core/geo/geo_trajectory.h"
 #include "evloc/localizer.grpc.pb.h"
 #include "localizer/service/bounded_queue.h"
@@ -789,11 +790,7 @@ class TrackCall final : public TrackReactor,
   }
 
   // CPU time of the calling thread, seconds.
-  static double ThreadCpuSeconds() {
-    timespec now{};
-    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &now);
-    return static_cast<double>(now.tv_sec) + 1e-9 * static_cast<double>(now.tv_nsec);
-  }
+  static double ThreadCpuSeconds() { return static_cast<double>(ThreadCpuTimeNs()) * 1e-9; }
 
   // The status of a session stopped by the drain.
   static grpc::Status DrainingStatus() {

@@ -8,11 +8,10 @@
 #include <cmath>
 #include <numbers>
 
-#include <time.h>
-
 #include <opencv2/imgproc.hpp>
 
 #include "core/common/error.h"
+#include "core/common/thread_cpu_time.h"
 #include "localizer/tracking/point_selection.h"
 #include "localizer/tracking/tracker.h"
 
@@ -20,14 +19,6 @@ namespace evloc::tracking {
 namespace {
 
 constexpr double kRadiansPerDegree = std::numbers::pi / 180.0;
-
-// CPU time of the calling thread, ns (the search's budget: a session's steps run on one thread
-// at a time, a step on one thread).
-int64_t ThreadCpuTimeNs() {
-  timespec now{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &now);
-  return int64_t{now.tv_sec} * 1'000'000'000 + now.tv_nsec;
-}
 
 }  // namespace
 

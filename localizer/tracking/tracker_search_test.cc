@@ -7,9 +7,9 @@
 #include <random>
 
 #include <gtest/gtest.h>
-#include <time.h>
 
 #include "core/common/error.h"
+#include "core/common/thread_cpu_time.h"
 #include "localizer/tracking/testing/synthetic_scene.h"
 #include "localizer/tracking/tracker.h"
 
@@ -114,11 +114,6 @@ TEST(TrackerSearch, ACpuShareBoundsTheSearchWorkAndItStillFindsItself) {
   options.relocalization_cpu_burst_s = 0.005;
   Tracker tracker(SceneMap(), nullptr, kCamera, options);
   tracker.StartWithoutPose(0);
-  const auto cpu_ns = [] {
-    timespec now{};
-    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &now);
-    return int64_t{now.tv_sec} * 1'000'000'000 + now.tv_nsec;
-  };
   // One step's events at a time, so that the CPU of each searching step is measured alone.
   const int64_t period_ns = std::llround(1e9 / options.step_rate_hz);
   std::vector<PoseEstimate> estimates;
@@ -134,9 +129,9 @@ TEST(TrackerSearch, ACpuShareBoundsTheSearchWorkAndItStillFindsItself) {
     while (end < events.size() && events.t_ns[end] < end_ns) ++end;
     EventBuffer window;
     window.Append(events, begin, end - begin);
-    const int64_t before = cpu_ns();
+    const int64_t before = ThreadCpuTimeNs();
     const std::vector<PoseEstimate> step = tracker.AddEvents(window);
-    const int64_t used = cpu_ns() - before;
+    const int64_t used = ThreadCpuTimeNs() - before;
     for (const PoseEstimate& estimate : step) {
       const bool searching =
           estimate.status != TrackingStatus::kTracking && estimate.search.verified_steps == 0;
