@@ -180,6 +180,7 @@ OfflineTrackingResult TrackEventStream(EventReader& reader, const MapSource& sou
   }
   const auto start = std::chrono::steady_clock::now();
   Tracker tracker(source, camera, options.tracker);
+  if (options.image_hypotheses) tracker.SetImageHypothesisSource(options.image_hypotheses);
   OfflineTrackingResult result;
   EventBuffer batch;
   bool started = false;

@@ -38,6 +38,9 @@ struct OfflineTrackingOptions {
   int64_t blackout_begin_ns = 0;
   // End of the blackout, nanoseconds (exclusive).
   int64_t blackout_end_ns = 0;
+  // Hypotheses from an image of the events for the global search (Tracker::
+  // SetImageHypothesisSource; not owned, must outlive the run); null: none.
+  const ImageHypothesisSource* image_hypotheses = nullptr;
 
   // Throws InvalidArgumentError when a field is out of range.
   void Check() const;

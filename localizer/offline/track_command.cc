@@ -17,6 +17,7 @@
 #include "core/trajectory/tum_io.h"
 #include "localizer/offline/debug_images.h"
 #include "localizer/offline/odometry_track.h"
+#include "localizer/relocalization/event_image_hypotheses.h"
 #include "localizer/tracking/event_filter.h"
 #include "maps/map_directory.h"
 #include "maps/site.h"
@@ -49,6 +50,7 @@ nlohmann::json StepsToJson(const OfflineTrackingResult& result) {
                      {"search_prescored", step.search.prescored},
                      {"search_refined", step.search.refined},
                      {"search_deferred", step.search.deferred},
+                     {"search_image_hypotheses", step.search.image_hypotheses},
                      {"search_verified_steps", step.search.verified_steps},
                      {"search_best_alignment", step.search.best_alignment},
                      {"search_second_alignment", step.search.second_alignment}});
@@ -288,6 +290,9 @@ Options:
                          new one starts (default 0: never)
   --search-cpu-share F   the search may use F cores per second of event time (default 0:
                          unbounded and reproducible; the server's default is 0.5)
+  --search-images on|off the search also locates images made from the events with the map's
+                         local features (maps with relocalization data; default on;
+                         docs/relocalization.md)
   --mode events|frames|vo|devo
                          events (Canny-EVT, default), frames (Canny-VT on images.txt), or the
                          mapless odometry without --map: vo (Canny-VO on images and depth) or
@@ -395,6 +400,8 @@ TrackCommandOptions ParseTrackCommandLine(const std::vector<std::string>& argume
       tracker.relocalization_give_up_s = ParseDoubleFlag(flag, value);
     } else if (flag == "--search-cpu-share") {
       tracker.relocalization_cpu_share = ParseDoubleFlag(flag, value);
+    } else if (flag == "--search-images") {
+      options.search_images = ParseSwitchFlag(flag, value);
     } else if (flag == "--search-active-fraction") {
       tracker.relocalization_active_fraction = ParseDoubleFlag(flag, value);
     } else if (flag == "--search-grid") {
@@ -587,6 +594,11 @@ OfflineTrackingResult RunTrackCommand(const TrackCommandOptions& options, std::o
                                  "images)");
     }
     const auto reader = OpenDatasetEvents(dataset);
+    std::optional<evloc::relocalization::EventImageHypotheses> image_hypotheses;
+    if (options.search_images && map.relocalization) {
+      image_hypotheses.emplace(map, visibility, dataset.camera);
+      tracking.image_hypotheses = &*image_hypotheses;
+    }
     result = TrackEventStream(*reader, map, &visibility, dataset.camera, initial_world_from_cam,
                               initial_t_ns, tracking, on_step);
   } else {

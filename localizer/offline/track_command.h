@@ -40,6 +40,9 @@ struct TrackCommandOptions {
   std::optional<Rigid3d> initial_world_from_cam;
   // Start without a pose and search the map (--init-pose none).
   bool no_initial_pose = false;
+  // The search also locates images of the events in the map's relocalization data (--search-images
+  // on|off; used when the map has that data).
+  bool search_images = true;
   // Start this many seconds after the dataset's first event (or frame), ignoring everything
   // before (--start S).
   std::optional<double> start_s;

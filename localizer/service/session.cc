@@ -533,6 +533,10 @@ SessionTracker::SessionTracker(std::shared_ptr<const LoadedMap> map,
                                 : std::nullopt),
       takes_frames_(settings.tracker.input == tracking::TrackerInput::kFrames),
       advanced_t_ns_(settings.initial_t_ns) {
+  if (!takes_frames_ && !tiled_ && map_->map.relocalization && map_->visibility) {
+    image_hypotheses_.emplace(map_->map, *map_->visibility, settings.camera);
+    tracker_.SetImageHypothesisSource(&*image_hypotheses_);
+  }
   if (takes_frames_) StartTracker();
 }
 

@@ -22,6 +22,7 @@
 #include "core/geo/geo_anchor.h"
 #include "core/geometry/rigid3.h"
 #include "evloc/localizer.pb.h"
+#include "localizer/relocalization/event_image_hypotheses.h"
 #include "localizer/service/map_registry.h"
 #include "localizer/tracking/tiled_map_source.h"
 #include "localizer/tracking/tracker.h"
@@ -310,6 +311,10 @@ class SessionTracker {
   // (`tiled_`, the same object, followed between step periods).
   std::unique_ptr<tracking::MapSource> source_;
   tracking::TiledMapSource* tiled_ = nullptr;
+  // Hypotheses from images of the events for the search (a whole map with relocalization data,
+  // an event session); declared before the tracker, whose request thread may use it until the
+  // tracker is destroyed.
+  std::optional<relocalization::EventImageHypotheses> image_hypotheses_;
   tracking::Tracker tracker_;
   std::optional<GeoReference> geo_;
   // Session time of the GNSS fix behind the tracker's search prior, ns.

@@ -127,12 +127,12 @@ std::vector<PoseEstimate> Tracker::Ingest(const EventBuffer& events) {
   size_t begin = 0;
   while (begin < count) {
     if (!initialized()) {
-      surface_.Insert(events, begin, count);
+      InsertEvents(events, begin, count);
       begin = count;
     } else if (options_.events_per_step) {
       const size_t take =
           std::min<size_t>(count - begin, *options_.events_per_step - events_since_step_);
-      surface_.Insert(events, begin, begin + take);
+      InsertEvents(events, begin, begin + take);
       begin += take;
       events_since_step_ += static_cast<int64_t>(take);
       if (events_since_step_ == *options_.events_per_step) {
@@ -145,7 +145,7 @@ std::vector<PoseEstimate> Tracker::Ingest(const EventBuffer& events) {
       // Events up to and including the next step time belong to that step.
       const size_t end =
           static_cast<size_t>(std::upper_bound(t_ns + begin, t_ns + count, next_step_t_ns_) - t_ns);
-      surface_.Insert(events, begin, end);
+      InsertEvents(events, begin, end);
       begin = end;
       if (end < count) {
         // An event after the step time proves that every event of the step has arrived.
@@ -155,6 +155,14 @@ std::vector<PoseEstimate> Tracker::Ingest(const EventBuffer& events) {
     }
   }
   return estimates;
+}
+
+void Tracker::InsertEvents(const EventBuffer& events, size_t begin, size_t end) {
+  surface_.Insert(events, begin, end);
+  if (event_image_ &&
+      (status_ == TrackingStatus::kInitializing || status_ == TrackingStatus::kRelocalizing)) {
+    event_image_->Insert(events, begin, end);
+  }
 }
 
 std::vector<PoseEstimate> Tracker::AdvanceTo(int64_t t_ns) {

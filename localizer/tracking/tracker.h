@@ -6,6 +6,7 @@
 #pragma once
 
 #include <cstdint>
+#include <future>
 #include <memory>
 #include <optional>
 #include <utility>
@@ -18,6 +19,8 @@
 #include "core/events/event.h"
 #include "core/geometry/rigid3.h"
 #include "localizer/tracking/event_filter.h"
+#include "localizer/tracking/event_image.h"
+#include "localizer/tracking/image_hypothesis_source.h"
 #include "localizer/tracking/map_source.h"
 #include "localizer/tracking/motion_model.h"
 #include "localizer/tracking/occlusion.h"
@@ -72,6 +75,8 @@ struct SearchProgress {
   // True when this step did no search work because the search had used its CPU share
   // (TrackerOptions::relocalization_cpu_share).
   bool deferred = false;
+  // Image hypotheses (ImageHypothesisSource) refined in this step (counted in `refined` too).
+  int image_hypotheses = 0;
   // Alignment of the best refined hypothesis of the last judged round (0 before one).
   double best_alignment = 0;
   // Alignment of the best refined hypothesis distinct from it (0 when there was none).
@@ -182,6 +187,14 @@ class Tracker {
   // Removes the search prior (the whole map is searched again from the next round).
   void ClearSearchPrior();
 
+  // Adds poses located from an image of the events to the global search's rounds
+  // (docs/relocalization.md, "Hypotheses from an image of the events"); they are refined and
+  // verified like the search's own. `source` must outlive the tracker; null removes it. With a
+  // CPU share (relocalization_cpu_share > 0) a request runs on a thread of its own while the
+  // steps go on, its CPU time charged to the share when its result is taken; without one it runs
+  // within the step (a run stays reproducible).
+  void SetImageHypothesisSource(const ImageHypothesisSource* source);
+
   // Ingests events (time-ordered, also across calls) and runs every step that became due; the
   // step at time t uses every event with t_ns <= t. Before the first Reset (or StartWithoutPose)
   // events are stored but no step runs. Throws InvalidArgumentError (nothing ingested) when the
@@ -238,6 +251,9 @@ class Tracker {
 
   // Runs the events that passed the noise filters into the surfaces and the steps they complete.
   std::vector<PoseEstimate> Ingest(const EventBuffer& events);
+  // Events [begin, end) into the time surface and, while searching with an image source, into
+  // the image of the events.
+  void InsertEvents(const EventBuffer& events, size_t begin, size_t end);
   PoseEstimate Step(int64_t t_ns);
   // Reads the source's points and generation; throws InvalidArgumentError when they are
   // inconsistent.
@@ -306,6 +322,10 @@ class Tracker {
   // Registers a hypothesis' pre-score points against the chamfer fields and scores the result
   // (Hypothesis::coarse_score); moves the hypothesis to the aligned pose.
   void CoarseAlign(Hypothesis* hypothesis);
+  // The chamfer stages of a refinement: selects the points at the start pose, registers them on
+  // the coarse then the fine chamfer field, and selects again where that ended when it moved;
+  // nullopt when too few points are selected.
+  std::optional<Rigid3d> ChamferStages(const Rigid3d& start_world_from_cam);
   // Coarse-to-fine registration from a hypothesis: chamfer fields, then Solve (unsigned) with
   // Assess.
   Refinement Refine(const Rigid3d& start_world_from_cam, int64_t t_ns);
@@ -313,6 +333,12 @@ class Tracker {
   RegistrationResult RegisterSelection(PotentialField* field, const Rigid3d& start_world_from_cam);
   // True when two poses are farther apart than relocalization_distinct_m / _deg.
   bool Distinct(const Rigid3d& a, const Rigid3d& b) const;
+  // At a round's start: asks the image source for hypotheses when one is due (enough events
+  // integrated, relocalization_image_interval_s since the last request, none in flight).
+  void RequestImageHypotheses(int64_t t_ns);
+  // The image hypotheses that are ready (a request without a CPU share runs now), distinct from
+  // each other; charges a threaded request's CPU time to the share.
+  std::vector<Rigid3d> TakeImageHypotheses();
   // Keeps the best distinct refinements of the round (relocalization_rivals) for the next one.
   void KeepRivals();
   // Judges the refinements of a finished round: true (and `accepted`) when the best is good and
@@ -387,6 +413,16 @@ class Tracker {
   std::vector<Refinement> refinements_;
   // The previous round's best distinct refinements, refined again first in the next round.
   std::vector<Hypothesis> rivals_;
+  // Image hypotheses: the source (not owned), the image of the events, a request in flight
+  // (poses and the CPU time it used) and the event time of the last request.
+  struct ImageRequest {
+    std::vector<Rigid3d> poses;
+    int64_t cpu_ns = 0;
+  };
+  const ImageHypothesisSource* image_source_ = nullptr;
+  std::unique_ptr<EventImage> event_image_;
+  std::future<ImageRequest> image_request_;
+  std::optional<int64_t> last_image_request_t_ns_;
   cv::Mat chamfer_distance_px_;
   DenseField chamfer_coarse_;
   DenseField chamfer_fine_;

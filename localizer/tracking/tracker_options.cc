@@ -129,6 +129,9 @@ void TrackerOptions::Check() const {
   Require(Positive(relocalization_distinct_m), "relocalization_distinct_m must be positive.");
   Require(Positive(relocalization_distinct_deg), "relocalization_distinct_deg must be positive.");
   Require(relocalization_verify_steps >= 1, "relocalization_verify_steps must be at least 1.");
+  Require(std::isfinite(relocalization_verify_min_alignment) &&
+              relocalization_verify_min_alignment >= 0 && relocalization_verify_min_alignment <= 1,
+          "relocalization_verify_min_alignment must be in [0, 1].");
   Require(std::isfinite(relocalization_active_fraction) && relocalization_active_fraction > 0 &&
               relocalization_active_fraction <= 1,
           "relocalization_active_fraction must be in (0, 1].");
@@ -139,6 +142,14 @@ void TrackerOptions::Check() const {
           "relocalization_cpu_share must be in [0, 1] (0 = unbounded).");
   Require(Positive(relocalization_cpu_burst_s) && relocalization_cpu_burst_s <= 10,
           "relocalization_cpu_burst_s must be in (0, 10].");
+  Require(Positive(relocalization_image_tau_s) && relocalization_image_tau_s <= 10,
+          "relocalization_image_tau_s must be in (0, 10].");
+  Require(std::isfinite(relocalization_image_min_events_s) &&
+              relocalization_image_min_events_s >= 0 && relocalization_image_min_events_s <= 60,
+          "relocalization_image_min_events_s must be in [0, 60].");
+  Require(std::isfinite(relocalization_image_interval_s) && relocalization_image_interval_s >= 0 &&
+              relocalization_image_interval_s <= 3600,
+          "relocalization_image_interval_s must be in [0, 3600].");
   Require(std::isfinite(relocalization_min_active_fraction) &&
               relocalization_min_active_fraction >= 0 && relocalization_min_active_fraction < 1,
           "relocalization_min_active_fraction must be in [0, 1).");

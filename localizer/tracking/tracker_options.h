@@ -256,6 +256,11 @@ struct TrackerOptions {
   // Consecutive good steps, tracked from the accepted hypothesis, before the status becomes
   // TRACKING (the first TRACKING pose is the last of them).
   int relocalization_verify_steps = 10;
+  // Each verification step must also reach this chance-corrected alignment (above min_alignment:
+  // a pose found from nothing needs a clearer fit than one tracked; a hypothesis refined into a
+  // shifted-and-turned pose 5 cm from the truth verified at 0.22-0.29 where right ones verify at
+  // 0.56-0.65, docs/relocalization.md).
+  double relocalization_verify_min_alignment = 0.4;
   // While searching, each round's decay time leaves this fraction of the pixels active (the
   // newest events; within [min_decay_time_s, decay_time_s]): thin edges without a velocity.
   double relocalization_active_fraction = 0.1;
@@ -276,6 +281,16 @@ struct TrackerOptions {
   // The most CPU time the budget saves up while the search is idle or cheap, seconds (a burst:
   // a round's first step builds its fields).
   double relocalization_cpu_burst_s = 0.05;
+  // Image hypotheses (docs/relocalization.md, "Hypotheses from an image of the events"), used only
+  // when the tracker has an ImageHypothesisSource: the time constant of the image of the events
+  // (a leaky integrator of their polarities), seconds.
+  double relocalization_image_tau_s = 0.05;
+  // Events integrated before a round may ask for image hypotheses, seconds (from the start of the
+  // episode).
+  double relocalization_image_min_events_s = 0.15;
+  // Event time between two requests for image hypotheses, seconds (each costs a feature
+  // extraction and matching: hundreds of milliseconds of CPU at 640x480).
+  double relocalization_image_interval_s = 0.25;
 
   // --- Frame-based twin (Canny-VT) ---
   // Lower hysteresis threshold of cv::Canny on 8-bit frames.

@@ -5,7 +5,9 @@
 // clearly better than the best distinct hypothesis), then a verification window of consecutive
 // good steps before TRACKING.
 #include <algorithm>
+#include <chrono>
 #include <cmath>
+#include <future>
 #include <numbers>
 
 #include <opencv2/imgproc.hpp>
@@ -69,6 +71,21 @@ void Tracker::ClearSearchPrior() {
   viewpoints_.clear();
 }
 
+void Tracker::SetImageHypothesisSource(const ImageHypothesisSource* source) {
+  if (source != nullptr && options_.input != TrackerInput::kEvents) {
+    throw InvalidArgumentError(
+        "Tracker::SetImageHypothesisSource: image hypotheses are for the event search.");
+  }
+  if (image_request_.valid()) image_request_.wait();  // Its result is dropped.
+  image_request_ = {};
+  image_source_ = source;
+  event_image_ = source == nullptr
+                     ? nullptr
+                     : std::make_unique<EventImage>(table_.width(), table_.height(),
+                                                    options_.relocalization_image_tau_s);
+  last_image_request_t_ns_.reset();
+}
+
 void Tracker::BeginSearch(TrackingStatus status, int64_t t_ns) {
   status_ = status;
   search_decay_ns_ = 0;
@@ -85,6 +102,54 @@ void Tracker::BeginSearch(TrackingStatus status, int64_t t_ns) {
   hypotheses_.clear();
   refinements_.clear();
   rivals_.clear();
+  // The image of the events starts again with the episode (a request in flight still joins a
+  // round of it: its poses are refined against the newest events like any hypothesis).
+  if (event_image_) event_image_->Clear();
+  last_image_request_t_ns_.reset();
+}
+
+void Tracker::RequestImageHypotheses(int64_t t_ns) {
+  if (image_source_ == nullptr || image_request_.valid()) return;
+  if (static_cast<double>(event_image_->covered_ns()) <
+      options_.relocalization_image_min_events_s * 1e9) {
+    return;
+  }
+  if (last_image_request_t_ns_ && static_cast<double>(t_ns - *last_image_request_t_ns_) <
+                                      options_.relocalization_image_interval_s * 1e9) {
+    return;
+  }
+  last_image_request_t_ns_ = t_ns;
+  const ImageHypothesisSource* source = image_source_;
+  auto work = [source, image = event_image_->Render(t_ns), t_ns]() {
+    ImageRequest request;
+    const int64_t start_ns = ThreadCpuTimeNs();
+    request.poses = source->Hypotheses(image, t_ns);
+    request.cpu_ns = ThreadCpuTimeNs() - start_ns;
+    return request;
+  };
+  // With a CPU share the request must not hold up the session's steps: a thread of its own.
+  // Without one it runs when its result is taken, in the step (reproducible).
+  image_request_ =
+      std::async(options_.relocalization_cpu_share > 0 ? std::launch::async : std::launch::deferred,
+                 std::move(work));
+}
+
+std::vector<Rigid3d> Tracker::TakeImageHypotheses() {
+  if (!image_request_.valid()) return {};
+  const bool threaded = options_.relocalization_cpu_share > 0;
+  if (threaded && image_request_.wait_for(std::chrono::seconds(0)) != std::future_status::ready) {
+    return {};
+  }
+  const ImageRequest request = image_request_.get();
+  if (threaded) search_credit_ns_ -= static_cast<double>(request.cpu_ns);
+  std::vector<Rigid3d> poses;
+  for (const Rigid3d& pose : request.poses) {
+    bool is_new = true;
+    for (const Rigid3d& kept : poses) is_new = is_new && Distinct(kept, pose);
+    if (is_new) poses.push_back(pose);
+  }
+  search_progress_.image_hypotheses += static_cast<int>(poses.size());
+  return poses;
 }
 
 void Tracker::ChooseSearchDecay(int64_t t_ns) {
@@ -344,12 +409,9 @@ RegistrationResult Tracker::RegisterSelection(PotentialField* field,
                         options_.registration);
 }
 
-Tracker::Refinement Tracker::Refine(const Rigid3d& start_world_from_cam, int64_t t_ns) {
-  Refinement refinement;
-  refinement.world_from_cam = start_world_from_cam;
-  refinement.t_ns = t_ns;
+std::optional<Rigid3d> Tracker::ChamferStages(const Rigid3d& start_world_from_cam) {
   SelectPoints(start_world_from_cam);
-  if (selected_.size() < static_cast<size_t>(options_.min_points)) return refinement;
+  if (selected_.size() < static_cast<size_t>(options_.min_points)) return std::nullopt;
   const Rigid3d coarse =
       RegisterSelection(&chamfer_coarse_, start_world_from_cam).cam_from_world.Inverse();
   const Rigid3d fine = RegisterSelection(&chamfer_fine_, coarse).cam_from_world.Inverse();
@@ -360,8 +422,17 @@ Tracker::Refinement Tracker::Refine(const Rigid3d& start_world_from_cam, int64_t
           options_.reselect_rotation_deg * kRadiansPerDegree) {
     SelectPoints(fine);
   }
-  if (selected_.size() < static_cast<size_t>(options_.min_points)) return refinement;
-  const Attempt attempt = Solve(fine, nullptr);
+  if (selected_.size() < static_cast<size_t>(options_.min_points)) return std::nullopt;
+  return fine;
+}
+
+Tracker::Refinement Tracker::Refine(const Rigid3d& start_world_from_cam, int64_t t_ns) {
+  Refinement refinement;
+  refinement.world_from_cam = start_world_from_cam;
+  refinement.t_ns = t_ns;
+  const std::optional<Rigid3d> fine = ChamferStages(start_world_from_cam);
+  if (!fine) return refinement;
+  const Attempt attempt = Solve(*fine, nullptr);
   refinement.world_from_cam = attempt.registration.cam_from_world.Inverse();
   refinement.alignment = attempt.quality.alignment;
   refinement.points_used = attempt.quality.points_used;
@@ -431,19 +502,32 @@ void Tracker::SearchStep(int64_t t_ns, PoseEstimate* estimate) {
   progress.refined = 0;
   progress.gave_up = false;
   progress.deferred = false;
+  progress.image_hypotheses = 0;
   estimate->world_from_cam = last_good_reported_world_from_cam_;
   estimate->covariance = Matrix6d::Identity() * kUnconstrainedVariance;
   estimate->quality.decay_time_ms = decay_.decay_time_ns * 1e-6;
 
   if (search_phase_ == SearchPhase::kVerify) {
     // Track the accepted hypothesis normally (unsigned surface, constant velocity) and require
-    // every step of the window to be good.
-    const Rigid3d predicted = motion_.Predict(t_ns);
-    SelectPoints(predicted);
-    const Attempt attempt = Solve(predicted, nullptr);
+    // every step of the window to be good. The accepted pose is that of the step it was refined
+    // at, one or more steps ago (an image hypothesis: the round's first step), and the camera
+    // has moved since: the first step aligns it on chamfer fields of its own events first, as a
+    // refinement does.
+    Rigid3d start = motion_.Predict(t_ns);
+    std::optional<Rigid3d> aligned;
+    if (progress.verified_steps == 0) {
+      BuildChamferFields(t_ns);
+      aligned = ChamferStages(start);
+    }
+    if (aligned) {
+      start = *aligned;
+    } else {
+      SelectPoints(start);
+    }
+    const Attempt attempt = Solve(start, nullptr);
     estimate->quality = attempt.quality;
     estimate->quality.decay_time_ms = decay_.decay_time_ns * 1e-6;
-    if (attempt.good) {
+    if (attempt.good && attempt.quality.alignment >= options_.relocalization_verify_min_alignment) {
       const Rigid3d pose = attempt.registration.cam_from_world.Inverse();
       // The accepted pose only predicts the first verification step: it was refined partly on
       // fields built when the round began, several steps ago, so a velocity measured from it
@@ -511,6 +595,12 @@ void Tracker::SearchWork(int64_t t_ns) {
       next_refinement_ = 0;
       refinements_.clear();
       ++progress.round;
+      RequestImageHypotheses(t_ns);
+      // Image hypotheses are refined at once, on this step's fields: a pose of this instant.
+      for (const Rigid3d& pose : TakeImageHypotheses()) {
+        refinements_.push_back(Refine(pose, t_ns));
+        ++progress.refined;
+      }
       if (!viewpoints_.empty()) search_phase_ = SearchPhase::kPrescore;
     }
   }

@@ -2,6 +2,7 @@
 // the synthetic rectangle scene: from no pose, after a blackout, against unrelated events, and
 // the verification's refusal of an ambiguous round.
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <iostream>
 #include <random>
@@ -23,13 +24,13 @@ const Camera kCamera = Camera::Pinhole(240, 180, 200.0, 200.0, 119.5, 89.5);
 // every 150 ms of SmoothMotion, displaced by 6 cm and turned by 3 degrees (a map built from
 // another pass through the scene).
 Map MapWithKeyframes(const std::vector<testing::Rectangle>& rectangles,
-                     const Eigen::Vector3d& shift = Eigen::Vector3d::Zero()) {
+                     const Eigen::Vector3d& shift = Eigen::Vector3d::Zero(),
+                     const Vector6d& displacement =
+                         (Vector6d() << 0.06, -0.03, 0.0, 0.0, 3 * kDegree, 0).finished()) {
   Map map = testing::MakeRectangleMap(rectangles, 0.004);
   map.cameras.push_back(kCamera);
   for (int64_t t_ns = 0; t_ns <= 900'000'000; t_ns += 150'000'000) {
-    Rigid3d world_from_cam =
-        testing::SmoothMotion(t_ns) *
-        ExpSE3((Vector6d() << 0.06, -0.03, 0.0, 0.0, 3 * kDegree, 0).finished());
+    Rigid3d world_from_cam = testing::SmoothMotion(t_ns) * ExpSE3(displacement);
     world_from_cam.translation += shift;
     Keyframe keyframe;
     keyframe.cam_from_world = world_from_cam.Inverse();
@@ -326,6 +327,103 @@ TEST(TrackerSearch, RefusesWhenTheSecondBestDistinctHypothesisIsAlmostAsGood) {
   EXPECT_GE(first_tracking_ns, 0);
 }
 
+// The rectangle map with keyframes on a pass 0.78 m and 20 degrees from the events' path: beyond
+// the reach of the search's own hypotheses (a 0.2 m grid and 8-degree turns around them).
+const Map& FarMap() {
+  static const Map map =
+      MapWithKeyframes(testing::DefaultRectangles(), Eigen::Vector3d::Zero(),
+                       (Vector6d() << 0.6, -0.4, 0.3, 0.0, 20 * kDegree, 0).finished());
+  return map;
+}
+
+// An image source that "locates" each image at the true pose of its time displaced by `offset`
+// (a located image of events is a few centimetres off), counting its calls.
+class TruthImageSource final : public ImageHypothesisSource {
+ public:
+  explicit TruthImageSource(const Vector6d& offset) : offset_(offset) {}
+  std::vector<Rigid3d> Hypotheses(const cv::Mat& image, int64_t t_ns) const override {
+    ++calls;
+    if (image.type() != CV_8UC1 || image.cols != kCamera.width || image.rows != kCamera.height) {
+      ++bad_images;
+    }
+    return {testing::SmoothMotion(t_ns) * ExpSE3(offset_)};
+  }
+  mutable std::atomic<int> calls{0};
+  mutable std::atomic<int> bad_images{0};
+
+ private:
+  Vector6d offset_;
+};
+
+int ImageHypothesesRefined(const std::vector<PoseEstimate>& estimates) {
+  int total = 0;
+  for (const PoseEstimate& estimate : estimates) total += estimate.search.image_hypotheses;
+  return total;
+}
+
+TEST(TrackerSearch, ImageHypothesesReachWhereTheMapsViewpointsDoNot) {
+  const EventBuffer events = SceneEvents(900'000'000);
+  const TrackerOptions options;
+  // Without image hypotheses the far map's viewpoints do not reach the events' path...
+  Tracker alone(FarMap(), nullptr, kCamera, options);
+  alone.StartWithoutPose(0);
+  EXPECT_LT(CheckEstimates(alone.AddEvents(events), options), 0) << "found without images";
+  // ...with images located 2 cm and 1 degree off the truth, it is found, and every TRACKING pose
+  // is right.
+  const TruthImageSource source((Vector6d() << 0.02, 0.0, -0.01, 0.0, 0.0, kDegree).finished());
+  Tracker tracker(FarMap(), nullptr, kCamera, options);
+  tracker.SetImageHypothesisSource(&source);
+  tracker.StartWithoutPose(0);
+  const std::vector<PoseEstimate> estimates = tracker.AddEvents(events);
+  const int64_t first_tracking_ns = CheckEstimates(estimates, options);
+  ASSERT_GE(first_tracking_ns, 0) << "never TRACKING";
+  std::cout << "far map with image hypotheses: TRACKING at " << first_tracking_ns * 1e-9 << " s, "
+            << source.calls << " image requests\n";
+  // The first request needs relocalization_image_min_events_s (0.15 s) of events, then one
+  // round and the verification.
+  EXPECT_LT(first_tracking_ns, 400'000'000);
+  EXPECT_GT(ImageHypothesesRefined(estimates), 0);
+  EXPECT_EQ(source.bad_images, 0);
+  EXPECT_EQ(tracker.status(), TrackingStatus::kTracking);
+}
+
+TEST(TrackerSearch, WrongImageHypothesesNeverGiveAWrongTrackingPose) {
+  const EventBuffer events = SceneEvents(900'000'000);
+  const TrackerOptions options;
+  // 25 cm and 10 degrees off: refined, judged, and never a TRACKING pose beyond 5 cm / 3 degrees.
+  const TruthImageSource source((Vector6d() << 0.25, -0.1, 0.1, 0.0, 10 * kDegree, 0).finished());
+  Tracker tracker(FarMap(), nullptr, kCamera, options);
+  tracker.SetImageHypothesisSource(&source);
+  tracker.StartWithoutPose(0);
+  const std::vector<PoseEstimate> estimates = tracker.AddEvents(events);
+  CheckEstimates(estimates, options);
+  EXPECT_GT(ImageHypothesesRefined(estimates), 0);
+}
+
+TEST(TrackerSearch, WithACpuShareImageHypothesesRunOnAThreadOfTheirOwn) {
+  const EventBuffer events = SceneEvents(900'000'000);
+  TrackerOptions options;
+  options.relocalization_cpu_share = 0.5;
+  const TruthImageSource source((Vector6d() << 0.02, 0.0, -0.01, 0.0, 0.0, kDegree).finished());
+  Tracker tracker(FarMap(), nullptr, kCamera, options);
+  tracker.SetImageHypothesisSource(&source);
+  tracker.StartWithoutPose(0);
+  // One step's events at a time, as a live session gets them.
+  const int64_t period_ns = std::llround(1e9 / options.step_rate_hz);
+  std::vector<PoseEstimate> estimates;
+  size_t begin = 0;
+  for (int64_t end_ns = period_ns; begin < events.size(); end_ns += period_ns) {
+    size_t end = begin;
+    while (end < events.size() && events.t_ns[end] < end_ns) ++end;
+    EventBuffer window;
+    window.Append(events, begin, end - begin);
+    for (PoseEstimate& estimate : tracker.AddEvents(window)) estimates.push_back(estimate);
+    begin = end;
+  }
+  EXPECT_GE(CheckEstimates(estimates, options), 0) << "never TRACKING";
+  EXPECT_GT(source.calls, 0);
+}
+
 TEST(TrackerSearch, RejectsABadPriorAndFrameTrackers) {
   Tracker tracker(SceneMap(), nullptr, kCamera, TrackerOptions());
   EXPECT_THROW(tracker.SetSearchPrior(Eigen::Vector3d::Zero(), 0.0), InvalidArgumentError);
@@ -334,9 +432,22 @@ TEST(TrackerSearch, RejectsABadPriorAndFrameTrackers) {
   frames.input = TrackerInput::kFrames;
   Tracker frame_tracker(SceneMap(), nullptr, kCamera, frames);
   EXPECT_THROW(frame_tracker.StartWithoutPose(0), InvalidArgumentError);
+  const TruthImageSource source(Vector6d::Zero());
+  EXPECT_THROW(frame_tracker.SetImageHypothesisSource(&source), InvalidArgumentError);
   TrackerOptions bad;
   bad.relocalization_verify_steps = 0;
   EXPECT_THROW(bad.Check(), InvalidArgumentError);
+  for (const double value : {-0.1, 1.5, std::nan("")}) {
+    TrackerOptions bad_alignment;
+    bad_alignment.relocalization_verify_min_alignment = value;
+    EXPECT_THROW(bad_alignment.Check(), InvalidArgumentError) << value;
+  }
+  TrackerOptions bad_tau;
+  bad_tau.relocalization_image_tau_s = 0;
+  EXPECT_THROW(bad_tau.Check(), InvalidArgumentError);
+  TrackerOptions bad_interval;
+  bad_interval.relocalization_image_interval_s = -1;
+  EXPECT_THROW(bad_interval.Check(), InvalidArgumentError);
 }
 
 TEST(StaticMapSource, GivesKeyframesAndViewpointsBetweenThemWithinThePrior) {

@@ -1,0 +1,102 @@
+#include "localizer/tracking/event_image.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "core/common/error.h"
+
+namespace evloc::tracking {
+namespace {
+
+constexpr int64_t kNever = std::numeric_limits<int64_t>::min();
+
+}  // namespace
+
+EventImage::EventImage(int width, int height, double tau_s)
+    : width_(width), height_(height), tau_ns_(tau_s * 1e9) {
+  if (width <= 0 || height <= 0 || !(tau_s > 0) || !std::isfinite(tau_s)) {
+    throw InvalidArgumentError("EventImage: the size must be positive and tau positive, got " +
+                               std::to_string(width) + "x" + std::to_string(height) + ", tau " +
+                               std::to_string(tau_s) + " s.");
+  }
+  Clear();
+}
+
+void EventImage::Clear() {
+  const size_t pixels = static_cast<size_t>(width_) * height_;
+  value_.assign(pixels, 0.0f);
+  last_t_ns_per_pixel_.assign(pixels, kNever);
+  any_ = false;
+  first_t_ns_ = 0;
+  last_t_ns_ = 0;
+}
+
+void EventImage::Insert(const EventBuffer& events, size_t begin, size_t end) {
+  if (begin >= end) return;
+  if (!any_) {
+    any_ = true;
+    first_t_ns_ = events.t_ns[begin];
+  }
+  const double inverse_tau = 1.0 / tau_ns_;
+  for (size_t i = begin; i < end; ++i) {
+    if (events.x[i] >= width_ || events.y[i] >= height_) continue;
+    const size_t pixel = static_cast<size_t>(events.y[i]) * width_ + events.x[i];
+    const int64_t t = events.t_ns[i];
+    const int64_t last = last_t_ns_per_pixel_[pixel];
+    float& value = value_[pixel];
+    if (last != kNever)
+      value *= static_cast<float>(std::exp(-static_cast<double>(t - last) * inverse_tau));
+    value += static_cast<float>(events.polarity[i]);
+    last_t_ns_per_pixel_[pixel] = t;
+  }
+  last_t_ns_ = events.t_ns[end - 1];
+}
+
+double EventImage::Value(int x, int y, int64_t t_ns) const {
+  if (x < 0 || y < 0 || x >= width_ || y >= height_) return 0.0;
+  const size_t pixel = static_cast<size_t>(y) * width_ + x;
+  if (last_t_ns_per_pixel_[pixel] == kNever) return 0.0;
+  return value_[pixel] *
+         std::exp(-static_cast<double>(t_ns - last_t_ns_per_pixel_[pixel]) / tau_ns_);
+}
+
+cv::Mat EventImage::Render(int64_t t_ns) const {
+  cv::Mat image(height_, width_, CV_8UC1, cv::Scalar(128));
+  if (!any_) return image;
+  const size_t pixels = value_.size();
+  std::vector<float> decayed(pixels, 0.0f);
+  // The percentiles are over every pixel (those that never fired are at the integrator's rest
+  // value, 0), as measured in docs/relocalization.md.
+  std::vector<float> seen;
+  seen.reserve(pixels);
+  const double inverse_tau = 1.0 / tau_ns_;
+  for (size_t i = 0; i < pixels; ++i) {
+    if (last_t_ns_per_pixel_[i] != kNever) {
+      decayed[i] =
+          value_[i] * static_cast<float>(std::exp(
+                          -static_cast<double>(t_ns - last_t_ns_per_pixel_[i]) * inverse_tau));
+    }
+    seen.push_back(decayed[i]);
+  }
+  const auto quantile = [&seen](double q) {
+    const size_t k =
+        std::min(seen.size() - 1, static_cast<size_t>(q * static_cast<double>(seen.size())));
+    std::nth_element(seen.begin(), seen.begin() + static_cast<std::ptrdiff_t>(k), seen.end());
+    return seen[k];
+  };
+  const float low = quantile(0.01);
+  const float high = quantile(0.99);
+  const float scale = high > low ? 255.0f / (high - low) : 0.0f;
+  for (int y = 0; y < height_; ++y) {
+    uint8_t* row = image.ptr<uint8_t>(y);
+    for (int x = 0; x < width_; ++x) {
+      const size_t i = static_cast<size_t>(y) * width_ + x;
+      const float v = scale > 0 ? (decayed[i] - low) * scale : 128.0f;
+      row[x] = static_cast<uint8_t>(std::clamp(v, 0.0f, 255.0f) + 0.5f);
+    }
+  }
+  return image;
+}
+
+}  // namespace evloc::tracking

@@ -1,0 +1,58 @@
+// A grey image reconstructed from events, for the search's image hypotheses
+// (docs/relocalization.md, "Events: hypotheses from an image of the events"): per pixel, a leaky
+// integrator of the event polarities, v <- v * exp(-dt / tau) + p. Each event is a step of the
+// log intensity by about one contrast threshold, so v is the log intensity high-pass filtered
+// with time constant tau: with the camera moving, the low-pass part is the scene blurred along
+// the motion and v keeps its texture, enough for the map's local features to match. Written here
+// rather than taken from a library: OpenCV's contrib has no event integrator, and the integrator
+// is four lines on the tracker's own event buffers.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include <opencv2/core/mat.hpp>
+
+#include "core/events/event.h"
+
+namespace evloc::tracking {
+
+class EventImage {
+ public:
+  // An image of width x height pixels (the sensor's) and time constant tau_s (> 0). Throws
+  // InvalidArgumentError otherwise.
+  EventImage(int width, int height, double tau_s);
+
+  // Forgets every event.
+  void Clear();
+
+  // Integrates events [begin, end) of `events` (time-ordered, also across calls); events outside
+  // the image are skipped.
+  void Insert(const EventBuffer& events, size_t begin, size_t end);
+
+  // Nanoseconds of events integrated since the first event after construction or Clear() (0
+  // before one).
+  int64_t covered_ns() const { return any_ ? last_t_ns_ - first_t_ns_ : 0; }
+
+  // The integrator's value at pixel (x, y) decayed to t_ns (>= its last event), in contrast
+  // thresholds (0 for a pixel that never fired or outside the image).
+  double Value(int x, int y, int64_t t_ns) const;
+
+  // The image at t_ns (>= the last event): every pixel decayed to t_ns, then stretched linearly
+  // from the 1st to the 99th percentile of the pixels that saw an event onto 0..255 (an 8-bit
+  // grey image, CV_8UC1). All grey (128) before any event.
+  cv::Mat Render(int64_t t_ns) const;
+
+ private:
+  int width_;
+  int height_;
+  double tau_ns_;
+  std::vector<float> value_;
+  std::vector<int64_t> last_t_ns_per_pixel_;
+  bool any_ = false;
+  int64_t first_t_ns_ = 0;
+  int64_t last_t_ns_ = 0;
+};
+
+}  // namespace evloc::tracking
