@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <sstream>
+#include <stdexcept>
 
 #include <CLI/CLI.hpp>
 
@@ -147,9 +148,9 @@ void CommandLine::Configure(std::string synopsis) {
 
 CommandLine& CommandLine::Add(std::string_view flag, std::string_view value_name,
                               std::string_view help, Apply apply) {
-  const std::string name(flag);
+  const std::string name(flag.substr(0, flag.find(',')));
   CLI::Option* option = app_->add_option_function<std::string>(
-      name,
+      std::string(flag),
       [apply = std::move(apply), name](const std::string& value) {
         try {
           apply(name, value);
@@ -167,6 +168,46 @@ CommandLine& CommandLine::Add(std::string_view flag, std::string_view value_name
   option->trigger_on_parse();
   option->multi_option_policy(CLI::MultiOptionPolicy::TakeLast);
   option->group(group_);
+  return *this;
+}
+
+CommandLine& CommandLine::AddFlagsOfUsage(
+    std::string_view usage,
+    const std::function<bool(const std::string& flag, const std::string& value)>& apply) {
+  struct Declared {
+    std::string flag;
+    std::string value_name;
+    std::string help;
+  };
+  std::vector<Declared> flags;
+  std::istringstream lines{std::string(usage)};
+  for (std::string line; std::getline(lines, line);) {
+    const size_t start = line.find_first_not_of(' ');
+    if (start == std::string::npos) continue;
+    std::string text = line.substr(start);
+    if (text.rfind("--", 0) != 0) {
+      // A continuation of the last flag's help.
+      if (!flags.empty()) flags.back().help += (flags.back().help.empty() ? "" : " ") + text;
+      continue;
+    }
+    const size_t gap = text.find("  ");
+    std::string head = text.substr(0, gap);
+    const size_t space = head.find(' ');
+    Declared declared{head.substr(0, space),
+                      space == std::string::npos ? "" : head.substr(space + 1), ""};
+    if (gap != std::string::npos) {
+      declared.help = text.substr(text.find_first_not_of(' ', gap));
+    }
+    flags.push_back(std::move(declared));
+  }
+  for (const Declared& declared : flags) {
+    Add(declared.flag, declared.value_name, declared.help,
+        [apply](const std::string& flag, const std::string& value) {
+          if (!apply(flag, value)) {
+            throw std::logic_error("the usage text lists " + flag + " but its parser ignores it");
+          }
+        });
+  }
   return *this;
 }
 

@@ -72,7 +72,8 @@ class CommandLine {
   CommandLine(const CommandLine&) = delete;
   CommandLine& operator=(const CommandLine&) = delete;
 
-  // A flag with a value (`value_name` in --help, e.g. "PATH"), stored by `apply`.
+  // A flag with a value (`value_name` in --help, e.g. "PATH"), stored by `apply`. `flag` may list
+  // aliases, "--input,--bag" (errors name the first).
   CommandLine& Add(std::string_view flag, std::string_view value_name, std::string_view help,
                    Apply apply);
   // A flag with a value parsed strictly into `*target` (ParseFlagValue).
@@ -90,6 +91,14 @@ class CommandLine {
       *target = ParseFlagValue<T>(name, text);
     });
   }
+  // The flags a hand-written usage text lists, one "  --flag VALUE  help" line each (continuation
+  // lines indented deeper; the help starts after two spaces), each stored by `apply`, which
+  // returns false for a flag it does not know (a programming error: std::logic_error). So a flag
+  // set shared with tools still on hand-written parsers keeps one help text and one parser:
+  // kRecordingFlagsUsage with ApplyRecordingFlag (core/dataset/dataset.h).
+  CommandLine& AddFlagsOfUsage(
+      std::string_view usage,
+      const std::function<bool(const std::string& flag, const std::string& value)>& apply);
   // A flag without a value that sets `*target` to true.
   CommandLine& Switch(std::string_view flag, std::string_view help, bool* target);
   // Flags declared after this call are listed under `heading` in --help (default "Options").

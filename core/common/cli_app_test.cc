@@ -176,5 +176,32 @@ TEST(CommandLine, SubcommandsHaveTheirOwnFlagsAndHelp) {
       << render.Help();
 }
 
+// A flag set shared with hand-written parsers keeps its one usage text and its one parser.
+TEST(CommandLine, FlagsOfAHandWrittenUsageText) {
+  constexpr char kUsage[] =
+      "  --topic T              the topic (default /dvs/events) of the\n"
+      "                         events\n"
+      "  --a-long-flag-name VALUE\n"
+      "                         help on the next line\n";
+  std::vector<std::pair<std::string, std::string>> applied;
+  CommandLine line("evloc-test", "", "");
+  line.AddFlagsOfUsage(kUsage, [&](const std::string& flag, const std::string& value) {
+    applied.emplace_back(flag, value);
+    return true;
+  });
+  line.Parse({"--a-long-flag-name", "x", "--topic", "/t"});
+  EXPECT_EQ(applied, (std::vector<std::pair<std::string, std::string>>{{"--a-long-flag-name", "x"},
+                                                                       {"--topic", "/t"}}));
+  const std::string help = line.Help();
+  EXPECT_NE(help.find("--topic T                   the topic (default /dvs/events) of the events"),
+            std::string::npos)
+      << help;
+  EXPECT_NE(help.find("--a-long-flag-name VALUE    help on the next line"), std::string::npos)
+      << help;
+  CommandLine broken("evloc-test", "", "");
+  broken.AddFlagsOfUsage(kUsage, [](const std::string&, const std::string&) { return false; });
+  EXPECT_THROW(broken.Parse({"--topic", "x"}), std::logic_error);
+}
+
 }  // namespace
 }  // namespace evloc
