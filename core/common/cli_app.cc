@@ -82,8 +82,15 @@ class HelpFormatter final : public CLI::Formatter {
     std::string usage = "Usage: ";
     std::istringstream forms(synopsis_);
     bool first = true;
+    // Each form after the name, wrapped under its own start.
+    const std::string hanging(std::string("Usage: ").size() + full_name.size() + 1, ' ');
     for (std::string form; std::getline(forms, form);) {
-      usage += (first ? "" : "       ") + full_name + (form.empty() ? "" : " " + form) + "\n";
+      std::string wrapped = Wrap(form, kHelpWidth - hanging.size());
+      for (size_t at = wrapped.find('\n'); at != std::string::npos;
+           at = wrapped.find('\n', at + 1)) {
+        wrapped.insert(at + 1, hanging);
+      }
+      usage += (first ? "" : "       ") + full_name + (form.empty() ? "" : " " + wrapped) + "\n";
       first = false;
     }
     return usage + "\n";
