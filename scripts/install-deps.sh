@@ -16,6 +16,8 @@ PACKAGES=(
   # geo-reference (core/geo: WGS84, ECEF, ENU) and the GNSS tags of photos (mapper --geo-exif;
   # exiv2: the command line checks the tags the tests write)
   libgeographiclib-dev libexiv2-dev exiv2
+  # plumbing libraries: logging (spdlog, with fmt) and the tools' command lines (CLI11)
+  libspdlog-dev libcli11-dev
   # service
   libgrpc++-dev libprotobuf-dev protobuf-compiler protobuf-compiler-grpc
   # token digests (SHA-256, CRYPTO_memcmp) and TLS file checks: OpenSSL libcrypto

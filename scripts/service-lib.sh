@@ -1,8 +1,8 @@
 # Shared by scripts/bench-service.sh and scripts/soak-service.sh (sourced, not run).
 
 # start_localizer LOG BINARY ARGS...: starts `BINARY serve ARGS... --listen 127.0.0.1:0` in the
-# background with its output in LOG, waits until it prints its port (at most 30 s), and sets
-# SERVER_PID and PORT. Exits with the log on stderr when the server stops or does not start.
+# background with its output in LOG, waits until it logs its port (at most 30 s; text or JSON
+# logs), and sets SERVER_PID and PORT. Exits with the log on stderr when the server stops or does not start.
 start_localizer() {
   local log=$1 binary=$2
   shift 2
@@ -10,7 +10,9 @@ start_localizer() {
   SERVER_PID=$!
   PORT=""
   for _ in $(seq 300); do
-    PORT=$(sed -n 's/^evloc-localizer: serving on port \([0-9]*\)$/\1/p' "$log")
+    # The text line, or the JSON record of --log-format json.
+    PORT=$(sed -n -e 's/^evloc-localizer: serving on port \([0-9]*\)$/\1/p' \
+      -e 's/^{.*"message":"serving on port \([0-9]*\)".*$/\1/p' "$log")
     [[ -n "$PORT" ]] && return 0
     kill -0 "$SERVER_PID" 2>/dev/null || { cat "$log" >&2; exit 1; }
     sleep 0.1

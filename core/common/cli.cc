@@ -49,6 +49,12 @@ double ParseDoubleFlag(std::string_view flag, std::string_view text) {
   return value;
 }
 
+std::optional<double> ParseDoubleOrWordFlag(std::string_view flag, std::string_view text,
+                                            std::string_view word) {
+  if (text == word) return std::nullopt;
+  return ParseDoubleFlag(flag, text);
+}
+
 namespace {
 
 // Parses a whole base-10 number of type T; throws UsageError "FLAG expects WHAT, got 'TEXT'".

@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <functional>
 #include <iostream>
+#include <optional>
 #include <ostream>
 #include <string>
 #include <string_view>
@@ -80,6 +81,10 @@ const std::string& TakeFlagValue(const std::vector<std::string>& arguments, size
 // Parses a finite floating-point number (no nan, no inf); the whole text must be consumed.
 // Throws UsageError "FLAG expects a number, got 'TEXT'".
 double ParseDoubleFlag(std::string_view flag, std::string_view text);
+
+// Parses a finite number as ParseDoubleFlag does, or `word` for none ("--speed max": nullopt).
+std::optional<double> ParseDoubleOrWordFlag(std::string_view flag, std::string_view text,
+                                            std::string_view word);
 
 // Parses a base-10 integer; the whole text must be consumed. Throws UsageError.
 int64_t ParseIntegerFlag(std::string_view flag, std::string_view text);

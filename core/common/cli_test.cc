@@ -53,6 +53,13 @@ TEST(ParseDoubleFlag, AcceptsWholeNumbersOnly) {
   }
 }
 
+TEST(ParseDoubleOrWordFlag, TakesTheWordOrAStrictNumber) {
+  EXPECT_EQ(ParseDoubleOrWordFlag("--speed", "max", "max"), std::nullopt);
+  EXPECT_EQ(ParseDoubleOrWordFlag("--speed", "2.5", "max"), 2.5);
+  EXPECT_THROW(ParseDoubleOrWordFlag("--speed", "Max", "max"), UsageError);
+  EXPECT_THROW(ParseDoubleOrWordFlag("--speed", "nan", "max"), UsageError);
+}
+
 TEST(ParseIntegerFlag, RejectsFractionsAndText) {
   EXPECT_EQ(ParseIntegerFlag("--n", "42"), 42);
   EXPECT_THROW(ParseIntegerFlag("--n", "4.2"), UsageError);

@@ -222,18 +222,24 @@ std::shared_ptr<const TokenTable> TokenFile::Current() {
   const std::string kept =
       "; the " + std::to_string(table_->size()) + " tokens read before stay in force";
   if (!stamp) {
-    if (log_) log_("token file '" + path_.string() + "' cannot be found or read" + kept);
+    if (log_) {
+      log_(LogLevel::kWarning,
+           "token file '" + path_.string() + "' cannot be found or read" + kept);
+    }
     return table_;
   }
   try {
     table_ = std::make_shared<const TokenTable>(TokenTable::Read(path_));
     ++reloads_;
     if (log_) {
-      log_("token file '" + path_.string() + "' changed: read again, " +
-           std::to_string(table_->size()) + " tokens");
+      log_(LogLevel::kInfo, "token file '" + path_.string() + "' changed: read again, " +
+                                std::to_string(table_->size()) + " tokens");
     }
   } catch (const std::exception& error) {
-    if (log_) log_(std::string("token file changed but is not valid: ") + error.what() + kept);
+    if (log_) {
+      log_(LogLevel::kWarning,
+           std::string("token file changed but is not valid: ") + error.what() + kept);
+    }
   }
   return table_;
 }
@@ -403,15 +409,18 @@ void ServerTlsFiles::WatchLoop() {
         lock.lock();
         ++reloads_;
         lock.unlock();
-        if (log_) log_("TLS files changed: the new certificate is in force for new connections");
+        if (log_) {
+          log_(LogLevel::kInfo,
+               "TLS files changed: the new certificate is in force for new connections");
+        }
       }
     } catch (const std::exception& error) {
       // Reported once per distinct problem (a file being replaced may fail one check).
       if (last_error != error.what()) {
         last_error = error.what();
         if (log_) {
-          log_(std::string("TLS files changed but are not valid: ") + error.what() +
-               "; the previous certificate stays in force");
+          log_(LogLevel::kWarning, std::string("TLS files changed but are not valid: ") +
+                                       error.what() + "; the previous certificate stays in force");
         }
       }
     }

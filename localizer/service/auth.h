@@ -20,6 +20,8 @@
 #include <thread>
 #include <vector>
 
+#include "core/common/log.h"
+
 namespace grpc {
 class ServerCredentials;
 }  // namespace grpc
@@ -75,8 +77,9 @@ class TokenTable {
 // (once per change). Thread-safe.
 class TokenFile {
  public:
-  // A report line (no trailing newline).
-  using LogFunction = std::function<void(const std::string& line)>;
+  // A report line (no trailing newline) and its level (info: read again; warning: the file is
+  // missing or invalid and the previous tokens stay in force).
+  using LogFunction = std::function<void(LogLevel level, const std::string& line)>;
 
   // Reads `path` now (throws like TokenTable::Read). `reload_interval`: the least time between
   // two checks of the file; zero checks on every lookup.
@@ -150,8 +153,9 @@ TlsPem ReadTlsFiles(const std::filesystem::path& cert_file, const std::filesyste
 // (mutual TLS).
 class ServerTlsFiles {
  public:
-  // A report line (no trailing newline); called from the watcher thread.
-  using LogFunction = std::function<void(const std::string& line)>;
+  // A report line (no trailing newline) and its level (info: new files in force; warning: they
+  // are not valid); called from the watcher thread.
+  using LogFunction = std::function<void(LogLevel level, const std::string& line)>;
 
   // Reads and checks the files (throws like ReadTlsFiles), publishes them and starts watching.
   // Throws IoError when the private folder cannot be made.

@@ -113,7 +113,7 @@ class TokenFileTest : public ::testing::Test {
   std::vector<std::string> log;
   // The file is written first (in order of declaration), then read.
   TokenFile tokens{(ReplaceFile(path, "alpha *\n"), path), std::chrono::milliseconds(0),
-                   [this](const std::string& line) { log.push_back(line); }};
+                   [this](LogLevel, const std::string& line) { log.push_back(line); }};
 };
 
 TEST_F(TokenFileTest, ReadsTheFileAgainWhenItChanges) {

@@ -261,17 +261,17 @@ std::string LocalizerServerOptions::Describe() const {
 class LocalizerServer::Service final
     : public api::Localizer::WithCallbackMethod_Track<api::Localizer::Service> {
  public:
-  Service(const LocalizerServerOptions& options, LogFunction log)
+  Service(const LocalizerServerOptions& options, std::shared_ptr<Logger> logger)
       : options_(options),
         session_limits_(options.session_limits()),
-        log_(std::move(log)),
+        logger_(std::move(logger)),
         registry_(options.registry_options()),
         memory_(options.max_memory_bytes),
         pool_(TrackingPool::ThreadsFor(options.tracking_threads)) {
     if (options.auth_tokens_file) {
-      tokens_ = std::make_unique<TokenFile>(*options.auth_tokens_file,
-                                            std::chrono::seconds(options.reload_interval_s),
-                                            [this](const std::string& line) { Log(line); });
+      tokens_ = std::make_unique<TokenFile>(
+          *options.auth_tokens_file, std::chrono::seconds(options.reload_interval_s),
+          [this](LogLevel level, const std::string& line) { Log(level, line); });
     }
   }
 
@@ -417,6 +417,10 @@ class LocalizerServer::Service final
         << memory_.used() << "\n# HELP evloc_memory_budget_bytes The --max-memory budget.\n"
         << "# TYPE evloc_memory_budget_bytes gauge\nevloc_memory_budget_bytes " << memory_.limit()
         << "\n"
+        << "# HELP evloc_log_records_dropped_total Log records dropped because the log's queue "
+           "was full (the log's output could not keep up).\n"
+        << "# TYPE evloc_log_records_dropped_total counter\nevloc_log_records_dropped_total "
+        << (logger_ ? logger_->dropped() : 0) << "\n"
         << TileCacheMetricsText(registry_.tile_cache().stats());
     return text.str();
   }
@@ -430,8 +434,10 @@ class LocalizerServer::Service final
       try {
         *response->add_maps() = DescribeMap(registry_.Describe(name));
       } catch (const Error& error) {
-        Log("ListMaps: skipping map '" + EscapeForLog(name) +
-            "': " + EscapeForLog(error.what(), 1024));
+        Log(LogLevel::kWarning,
+            "ListMaps: skipping map '" + EscapeForLog(name) +
+                "': " + EscapeForLog(error.what(), 1024),
+            {{"map", EscapeForLog(name)}, {"error", EscapeForLog(error.what(), 1024)}});
       }
     }
     return grpc::Status::OK;
@@ -449,8 +455,10 @@ class LocalizerServer::Service final
     } catch (const MapNotFoundError& error) {
       return Reject(ForClient({grpc::StatusCode::NOT_FOUND, error.what()}));
     } catch (const Error& error) {
-      Log("GetMap '" + EscapeForLog(request->name()) +
-          "': cannot load: " + EscapeForLog(error.what(), 1024));
+      Log(LogLevel::kWarning,
+          "GetMap '" + EscapeForLog(request->name()) +
+              "': cannot load: " + EscapeForLog(error.what(), 1024),
+          {{"map", EscapeForLog(request->name())}, {"error", EscapeForLog(error.what(), 1024)}});
       return Reject(ForClient({grpc::StatusCode::FAILED_PRECONDITION,
                                std::string("the map cannot be loaded: ") + error.what()}));
     }
@@ -472,13 +480,21 @@ class LocalizerServer::Service final
     grpc::Status status = HandleLocate(*request, registry_, options_.max_camera_pixels,
                                        relocalization::LocateOptions(), response);
     if (!status.ok()) {
-      Log("Locate on map '" + EscapeForLog(request->map_name()) +
-          "' rejected: " + EscapeForLog(status.error_message(), 1024));
+      Log(LogLevel::kInfo,
+          "Locate on map '" + EscapeForLog(request->map_name()) +
+              "' rejected: " + EscapeForLog(status.error_message(), 1024),
+          {{"map", EscapeForLog(request->map_name())},
+           {"code", wire::StatusCodeName(status.error_code())},
+           {"error", EscapeForLog(status.error_message(), 1024)}});
       return Reject(ForClient(status));
     }
-    Log("Locate on map '" + EscapeForLog(request->map_name()) +
-        "': " + (response->status() == api::FOUND ? "FOUND" : "NOT_FOUND") + " in " +
-        std::to_string(response->locate_ms()) + " ms");
+    const char* found = response->status() == api::FOUND ? "FOUND" : "NOT_FOUND";
+    Log(LogLevel::kInfo,
+        "Locate on map '" + EscapeForLog(request->map_name()) + "': " + found + " in " +
+            std::to_string(response->locate_ms()) + " ms",
+        {{"map", EscapeForLog(request->map_name())},
+         {"status", found},
+         {"locate_ms", response->locate_ms()}});
     return status;
   }
 
@@ -514,9 +530,14 @@ class LocalizerServer::Service final
     return {grpc::StatusCode::PERMISSION_DENIED, "this token may not use map '" + map_name + "'"};
   }
 
-  // Writes a log line.
-  void Log(const std::string& line) const {
-    if (log_) log_(line);
+  // Logs a record (core/common/log.h); `session` 0: none. Never blocks on the log's output.
+  void Log(LogLevel level, std::string_view message, std::initializer_list<LogField> fields = {},
+           uint64_t session = 0) const {
+    if (logger_) logger_->Log(level, message, fields, session);
+  }
+  void Log(LogLevel level, std::string_view message, const std::vector<LogField>& fields,
+           uint64_t session) const {
+    if (logger_) logger_->Log(level, message, fields, session);
   }
 
   const LocalizerServerOptions& options() const { return options_; }
@@ -533,7 +554,7 @@ class LocalizerServer::Service final
  private:
   LocalizerServerOptions options_;
   SessionLimits session_limits_;
-  LogFunction log_;
+  std::shared_ptr<Logger> logger_;
   MapRegistry registry_;
   std::unique_ptr<TokenFile> tokens_;
   ServerCounters counters_;
@@ -868,15 +889,30 @@ class TrackCall final : public TrackReactor,
     id_ = service_.NextSessionId();
     ++service_.counters().sessions_started;
     session_start_ = Clock::now();
-    service_.Log(
-        "session " + std::to_string(id_) + " start: map " + map->name + " version " + map->version +
-        " (" + std::to_string(map->map.size()) + " points), client '" +
-        EscapeForLog(start_.client_name()) + "' " + context_->peer() + ", camera " +
-        std::to_string(settings.camera.width) + "x" + std::to_string(settings.camera.height) +
-        ", " + (tracker_->takes_frames() ? "frames" : "events") + ", " +
-        settings.tracker.VariantName() + " at " + std::to_string(settings.tracker.step_rate_hz) +
-        " Hz, opened in " +
-        std::to_string(static_cast<int64_t>(MicrosecondsSince(open_start) / 1000)) + " ms");
+    const int64_t open_ms = static_cast<int64_t>(MicrosecondsSince(open_start) / 1000);
+    const char* input = tracker_->takes_frames() ? "frames" : "events";
+    service_.Log(LogLevel::kInfo,
+                 "session " + std::to_string(id_) + " start: map " + map->name + " version " +
+                     map->version + " (" + std::to_string(map->map.size()) + " points), client '" +
+                     EscapeForLog(start_.client_name()) + "' " + context_->peer() + ", camera " +
+                     std::to_string(settings.camera.width) + "x" +
+                     std::to_string(settings.camera.height) + ", " + input + ", " +
+                     settings.tracker.VariantName() + " at " +
+                     std::to_string(settings.tracker.step_rate_hz) + " Hz, opened in " +
+                     std::to_string(open_ms) + " ms",
+                 {{"event", "start"},
+                  {"map", map->name},
+                  {"map_version", map->version},
+                  {"map_points", map->map.size()},
+                  {"client", EscapeForLog(start_.client_name())},
+                  {"peer", context_->peer()},
+                  {"camera_width", settings.camera.width},
+                  {"camera_height", settings.camera.height},
+                  {"input", input},
+                  {"variant", settings.tracker.VariantName()},
+                  {"step_rate_hz", settings.tracker.step_rate_hz},
+                  {"open_ms", open_ms}},
+                 id_);
     api::TrackResponse started;
     started.mutable_started()->set_session_id(id_);
     *started.mutable_started()->mutable_map() = DescribeMap(*map);
@@ -1019,8 +1055,10 @@ class TrackCall final : public TrackReactor,
     try {
       estimates = tracker_->Process(item.item, [this] { return ShouldStop(); });
     } catch (const std::exception& error) {
-      service_.Log("session " + std::to_string(id_) +
-                   " tracking failed: " + EscapeForLog(error.what(), 1024));
+      service_.Log(LogLevel::kError,
+                   "session " + std::to_string(id_) +
+                       " tracking failed: " + EscapeForLog(error.what(), 1024),
+                   {{"event", "failed"}, {"error", EscapeForLog(error.what(), 1024)}}, id_);
       FailFromWorker(grpc::Status(
           grpc::StatusCode::INTERNAL,
           ScrubServerPaths(std::string("tracking failed: ") + error.what(), options_.maps_dir)));
@@ -1103,24 +1141,40 @@ class TrackCall final : public TrackReactor,
       return std::to_string(static_cast<int64_t>(histogram.Percentile(fraction)));
     };
     std::string figures;
+    const double duration_s = std::chrono::duration<double>(Clock::now() - session_start_).count();
     {
       std::lock_guard<std::mutex> lock(mutex_);
       figures = "latency p50 " + us(latencies_us_, 0.5) + " us p99 " + us(latencies_us_, 0.99) +
                 " us (in the queue p50 " + us(queue_us_, 0.5) + " p99 " + us(queue_us_, 0.99) +
                 " us; stream write p50 " + us(write_us_, 0.5) + " p99 " + us(write_us_, 0.99) +
                 " us)";
+      end_fields_ = {{"event", "end"},
+                     {"code", wire::StatusCodeName(status.error_code())},
+                     {"error", EscapeForLog(status.error_message(), 1024)},
+                     {"packets", packets_read_.load()},
+                     {"events", events_},
+                     {"frames", frames_},
+                     {"poses", poses_},
+                     {"lost_poses", lost_poses_},
+                     {"latency_p50_us", latencies_us_.Percentile(0.5)},
+                     {"latency_p99_us", latencies_us_.Percentile(0.99)},
+                     {"queue_p50_us", queue_us_.Percentile(0.5)},
+                     {"queue_p99_us", queue_us_.Percentile(0.99)},
+                     {"write_p50_us", write_us_.Percentile(0.5)},
+                     {"write_p99_us", write_us_.Percentile(0.99)},
+                     {"backpressure_notices", backpressure_notices_.load()},
+                     {"cpu_s", cpu_used_s_.load()},
+                     {"duration_s", duration_s}};
     }
-    end_log_ =
-        "session " + std::to_string(id_) + " end: " +
-        (status.ok() ? std::string("OK")
-                     : std::string(wire::StatusCodeName(status.error_code())) + ": " +
-                           EscapeForLog(status.error_message(), 1024)) +
-        "; " + std::to_string(packets_read_.load()) + " packets, " + std::to_string(events_) +
-        " events, " + std::to_string(frames_) + " frames, " + std::to_string(poses_) + " poses (" +
-        std::to_string(lost_poses_) + " LOST), " + figures + ", " +
-        std::to_string(backpressure_notices_) + " backpressure notices, " +
-        std::to_string(cpu_used_s_.load()) + " CPU s, " +
-        std::to_string(std::chrono::duration<double>(Clock::now() - session_start_).count()) + " s";
+    end_log_ = "session " + std::to_string(id_) + " end: " +
+               (status.ok() ? std::string("OK")
+                            : std::string(wire::StatusCodeName(status.error_code())) + ": " +
+                                  EscapeForLog(status.error_message(), 1024)) +
+               "; " + std::to_string(packets_read_.load()) + " packets, " +
+               std::to_string(events_) + " events, " + std::to_string(frames_) + " frames, " +
+               std::to_string(poses_) + " poses (" + std::to_string(lost_poses_) + " LOST), " +
+               figures + ", " + std::to_string(backpressure_notices_) + " backpressure notices, " +
+               std::to_string(cpu_used_s_.load()) + " CPU s, " + std::to_string(duration_s) + " s";
     FinishCall(status);
   }
 
@@ -1138,12 +1192,17 @@ class TrackCall final : public TrackReactor,
     if (!client_status.ok()) {
       ++service_.counters().rejected;
       if (id_ == 0) {
-        service_.Log("Track from " + context_->peer() +
-                     " refused: " + wire::StatusCodeName(client_status.error_code()) + ": " +
-                     EscapeForLog(client_status.error_message(), 1024));
+        service_.Log(LogLevel::kInfo,
+                     "Track from " + context_->peer() +
+                         " refused: " + wire::StatusCodeName(client_status.error_code()) + ": " +
+                         EscapeForLog(client_status.error_message(), 1024),
+                     {{"event", "refused"},
+                      {"peer", context_->peer()},
+                      {"code", wire::StatusCodeName(client_status.error_code())},
+                      {"error", EscapeForLog(client_status.error_message(), 1024)}});
       }
     }
-    if (!end_log_.empty()) service_.Log(end_log_);
+    if (!end_log_.empty()) service_.Log(LogLevel::kInfo, end_log_, end_fields_, id_);
     bool finish = false;
     {
       std::lock_guard<std::mutex> lock(mutex_);
@@ -1263,6 +1322,8 @@ class TrackCall final : public TrackReactor,
   bool cpu_exceeded_ = false;
   std::atomic<bool> worker_failed_{false};
   std::string end_log_;
+  // Its figures as typed fields (JSON logs).
+  std::vector<LogField> end_fields_;
 
   // A Backpressure notice from the reader that the pool has not sent yet (guarded by
   // notice_mutex_).
@@ -1325,9 +1386,26 @@ TrackReactor* LocalizerServer::Service::Track(grpc::CallbackServerContext* conte
 // ---------------------------------------------------------------------------------------------
 // The server.
 
-LocalizerServer::LocalizerServer(const LocalizerServerOptions& options, LogFunction log) {
+namespace {
+
+// The logger of a LogFunction: synchronous text lines without a name.
+std::shared_ptr<Logger> LoggerOfFunction(LocalizerServer::LogFunction log) {
+  if (!log) return nullptr;
+  LoggerOptions options;
+  options.asynchronous = false;
+  return std::make_shared<Logger>(
+      "", options, [log = std::move(log)](std::string_view line) { log(std::string(line)); });
+}
+
+}  // namespace
+
+LocalizerServer::LocalizerServer(const LocalizerServerOptions& options, LogFunction log)
+    : LocalizerServer(options, LoggerOfFunction(std::move(log))) {}
+
+LocalizerServer::LocalizerServer(const LocalizerServerOptions& options,
+                                 std::shared_ptr<Logger> logger) {
   options.Check();
-  service_ = std::make_unique<Service>(options, std::move(log));
+  service_ = std::make_unique<Service>(options, std::move(logger));
   grpc::EnableDefaultHealthCheckService(true);
   grpc::reflection::InitProtoReflectionServerBuilderPlugin();
   grpc::ServerBuilder builder;
@@ -1336,7 +1414,9 @@ LocalizerServer::LocalizerServer(const LocalizerServerOptions& options, LogFunct
     tls_files_ = std::make_unique<ServerTlsFiles>(
         *options.tls_cert_file, *options.tls_key_file, options.tls_client_ca_file,
         options.reload_interval_s,
-        [service = service_.get()](const std::string& line) { service->Log(line); });
+        [service = service_.get()](LogLevel level, const std::string& line) {
+          service->Log(level, line);
+        });
     credentials = tls_files_->credentials();
   }
   builder.AddListeningPort(options.listen_address, credentials, &port_);

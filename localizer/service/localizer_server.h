@@ -15,6 +15,7 @@
 #include <set>
 #include <string>
 
+#include "core/common/log.h"
 #include "localizer/service/auth.h"
 #include "localizer/service/map_registry.h"
 #include "localizer/service/session.h"
@@ -200,8 +201,13 @@ class LocalizerServer {
   // A log line (no trailing newline); called from gRPC threads, must be thread-safe.
   using LogFunction = std::function<void(const std::string& line)>;
 
-  // Starts serving. Throws InvalidArgumentError for invalid options, IoError when the address
-  // cannot be bound or the token file cannot be read.
+  // Starts serving; its records (session start and end with the session id, refusals, reloads,
+  // failures: docs/api.md, "Logs") go to `logger` (none when null). Throws
+  // InvalidArgumentError for invalid options, IoError when the address cannot be bound or the
+  // token file cannot be read.
+  LocalizerServer(const LocalizerServerOptions& options, std::shared_ptr<Logger> logger);
+  // The same with every record rendered as a text line without the logger's name (level info:
+  // the message; others "LEVEL: message") and handed to `log` on the thread that logs.
   explicit LocalizerServer(const LocalizerServerOptions& options, LogFunction log = {});
   // Shuts down (see Shutdown).
   ~LocalizerServer();

@@ -8,6 +8,8 @@
 #include <fstream>
 #include <future>
 #include <iostream>
+#include <map>
+#include <mutex>
 #include <thread>
 
 #include <arpa/inet.h>
@@ -17,9 +19,11 @@
 
 #include <grpcpp/generic/generic_stub.h>
 #include <grpcpp/grpcpp.h>
+#include <nlohmann/json.hpp>
 
 #include "core/common/error.h"
 #include "core/common/file_util.h"
+#include "core/common/log.h"
 #include "core/events/event_reader.h"
 #include "localizer/offline/offline_tracking.h"
 #include "localizer/service/session.h"
@@ -947,6 +951,100 @@ TEST_F(LocalizerServerTest, ServesPrometheusMetrics) {
   EXPECT_NE(response.find("evloc_pose_latency_microseconds_bucket{le=\"+Inf\"} "),
             std::string::npos);
   EXPECT_EQ(HttpGet(server_->metrics_port(), "/other").rfind("HTTP/1.0 404", 0), 0u);
+}
+
+// JSON logs (--log-format json): every line the service writes is one JSON object with time,
+// level, logger and message; the records of a session carry its id, a refused stream none; the
+// drops of the log's queue are a metric.
+TEST(LocalizerServerLogTest, JsonLinesParseAndCarryTheSessionIds) {
+  testing::TemporaryFolder folder;
+  testing::WriteTestMap(folder.path(), testing::kTestMapName, testing::TestMap());
+  LocalizerServerOptions options = testing::TestServerOptions(folder.path());
+  options.metrics_address = "127.0.0.1:0";
+  std::mutex mutex;
+  std::vector<std::string> lines;
+  LoggerOptions log_options;
+  log_options.format = LogFormat::kJson;
+  const auto logger =
+      std::make_shared<Logger>("evloc-localizer", log_options, [&](std::string_view line) {
+        std::lock_guard<std::mutex> lock(mutex);
+        lines.emplace_back(line);
+      });
+  LocalizerServer server(options, logger);
+  auto stub = testing::ConnectStub(server.port());
+  std::vector<api::TrackRequest> requests{TestSessionStart()};
+  for (auto& packet : testing::PackedPackets(testing::TestEvents(70'000'000), 1'000'000)) {
+    requests.push_back(packet);
+  }
+  ASSERT_TRUE(RunTrack(*stub, requests).status.ok());
+  ASSERT_TRUE(RunTrack(*stub, requests).status.ok());
+  requests[0].mutable_start()->set_map_name("atlantis\n\"quoted\"");
+  ASSERT_EQ(RunTrack(*stub, requests).status.error_code(), grpc::StatusCode::NOT_FOUND);
+  const std::string metrics = HttpGet(server.metrics_port(), "/metrics");
+  EXPECT_EQ(MetricValue(metrics, "evloc_log_records_dropped_total"), 0) << metrics;
+  logger->Flush();
+
+  std::lock_guard<std::mutex> lock(mutex);
+  ASSERT_EQ(lines.size(), 5u);  // Two sessions' start and end, one refusal.
+  std::map<uint64_t, std::vector<std::string>> events_of_session;
+  int refusals = 0;
+  for (const std::string& line : lines) {
+    nlohmann::json record;
+    ASSERT_NO_THROW(record = nlohmann::json::parse(line)) << line;
+    for (const char* key : {"time", "level", "logger", "message", "fields"}) {
+      ASSERT_TRUE(record.contains(key)) << key << " in " << line;
+    }
+    EXPECT_EQ(record["logger"], "evloc-localizer");
+    EXPECT_EQ(record["level"], "info");
+    const std::string event = record["fields"]["event"];
+    if (event == "refused") {
+      ++refusals;
+      EXPECT_FALSE(record.contains("session")) << line;
+      EXPECT_EQ(record["fields"]["code"], "NOT_FOUND");
+      EXPECT_NE(record["message"].get<std::string>().find("refused: NOT_FOUND"), std::string::npos);
+      continue;
+    }
+    ASSERT_TRUE(record.contains("session")) << line;
+    const uint64_t session = record["session"];
+    EXPECT_EQ(record["message"].get<std::string>().rfind("session " + std::to_string(session), 0),
+              0u)
+        << line;
+    events_of_session[session].push_back(event);
+    if (event == "start") {
+      EXPECT_EQ(record["fields"]["map"], testing::kTestMapName);
+      EXPECT_GT(record["fields"]["map_points"].get<int64_t>(), 0);
+    } else {
+      EXPECT_EQ(record["fields"]["code"], "OK");
+      EXPECT_GT(record["fields"]["poses"].get<int64_t>(), 5);
+      EXPECT_GT(record["fields"]["latency_p99_us"].get<double>(), 0);
+    }
+  }
+  EXPECT_EQ(refusals, 1);
+  const std::vector<std::string> start_end{"start", "end"};
+  EXPECT_EQ(events_of_session,
+            (std::map<uint64_t, std::vector<std::string>>{{1, start_end}, {2, start_end}}));
+}
+
+// --log-level warning: a session that goes well writes nothing; a refused stream neither (info).
+TEST(LocalizerServerLogTest, TheLevelFiltersTheServicesRecords) {
+  testing::TemporaryFolder folder;
+  testing::WriteTestMap(folder.path(), testing::kTestMapName, testing::TestMap());
+  std::vector<std::string> lines;
+  LoggerOptions log_options;
+  log_options.level = LogLevel::kWarning;
+  log_options.asynchronous = false;
+  const auto logger = std::make_shared<Logger>(
+      "evloc-localizer", log_options, [&](std::string_view line) { lines.emplace_back(line); });
+  LocalizerServer server(testing::TestServerOptions(folder.path()), logger);
+  auto stub = testing::ConnectStub(server.port());
+  std::vector<api::TrackRequest> requests{TestSessionStart()};
+  for (auto& packet : testing::PackedPackets(testing::TestEvents(70'000'000), 1'000'000)) {
+    requests.push_back(packet);
+  }
+  ASSERT_TRUE(RunTrack(*stub, requests).status.ok());
+  requests[0].mutable_start()->set_map_name("atlantis");
+  ASSERT_EQ(RunTrack(*stub, requests).status.error_code(), grpc::StatusCode::NOT_FOUND);
+  EXPECT_TRUE(lines.empty()) << lines.front();
 }
 
 TEST_F(LocalizerServerTest, ServesTlsWhenGivenACertificate) {

@@ -68,6 +68,10 @@ Options:
   --tls-client-ca PEM        mutual TLS: require client certificates signed by this CA
   --reload-interval SECONDS  check the TLS files and the token file for changes this often;
                              changes apply without a restart (default 10)
+  --log-level LEVEL          trace | debug | info | warning | error | critical | off: the
+                             least severe record written (default info)
+  --log-format FORMAT        text (default: "evloc-localizer: message" lines) | json (one
+                             object per line: time, level, logger, session, message, fields)
   --insecure                 allow a non-loopback --listen without TLS or without
                              authentication (tokens or client certificates); without it such a
                              server refuses to start (docs/deploy.md, "Secure defaults")
@@ -187,6 +191,10 @@ ServeCommand ParseServeCommandLine(const std::vector<std::string>& arguments) {
       server.tls_client_ca_file = value;
     } else if (flag == "--reload-interval") {
       server.reload_interval_s = static_cast<int>(ParseIntegerFlag(flag, value));
+    } else if (flag == "--log-level") {
+      command.logging.level = ParseLogLevel(flag, value);
+    } else if (flag == "--log-format") {
+      command.logging.format = ParseLogFormat(flag, value);
     } else if (flag == "--rate") {
       server.tracker.step_rate_hz = ParseDoubleFlag(flag, value);
     } else if (flag == "--variant") {

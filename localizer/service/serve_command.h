@@ -15,6 +15,8 @@ struct ServeCommand {
   bool help = false;
   // The server options.
   LocalizerServerOptions server;
+  // The service's log (--log-level, --log-format; docs/api.md, "Logs").
+  LoggerOptions logging;
 };
 
 // The usage text of `evloc-localizer`.

@@ -2,6 +2,7 @@
 // streaming in real time gets SIGTERM; every session gets a final status within the drain
 // timeout and the process exits 0. Prints the figure (time from SIGTERM to exit, statuses) that
 // docs/reliability.md quotes.
+// Also: the process's JSON logs (--log-format json) are one object per line.
 #include <gtest/gtest.h>
 
 #include <signal.h>
@@ -14,11 +15,13 @@
 #include <iostream>
 #include <map>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
 
 #include <grpcpp/grpcpp.h>
+#include <nlohmann/json.hpp>
 
 #include "localizer/service/testing/service_fixture.h"
 #include "localizer/wire/status_name.h"
@@ -218,6 +221,62 @@ TEST(LocalizerShutdown, SigtermEndsEightStreamingSessionsWithinTheDrainTimeoutAn
   for (const auto& [name, count] : statuses) figure += " " + std::to_string(count) + " " + name;
   std::cout << figure << std::endl;
   ::testing::Test::RecordProperty("figure", figure);
+}
+
+// `serve --log-format json`: every line the process writes, from the configuration to
+// "stopped", is one JSON object; a session's records carry its id.
+TEST(LocalizerProcessLogs, JsonFormatWritesOneObjectPerLine) {
+  testing::TemporaryFolder folder;
+  testing::WriteTestMap(folder.path(), testing::kTestMapName, testing::TestMap());
+  ChildProcess server({EVLOC_LOCALIZER_BINARY, "serve", "--maps", folder.path().string(),
+                       "--listen", "127.0.0.1:0", "--log-format", "json", "--log-level", "info"});
+  ASSERT_GT(server.pid(), 0);
+  int port = 0;
+  for (int i = 0; i < 3000 && port == 0; ++i) {
+    for (const std::string& line : server.lines()) {
+      const nlohmann::json record = nlohmann::json::parse(line, nullptr, false);
+      if (!record.is_discarded() && record.contains("fields") &&
+          record["fields"].contains("port")) {
+        port = record["fields"]["port"];
+      }
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  ASSERT_NE(port, 0) << "the server did not start";
+  auto stub = testing::ConnectStub(port);
+  const auto packets = testing::PackedPackets(testing::TestEvents(1'000'000'000), 1'000'000);
+  std::atomic<bool> stop{false};
+  ClientResult result;
+  std::thread client([&] { StreamUntilEnded(*stub, packets, stop, &result); });
+  for (int i = 0; i < 3000 && result.poses < 20; ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  stop = true;
+  client.join();
+  EXPECT_TRUE(result.status.ok()) << result.status.error_message();
+  ASSERT_EQ(::kill(server.pid(), SIGTERM), 0);
+  const std::optional<int> exit_status = server.WaitForExit(std::chrono::seconds(20));
+  ASSERT_TRUE(exit_status.has_value()) << "the server did not exit";
+  EXPECT_TRUE(WIFEXITED(*exit_status) && WEXITSTATUS(*exit_status) == 0) << *exit_status;
+  std::vector<std::string> messages;
+  int session_records = 0;
+  for (const std::string& line : server.lines()) {
+    nlohmann::json record;
+    ASSERT_NO_THROW(record = nlohmann::json::parse(line)) << line;
+    ASSERT_TRUE(record.is_object()) << line;
+    EXPECT_EQ(record["logger"], "evloc-localizer") << line;
+    EXPECT_EQ(record["level"], "info") << line;
+    EXPECT_TRUE(record["time"].is_string()) << line;
+    messages.push_back(record["message"]);
+    if (record.contains("session")) {
+      EXPECT_EQ(record["session"], 1) << line;
+      ++session_records;
+    }
+  }
+  EXPECT_EQ(session_records, 2);  // Start and end.
+  ASSERT_GE(messages.size(), 5u);
+  EXPECT_EQ(messages.front(), "effective configuration");
+  EXPECT_EQ(messages.back(), "stopped");
 }
 
 }  // namespace

@@ -1,6 +1,6 @@
 #include "tools/convert/convert_command.h"
 
-#include "core/common/cli.h"
+#include "core/common/cli_app.h"
 #include "core/common/error.h"
 
 namespace evloc {
@@ -15,48 +15,37 @@ void ConvertCommandOptions::Check() const {
   aedat4.Check();
 }
 
-std::string ConvertCommandUsage() {
-  return R"(Usage: evloc-convert --input FILE.bag|FILE.aedat4 --out DIR [options]
+namespace {
 
-Converts a ROS1 bag (format 2.0, uncompressed, bz2 or lz4) or an iniVation AEDAT4 file
-(uncompressed, LZ4 or Zstd) into a dataset folder: calib.yaml (from the bag's camera info, or
-the AEDAT4 file's --calib), events.evb, images/ with images.txt, groundtruth.txt (TUM),
-imu.txt (AEDAT4 IMU samples) and info.json (docs/event-formats.md, sections 7 and 8;
-docs/dataset-format.md). evloc-track and evloc-replay also read both directly with --dataset
-FILE; the folder is needed for frames mode.
-
-Options:
-  --input FILE           the bag or AEDAT4 file (required; --bag is the same flag)
-  --out DIR              the dataset folder to write; it appears only when complete (required)
-)" + std::string(kRecordingFlagsUsage) +
-         R"(  --force                replace an existing output folder
-  --help                 print this help
-
-Exit codes: 0 success, 1 bad input or failure, 2 bad command line.
-)";
+// The command line of evloc-convert over `options`.
+std::unique_ptr<CommandLine> DeclareConvertCommandLine(ConvertCommandOptions* options) {
+  auto line = std::make_unique<CommandLine>(
+      "evloc-convert", "--input FILE.bag|FILE.aedat4 --out DIR [options]",
+      "Converts a ROS1 bag (format 2.0, uncompressed, bz2 or lz4) or an iniVation AEDAT4 file "
+      "(uncompressed, LZ4 or Zstd) into a dataset folder: calib.yaml (from the bag's camera info, "
+      "or the AEDAT4 file's --calib), events.evb, images/ with images.txt, groundtruth.txt (TUM), "
+      "imu.txt (AEDAT4 IMU samples) and info.json (docs/event-formats.md, sections 7 and 8; "
+      "docs/dataset-format.md). evloc-track and evloc-replay also read both directly with "
+      "--dataset FILE; the folder is needed for frames mode.");
+  line->Add("--input,--bag", "FILE", "the bag or AEDAT4 file (required; --bag is the same flag)",
+            &options->input_path)
+      .Add("--out", "DIR", "the dataset folder to write; it appears only when complete (required)",
+           &options->out_dir)
+      .AddFlagsOfUsage(kRecordingFlagsUsage,
+                       [options](const std::string& flag, const std::string& value) {
+                         return ApplyRecordingFlag(flag, value, &options->topics, &options->aedat4);
+                       })
+      .Switch("--force", "replace an existing output folder", &options->force)
+      .Footer("Exit codes: 0 success, 1 bad input or failure, 2 bad command line.");
+  return line;
 }
 
+}  // namespace
+
+std::string ConvertCommandUsage() { return HelpOfDeclaredCommandLine(&DeclareConvertCommandLine); }
+
 ConvertCommandOptions ParseConvertCommandLine(const std::vector<std::string>& arguments) {
-  ConvertCommandOptions options;
-  for (size_t i = 0; i < arguments.size(); ++i) {
-    const std::string& flag = arguments[i];
-    if (flag == "--help" || flag == "-h") {
-      options.help = true;
-      continue;
-    }
-    if (flag == "--force") {
-      options.force = true;
-      continue;
-    }
-    const std::string& value = TakeFlagValue(arguments, &i);
-    if (flag == "--input" || flag == "--bag") {
-      options.input_path = value;
-    } else if (flag == "--out") {
-      options.out_dir = value;
-    } else if (!ApplyRecordingFlag(flag, value, &options.topics, &options.aedat4)) {
-      throw UsageError("unknown flag '" + flag + "' (see --help)");
-    }
-  }
+  ConvertCommandOptions options = ParseDeclaredCommandLine(&DeclareConvertCommandLine, arguments);
   options.Check();
   return options;
 }

@@ -13,6 +13,7 @@
 #include <nlohmann/json.hpp>
 
 #include "core/common/cli.h"
+#include "core/common/cli_app.h"
 #include "core/common/error.h"
 #include "core/common/file_util.h"
 #include "core/dataset/dataset.h"
@@ -362,95 +363,94 @@ LoadResult RunLoad(const LoadOptions& options, std::ostream& log) {
   return result;
 }
 
-std::string LoadUsage() {
-  return R"(Usage: evloc-load --server HOST:PORT --map NAME --dataset DIR [options]
+namespace {
 
-Runs many Track sessions at once against an evloc localizer (docs/benchmarks.md §4,
-docs/reliability.md §4): each session slot opens a session, streams the dataset's events as
-PACKED 1 ms packets, ends it and opens the next until --duration has elapsed. Prints sessions,
-how they ended, poses, backpressure notices and the latency percentiles.
+// What the command line asks for.
+struct LoadArguments {
+  LoadOptions options;
+  // --help was given.
+  bool help = false;
+};
 
-Options:
-  --server HOST:PORT     localizer address (required)
-  --map NAME             map name on the server (required)
-  --dataset DIR          dataset folder with ground truth for the initial pose (required)
-  --sessions N           concurrent session slots (default 1)
-  --session-s S          session time streamed per session after the initial pose (default 1)
-  --duration S           keep opening sessions for S seconds of wall time (default 0: one
-                         session per slot)
-  --speed S|max          playback speed relative to real time (default 1), or max: as fast as
-                         the server confirms packets (at most a quarter of its queue in flight)
-  --packet-us N          time window per packet, microseconds (default 1000)
-  --rate HZ              tracking steps per second (default: the server's)
-  --cancel-fraction F    fraction of sessions the client cancels at a random packet (default 0)
-  --bad-fraction F       fraction of sessions that send an event outside the sensor at a random
-                         packet, expecting INVALID_ARGUMENT (default 0)
-  --spread CxR:P          the k-th session starts at its pose moved by ((k mod C) * P,
-                         ((k / C) mod R) * P, 0) metres: sessions spread over a site made of
-                         copies of the dataset's scene (docs/benchmarks.md, "Sites")
-  --seed N               seed of those random choices (default 1)
-  --report PATH          write the figures as JSON
-  --help                 print this help
-
-Exit codes: 0 every session ended as planned, 1 some did not (or failure), 2 bad command line.
-)";
+// Applies --spread COLUMNSxROWS:PITCH.
+void ApplySpread(const std::string& flag, const std::string& value, LoadOptions* options) {
+  const size_t x = value.find('x');
+  const size_t colon = value.find(':');
+  if (x == std::string::npos || colon == std::string::npos || colon < x) {
+    throw InvalidArgumentError("--spread expects COLUMNSxROWS:PITCH, e.g. 8x8:5");
+  }
+  options->spread_columns = ParseIntFlag(flag, value.substr(0, x));
+  options->spread_rows = ParseIntFlag(flag, value.substr(x + 1, colon - x - 1));
+  options->spread_pitch_m = ParseDoubleFlag(flag, value.substr(colon + 1));
+  if (options->spread_columns < 1 || options->spread_rows < 1 || !(options->spread_pitch_m > 0)) {
+    throw InvalidArgumentError("--spread needs positive columns, rows and pitch");
+  }
 }
 
+// The command line of evloc-load over `arguments`.
+std::unique_ptr<CommandLine> DeclareLoadCommandLine(LoadArguments* arguments) {
+  LoadOptions* options = &arguments->options;
+  auto line = std::make_unique<CommandLine>(
+      "evloc-load", "--server HOST:PORT --map NAME --dataset DIR [options]",
+      "Runs many Track sessions at once against an evloc localizer (docs/benchmarks.md §4, "
+      "docs/reliability.md §4): each session slot opens a session, streams the dataset's events "
+      "as PACKED 1 ms packets, ends it and opens the next until --duration has elapsed. Prints "
+      "sessions, how they ended, poses, backpressure notices and the latency percentiles.");
+  line->Add("--server", "HOST:PORT", "localizer address (required)", &options->server)
+      .Add("--map", "NAME", "map name on the server (required)", &options->map_name)
+      .Add("--dataset", "DIR", "dataset folder with ground truth for the initial pose (required)",
+           &options->dataset)
+      .Add("--sessions", "N", "concurrent session slots (default 1)", &options->sessions)
+      .Add("--session-s", "S",
+           "session time streamed per session after the initial pose (default 1)",
+           &options->session_s)
+      .Add("--duration", "S",
+           "keep opening sessions for S seconds of wall time (default 0: one session per slot)",
+           &options->duration_s)
+      .Add("--speed", "S|max",
+           "playback speed relative to real time (default 1), or max: as fast as the server "
+           "confirms packets (at most a quarter of its queue in flight)",
+           [options](const std::string& flag, const std::string& value) {
+             options->speed = ParseDoubleOrWordFlag(flag, value, "max");
+           })
+      .Add("--packet-us", "N", "time window per packet, microseconds (default 1000)",
+           &options->packet_us)
+      .Add("--rate", "HZ", "tracking steps per second (default: the server's)",
+           &options->step_rate_hz)
+      .Add("--cancel-fraction", "F",
+           "fraction of sessions the client cancels at a random packet (default 0)",
+           &options->cancel_fraction)
+      .Add("--bad-fraction", "F",
+           "fraction of sessions that send an event outside the sensor at a random packet, "
+           "expecting INVALID_ARGUMENT (default 0)",
+           &options->bad_fraction)
+      .Add("--spread", "CxR:P",
+           "the k-th session starts at its pose moved by ((k mod C) * P, ((k / C) mod R) * P, 0) "
+           "metres: sessions spread over a site made of copies of the dataset's scene "
+           "(docs/benchmarks.md, \"Sites\")",
+           [options](const std::string& flag, const std::string& value) {
+             ApplySpread(flag, value, options);
+           })
+      .Add("--seed", "N", "seed of those random choices (default 1)",
+           [options](const std::string& flag, const std::string& value) {
+             options->seed = static_cast<uint32_t>(ParseIntegerFlag(flag, value));
+           })
+      .Add("--report", "PATH", "write the figures as JSON", &options->report)
+      .Footer(
+          "Exit codes: 0 every session ended as planned, 1 some did not (or failure), 2 bad "
+          "command line.");
+  return line;
+}
+
+}  // namespace
+
+std::string LoadUsage() { return HelpOfDeclaredCommandLine(&DeclareLoadCommandLine); }
+
 LoadOptions ParseLoadCommandLine(const std::vector<std::string>& arguments, bool* help) {
-  LoadOptions options;
-  *help = false;
-  for (size_t i = 0; i < arguments.size(); ++i) {
-    const std::string& flag = arguments[i];
-    if (flag == "--help" || flag == "-h") {
-      *help = true;
-      return options;
-    }
-    const std::string& value = TakeFlagValue(arguments, &i);
-    if (flag == "--server") {
-      options.server = value;
-    } else if (flag == "--map") {
-      options.map_name = value;
-    } else if (flag == "--dataset") {
-      options.dataset = value;
-    } else if (flag == "--sessions") {
-      options.sessions = ParseIntFlag(flag, value);
-    } else if (flag == "--session-s") {
-      options.session_s = ParseDoubleFlag(flag, value);
-    } else if (flag == "--duration") {
-      options.duration_s = ParseDoubleFlag(flag, value);
-    } else if (flag == "--speed") {
-      options.speed =
-          value == "max" ? std::nullopt : std::optional<double>(ParseDoubleFlag(flag, value));
-    } else if (flag == "--packet-us") {
-      options.packet_us = ParseIntegerFlag(flag, value);
-    } else if (flag == "--rate") {
-      options.step_rate_hz = ParseDoubleFlag(flag, value);
-    } else if (flag == "--cancel-fraction") {
-      options.cancel_fraction = ParseDoubleFlag(flag, value);
-    } else if (flag == "--bad-fraction") {
-      options.bad_fraction = ParseDoubleFlag(flag, value);
-    } else if (flag == "--spread") {
-      const size_t x = value.find('x');
-      const size_t colon = value.find(':');
-      if (x == std::string::npos || colon == std::string::npos || colon < x) {
-        throw InvalidArgumentError("--spread expects COLUMNSxROWS:PITCH, e.g. 8x8:5");
-      }
-      options.spread_columns = ParseIntFlag(flag, value.substr(0, x));
-      options.spread_rows = ParseIntFlag(flag, value.substr(x + 1, colon - x - 1));
-      options.spread_pitch_m = ParseDoubleFlag(flag, value.substr(colon + 1));
-      if (options.spread_columns < 1 || options.spread_rows < 1 || !(options.spread_pitch_m > 0)) {
-        throw InvalidArgumentError("--spread needs positive columns, rows and pitch");
-      }
-    } else if (flag == "--seed") {
-      options.seed = static_cast<uint32_t>(ParseIntegerFlag(flag, value));
-    } else if (flag == "--report") {
-      options.report = value;
-    } else {
-      throw InvalidArgumentError("unknown flag '" + flag + "' (see --help)");
-    }
-  }
-  options.Check();
-  return options;
+  const LoadArguments parsed = ParseDeclaredCommandLine(&DeclareLoadCommandLine, arguments);
+  *help = parsed.help;
+  if (!parsed.help) parsed.options.Check();
+  return parsed.options;
 }
 
 }  // namespace evloc::load

@@ -14,6 +14,7 @@
 
 #include "core/camera/camera.h"
 #include "core/common/cli.h"
+#include "core/common/cli_app.h"
 #include "core/common/error.h"
 #include "core/common/file_util.h"
 #include "maps/map.h"
@@ -25,23 +26,6 @@ namespace {
 
 namespace fs = std::filesystem;
 using evloc::mapper::DepthView;
-
-constexpr const char* kUsage = R"(Usage: evloc-mapper-accuracy --map MAPDIR --dataset DIR [options]
-       evloc-mapper-accuracy --map MAPDIR --images DIR
-
-Measures a map against an evloc-sim dataset: depth error against the rendered depth maps (nearest
-frame by camera centre), distance to the exact edges of DIR/gt_map and gradient angles (also
-without the convex creases, whose image gradient depends on the background).
-With --images instead: the distance in pixels from each keyframe's projected visible points to
-the nearest Canny edge (40/100) of its image (real data without a ground-truth scene).
-  --map MAPDIR         map directory or .evmap file
-  --dataset DIR        evloc-sim dataset (calib.yaml, depth.txt, groundtruth.txt, gt_map/)
-  --images DIR         the image folder given to `evloc-mapper build --images`
-  --within METRES      threshold of the "within" fractions (default 0.02)
-  --depth-stride N     use every N-th depth map (default 1)
-  --points-csv FILE    also write one line per map point: x y z gx gy gz depth_error_m
-                       edge_distance_m gradient_angle_deg image_gradient_angle_deg reference_index
-)";
 
 // What the command line asks for.
 struct AccuracyCommand {
@@ -61,32 +45,36 @@ struct AccuracyCommand {
   bool help = false;
 };
 
+// The command line over `command`.
+std::unique_ptr<evloc::CommandLine> DeclareAccuracyCommandLine(AccuracyCommand* command) {
+  auto line = std::make_unique<evloc::CommandLine>(
+      "evloc-mapper-accuracy", "--map MAPDIR --dataset DIR [options]\n--map MAPDIR --images DIR",
+      "Measures a map against an evloc-sim dataset: depth error against the rendered depth maps "
+      "(nearest frame by camera centre), distance to the exact edges of DIR/gt_map and gradient "
+      "angles (also without the convex creases, whose image gradient depends on the "
+      "background).\nWith --images instead: the distance in pixels from each keyframe's "
+      "projected visible points to the nearest Canny edge (40/100) of its image (real data "
+      "without a ground-truth scene). Prints one JSON object.");
+  line->Add("--map", "MAPDIR", "map directory or .evmap file", &command->map_path)
+      .Add("--dataset", "DIR",
+           "evloc-sim dataset (calib.yaml, depth.txt, groundtruth.txt, gt_map/)", &command->dataset)
+      .Add("--images", "DIR", "the image folder given to `evloc-mapper build --images`",
+           &command->image_dir)
+      .Add("--within", "METRES", "threshold of the \"within\" fractions (default 0.02)",
+           &command->options.within_m)
+      .Add("--depth-stride", "N", "use every N-th depth map (default 1)", &command->stride)
+      .Add("--points-csv", "FILE",
+           "also write one line per map point: x y z gx gy gz depth_error_m edge_distance_m "
+           "gradient_angle_deg image_gradient_angle_deg reference_index",
+           &command->points_csv)
+      .Footer("Exit codes: 0 success, 1 failure, 2 bad command line.");
+  return line;
+}
+
 // Parses the arguments after the program name; throws evloc::Error for a bad command line.
 AccuracyCommand ParseAccuracyCommandLine(const std::vector<std::string>& arguments) {
-  AccuracyCommand command;
-  for (size_t i = 0; i < arguments.size(); ++i) {
-    const std::string& flag = arguments[i];
-    if (flag == "--help" || flag == "-h") {
-      command.help = true;
-      return command;
-    }
-    const std::string& value = evloc::TakeFlagValue(arguments, &i);
-    if (flag == "--map") {
-      command.map_path = value;
-    } else if (flag == "--dataset") {
-      command.dataset = value;
-    } else if (flag == "--images") {
-      command.image_dir = value;
-    } else if (flag == "--points-csv") {
-      command.points_csv = value;
-    } else if (flag == "--within") {
-      command.options.within_m = evloc::ParseDoubleFlag(flag, value);
-    } else if (flag == "--depth-stride") {
-      command.stride = evloc::ParseIntFlag(flag, value);
-    } else {
-      throw evloc::InvalidArgumentError("unknown flag '" + flag + "' (see --help)");
-    }
-  }
+  AccuracyCommand command = evloc::ParseDeclaredCommandLine(&DeclareAccuracyCommandLine, arguments);
+  if (command.help) return command;
   if (command.map_path.empty() || command.dataset.empty() == command.image_dir.empty()) {
     throw evloc::InvalidArgumentError("--map and one of --dataset or --images are required");
   }
@@ -179,5 +167,6 @@ int RunAccuracyCommand(const AccuracyCommand& command) {
 int main(int argc, char** argv) {
   return evloc::RunCommandTool(
       "evloc-mapper-accuracy", argc, argv, ParseAccuracyCommandLine,
-      [] { return std::string(kUsage); }, RunAccuracyCommand);
+      [] { return evloc::HelpOfDeclaredCommandLine(&DeclareAccuracyCommandLine); },
+      RunAccuracyCommand);
 }

@@ -17,6 +17,7 @@
 #include <nlohmann/json.hpp>
 
 #include "core/common/cli.h"
+#include "core/common/cli_app.h"
 #include "core/common/error.h"
 #include "core/common/file_util.h"
 #include "core/dataset/dataset.h"
@@ -920,179 +921,160 @@ std::string CheckHealth(const ReplayOptions& options, double timeout_s,
   return kNames[value];
 }
 
-std::string ReplayUsage() {
-  return R"(Usage: evloc-replay --server HOST:PORT --map NAME --dataset DIR --out TRAJ.txt [options]
-       evloc-replay --health-check --server HOST:PORT [--tls-ca PEM [--tls-cert PEM --tls-key PEM]]
-                    [--health-timeout S] [--health-service NAME]
+namespace {
 
-Streams a dataset's events to an evloc localizer (docs/api.md) as a live camera would, writes
-the poses it gets back as a TUM trajectory, and prints events sent, poses received and the
-packet-to-pose latency (p50, p99). With --reconnect N, a stream that fails because its server
-went away, drains or is overloaded (UNAVAILABLE, CANCELLED, ABORTED, RESOURCE_EXHAUSTED, or
-UNKNOWN: ended without a status, as a proxy does when its backend dies) is started again as a
-new session at the last pose received, and the trajectory continues (docs/deploy.md). Attempt k
-of an outage waits a random time in [0, min(max, backoff * 2^(k-1))] (full jitter; at least half
-of it after RESOURCE_EXHAUSTED, and at least the server's grpc-retry-pushback-ms or RetryInfo
-delay); the outage ends only when a new session stayed up --reconnect-stable-s.
-
-Options:
-  --server TARGET        localizer address: HOST:PORT, or a gRPC target such as
-                         ipv4:HOST:PORT,HOST:PORT or dns:///NAME:PORT (required)
-  --map NAME             map name on the server (required)
-  --dataset DIR|FILE     dataset folder, evloc or Event Camera Dataset layout, a ROS1 bag
-                         (.bag) or an AEDAT4 file (.aedat4)
-                         (required)
-  --out PATH             output TUM trajectory (required)
-  --speed S|max          playback speed relative to real time (default 1), or max: as fast as
-                         the server keeps up
-  --encoding packed|evt3 wire encoding (default packed; evt3 rounds times up to microseconds)
-  --packet-us N          time window per packet, microseconds (default 1000)
-  --token-file FILE      file holding the bearer token (sent as 'authorization: Bearer T')
-  --token T              the bearer token itself: visible to every user in the process list;
-                         deprecated, use --token-file
-  --tls-ca PEM           use TLS, trusting these root certificates (default plaintext)
-  --tls-cert PEM         client certificate chain, for a server that requires one (mutual TLS;
-                         with --tls-key and --tls-ca)
-  --tls-key PEM          private key of --tls-cert
-  --tls-server-name NAME host name in the server's certificate, when not --server's host
-  --init-pose "tx ty tz qx qy qz qw"|none
-                         initial world_from_cam (default: first ground-truth pose); none: start
-                         without a pose, the server finds the camera in the map (updates
-                         INITIALIZING until then; docs/relocalization.md)
-  --rate HZ              tracking steps per second (default: the server's)
-  --max-lead-ms MS       with --speed max: session time sent ahead of the last pose (default 50)
-  --duration S           stop after S seconds of session time after the initial pose
-  --ecd-size WxH         sensor size for ECD folders with calib.txt only (default 240x180)
-)" + std::string(kRecordingFlagsUsage) +
-         R"(  --reconnect N          reconnect attempts of one outage (default 0: fail at once)
-  --reconnect-backoff-ms MS
-                         delay ceiling of the first attempt, doubled per attempt (default 100)
-  --reconnect-backoff-max-ms MS
-                         largest delay ceiling (default 2000)
-  --reconnect-max-s S    no attempt starts later than S after the outage began (default 60)
-  --reconnect-stable-s S a session that stays up S seconds ends the outage and resets the
-                         backoff; one that fails sooner continues it (default 10)
-  --reconnect-seed N     seed of the jitter (default random)
-  --resume-prime-ms MS   events before the resume pose sent again to prime the new session
-                         (default 100)
-  --resume-velocity-ms MS
-                         a resumed session starts with the velocity of the last TRACKING poses
-                         within MS (default 100; 0: at rest)
-  --lb pick_first|round_robin
-                         gRPC load balancing over the addresses of --server (default pick_first)
-  --report FILE          write the figures as JSON (events, poses, outages, latency)
-  --geo FILE             also write the poses in WGS84 as the server sends them (time,
-                         latitude, longitude, altitude, heading, pitch, ENU; docs/geo.md); the
-                         map needs a geo anchor
-  --health-check         only ask the server's grpc.health.v1 service; exit 0 when SERVING
-  --health-timeout S     deadline of --health-check (default 5)
-  --health-service NAME  the service --health-check asks for: "" (default) the server's overall
-                         health (liveness), evloc.api.Localizer whether it admits new sessions
-                         (readiness: NOT_SERVING while full or draining)
-  --help                 print this help
-
-Exit codes: 0 success (or SERVING), 1 failure (a session the server ended with an error, a
-failure past --reconnect attempts, or not SERVING), 2 bad command line.
-)";
+// The command line of evloc-replay over `command`.
+std::unique_ptr<CommandLine> DeclareReplayCommandLine(ReplayCommand* command) {
+  ReplayOptions* options = &command->options;
+  auto line = std::make_unique<CommandLine>(
+      "evloc-replay",
+      "--server HOST:PORT --map NAME --dataset DIR --out TRAJ.txt [options]\n"
+      "--health-check --server HOST:PORT [--tls-ca PEM [--tls-cert PEM --tls-key PEM]] "
+      "[--health-timeout S] [--health-service NAME]",
+      "Streams a dataset's events to an evloc localizer (docs/api.md) as a live camera would, "
+      "writes the poses it gets back as a TUM trajectory, and prints events sent, poses received "
+      "and the packet-to-pose latency (p50, p99). With --reconnect N, a stream that fails because "
+      "its server went away, drains or is overloaded (UNAVAILABLE, CANCELLED, ABORTED, "
+      "RESOURCE_EXHAUSTED, or UNKNOWN: ended without a status, as a proxy does when its backend "
+      "dies) is started again as a new session at the last pose received, and the trajectory "
+      "continues (docs/deploy.md). Attempt k of an outage waits a random time in [0, min(max, "
+      "backoff * 2^(k-1))] (full jitter; at least half of it after RESOURCE_EXHAUSTED, and at "
+      "least the server's grpc-retry-pushback-ms or RetryInfo delay); the outage ends only when a "
+      "new session stayed up --reconnect-stable-s.");
+  line->Add("--server", "TARGET",
+            "localizer address: HOST:PORT, or a gRPC target such as ipv4:HOST:PORT,HOST:PORT or "
+            "dns:///NAME:PORT (required)",
+            &options->server)
+      .Add("--map", "NAME", "map name on the server (required)", &options->map_name)
+      .Add("--dataset", "DIR|FILE",
+           "dataset folder, evloc or Event Camera Dataset layout, a ROS1 bag (.bag) or an AEDAT4 "
+           "file (.aedat4) (required)",
+           &options->dataset)
+      .Add("--out", "PATH", "output TUM trajectory (required)", &options->output)
+      .Add("--speed", "S|max",
+           "playback speed relative to real time (default 1), or max: as fast as the server "
+           "keeps up",
+           [options](const std::string& flag, const std::string& value) {
+             options->speed = ParseDoubleOrWordFlag(flag, value, "max");
+           })
+      .Add("--encoding", "packed|evt3",
+           "wire encoding (default packed; evt3 rounds times up to microseconds)",
+           [options](const std::string&, const std::string& value) {
+             if (value == "packed") {
+               options->encoding = WireEncoding::kPacked;
+             } else if (value == "evt3") {
+               options->encoding = WireEncoding::kEvt3;
+             } else {
+               throw InvalidArgumentError("--encoding expects packed or evt3, got '" + value + "'");
+             }
+           })
+      .Add("--packet-us", "N", "time window per packet, microseconds (default 1000)",
+           &options->packet_us)
+      .Add("--init-pose", "\"tx ty tz qx qy qz qw\"|none",
+           "initial world_from_cam (default: first ground-truth pose); none: start without a "
+           "pose, the server finds the camera in the map (updates INITIALIZING until then; "
+           "docs/relocalization.md)",
+           [options](const std::string& flag, const std::string& value) {
+             if (value == "none") {
+               options->start_without_pose = true;
+             } else {
+               options->initial_world_from_cam = ParsePoseText(flag, value);
+             }
+           })
+      .Add("--rate", "HZ", "tracking steps per second (default: the server's)",
+           &options->step_rate_hz)
+      .Add("--max-lead-ms", "MS",
+           "with --speed max: session time sent ahead of the last pose (default 50)",
+           &options->max_lead_ms)
+      .Add("--duration", "S", "stop after S seconds of session time after the initial pose",
+           &options->duration_s)
+      .Add("--ecd-size", "WxH", "sensor size for ECD folders with calib.txt only (default 240x180)",
+           [options](const std::string& flag, const std::string& value) {
+             ParseSizeFlag(flag, value, &options->ecd_width, &options->ecd_height);
+           })
+      .AddFlagsOfUsage(kRecordingFlagsUsage,
+                       [options](const std::string& flag, const std::string& value) {
+                         return ApplyRecordingFlag(flag, value, &options->bag_topics,
+                                                   &options->aedat4);
+                       })
+      .Add("--report", "FILE", "write the figures as JSON (events, poses, outages, latency)",
+           &options->report)
+      .Add("--geo", "FILE",
+           "also write the poses in WGS84 as the server sends them (time, latitude, longitude, "
+           "altitude, heading, pitch, ENU; docs/geo.md); the map needs a geo anchor",
+           &options->geo_output)
+      .Group("Security")
+      .Add("--token-file", "FILE",
+           "file holding the bearer token (sent as 'authorization: Bearer T')",
+           &options->token_file)
+      .Add("--token", "T",
+           "the bearer token itself: visible to every user in the process list; deprecated, use "
+           "--token-file",
+           &options->token)
+      .Add("--tls-ca", "PEM", "use TLS, trusting these root certificates (default plaintext)",
+           &options->tls_ca_file)
+      .Add("--tls-cert", "PEM",
+           "client certificate chain, for a server that requires one (mutual TLS; with "
+           "--tls-key and --tls-ca)",
+           &options->tls_cert_file)
+      .Add("--tls-key", "PEM", "private key of --tls-cert", &options->tls_key_file)
+      .Add("--tls-server-name", "NAME",
+           "host name in the server's certificate, when not --server's host",
+           &options->tls_server_name)
+      .Group("Reconnecting")
+      .Add("--reconnect", "N", "reconnect attempts of one outage (default 0: fail at once)",
+           &options->reconnect)
+      .Add("--reconnect-backoff-ms", "MS",
+           "delay ceiling of the first attempt, doubled per attempt (default 100)",
+           &options->reconnect_backoff_ms)
+      .Add("--reconnect-backoff-max-ms", "MS", "largest delay ceiling (default 2000)",
+           &options->reconnect_backoff_max_ms)
+      .Add("--reconnect-max-s", "S",
+           "no attempt starts later than S after the outage began (default 60)",
+           &options->reconnect_max_s)
+      .Add("--reconnect-stable-s", "S",
+           "a session that stays up S seconds ends the outage and resets the backoff; one that "
+           "fails sooner continues it (default 10)",
+           &options->reconnect_stable_s)
+      .Add("--reconnect-seed", "N", "seed of the jitter (default random)", &options->reconnect_seed)
+      .Add("--resume-prime-ms", "MS",
+           "events before the resume pose sent again to prime the new session (default 100)",
+           &options->resume_prime_ms)
+      .Add("--resume-velocity-ms", "MS",
+           "a resumed session starts with the velocity of the last TRACKING poses within MS "
+           "(default 100; 0: at rest)",
+           &options->resume_velocity_ms)
+      .Add("--lb", "pick_first|round_robin",
+           "gRPC load balancing over the addresses of --server (default pick_first)",
+           &options->lb_policy)
+      .Group("Health check")
+      .Switch("--health-check", "only ask the server's grpc.health.v1 service; exit 0 when SERVING",
+              &command->health_check)
+      .Add("--health-timeout", "S", "deadline of --health-check (default 5)",
+           &command->health_timeout_s)
+      .Add("--health-service", "NAME",
+           "the service --health-check asks for: \"\" (default) the server's overall health "
+           "(liveness), evloc.api.Localizer whether it admits new sessions (readiness: "
+           "NOT_SERVING while full or draining)",
+           &command->health_service)
+      .Footer(
+          "Exit codes: 0 success (or SERVING), 1 failure (a session the server ended with an "
+          "error, a failure past --reconnect attempts, or not SERVING), 2 bad command line.");
+  return line;
 }
 
+}  // namespace
+
+std::string ReplayUsage() { return HelpOfDeclaredCommandLine(&DeclareReplayCommandLine); }
+
 ReplayCommand ParseReplayCommandLine(const std::vector<std::string>& arguments) {
-  ReplayCommand command;
-  ReplayOptions& options = command.options;
-  for (size_t i = 0; i < arguments.size(); ++i) {
-    const std::string& flag = arguments[i];
-    if (flag == "--help" || flag == "-h") {
-      command.help = true;
-      return command;
-    }
-    if (flag == "--health-check") {
-      command.health_check = true;
-      continue;
-    }
-    const std::string& value = TakeFlagValue(arguments, &i);
-    if (flag == "--server") {
-      options.server = value;
-    } else if (flag == "--map") {
-      options.map_name = value;
-    } else if (flag == "--dataset") {
-      options.dataset = value;
-    } else if (flag == "--out") {
-      options.output = value;
-    } else if (flag == "--speed") {
-      options.speed =
-          value == "max" ? std::nullopt : std::optional<double>(ParseDoubleFlag(flag, value));
-    } else if (flag == "--encoding") {
-      if (value == "packed") {
-        options.encoding = WireEncoding::kPacked;
-      } else if (value == "evt3") {
-        options.encoding = WireEncoding::kEvt3;
-      } else {
-        throw InvalidArgumentError("--encoding expects packed or evt3, got '" + value + "'");
-      }
-    } else if (flag == "--packet-us") {
-      options.packet_us = ParseIntegerFlag(flag, value);
-    } else if (flag == "--token") {
-      options.token = value;
-    } else if (flag == "--token-file") {
-      options.token_file = value;
-    } else if (flag == "--tls-ca") {
-      options.tls_ca_file = value;
-    } else if (flag == "--tls-cert") {
-      options.tls_cert_file = value;
-    } else if (flag == "--tls-key") {
-      options.tls_key_file = value;
-    } else if (flag == "--tls-server-name") {
-      options.tls_server_name = value;
-    } else if (flag == "--init-pose") {
-      if (value == "none") {
-        options.start_without_pose = true;
-      } else {
-        options.initial_world_from_cam = ParsePoseText(flag, value);
-      }
-    } else if (flag == "--rate") {
-      options.step_rate_hz = ParseDoubleFlag(flag, value);
-    } else if (flag == "--max-lead-ms") {
-      options.max_lead_ms = ParseDoubleFlag(flag, value);
-    } else if (flag == "--duration") {
-      options.duration_s = ParseDoubleFlag(flag, value);
-    } else if (flag == "--ecd-size") {
-      ParseSizeFlag(flag, value, &options.ecd_width, &options.ecd_height);
-    } else if (ApplyRecordingFlag(flag, value, &options.bag_topics, &options.aedat4)) {
-    } else if (flag == "--reconnect") {
-      options.reconnect = ParseIntFlag(flag, value);
-    } else if (flag == "--reconnect-backoff-ms") {
-      options.reconnect_backoff_ms = ParseDoubleFlag(flag, value);
-    } else if (flag == "--reconnect-backoff-max-ms") {
-      options.reconnect_backoff_max_ms = ParseDoubleFlag(flag, value);
-    } else if (flag == "--reconnect-max-s") {
-      options.reconnect_max_s = ParseDoubleFlag(flag, value);
-    } else if (flag == "--reconnect-stable-s") {
-      options.reconnect_stable_s = ParseDoubleFlag(flag, value);
-    } else if (flag == "--reconnect-seed") {
-      options.reconnect_seed = ParseUnsignedFlag(flag, value);
-    } else if (flag == "--resume-prime-ms") {
-      options.resume_prime_ms = ParseDoubleFlag(flag, value);
-    } else if (flag == "--resume-velocity-ms") {
-      options.resume_velocity_ms = ParseDoubleFlag(flag, value);
-    } else if (flag == "--lb") {
-      options.lb_policy = value;
-    } else if (flag == "--report") {
-      options.report = value;
-    } else if (flag == "--geo") {
-      options.geo_output = value;
-    } else if (flag == "--health-timeout") {
-      command.health_timeout_s = ParseDoubleFlag(flag, value);
-    } else if (flag == "--health-service") {
-      command.health_service = value;
-    } else {
-      throw InvalidArgumentError("unknown flag '" + flag + "' (see --help)");
-    }
-  }
+  ReplayCommand command = ParseDeclaredCommandLine(&DeclareReplayCommandLine, arguments);
+  if (command.help) return command;
   if (command.health_check) {
-    CheckServerOptions(options);
+    CheckServerOptions(command.options);
     CheckHealthTimeout(command.health_timeout_s);
   } else {
-    options.Check();
+    command.options.Check();
   }
   return command;
 }

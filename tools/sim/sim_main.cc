@@ -1,123 +1,169 @@
 // evloc-sim: the event camera simulator's command line (docs/simulator.md). Parses flags into
 // the options of tools/sim/render_command.h and reports errors; all work is in the library.
 #include <algorithm>
+#include <filesystem>
 #include <iostream>
-#include <map>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "core/common/cli.h"
+#include "core/common/cli_app.h"
 #include "core/common/error.h"
 #include "tools/sim/render_command.h"
 
 namespace {
 
+using evloc::CommandLine;
 using evloc::InvalidArgumentError;
-using evloc::ParseDoubleFlag;
 using evloc::ParseSizeFlag;
 using evloc::ParseUnsignedFlag;
-using evloc::TakeFlagValue;
 using evloc::UsageError;
 
-constexpr char kUsage[] = R"(evloc-sim: simulate an event camera dataset (docs/simulator.md).
-
-Usage:
-  evloc-sim render --out DIR [options]
-  evloc-sim events-from-frames --in DATASET --out DIR [options]
-  evloc-sim survey --out DIR [options]
-  evloc-sim --help
-
-render options:
-  --out DIR             output dataset folder (written as DIR.partial, renamed when complete)
-  --camera NAME         default (640x480 pinhole, f=500 px) | davis240 (ECD DAVIS240C); default: default
-  --camera-yaml FILE    a camera file (evloc YAML, Kalibr, ROS, OpenCV, COLMAP: docs/camera.md),
-                        overrides --camera
-  --scene FILE|carpark  scene JSON (docs/sim-scene.md), or carpark: the generated 200 m x 200 m
-                        car park site; default: the built-in room
-  --site-seed N         seed of the car park's layout; default 1
-  --time-of-day NAME    car park lighting: day | dusk | night (street lamps on at dusk and night);
-                        default: day
-  --path NAME           car park path instead of --motion: vehicle (forward camera 1.5 m up along
-                        the serpentine route through the lanes) | pedestrian (hand-held, 1.4 m/s)
-  --speed M/S           vehicle speed along the route; default 5
-  --path-start M        where along the route the path starts, metres; default 0
-  --map-spacing M       spacing of the ground-truth map's points along edges; default 0.01
-  --motion NAME         slow | mid | fast | aggressive; default: mid
-  --trajectory FILE     TUM trajectory replayed relative to its first pose instead of --motion
-  --duration S          seconds; default 10 for --motion, the whole file for --trajectory
-  --fps F               frame camera rate, Hz; default 30
-  --lighting NAME       bright | dim | dark | hdr; default: bright
-  --seed N              seed of motion and noise (same seed, same bytes); default 1
-  --render-motion PX    largest image motion between two renders; images in between are
-                        interpolated along the depth-based flow (0.5 = render every image); default 3
-  --sensor NAME         event pixel: ideal | davis240 | davis346 | gen3 | gen4 (docs/simulator.md,
-                        "Sensor presets"); default: ideal (the ESIM pixel)
-  --noise-rate HZ       shot-noise rate per pixel at the darkest level (falls as light rises with
-                        a realistic sensor; uniform with ideal); default: the sensor's
-  --hot-pixels F        fraction of hot pixels (each fires ~1 kHz whatever the light), e.g. 0.001;
-                        default: the sensor's (0)
-  --cutoff HZ           photoreceptor cutoff at intensity 1 (white paper, bright light); it falls
-                        with the light; 0 = no low-pass; default: the sensor's
-  --clean               perfect event pixel: no threshold mismatch, refractory period, noise, leak,
-                        hot pixels, low-pass or read-out limit
-  --events-txt          also write events.txt (ECD text format)
-  --force               replace an existing non-empty output folder
-
-survey options (photos of the car park with exact poses, for evloc-mapper build --known-poses):
-  --out DIR             output dataset folder (images, depth, groundtruth.txt, calib.yaml)
-  --survey NAME         walk (hand-held, 1.4 m up, loops along every lane, looking left, ahead and
-                        right in turn) | car (a mapping car's forward camera, 2 m up, along the
-                        vehicle route); default: walk
-  --spacing M           metres between two photos along the path; default 2
-  --path-start M        where along the path the survey starts, metres; default 0
-  --max-photos N        at most N photos; default: the whole path
-  --camera, --camera-yaml, --site-seed, --time-of-day, --seed, --force   as for render
-
-events-from-frames options:
-  --in DATASET          input folder with images.txt (evloc-sim output or ECD)
-  --out DIR             output dataset folder
-  --ecd-size WxH        sensor size for an ECD calib.txt input; default 240x180
-  --contrast C          ESIM contrast threshold (ON and OFF); default 0.2
-  --gamma G             input frames are raised to G to get linear intensity; default 1
-  --seed N              seed of mismatch and noise; default 1
-  --clean, --events-txt, --force   as for render
-
-Exit codes: 0 success, 2 bad command line, 1 failure while running.
-)";
-
-// Flags as name -> value ("" for switches), checked against the allowed names.
-std::map<std::string, std::string> ParseFlags(const std::vector<std::string>& args,
-                                              const std::vector<std::string>& valued,
-                                              const std::vector<std::string>& switches) {
-  std::map<std::string, std::string> flags;
-  for (size_t i = 0; i < args.size(); ++i) {
-    const std::string& arg = args[i];
-    const auto contains = [&](const std::vector<std::string>& names) {
-      return std::find(names.begin(), names.end(), arg) != names.end();
-    };
-    if (contains(switches)) {
-      flags[arg] = "";
-    } else if (contains(valued)) {
-      flags[arg] = TakeFlagValue(args, &i);
-    } else {
-      throw UsageError("unknown argument '" + arg + "'.");
-    }
-  }
-  return flags;
+// The flags `render` and `survey` share: the camera and the car park.
+void DeclareCameraAndSiteFlags(CommandLine& line, std::string* camera_preset,
+                               std::optional<std::filesystem::path>* camera_yaml,
+                               evloc::sim::CarParkOptions* site,
+                               std::optional<evloc::sim::TimeOfDay>* time_of_day) {
+  line.Add("--camera", "NAME",
+           "default (640x480 pinhole, f=500 px) | davis240 (ECD DAVIS240C); default: default",
+           camera_preset)
+      .Add("--camera-yaml", "FILE",
+           "a camera file (evloc YAML, Kalibr, ROS, OpenCV, COLMAP: docs/camera.md), overrides "
+           "--camera",
+           camera_yaml)
+      .Add("--site-seed", "N", "seed of the car park's layout; default 1", &site->seed)
+      .Add("--time-of-day", "NAME",
+           "car park lighting: day | dusk | night (street lamps on at dusk and night); default: "
+           "day",
+           [time_of_day](const std::string&, const std::string& value) {
+             *time_of_day = evloc::sim::ParseTimeOfDay(value);
+           });
 }
 
-// Calls `apply(flag, value)` for every flag; an invalid value becomes a UsageError naming the flag.
-template <typename Apply>
-void ForEachFlag(const std::map<std::string, std::string>& flags, const Apply& apply) {
-  for (const auto& [flag, value] : flags) {
-    try {
-      apply(flag, value);
-    } catch (const UsageError&) {
-      throw;
-    } catch (const InvalidArgumentError& error) {
-      throw UsageError(flag + ": " + error.what());
-    }
-  }
+// The flags of `render` over `options`.
+void DeclareRender(CommandLine& line, evloc::sim::RenderCommandOptions* options) {
+  line.Add("--out", "DIR", "output dataset folder (written as DIR.partial, renamed when complete)",
+           &options->out_dir);
+  DeclareCameraAndSiteFlags(line, &options->camera_preset, &options->camera_yaml, &options->site,
+                            &options->time_of_day);
+  line.Add("--scene", "FILE|carpark",
+           "scene JSON (docs/sim-scene.md), or carpark: the generated 200 m x 200 m car park "
+           "site; default: the built-in room",
+           [options](const std::string&, const std::string& value) {
+             if (value == "carpark") {
+               options->carpark = true;
+             } else {
+               options->scene_json = value;
+             }
+           })
+      .Add("--path", "NAME",
+           "car park path instead of --motion: vehicle (forward camera 1.5 m up along the "
+           "serpentine route through the lanes) | pedestrian (hand-held, 1.4 m/s)",
+           &options->path)
+      .Add("--speed", "M/S", "vehicle speed along the route; default 5", &options->speed_m_per_s)
+      .Add("--path-start", "M", "where along the route the path starts, metres; default 0",
+           &options->path_start_m)
+      .Add("--map-spacing", "M",
+           "spacing of the ground-truth map's points along edges; default 0.01",
+           &options->map_spacing_m)
+      .Add("--motion", "NAME", "slow | mid | fast | aggressive; default: mid",
+           [options](const std::string&, const std::string& value) {
+             options->motion = evloc::sim::ParseMotionProfile(value);
+           })
+      .Add("--trajectory", "FILE",
+           "TUM trajectory replayed relative to its first pose instead of --motion",
+           &options->trajectory_file)
+      .Add("--duration", "S", "seconds; default 10 for --motion, the whole file for --trajectory",
+           &options->duration_s)
+      .Add("--fps", "F", "frame camera rate, Hz; default 30", &options->fps)
+      .Add("--lighting", "NAME", "bright | dim | dark | hdr; default: bright",
+           [options](const std::string&, const std::string& value) {
+             options->lighting = evloc::sim::ParseLightingCondition(value);
+           })
+      .Add("--seed", "N", "seed of motion and noise (same seed, same bytes); default 1",
+           &options->seed)
+      .Add("--render-motion", "PX",
+           "largest image motion between two renders; images in between are interpolated along "
+           "the depth-based flow (0.5 = render every image); default 3",
+           &options->max_render_motion_px)
+      .Group("Event pixel")
+      .Add("--sensor", "NAME",
+           "event pixel: ideal | davis240 | davis346 | gen3 | gen4 (docs/simulator.md, \"Sensor "
+           "presets\"); default: ideal (the ESIM pixel)",
+           [options](const std::string&, const std::string& value) {
+             evloc::sim::SensorPreset(value);
+             options->sensor = value;
+           })
+      .Add("--noise-rate", "HZ",
+           "shot-noise rate per pixel at the darkest level (falls as light rises with a "
+           "realistic sensor; uniform with ideal); default: the sensor's",
+           &options->noise_rate_hz)
+      .Add("--hot-pixels", "F",
+           "fraction of hot pixels (each fires ~1 kHz whatever the light), e.g. 0.001; default: "
+           "the sensor's (0)",
+           &options->hot_pixel_fraction)
+      .Add("--cutoff", "HZ",
+           "photoreceptor cutoff at intensity 1 (white paper, bright light); it falls with the "
+           "light; 0 = no low-pass; default: the sensor's",
+           &options->photoreceptor_cutoff_hz)
+      .Switch("--clean",
+              "perfect event pixel: no threshold mismatch, refractory period, noise, leak, hot "
+              "pixels, low-pass or read-out limit",
+              &options->clean)
+      .Group("Output")
+      .Switch("--events-txt", "also write events.txt (ECD text format)", &options->events_txt)
+      .Switch("--force", "replace an existing non-empty output folder", &options->force);
+}
+
+// The flags of `survey` over `options`.
+void DeclareSurvey(CommandLine& line, evloc::sim::SurveyCommandOptions* options) {
+  line.Add("--out", "DIR", "output dataset folder (images, depth, groundtruth.txt, calib.yaml)",
+           &options->out_dir)
+      .Add("--survey", "NAME",
+           "walk (hand-held, 1.4 m up, loops along every lane, looking left, ahead and right in "
+           "turn) | car (a mapping car's forward camera, 2 m up, along the vehicle route); "
+           "default: walk",
+           &options->survey)
+      .Add("--spacing", "M", "metres between two photos along the path; default 2",
+           &options->spacing_m)
+      .Add("--path-start", "M", "where along the path the survey starts, metres; default 0",
+           &options->start_m)
+      .Add("--max-photos", "N", "at most N photos; default: the whole path",
+           [options](const std::string& flag, const std::string& value) {
+             options->max_photos = static_cast<int>(std::min<uint64_t>(
+                 ParseUnsignedFlag(flag, value), static_cast<uint64_t>(1) << 30));
+           });
+  DeclareCameraAndSiteFlags(line, &options->camera_preset, &options->camera_yaml, &options->site,
+                            &options->time_of_day);
+  line.Add("--seed", "N", "seed of the walk's gait and the car's vibrations; default 1",
+           &options->seed)
+      .Switch("--force", "replace an existing non-empty output folder", &options->force);
+}
+
+// The flags of `events-from-frames` over `options`; --clean sets `*clean` (applied after every
+// other flag, as it replaces the pixel's options).
+void DeclareEventsFromFrames(CommandLine& line, evloc::sim::EventsFromFramesCommandOptions* options,
+                             bool* clean) {
+  line.Add("--in", "DATASET", "input folder with images.txt (evloc-sim output or ECD)",
+           &options->in_dir)
+      .Add("--out", "DIR", "output dataset folder", &options->out_dir)
+      .Add("--ecd-size", "WxH", "sensor size for an ECD calib.txt input; default 240x180",
+           [options](const std::string& flag, const std::string& value) {
+             ParseSizeFlag(flag, value, &options->ecd_width, &options->ecd_height);
+           })
+      .Add("--contrast", "C", "ESIM contrast threshold (ON and OFF); default 0.2",
+           [options](const std::string& flag, const std::string& value) {
+             auto& esim = options->conversion.esim;
+             esim.contrast_threshold_on = evloc::ParseDoubleFlag(flag, value);
+             esim.contrast_threshold_off = esim.contrast_threshold_on;
+           })
+      .Add("--gamma", "G", "input frames are raised to G to get linear intensity; default 1",
+           &options->conversion.input_gamma)
+      .Add("--seed", "N", "seed of mismatch and noise; default 1", &options->conversion.esim.seed)
+      .Switch("--clean", "perfect event pixel (as for render)", clean)
+      .Switch("--events-txt", "also write events.txt (ECD text format)", &options->events_txt)
+      .Switch("--force", "replace an existing non-empty output folder", &options->force);
 }
 
 // Throws a UsageError for an unknown --camera preset (unless a camera YAML replaces it).
@@ -130,57 +176,14 @@ void RequireKnownCamera(bool has_camera_yaml, const std::string& preset) {
   }
 }
 
-int RunRender(const std::vector<std::string>& args) {
-  const auto flags = ParseFlags(
-      args, {"--out",           "--camera",      "--camera-yaml", "--scene",      "--motion",
-             "--trajectory",    "--duration",    "--fps",         "--lighting",   "--seed",
-             "--render-motion", "--sensor",      "--noise-rate",  "--hot-pixels", "--cutoff",
-             "--site-seed",     "--time-of-day", "--path",        "--speed",      "--path-start",
-             "--map-spacing"},
-      {"--clean", "--events-txt", "--force"});
-  evloc::sim::RenderCommandOptions options;
-  if (!flags.contains("--out")) throw UsageError("render needs --out DIR.");
-  if (flags.contains("--motion") && flags.contains("--trajectory")) {
+int RunRender(const CommandLine& line, evloc::sim::RenderCommandOptions& options) {
+  if (line.Count("--out") == 0) throw UsageError("render needs --out DIR.");
+  if (line.Count("--motion") > 0 && line.Count("--trajectory") > 0) {
     throw UsageError("--motion and --trajectory exclude each other.");
   }
-  if (flags.contains("--motion") && flags.contains("--path")) {
+  if (line.Count("--motion") > 0 && line.Count("--path") > 0) {
     throw UsageError("--motion and --path exclude each other.");
   }
-  ForEachFlag(flags, [&](const std::string& flag, const std::string& value) {
-    if (flag == "--out") options.out_dir = value;
-    if (flag == "--camera") options.camera_preset = value;
-    if (flag == "--camera-yaml") options.camera_yaml = value;
-    if (flag == "--scene") {
-      if (value == "carpark") {
-        options.carpark = true;
-      } else {
-        options.scene_json = value;
-      }
-    }
-    if (flag == "--site-seed") options.site.seed = ParseUnsignedFlag(flag, value);
-    if (flag == "--time-of-day") options.time_of_day = evloc::sim::ParseTimeOfDay(value);
-    if (flag == "--path") options.path = value;
-    if (flag == "--speed") options.speed_m_per_s = ParseDoubleFlag(flag, value);
-    if (flag == "--path-start") options.path_start_m = ParseDoubleFlag(flag, value);
-    if (flag == "--map-spacing") options.map_spacing_m = ParseDoubleFlag(flag, value);
-    if (flag == "--motion") options.motion = evloc::sim::ParseMotionProfile(value);
-    if (flag == "--trajectory") options.trajectory_file = value;
-    if (flag == "--duration") options.duration_s = ParseDoubleFlag(flag, value);
-    if (flag == "--fps") options.fps = ParseDoubleFlag(flag, value);
-    if (flag == "--lighting") options.lighting = evloc::sim::ParseLightingCondition(value);
-    if (flag == "--seed") options.seed = ParseUnsignedFlag(flag, value);
-    if (flag == "--render-motion") options.max_render_motion_px = ParseDoubleFlag(flag, value);
-    if (flag == "--sensor") {
-      evloc::sim::SensorPreset(value);
-      options.sensor = value;
-    }
-    if (flag == "--noise-rate") options.noise_rate_hz = ParseDoubleFlag(flag, value);
-    if (flag == "--hot-pixels") options.hot_pixel_fraction = ParseDoubleFlag(flag, value);
-    if (flag == "--cutoff") options.photoreceptor_cutoff_hz = ParseDoubleFlag(flag, value);
-    if (flag == "--clean") options.clean = true;
-    if (flag == "--events-txt") options.events_txt = true;
-    if (flag == "--force") options.force = true;
-  });
   RequireKnownCamera(options.camera_yaml.has_value(), options.camera_preset);
   options.Check();
   const auto info = evloc::sim::RunRenderCommand(options);
@@ -194,30 +197,8 @@ int RunRender(const std::vector<std::string>& args) {
   return 0;
 }
 
-int RunSurvey(const std::vector<std::string>& args) {
-  const auto flags =
-      ParseFlags(args,
-                 {"--out", "--survey", "--spacing", "--path-start", "--max-photos", "--camera",
-                  "--camera-yaml", "--site-seed", "--time-of-day", "--seed"},
-                 {"--force"});
-  if (!flags.contains("--out")) throw UsageError("survey needs --out DIR.");
-  evloc::sim::SurveyCommandOptions options;
-  ForEachFlag(flags, [&](const std::string& flag, const std::string& value) {
-    if (flag == "--out") options.out_dir = value;
-    if (flag == "--survey") options.survey = value;
-    if (flag == "--spacing") options.spacing_m = ParseDoubleFlag(flag, value);
-    if (flag == "--path-start") options.start_m = ParseDoubleFlag(flag, value);
-    if (flag == "--max-photos") {
-      options.max_photos = static_cast<int>(
-          std::min<uint64_t>(ParseUnsignedFlag(flag, value), static_cast<uint64_t>(1) << 30));
-    }
-    if (flag == "--camera") options.camera_preset = value;
-    if (flag == "--camera-yaml") options.camera_yaml = value;
-    if (flag == "--site-seed") options.site.seed = ParseUnsignedFlag(flag, value);
-    if (flag == "--time-of-day") options.time_of_day = evloc::sim::ParseTimeOfDay(value);
-    if (flag == "--seed") options.seed = ParseUnsignedFlag(flag, value);
-    if (flag == "--force") options.force = true;
-  });
+int RunSurvey(const CommandLine& line, evloc::sim::SurveyCommandOptions& options) {
+  if (line.Count("--out") == 0) throw UsageError("survey needs --out DIR.");
   RequireKnownCamera(options.camera_yaml.has_value(), options.camera_preset);
   options.Check();
   const auto info = evloc::sim::RunSurveyCommand(options);
@@ -226,29 +207,10 @@ int RunSurvey(const std::vector<std::string>& args) {
   return 0;
 }
 
-int RunEventsFromFrames(const std::vector<std::string>& args) {
-  const auto flags =
-      ParseFlags(args, {"--in", "--out", "--ecd-size", "--contrast", "--gamma", "--seed"},
-                 {"--clean", "--events-txt", "--force"});
-  evloc::sim::EventsFromFramesCommandOptions options;
-  if (!flags.contains("--in") || !flags.contains("--out")) {
+int RunEventsFromFrames(const CommandLine& line,
+                        evloc::sim::EventsFromFramesCommandOptions& options, bool clean) {
+  if (line.Count("--in") == 0 || line.Count("--out") == 0) {
     throw UsageError("events-from-frames needs --in DATASET and --out DIR.");
-  }
-  bool clean = false;
-  for (const auto& [flag, value] : flags) {
-    if (flag == "--in") options.in_dir = value;
-    if (flag == "--out") options.out_dir = value;
-    if (flag == "--ecd-size") ParseSizeFlag(flag, value, &options.ecd_width, &options.ecd_height);
-    if (flag == "--contrast") {
-      options.conversion.esim.contrast_threshold_on = ParseDoubleFlag(flag, value);
-      options.conversion.esim.contrast_threshold_off =
-          options.conversion.esim.contrast_threshold_on;
-    }
-    if (flag == "--gamma") options.conversion.input_gamma = ParseDoubleFlag(flag, value);
-    if (flag == "--seed") options.conversion.esim.seed = ParseUnsignedFlag(flag, value);
-    if (flag == "--clean") clean = true;
-    if (flag == "--events-txt") options.events_txt = true;
-    if (flag == "--force") options.force = true;
   }
   if (clean) options.conversion.esim = options.conversion.esim.Clean();
   options.Check();
@@ -265,16 +227,51 @@ int RunEventsFromFrames(const std::vector<std::string>& args) {
 
 int main(int argc, char** argv) {
   return evloc::RunTool("evloc-sim", argc, argv, [](const std::vector<std::string>& args) {
-    if (args.empty() || args[0] == "--help" || args[0] == "-h" ||
-        std::find(args.begin(), args.end(), "--help") != args.end()) {
-      std::cout << kUsage;
+    evloc::sim::RenderCommandOptions render_options;
+    evloc::sim::SurveyCommandOptions survey_options;
+    evloc::sim::EventsFromFramesCommandOptions events_options;
+    bool clean_events = false;
+    CommandLine line("evloc-sim",
+                     "render --out DIR [options]\n"
+                     "events-from-frames --in DATASET --out DIR [options]\n"
+                     "survey --out DIR [options]\n"
+                     "--help",
+                     "Simulates an event camera dataset (docs/simulator.md).");
+    CommandLine& render =
+        line.Subcommand("render", "--out DIR [options]",
+                        "Renders a scene along a motion into a dataset: events, frames, depth, "
+                        "ground truth and the exact ground-truth map.");
+    DeclareRender(render, &render_options);
+    CommandLine& survey = line.Subcommand(
+        "survey", "--out DIR [options]",
+        "Photos of the car park with exact poses, for evloc-mapper build --known-poses.");
+    DeclareSurvey(survey, &survey_options);
+    CommandLine& events_from_frames =
+        line.Subcommand("events-from-frames", "--in DATASET --out DIR [options]",
+                        "Events from a dataset's frames (ESIM between interpolated frames).");
+    DeclareEventsFromFrames(events_from_frames, &events_options, &clean_events);
+    line.Footer("Exit codes: 0 success, 2 bad command line, 1 failure while running.");
+
+    const bool known_command = !args.empty() && (args[0] == "render" || args[0] == "survey" ||
+                                                 args[0] == "events-from-frames");
+    if (args.empty() || (!known_command && (args[0] == "--help" || args[0] == "-h"))) {
+      std::cout << line.Help(/*expand_subcommands=*/true);
       return args.empty() ? evloc::kExitUsage : evloc::kExitSuccess;
     }
-    const std::vector<std::string> rest(args.begin() + 1, args.end());
+    if (!known_command) {
+      throw UsageError("unknown command '" + args[0] +
+                       "'; expected render, survey or events-from-frames.");
+    }
     try {
-      if (args[0] == "render") return RunRender(rest);
-      if (args[0] == "events-from-frames") return RunEventsFromFrames(rest);
-      if (args[0] == "survey") return RunSurvey(rest);
+      line.Parse(args);
+      CommandLine* chosen = line.chosen_subcommand();
+      if (chosen->help_requested()) {
+        std::cout << chosen->Help();
+        return evloc::kExitSuccess;
+      }
+      if (chosen == &render) return RunRender(render, render_options);
+      if (chosen == &survey) return RunSurvey(survey, survey_options);
+      return RunEventsFromFrames(events_from_frames, events_options, clean_events);
     } catch (const UsageError&) {
       throw;
     } catch (const InvalidArgumentError& error) {
@@ -282,7 +279,5 @@ int main(int argc, char** argv) {
       // without --force) is a bad command line too (docs/simulator.md).
       throw UsageError(error.what());
     }
-    throw UsageError("unknown command '" + args[0] +
-                     "'; expected render, survey or events-from-frames.");
   });
 }
