@@ -17,6 +17,11 @@
 #include <thread>
 
 #include <httplib.h>
+// httplib includes <resolv.h>, whose macro `_res` breaks Eigen (a parameter name there); nothing
+// here uses the resolver state.
+#ifdef _res
+#undef _res
+#endif
 
 #include "localizer/service/auth.h"
 
