@@ -54,15 +54,18 @@ function colourPoints() {
   const mode = document.getElementById('colour').value;
   const colour = new THREE.Color();
   if (mode === 'depth') {
+    // A point's depth in its source keyframe; a point without one (an imported map): its
+    // distance from the view's camera when the colours were chosen.
+    const depthOf = (i) => Number.isFinite(data[7 * i + 3]) ? data[7 * i + 3] :
+        Math.hypot(data[7 * i] - camera.position.x, data[7 * i + 1] - camera.position.y,
+                   data[7 * i + 2] - camera.position.z);
     const depths = [];
-    for (let i = 0; i < count; ++i) if (Number.isFinite(data[7 * i + 3])) depths.push(data[7 * i + 3]);
+    for (let i = 0; i < count; ++i) depths.push(depthOf(i));
     depths.sort((a, b) => a - b);
     const low = depths.length ? depths[Math.floor(0.05 * (depths.length - 1))] : 0;
     const high = depths.length ? depths[Math.floor(0.95 * (depths.length - 1))] : 1;
     for (let i = 0; i < count; ++i) {
-      const depth = data[7 * i + 3];
-      if (Number.isFinite(depth)) rampColour((depth - low) / Math.max(1e-6, high - low), colour);
-      else colour.setRGB(0.6, 0.6, 0.6);
+      rampColour((depthOf(i) - low) / Math.max(1e-6, high - low), colour);
       colours.setXYZ(i, colour.r, colour.g, colour.b);
     }
   } else {
@@ -110,7 +113,6 @@ async function loadMap(name) {
     state.points = new THREE.Points(geometry, new THREE.PointsMaterial({
       size: Math.max(2, 3 * window.devicePixelRatio), sizeAttenuation: false, vertexColors: true }));
     mapGroup.add(state.points);
-    colourPoints();
     drawn = count;
   }
   for (const keyframe of info.keyframes) {
@@ -133,6 +135,7 @@ async function loadMap(name) {
   camera.far = extent * 50;
   camera.updateProjectionMatrix();
   controls.update();
+  colourPoints();
 }
 
 function sessionRow(id) {
