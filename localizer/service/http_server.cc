@@ -261,7 +261,11 @@ class MemoryStream final : public httplib::Stream {
  public:
   explicit MemoryStream(const std::string& request) : request_(request) {}
   bool is_readable() const override { return offset_ < request_.size(); }
-  bool is_writable() const override { return response_.size() < (size_t{64} << 20); }
+  // A streamed response (a content provider) ends after its first piece of body.
+  bool is_writable() const override {
+    const size_t headers_end = response_.find("\r\n\r\n");
+    return headers_end == std::string::npos || response_.size() == headers_end + 4;
+  }
   ssize_t read(char* data, size_t size) override {
     const size_t count = std::min(size, request_.size() - offset_);
     std::memcpy(data, request_.data() + offset_, count);
@@ -269,7 +273,6 @@ class MemoryStream final : public httplib::Stream {
     return static_cast<ssize_t>(count);
   }
   ssize_t write(const char* data, size_t size) override {
-    if (!is_writable()) return -1;
     response_.append(data, size);
     return static_cast<ssize_t>(size);
   }

@@ -69,7 +69,8 @@ class HttpServer {
   bool stopping() const;
 
   // Runs one request given as raw bytes through the routes, as a connection would, and returns
-  // the raw response (for the fuzz targets and tests; no socket).
+  // the raw response (for the fuzz targets and tests; no socket). A streamed response (server-
+  // sent events) ends after its first piece of body.
   std::string HandleRawRequest(const std::string& request);
 
   // The httplib server with the connection handling described above (defined in the .cc).

@@ -317,6 +317,7 @@ void ViewerServer::AddRoutes(httplib::Server& server) {
         "text/event-stream",
         [this, state, period, token](size_t, httplib::DataSink& sink) {
           // Rate limit: one event per period; the wait checks the stop flag every 50 ms.
+          if (!sink.is_writable()) return false;
           while (Clock::now() < state->next) {
             if (stopping_) return false;
             std::this_thread::sleep_for(std::min<Clock::duration>(state->next - Clock::now(),
