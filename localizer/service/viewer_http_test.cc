@@ -13,7 +13,9 @@
 
 #include "core/common/error.h"
 #include "localizer/service/localizer_server.h"
+#include "localizer/service/serve_command.h"
 #include "localizer/service/testing/service_fixture.h"
+#include "localizer/service/testing/test_pki.h"
 #include "localizer/service/viewer_board.h"
 
 namespace evloc::service {
@@ -238,6 +240,51 @@ TEST_F(ViewerTest, LimitsOpenPages) {
   EXPECT_NE(second->body.find("--viewer-max-clients"), std::string::npos);
   done = true;
   page.join();
+}
+
+// With --tls-cert the viewer serves HTTPS with the API's certificate; with --tls-client-ca a
+// browser without a client certificate of that CA gets no answer.
+TEST_F(ViewerTest, ServesHttpsWithTheApisCertificateAndChecksClientCertificates) {
+  if (!testing::HaveOpenssl()) GTEST_SKIP() << "the openssl command is missing (openssl package)";
+  const testing::TestPki pki(folder_.path());
+  ASSERT_TRUE(pki.MakeCa("ca") && pki.MakeLeaf("server", "ca") && pki.MakeCa("client-ca") &&
+              pki.MakeLeaf("client", "client-ca") && pki.MakeCa("other-ca") &&
+              pki.MakeLeaf("other", "other-ca"));
+  StartServer([&](LocalizerServerOptions& options) {
+    options.tls_cert_file = pki.Cert("server");
+    options.tls_key_file = pki.Key("server");
+    options.tls_client_ca_file = pki.Cert("client-ca");
+  });
+  const auto get = [&](const std::string& client) {
+    httplib::SSLClient https("127.0.0.1", server_->viewer_port(), pki.Cert(client).string(),
+                             pki.Key(client).string());
+    https.set_ca_cert_path(pki.Cert("ca").string());
+    https.enable_server_certificate_verification(true);
+    return https.Get("/api/maps");
+  };
+  const httplib::Result good = get("client");
+  ASSERT_TRUE(good) << httplib::to_string(good.error());
+  EXPECT_EQ(good->status, 200);
+  EXPECT_NE(good->body.find(testing::kTestMapName), std::string::npos);
+  EXPECT_FALSE(get("other")) << "a client certificate of another CA was accepted";
+  EXPECT_FALSE(client_->Get("/api/maps")) << "plaintext was answered on the TLS port";
+}
+
+TEST(ViewerOptions, TheCommandLineSetsTheViewer) {
+  testing::TemporaryFolder folder;
+  const ServeCommand command =
+      ParseServeCommandLine({"serve", "--maps", folder.path().string(), "--viewer", "8080",
+                             "--viewer-max-clients", "3", "--viewer-rate", "12.5"});
+  EXPECT_EQ(command.server.viewer_address, "127.0.0.1:8080");
+  EXPECT_EQ(command.server.viewer_max_clients, 3);
+  EXPECT_EQ(command.server.viewer_rate_hz, 12.5);
+  EXPECT_NE(ServeUsage().find("--viewer [IPV4:]PORT"), std::string::npos);
+  EXPECT_THROW(ParseServeCommandLine(
+                   {"serve", "--maps", folder.path().string(), "--viewer", "10.1.2.3:8080"}),
+               InvalidArgumentError);
+  EXPECT_THROW(ParseServeCommandLine({"serve", "--maps", folder.path().string(), "--viewer", "8080",
+                                      "--viewer-max-clients", "0"}),
+               InvalidArgumentError);
 }
 
 TEST(ViewerOptions, RefusesAnOpenNetworkAddress) {
