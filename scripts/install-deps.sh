@@ -23,7 +23,7 @@ PACKAGES=(
   # the HTTP server of --metrics and --viewer (localizer/service/http_server.h)
   libcpp-httplib-dev
   # the live viewer's browser test (headless Chromium driven by Selenium, docs/viewer.md)
-  chromium chromium-driver python3-selenium python3-pil
+  chromium chromium-driver python3-selenium
   # tests and benchmarks
   libgtest-dev libgmock-dev libbenchmark-dev
   # the Python package (python/: bindings, client, pytest tests) and its example

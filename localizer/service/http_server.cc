@@ -298,7 +298,9 @@ class MemoryStream final : public httplib::Stream {
 class HttpServer::Server final : public httplib::Server {
  public:
   explicit Server(const HttpServerOptions& options) : options_(options) {
-    const size_t threads = static_cast<size_t>(options.max_connections);
+    // One thread more than the connections allowed: it answers 503 to the next one at once
+    // instead of leaving it queued behind long responses (event streams).
+    const size_t threads = static_cast<size_t>(options.max_connections) + 1;
     new_task_queue = [threads] { return new httplib::ThreadPool(threads); };
     if (options.tls) tls_context_ = MakeTlsContext(*options.tls, options.flag);
   }

@@ -15,6 +15,7 @@
 #include <chrono>
 #include <memory>
 #include <thread>
+#include <vector>
 
 namespace evloc::service {
 namespace {
@@ -109,6 +110,30 @@ TEST(MetricsHttpServer, ScrapesAreAnsweredWhileAClientTrickles) {
   ASSERT_TRUE(other);
   EXPECT_EQ(other->status, 404);
   EXPECT_EQ(other->body, "only GET /metrics is served here\n");
+}
+
+// Connections beyond the pool (4 for /metrics) are answered 503 at once, not queued behind
+// clients that hold theirs.
+TEST(MetricsHttpServer, AnswersBusyBeyondItsConnections) {
+  MetricsHttpServer server("127.0.0.1:0", [] { return std::string("m 1\n"); });
+  std::vector<int> silent;
+  for (int i = 0; i < 4; ++i) {
+    silent.push_back(ConnectTo(server.port()));
+    ASSERT_GE(silent.back(), 0);
+  }
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  httplib::Client scraper("127.0.0.1", server.port());
+  const auto start = Clock::now();
+  const httplib::Result result = scraper.Get("/metrics");
+  ASSERT_TRUE(result) << httplib::to_string(result.error());
+  EXPECT_EQ(result->status, 503);
+  EXPECT_LT(Clock::now() - start, std::chrono::milliseconds(1000));
+  for (const int socket : silent) ::close(socket);
+  // Once the silent clients go away, scrapes are served again.
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  const httplib::Result later = scraper.Get("/metrics");
+  ASSERT_TRUE(later);
+  EXPECT_EQ(later->status, 200);
 }
 
 TEST(MetricsHttpServer, RefusesABadAddressOrDeadline) {
