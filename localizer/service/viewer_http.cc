@@ -22,14 +22,20 @@ namespace {
 using Clock = std::chrono::steady_clock;
 using nlohmann::json;
 
+// JSON text; bytes that are not UTF-8 (a client's query echoed in an error) become U+FFFD
+// instead of throwing.
+std::string Dump(const json& value) {
+  return value.dump(-1, ' ', false, json::error_handler_t::replace);
+}
+
 void SendError(httplib::Response& response, int status, const std::string& message) {
   response.status = status;
-  response.set_content(json{{"error", message}}.dump() + "\n", "application/json");
+  response.set_content(Dump(json{{"error", message}}) + "\n", "application/json");
 }
 
 void SendJson(httplib::Response& response, const json& body) {
   response.set_header("Cache-Control", "no-store");
-  response.set_content(body.dump(), "application/json");
+  response.set_content(Dump(body), "application/json");
 }
 
 json Vector(const Eigen::Vector3d& v) { return json::array({v.x(), v.y(), v.z()}); }
@@ -346,7 +352,7 @@ void ViewerServer::AddRoutes(httplib::Server& server) {
           }
           state->first = false;
           const std::string event =
-              "event: poses\ndata: " + json{{"ids", ids}, {"sessions", changed}}.dump() + "\n\n";
+              "event: poses\ndata: " + Dump(json{{"ids", ids}, {"sessions", changed}}) + "\n\n";
           return sink.write(event.data(), event.size());
         },
         [this](bool) { --event_streams_; });
