@@ -2,7 +2,7 @@
 // (testing/viewer_browser_check.py), loads the page of a running server with two live sessions,
 // checks the DOM (sessions listed, statuses, poses updating, the map's points, a time surface)
 // and saves a screenshot, which this test inspects: the 3D view is not empty and the map's
-// points are drawn in it. The screenshot is kept as viewer_browser.png in the test's working
+// points are drawn in it. The screenshot is kept as viewer_browser.png in the test's build
 // folder (docs/viewer.md shows one).
 #include <gtest/gtest.h>
 
@@ -48,19 +48,22 @@ TEST(ViewerBrowserTest, TwoLiveSessionsInHeadlessChromium) {
   options.viewer_address = "127.0.0.1:0";
   LocalizerServer server(options);
 
-  // Two sessions of 2 s of events each, played at a tenth of real time (20 s), so that they are
-  // still live while the browser starts and looks.
+  // Two clients streaming sessions of 2 s of events, played at a tenth of real time (20 s each),
+  // a new session after each one ends, so that two sessions are live whenever the browser
+  // looks, however long a loaded machine takes to start it.
   std::atomic<bool> stop{false};
   const EventBuffer events = testing::TestEvents(2'000'000'000);
   std::vector<std::thread> sessions;
   for (const char* name : {"camera-left", "camera-right"}) {
     sessions.emplace_back([&, name] {
-      testing::StreamPacedSession(server.port(), events, 10'000'000, std::chrono::milliseconds(100),
-                                  stop, name);
+      while (!stop) {
+        testing::StreamPacedSession(server.port(), events, 10'000'000,
+                                    std::chrono::milliseconds(100), stop, name);
+      }
     });
   }
 
-  const std::filesystem::path screenshot = std::filesystem::current_path() / "viewer_browser.png";
+  const std::filesystem::path screenshot = EVLOC_VIEWER_SCREENSHOT;
   std::filesystem::remove(screenshot);
   const std::string url = "http://127.0.0.1:" + std::to_string(server.viewer_port()) + "/";
   const auto [status, output] = RunCommand("/usr/bin/python3 " EVLOC_VIEWER_BROWSER_CHECK " '" +

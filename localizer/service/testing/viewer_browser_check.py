@@ -21,7 +21,7 @@ from selenium.webdriver.common.by import By
 STATUSES = {"TRACKING", "LOST", "RELOCALIZING", "INITIALIZING"}
 
 
-def wait_for(what, condition, timeout_s=30.0):
+def wait_for(what, condition, timeout_s=90.0):
     deadline = time.monotonic() + timeout_s
     last_error = None
     while time.monotonic() < deadline:
@@ -59,7 +59,7 @@ def main():
         return 2
     seen = {}
     try:
-        driver.set_page_load_timeout(30)
+        driver.set_page_load_timeout(90)
         driver.get(url)
         wait_for("the page to load the map",
                  lambda: driver.find_element(By.TAG_NAME, "body").get_attribute("data-ready"))
