@@ -4,6 +4,8 @@
 #   scripts/bench-service.sh [--build DIR] [--dataset DIR] [--out DIR] [--latency-s S]
 #                            [--capacity "1 2 3 4"] [--capacity-s S] [--server-args "ARGS"]
 #                            [--taskset CPUS] [--capacity-speed S|max] [--skip-latency]
+#                            [--rate HZ] [--viewer-clients N] [--viewer-rate HZ]
+#                            [--client-taskset CPUS] [--packet-us N]
 #
 # Starts evloc-localizer on 127.0.0.1 (any free port) with the dataset's ground-truth map, then
 #  (a) latency: one evloc-replay session at real time (300 Hz, PACKED 1 ms packets) for
@@ -20,7 +22,12 @@
 # streams the capacity runs as fast as the server confirms (evloc-load --speed max): then the
 # figure is the server's CPU per session-second of events (cpu_per_session_s in capacity.csv),
 # which other jobs on the machine change far less than the wall-clock latency. --skip-latency
-# leaves out (a).
+# leaves out (a). --rate sets the sessions' step rate (default 300). --viewer-clients N serves the
+# live viewer (--viewer) and keeps N pages' event streams open during the runs (curl reading
+# /api/events at --viewer-rate, default 30 Hz): the viewer's cost shows as the difference with a
+# run without it; the events each page received per second go to the summary. --client-taskset
+# pins evloc-load, evloc-replay and the viewer clients (taskset -c). --packet-us sets the capacity
+# runs' packet window (default 1000).
 # Every figure also goes to OUT (JSON per run, server log, summary.txt). Wall-clock figures need
 # an otherwise idle machine; the script prints the load average before each run.
 set -euo pipefail
@@ -36,6 +43,10 @@ SERVER_ARGS=""
 TASKSET=""
 CAPACITY_SPEED=1
 SKIP_LATENCY=0
+VIEWER_CLIENTS=0
+VIEWER_RATE=30
+CLIENT_TASKSET=""
+PACKET_US=1000
 
 usage() { sed -n '2,28p' "$0" | sed 's/^# \{0,1\}//'; }
 while [[ $# -gt 0 ]]; do
@@ -50,6 +61,11 @@ while [[ $# -gt 0 ]]; do
     --taskset) TASKSET="$2"; shift 2 ;;
     --capacity-speed) CAPACITY_SPEED="$2"; shift 2 ;;
     --skip-latency) SKIP_LATENCY=1; shift ;;
+    --rate) RATE="$2"; shift 2 ;;
+    --viewer-clients) VIEWER_CLIENTS="$2"; shift 2 ;;
+    --viewer-rate) VIEWER_RATE="$2"; shift 2 ;;
+    --client-taskset) CLIENT_TASKSET="$2"; shift 2 ;;
+    --packet-us) PACKET_US="$2"; shift 2 ;;
     -h|--help) usage; exit 0 ;;
     *) echo "bench-service: unknown argument '$1' (see --help)" >&2; exit 2 ;;
   esac
@@ -72,13 +88,37 @@ say() { echo "$*" | tee -a "$SUMMARY"; }
 SERVER_LOG="$OUT/server.log"
 # shellcheck source=scripts/service-lib.sh
 source "$(dirname "${BASH_SOURCE[0]}")/service-lib.sh"
+VIEWER_ARGS=()
+(( VIEWER_CLIENTS > 0 )) && VIEWER_ARGS=(--viewer 127.0.0.1:0 --viewer-max-clients "$VIEWER_CLIENTS")
 # shellcheck disable=SC2086  # SERVER_ARGS is a list of options
 start_localizer "$SERVER_LOG" "$SERVER_BIN" --maps "$OUT/maps" --max-sessions 64 --rate "$RATE" \
-  $SERVER_ARGS
+  "${VIEWER_ARGS[@]}" $SERVER_ARGS
 # Every thread of the server (threads created later inherit it).
 [[ -n "$TASKSET" ]] && taskset -a -p -c "$TASKSET" "$SERVER_PID" > /dev/null
 trap 'kill "$SERVER_PID" 2>/dev/null || true; wait "$SERVER_PID" 2>/dev/null || true' EXIT
 ADDRESS="127.0.0.1:$PORT"
+# The clients (evloc-load, evloc-replay, viewer pages), pinned when asked.
+CLIENT_PREFIX=()
+[[ -n "$CLIENT_TASKSET" ]] && CLIENT_PREFIX=(taskset -c "$CLIENT_TASKSET")
+LOAD_BIN=("${CLIENT_PREFIX[@]}" "$LOAD_BIN")
+REPLAY_BIN=("${CLIENT_PREFIX[@]}" "$REPLAY_BIN")
+VIEWER_PIDS=()
+if (( VIEWER_CLIENTS > 0 )); then
+  VIEWER_URL=$(sed -n 's|^evloc-localizer: viewer: \(http://[0-9.:]*/\)$|\1|p' "$SERVER_LOG")
+  [[ -n "$VIEWER_URL" ]] || { echo "bench-service: the server printed no viewer address" >&2; exit 1; }
+  command -v curl >/dev/null || { echo "bench-service: --viewer-clients needs curl" >&2; exit 1; }
+  VIEWER_START=$(date +%s.%N)
+  for i in $(seq "$VIEWER_CLIENTS"); do
+    "${CLIENT_PREFIX[@]}" curl -sN "${VIEWER_URL}api/events?rate=$VIEWER_RATE" \
+      > "$OUT/viewer_$i.sse" 2>/dev/null &
+    VIEWER_PIDS+=($!)
+  done
+fi
+stop_viewers() {
+  for pid in "${VIEWER_PIDS[@]}"; do kill "$pid" 2>/dev/null || true; wait "$pid" 2>/dev/null || true; done
+  VIEWER_PIDS=()
+}
+trap 'stop_viewers; kill "$SERVER_PID" 2>/dev/null || true; wait "$SERVER_PID" 2>/dev/null || true' EXIT
 
 # CPU seconds (user + system) the server has used so far.
 server_cpu() { awk -v hz="$(getconf CLK_TCK)" '{print ($14 + $15) / hz}' "/proc/$SERVER_PID/stat"; }
@@ -89,13 +129,13 @@ say "bench-service: $(date -u +%FT%TZ) on $(nproc) cores, server $ADDRESS, datas
 server_threads() { awk '/^Threads:/ {print $2}' "/proc/$SERVER_PID/status"; }
 
 # Warm-up: loads the map (a first session pays it) so that it does not count in the figures.
-"$LOAD_BIN" --server "$ADDRESS" --map bench --dataset "$DATASET" --sessions 1 --session-s 0.2 \
+"${LOAD_BIN[@]}" --server "$ADDRESS" --map bench --dataset "$DATASET" --sessions 1 --session-s 0.2 \
   --speed max --rate "$RATE" > "$OUT/warmup.txt"
 
 if (( ! SKIP_LATENCY )); then
 say "(a) latency: one real-time session, ${LATENCY_S} s; load average: $(cut -d' ' -f1-3 /proc/loadavg)"
 cpu_before=$(server_cpu)
-"$REPLAY_BIN" --server "$ADDRESS" --map bench --dataset "$DATASET" --out "$OUT/latency_traj.txt" \
+"${REPLAY_BIN[@]}" --server "$ADDRESS" --map bench --dataset "$DATASET" --out "$OUT/latency_traj.txt" \
   --speed 1 --rate "$RATE" --packet-us 1000 --duration "$LATENCY_S" --report "$OUT/latency.json" \
   > "$OUT/latency.txt" 2>&1 || say "  the session did not keep up (a figure too): $(tail -1 "$OUT/latency.txt")"
 cpu_after=$(server_cpu)
@@ -109,8 +149,8 @@ echo "sessions,kept_up,server_p50_us,server_p99_us,client_p99_us,step_p50_ms,ste
 for sessions in $CAPACITY; do
   load=$(cut -d' ' -f1-3 /proc/loadavg)
   cpu_before=$(server_cpu)
-  "$LOAD_BIN" --server "$ADDRESS" --map bench --dataset "$DATASET" --sessions "$sessions" \
-    --session-s "$CAPACITY_S" --speed "$CAPACITY_SPEED" --rate "$RATE" \
+  "${LOAD_BIN[@]}" --server "$ADDRESS" --map bench --dataset "$DATASET" --sessions "$sessions" \
+    --session-s "$CAPACITY_S" --speed "$CAPACITY_SPEED" --rate "$RATE" --packet-us "$PACKET_US" \
     --report "$OUT/capacity_$sessions.json" > "$OUT/capacity_$sessions.txt" 2>&1 &
   load_pid=$!
   # The most threads the server had while the sessions ran (sampled every 0.5 s).
@@ -153,5 +193,14 @@ if /usr/bin/python3 -c "import matplotlib" 2>/dev/null; then
     "$OUT/capacity.csv" && say "capacity curve: $OUT/capacity.csv, $OUT/capacity.png"
 else
   say "capacity curve: $OUT/capacity.csv (no plot: python3-matplotlib is missing, scripts/install-deps.sh)"
+fi
+if (( VIEWER_CLIENTS > 0 )); then
+  viewer_s=$(minus "$(date +%s.%N)" "$VIEWER_START")
+  stop_viewers
+  for i in $(seq "$VIEWER_CLIENTS"); do
+    events=$(grep -c '^event: poses' "$OUT/viewer_$i.sse" || true)
+    poses=$(grep -o '"position"' "$OUT/viewer_$i.sse" | wc -l)
+    say "  viewer page $i: $events events ($(awk -v e="$events" -v s="$viewer_s" 'BEGIN {printf "%.1f", e / s}') /s), $poses session poses in ${viewer_s%.*} s"
+  done
 fi
 say "bench-service: figures in $OUT"

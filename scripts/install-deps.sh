@@ -22,6 +22,10 @@ PACKAGES=(
   libgrpc++-dev libprotobuf-dev protobuf-compiler protobuf-compiler-grpc
   # token digests (SHA-256, CRYPTO_memcmp) and TLS file checks: OpenSSL libcrypto
   libssl-dev
+  # the HTTP server of --metrics and --viewer (localizer/service/http_server.h)
+  libcpp-httplib-dev
+  # the live viewer's browser test (headless Chromium driven by Selenium, docs/viewer.md)
+  chromium chromium-driver python3-selenium
   # tests and benchmarks
   libgtest-dev libgmock-dev libbenchmark-dev
   # the Python package (python/: bindings, client, pytest tests) and its example
@@ -38,6 +42,12 @@ PACKAGES=(
   # the service capacity plot (scripts/plot-capacity.py, docs/benchmarks.md)
   python3-matplotlib
 )
+
+# npm vendors three.js for the live viewer (scripts/build-viewer.sh); a machine that has npm from
+# another Node.js distribution keeps it (Debian's npm would conflict with that nodejs).
+if ! command -v npm >/dev/null 2>&1; then
+  PACKAGES+=(npm)
+fi
 
 missing=()
 for pkg in "${PACKAGES[@]}"; do

@@ -10,25 +10,10 @@
 #include <opencv2/imgproc.hpp>
 
 #include "localizer/tracking/polarity.h"
+#include "localizer/tracking/surface_picture.h"
 
 namespace evloc::tracking {
 namespace {
-
-cv::Mat SurfaceImage(const Tracker& tracker, SurfaceChannel channel, int64_t t_ns) {
-  const TimeSurface& surface = tracker.time_surface();
-  SurfaceDecay decay;
-  decay.decay_time_ns = tracker.options().decay_time_s * 1e9;
-  decay.empty_threshold = tracker.options().empty_threshold;
-  cv::Mat image(surface.height(), surface.width(), CV_8UC1);
-  for (int y = 0; y < surface.height(); ++y) {
-    auto* row = image.ptr<uint8_t>(y);
-    for (int x = 0; x < surface.width(); ++x) {
-      const double value = decay.Value(surface.LastTimestamp(channel, x, y), t_ns);
-      row[x] = static_cast<uint8_t>(std::lround(255.0 * value));
-    }
-  }
-  return image;
-}
 
 cv::Point ToPoint(const Eigen::Vector2d& pixel) {
   return cv::Point(static_cast<int>(std::lround(pixel.x())),
@@ -41,9 +26,9 @@ cv::Mat RenderTrackingDebugImage(const Tracker& tracker, const Map& map,
                                  const VisibilityIndex* visibility, const PoseEstimate& step,
                                  const Rigid3d& previous_world_from_cam) {
   const Camera& camera = tracker.ideal_camera();
-  const cv::Mat all = SurfaceImage(tracker, SurfaceChannel::kAll, step.t_ns);
-  const cv::Mat on = SurfaceImage(tracker, SurfaceChannel::kOn, step.t_ns);
-  const cv::Mat off = SurfaceImage(tracker, SurfaceChannel::kOff, step.t_ns);
+  const cv::Mat all = TimeSurfacePicture(tracker, SurfaceChannel::kAll, step.t_ns);
+  const cv::Mat on = TimeSurfacePicture(tracker, SurfaceChannel::kOn, step.t_ns);
+  const cv::Mat off = TimeSurfacePicture(tracker, SurfaceChannel::kOff, step.t_ns);
 
   cv::Mat panel_map;
   cv::cvtColor(all, panel_map, cv::COLOR_GRAY2BGR);
@@ -85,6 +70,7 @@ cv::Mat RenderTrackingDebugImage(const Tracker& tracker, const Map& map,
     points.resize(map.size());
     std::iota(points.begin(), points.end(), 0u);
   }
+  DrawReprojectedPoints(camera, map.positions, points, step.world_from_cam, all, &panel_map);
   const Rigid3d cam_from_world = step.world_from_cam.Inverse();
   const Rigid3d previous_cam_from_world = previous_world_from_cam.Inverse();
   const size_t stride = std::max<size_t>(1, points.size() / 400);
@@ -94,9 +80,6 @@ cv::Mat RenderTrackingDebugImage(const Tracker& tracker, const Map& map,
     const Eigen::Vector3d p_cam = cam_from_world * p_world;
     Eigen::Vector2d pixel;
     if (!camera.Project(p_cam, &pixel) || !camera.IsInside(pixel)) continue;
-    const bool on_edge = all.at<uint8_t>(ToPoint(pixel)) > 0;
-    cv::circle(panel_map, ToPoint(pixel), 1,
-               on_edge ? cv::Scalar(0, 220, 0) : cv::Scalar(0, 0, 255), cv::FILLED);
     const PredictedPolarity polarity =
         predictor.Predict(p_world, map.gradients[index].cast<double>());
     panel_prediction.at<cv::Vec3b>(ToPoint(pixel)) =

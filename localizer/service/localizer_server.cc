@@ -27,6 +27,8 @@
 #include "localizer/service/metrics_http.h"
 #include "localizer/service/session.h"
 #include "localizer/service/tracking_pool.h"
+#include "localizer/service/viewer_board.h"
+#include "localizer/service/viewer_http.h"
 #include "localizer/wire/percentile.h"
 #include "localizer/wire/status_name.h"
 
@@ -98,7 +100,19 @@ void LocalizerServerOptions::Check() const {
   }
   if (reload_interval_s < 1) throw InvalidArgumentError("--reload-interval must be at least 1 s");
   CheckListenSecurity(listen_address, listen_security());
+  if (viewer_address) {
+    viewer_options().Check();
+    CheckListenSecurity(*viewer_address, listen_security());
+  }
   session_limits().Check();
+}
+
+ViewerOptions LocalizerServerOptions::viewer_options() const {
+  ViewerOptions options;
+  options.address = viewer_address.value_or("");
+  options.max_clients = viewer_max_clients;
+  options.max_rate_hz = viewer_rate_hz;
+  return options;
 }
 
 ListenSecurity LocalizerServerOptions::listen_security() const {
@@ -241,6 +255,11 @@ std::string LocalizerServerOptions::Describe() const {
        << max_connection_age_grace_s << " s)\n"
        << "drain-timeout: " << drain_timeout_s << " s\n"
        << "metrics: " << metrics_address.value_or("none") << "\n"
+       << "viewer: "
+       << (viewer_address ? *viewer_address + " (" + std::to_string(viewer_max_clients) +
+                                " pages, " + std::to_string(viewer_rate_hz) + " Hz)"
+                          : std::string("none"))
+       << "\n"
        << "tls: "
        << (tls_cert_file ? tls_cert_file->string() + " + " + tls_key_file->string()
                          : std::string("off (plaintext)"))
@@ -273,6 +292,7 @@ class LocalizerServer::Service final
           *options.auth_tokens_file, std::chrono::seconds(options.reload_interval_s),
           [this](LogLevel level, const std::string& line) { Log(level, line); });
     }
+    if (options.viewer_address) viewer_board_ = std::make_unique<ViewerBoard>();
   }
 
   // The health service to keep up to date (set once the server runs).
@@ -546,6 +566,10 @@ class LocalizerServer::Service final
   const ServerCounters& counters() const { return counters_; }
   const SessionLimits& session_limits() const { return session_limits_; }
   uint64_t NextSessionId() { return ++last_session_id_; }
+  // The sessions as the live viewer shows them (null without --viewer).
+  ViewerBoard* viewer_board() { return viewer_board_.get(); }
+  // The token file (null without --auth-tokens).
+  TokenFile* tokens() { return tokens_.get(); }
   // The tracking workers every session's work runs on.
   TrackingPool& pool() { return pool_; }
   // The one timer of every stream's deadlines.
@@ -557,6 +581,7 @@ class LocalizerServer::Service final
   std::shared_ptr<Logger> logger_;
   MapRegistry registry_;
   std::unique_ptr<TokenFile> tokens_;
+  std::unique_ptr<ViewerBoard> viewer_board_;
   ServerCounters counters_;
   std::atomic<uint64_t> last_session_id_{0};
   MemoryBudget memory_;
@@ -606,6 +631,8 @@ class TrackCall final : public TrackReactor,
         backpressure_event_threshold_(std::max<uint64_t>(
             1, static_cast<uint64_t>(options_.backpressure_fraction *
                                      static_cast<double>(options_.queue_events)))) {}
+
+  ~TrackCall() override { CloseViewer(); }
 
   // Starts the call; `self` owns it until gRPC calls OnDone.
   void Begin(std::shared_ptr<TrackCall> self) {
@@ -920,6 +947,9 @@ class TrackCall final : public TrackReactor,
     started.mutable_started()->set_variant(settings.tracker.VariantName());
     started.mutable_started()->set_queue_capacity(static_cast<uint32_t>(inbound_.capacity()));
     Send(std::move(started));
+    if (ViewerBoard* board = service_.viewer_board()) {
+      viewer_ = board->Open(id_, map->name, EscapeForLog(start_.client_name()));
+    }
     opened_ = true;
     ReadNext();
   }
@@ -1082,6 +1112,7 @@ class TrackCall final : public TrackReactor,
       lost_poses_ += no_estimate ? 1 : 0;
       Send(std::move(response), true, item.received, dequeued, no_estimate);
     }
+    if (viewer_ && !estimates.empty()) PublishToViewer(estimates.back());
     if (tracker_->stopped()) {
       if (cpu_exceeded_) {
         ++counters.limited;
@@ -1100,9 +1131,26 @@ class TrackCall final : public TrackReactor,
     }
   }
 
+  // Publishes a step's pose to the viewer (one short lock) and, when a viewer asked for it, the
+  // time surface with the map reprojected at that pose (docs/viewer.md).
+  void PublishToViewer(const tracking::PoseEstimate& estimate) {
+    viewer_->Publish({estimate.t_ns, estimate.world_from_cam, estimate.status});
+    if (viewer_->surface_requested()) {
+      viewer_->PublishSurface(tracker_->SurfacePicture(estimate.world_from_cam, estimate.t_ns));
+    }
+  }
+
+  // Removes the session from the viewer.
+  void CloseViewer() {
+    if (!viewer_) return;
+    if (ViewerBoard* board = service_.viewer_board()) board->Close(id_);
+    viewer_.reset();
+  }
+
   // Ends an opened session (on the pool): its SessionEnd when it ended well, the log line, the
   // final status.
   void EndSession() {
+    CloseViewer();
     grpc::Status status;
     {
       std::lock_guard<std::mutex> lock(mutex_);
@@ -1294,6 +1342,8 @@ class TrackCall final : public TrackReactor,
   std::atomic<bool> opened_{false};
   std::atomic<uint64_t> id_{0};
   std::unique_ptr<SessionTracker> tracker_;
+  // The session's slot on the viewer's board (null without --viewer; the worker's only).
+  std::shared_ptr<ViewerSession> viewer_;
   std::unique_ptr<RequestValidator> validator_;
   int64_t initial_t_ns_ = 0;
   Clock::time_point session_start_;
@@ -1452,11 +1502,27 @@ LocalizerServer::LocalizerServer(const LocalizerServerOptions& options,
       return service->counters().PrometheusText() + service->ServiceMetricsText();
     });
   }
+  if (options.viewer_address) {
+    ViewerOptions viewer = options.viewer_options();
+    if (options.tls_cert_file) {
+      viewer.tls =
+          ReadTlsFiles(*options.tls_cert_file, *options.tls_key_file, options.tls_client_ca_file);
+    }
+    viewer_ = std::make_unique<ViewerServer>(viewer, *service_->viewer_board(),
+                                             service_->registry(), service_->tokens());
+    service_->Log(LogLevel::kInfo, "viewer: " + std::string(viewer.tls ? "https" : "http") + "://" +
+                                       viewer.address.substr(0, viewer.address.rfind(':')) + ":" +
+                                       std::to_string(viewer_->port()) + "/");
+  }
 }
 
 LocalizerServer::~LocalizerServer() { Shutdown(); }
 
 int LocalizerServer::metrics_port() const { return metrics_ ? metrics_->port() : 0; }
+
+int LocalizerServer::viewer_port() const { return viewer_ ? viewer_->port() : 0; }
+
+ViewerBoard* LocalizerServer::viewer_board() { return service_->viewer_board(); }
 
 void LocalizerServer::Shutdown() {
   if (shut_down_.exchange(true)) return;
@@ -1468,6 +1534,7 @@ void LocalizerServer::Shutdown() {
                     std::chrono::duration_cast<std::chrono::system_clock::duration>(
                         std::chrono::duration<double>(drain_timeout_s_)));
   server_->Wait();
+  viewer_.reset();
   metrics_.reset();
 }
 

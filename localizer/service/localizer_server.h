@@ -19,6 +19,7 @@
 #include "localizer/service/auth.h"
 #include "localizer/service/map_registry.h"
 #include "localizer/service/session.h"
+#include "localizer/service/viewer_http.h"
 #include "localizer/tracking/tracker_options.h"
 
 namespace grpc {
@@ -65,6 +66,14 @@ struct LocalizerServerOptions {
   // Serve Prometheus metrics over HTTP at this IPV4:PORT (GET /metrics); unset: none
   // (--metrics).
   std::optional<std::string> metrics_address;
+  // Serve the live web viewer (docs/viewer.md) over HTTP at this IPV4:PORT; unset: none
+  // (--viewer). The same rules as the API's address: TLS (the same certificate) and tokens (the
+  // same file) apply to it, and a non-loopback address needs them or --insecure.
+  std::optional<std::string> viewer_address;
+  // Most viewer pages open at once (each holds one event stream) (--viewer-max-clients).
+  int viewer_max_clients = 8;
+  // Highest update rate of a viewer page, Hz (--viewer-rate).
+  double viewer_rate_hz = 30.0;
   // PEM certificate chain for TLS; with tls_key_file. Unset: plaintext (--tls-cert).
   std::optional<std::filesystem::path> tls_cert_file;
   // PEM private key for TLS (--tls-key).
@@ -158,6 +167,8 @@ struct LocalizerServerOptions {
   ListenSecurity listen_security() const;
   // What every session is checked against (tracker defaults, camera size).
   SessionLimits session_limits() const;
+  // The viewer's options (address, pages, rate; TLS is added by the server).
+  ViewerOptions viewer_options() const;
   // The map registry's options (maps folder, budgets, tile loader threads).
   MapRegistryOptions registry_options() const;
   // The effective configuration, one "key: value" line per option.
@@ -227,6 +238,10 @@ class LocalizerServer {
   const ServerCounters& counters() const;
   // Port of the metrics endpoint (0 without one).
   int metrics_port() const;
+  // Port of the live viewer (0 without one).
+  int viewer_port() const;
+  // The sessions as the viewer shows them (null without a viewer).
+  ViewerBoard* viewer_board();
   // The map registry.
   MapRegistry& registry();
 
@@ -239,6 +254,7 @@ class LocalizerServer {
   std::unique_ptr<ServerTlsFiles> tls_files_;
   std::unique_ptr<grpc::Server> server_;
   std::unique_ptr<MetricsHttpServer> metrics_;
+  std::unique_ptr<ViewerServer> viewer_;
   int port_ = 0;
   double drain_timeout_s_ = 0;
   std::atomic<bool> shut_down_{false};

@@ -939,7 +939,7 @@ TEST_F(LocalizerServerTest, ServesPrometheusMetrics) {
   ASSERT_FALSE(RunTrack(*stub_, requests).status.ok());
 
   const std::string response = HttpGet(server_->metrics_port(), "/metrics");
-  ASSERT_EQ(response.rfind("HTTP/1.0 200 OK", 0), 0u) << response;
+  ASSERT_EQ(response.rfind("HTTP/1.1 200 OK", 0), 0u) << response;
   const double poses = MetricValue(response, "evloc_poses_total");
   EXPECT_GT(poses, 5);
   EXPECT_EQ(MetricValue(response, "evloc_sessions_started_total"), 1);
@@ -950,7 +950,7 @@ TEST_F(LocalizerServerTest, ServesPrometheusMetrics) {
   EXPECT_EQ(MetricValue(response, "evloc_pose_latency_microseconds_count"), poses);
   EXPECT_NE(response.find("evloc_pose_latency_microseconds_bucket{le=\"+Inf\"} "),
             std::string::npos);
-  EXPECT_EQ(HttpGet(server_->metrics_port(), "/other").rfind("HTTP/1.0 404", 0), 0u);
+  EXPECT_EQ(HttpGet(server_->metrics_port(), "/other").rfind("HTTP/1.1 404", 0), 0u);
 }
 
 // JSON logs (--log-format json): every line the service writes is one JSON object with time,

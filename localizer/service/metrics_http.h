@@ -1,14 +1,14 @@
-// A tiny HTTP/1.0 server that answers `GET /metrics` with a text body (the Prometheus text
-// exposition format), for `evloc-localizer serve --metrics ADDR`. One connection at a time,
-// on its own thread, each with an absolute deadline (a slow or silent client is dropped when it
-// passes, and stopping never waits longer than one poll); meant for a scraper nearby.
+// `GET /metrics` with a text body (the Prometheus text exposition format), for `evloc-localizer
+// serve --metrics ADDR`, on the service's HTTP server (http_server.h: cpp-httplib with one
+// absolute deadline per request, so a slow or silent client is dropped when it passes, and
+// stopping never waits longer than one poll); meant for a scraper nearby.
 #pragma once
 
-#include <atomic>
-#include <chrono>
 #include <functional>
+#include <memory>
 #include <string>
-#include <thread>
+
+#include "localizer/service/http_server.h"
 
 namespace evloc::service {
 
@@ -18,38 +18,20 @@ class MetricsHttpServer {
   // Produces the body of each response.
   using BodyFunction = std::function<std::string()>;
 
-  // Default of the time one connection may take from accept to the last byte sent, seconds.
+  // Default of the time one connection may take from accept to the end of its request, seconds.
   static constexpr double kDefaultConnectionDeadlineS = 2.0;
 
-  // Listens on `address`, "IPV4:PORT" (port 0: any free port); a connection is closed when it is
-  // not answered `connection_deadline_s` after it was accepted. Throws InvalidArgumentError for
-  // a malformed address or a deadline that is not positive, IoError when it cannot be bound.
+  // Listens on `address`, "IPV4:PORT" (port 0: any free port); a connection whose request has not
+  // arrived `connection_deadline_s` after it was accepted is closed. Throws InvalidArgumentError
+  // for a malformed address or a deadline that is not positive, IoError when it cannot be bound.
   MetricsHttpServer(const std::string& address, BodyFunction body,
                     double connection_deadline_s = kDefaultConnectionDeadlineS);
-  // Stops the thread and closes the socket.
-  ~MetricsHttpServer();
-  MetricsHttpServer(const MetricsHttpServer&) = delete;
-  MetricsHttpServer& operator=(const MetricsHttpServer&) = delete;
 
   // The port bound.
-  int port() const { return port_; }
+  int port() const { return server_->port(); }
 
  private:
-  void Serve();
-  void Answer(int connection);
-
-  // Waits until `connection` is ready for `events` (POLLIN / POLLOUT), the deadline passes or
-  // the server stops; true when ready.
-  bool WaitFor(int connection, short events) const;
-
-  BodyFunction body_;
-  double connection_deadline_s_;
-  // Deadline of the connection being answered (serving thread only).
-  std::chrono::steady_clock::time_point deadline_;
-  int socket_ = -1;
-  int port_ = 0;
-  std::atomic<bool> stop_{false};
-  std::thread thread_;
+  std::unique_ptr<HttpServer> server_;
 };
 
 }  // namespace evloc::service

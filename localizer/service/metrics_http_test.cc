@@ -1,6 +1,9 @@
 #include "localizer/service/metrics_http.h"
 
+#include "core/common/error.h"
+
 #include <gtest/gtest.h>
+#include <httplib.h>
 
 #include <arpa/inet.h>
 #include <netinet/in.h>
@@ -12,6 +15,7 @@
 #include <chrono>
 #include <memory>
 #include <thread>
+#include <vector>
 
 namespace evloc::service {
 namespace {
@@ -81,6 +85,63 @@ TEST(MetricsHttpServer, StopsPromptlyWhileAClientTrickles) {
   ::close(socket);
   EXPECT_LT(stopping, std::chrono::milliseconds(1500))
       << std::chrono::duration<double>(stopping).count() << " s";
+}
+
+// httplib serves connections from a pool: a client trickling its request does not delay a scrape,
+// and the body and content type of /metrics are what the hand-written server sent.
+TEST(MetricsHttpServer, ScrapesAreAnsweredWhileAClientTrickles) {
+  MetricsHttpServer server("127.0.0.1:0", [] { return std::string("evloc_poses_total 7\n"); });
+  const int socket = ConnectTo(server.port());
+  ASSERT_GE(socket, 0);
+  std::thread client([&] { TrickleUntilClosed(socket, std::chrono::seconds(3)); });
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  httplib::Client scraper("127.0.0.1", server.port());
+  const auto start = Clock::now();
+  const httplib::Result result = scraper.Get("/metrics");
+  const auto took = Clock::now() - start;
+  client.join();
+  ::close(socket);
+  ASSERT_TRUE(result) << httplib::to_string(result.error());
+  EXPECT_EQ(result->status, 200);
+  EXPECT_EQ(result->body, "evloc_poses_total 7\n");
+  EXPECT_EQ(result->get_header_value("Content-Type"), "text/plain; version=0.0.4");
+  EXPECT_LT(took, std::chrono::milliseconds(1000));
+  const httplib::Result other = scraper.Get("/other");
+  ASSERT_TRUE(other);
+  EXPECT_EQ(other->status, 404);
+  EXPECT_EQ(other->body, "only GET /metrics is served here\n");
+}
+
+// Connections beyond the pool (4 for /metrics) are answered 503 at once, not queued behind
+// clients that hold theirs.
+TEST(MetricsHttpServer, AnswersBusyBeyondItsConnections) {
+  MetricsHttpServer server("127.0.0.1:0", [] { return std::string("m 1\n"); });
+  std::vector<int> silent;
+  for (int i = 0; i < 4; ++i) {
+    silent.push_back(ConnectTo(server.port()));
+    ASSERT_GE(silent.back(), 0);
+  }
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  httplib::Client scraper("127.0.0.1", server.port());
+  const auto start = Clock::now();
+  const httplib::Result result = scraper.Get("/metrics");
+  ASSERT_TRUE(result) << httplib::to_string(result.error());
+  EXPECT_EQ(result->status, 503);
+  EXPECT_LT(Clock::now() - start, std::chrono::milliseconds(1000));
+  for (const int socket : silent) ::close(socket);
+  // Once the silent clients go away, scrapes are served again.
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  const httplib::Result later = scraper.Get("/metrics");
+  ASSERT_TRUE(later);
+  EXPECT_EQ(later->status, 200);
+}
+
+TEST(MetricsHttpServer, RefusesABadAddressOrDeadline) {
+  const auto body = [] { return std::string(); };
+  EXPECT_THROW(MetricsHttpServer("9464", body), InvalidArgumentError);
+  EXPECT_THROW(MetricsHttpServer("example.org:9464", body), InvalidArgumentError);
+  EXPECT_THROW(MetricsHttpServer("127.0.0.1:70000", body), InvalidArgumentError);
+  EXPECT_THROW(MetricsHttpServer("127.0.0.1:0", body, 0.0), InvalidArgumentError);
 }
 
 }  // namespace

@@ -63,6 +63,12 @@ Options:
   --metrics [IPV4:]PORT      serve Prometheus metrics at http://IPV4:PORT/metrics; a bare PORT
                              listens on 127.0.0.1 only: sessions, events, poses, LOST,
                              rejections, latency histogram (default: no metrics)
+  --viewer [IPV4:]PORT       serve the live web viewer at http://IPV4:PORT/ (https with
+                             --tls-cert; tokens of --auth-tokens); a bare PORT listens on
+                             127.0.0.1 only; a network address needs TLS and authentication
+                             like --listen, or --insecure (docs/viewer.md; default: none)
+  --viewer-max-clients N     most viewer pages open at once (default 8)
+  --viewer-rate HZ           highest update rate of a viewer page (default 30)
   --tls-cert PEM             TLS certificate chain (with --tls-key); default plaintext
   --tls-key PEM              TLS private key
   --tls-client-ca PEM        mutual TLS: require client certificates signed by this CA
@@ -183,6 +189,12 @@ ServeCommand ParseServeCommandLine(const std::vector<std::string>& arguments) {
     } else if (flag == "--metrics") {
       // A bare port listens on loopback only.
       server.metrics_address = value.find(':') == std::string::npos ? "127.0.0.1:" + value : value;
+    } else if (flag == "--viewer") {
+      server.viewer_address = value.find(':') == std::string::npos ? "127.0.0.1:" + value : value;
+    } else if (flag == "--viewer-max-clients") {
+      server.viewer_max_clients = ParseIntFlag(flag, value);
+    } else if (flag == "--viewer-rate") {
+      server.viewer_rate_hz = ParseDoubleFlag(flag, value);
     } else if (flag == "--tls-cert") {
       server.tls_cert_file = value;
     } else if (flag == "--tls-key") {

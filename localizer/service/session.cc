@@ -6,6 +6,7 @@
 #include <string>
 
 #include "core/common/error.h"
+#include "localizer/tracking/surface_picture.h"
 #include "localizer/wire/packed_events.h"
 #include "localizer/wire/twist.h"
 #include "proto/convert/proto_convert.h"
@@ -693,6 +694,11 @@ grpc::Status OpenSession(const api::SessionStart& start, MapRegistry& registry,
             "map '" + start.map_name() + "' cannot be loaded: " + error.what()};
   }
   return grpc::Status::OK;
+}
+
+cv::Mat SessionTracker::SurfacePicture(const Rigid3d& world_from_cam, int64_t t_ns) const {
+  if (!started_ || source_ == nullptr) return cv::Mat();
+  return tracking::SurfaceWithReprojectedMap(tracker_, *source_, world_from_cam, t_ns);
 }
 
 }  // namespace evloc::service

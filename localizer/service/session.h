@@ -293,6 +293,10 @@ class SessionTracker {
   bool stopped() const { return stopped_; }
   // Session time the tracker has been advanced to (steps ran up to it), ns.
   int64_t advanced_t_ns() const { return advanced_t_ns_; }
+  // The live viewer's picture (docs/viewer.md): the unsigned time surface at `t_ns` with the
+  // map points that may be visible from `world_from_cam` reprojected onto it (CV_8UC3; green on
+  // an active pixel, red not). Empty before the tracker started.
+  cv::Mat SurfacePicture(const Rigid3d& world_from_cam, int64_t t_ns) const;
 
  private:
   std::vector<tracking::PoseEstimate> AddEvents(const EventBuffer& events, int64_t end_t_ns,

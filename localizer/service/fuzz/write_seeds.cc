@@ -3,7 +3,8 @@
 // targets read (session_packets_fuzzer.cc, session_requests_fuzzer.cc), from the synthetic test
 // scene: PACKED, EVT 3.0 and EVT 2.0 packet streams; event sessions (PACKED and EVT 3.0, with a
 // pose hint and empty packets) and a frame session; and OUT_DIR/locate, the Locate requests of
-// locate_request_fuzzer.cc (locate_fuzz_common.h).
+// locate_request_fuzzer.cc (locate_fuzz_common.h); and OUT_DIR/viewer, HTTP requests of every
+// route of the live viewer (viewer_requests_fuzzer.cc).
 #include <filesystem>
 #include <fstream>
 #include <iostream>
@@ -232,6 +233,21 @@ int Main(int argc, char** argv) {
   const std::vector<api::LocateRequest> locate = LocateSeedRequests();
   for (size_t i = 0; i < locate.size(); ++i) {
     WriteFile(out / "locate" / ("request" + std::to_string(i)), locate[i].SerializeAsString());
+  }
+  fs::create_directories(out / "viewer");
+  const char* const viewer_requests[] = {
+      "GET / HTTP/1.1\r\nHost: x\r\n\r\n",
+      "GET /app.js HTTP/1.1\r\n\r\n",
+      "GET /api/maps HTTP/1.1\r\nAuthorization: Bearer abc\r\n\r\n",
+      "GET /api/maps/rectangles HTTP/1.1\r\n\r\n",
+      "GET /api/maps/rectangles/points?max=100 HTTP/1.1\r\n\r\n",
+      "GET /api/sessions HTTP/1.1\r\n\r\n",
+      "GET /api/events?rate=30 HTTP/1.1\r\n\r\n",
+      "GET /api/sessions/1/surface.png HTTP/1.1\r\n\r\n",
+      "POST /api/maps HTTP/1.1\r\nContent-Length: 4\r\n\r\nabcd",
+  };
+  for (size_t i = 0; i < std::size(viewer_requests); ++i) {
+    WriteFile(out / "viewer" / ("request" + std::to_string(i)), viewer_requests[i]);
   }
   for (const auto& entry : fs::recursive_directory_iterator(out)) {
     if (entry.is_regular_file()) {

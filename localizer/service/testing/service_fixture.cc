@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <atomic>
 #include <random>
+#include <thread>
 
 #include <grpcpp/grpcpp.h>
 
@@ -127,6 +128,31 @@ std::vector<api::TrackRequest> PackedPackets(const EventBuffer& events, int64_t 
     *requests.emplace_back().mutable_events() = std::move(packet);
   }
   return requests;
+}
+
+int64_t StreamPacedSession(int port, const EventBuffer& events, int64_t packet_ns,
+                           std::chrono::milliseconds wall_per_packet, const std::atomic<bool>& stop,
+                           const std::string& client_name) {
+  const auto stub = ConnectStub(port);
+  grpc::ClientContext context;
+  auto stream = stub->Track(&context);
+  std::atomic<int64_t> poses{0};
+  std::thread reader([&] {
+    api::TrackResponse response;
+    while (stream->Read(&response)) poses += response.has_pose() ? 1 : 0;
+  });
+  api::TrackRequest start = TestSessionStart();
+  start.mutable_start()->set_client_name(client_name);
+  bool ok = stream->Write(start);
+  for (const api::TrackRequest& packet : PackedPackets(events, packet_ns)) {
+    if (!ok || stop) break;
+    ok = stream->Write(packet);
+    std::this_thread::sleep_for(wall_per_packet);
+  }
+  stream->WritesDone();
+  reader.join();
+  stream->Finish();
+  return poses;
 }
 
 }  // namespace evloc::service::testing

@@ -2,6 +2,8 @@
 // rectangle map, a server on loopback, the synthetic event stream and the Track requests for it.
 #pragma once
 
+#include <atomic>
+#include <chrono>
 #include <cstdint>
 #include <filesystem>
 #include <memory>
@@ -82,5 +84,13 @@ api::TrackRequest TestSessionStart();
 
 // PACKED EventPackets of `events`, one per `packet_ns` window starting at the first event.
 std::vector<api::TrackRequest> PackedPackets(const EventBuffer& events, int64_t packet_ns);
+
+// Streams one session (TestSessionStart named `client_name`, then the PackedPackets of `events`
+// in `packet_ns` windows) to 127.0.0.1:port, one packet every `wall_per_packet`, until the
+// packets run out or `stop` is set; returns the PoseUpdates received. For tests that watch live
+// sessions (the viewer).
+int64_t StreamPacedSession(int port, const EventBuffer& events, int64_t packet_ns,
+                           std::chrono::milliseconds wall_per_packet, const std::atomic<bool>& stop,
+                           const std::string& client_name = "test");
 
 }  // namespace evloc::service::testing
