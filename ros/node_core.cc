@@ -1,0 +1,325 @@
+#include "ros/node_core.h"
+
+#include <algorithm>
+#include <cmath>
+#include <utility>
+
+#include "core/camera/calibration_file.h"
+#include "core/common/error.h"
+#include "core/dataset/pose_text.h"
+#include "core/dataset/rosbag_dataset.h"
+#include "core/events/prophesee_decoder.h"
+#include "core/events/rosbag_events.h"
+#include "core/trajectory/tum_io.h"
+#include "localizer/offline/offline_tracking.h"
+#include "maps/map.h"
+#include "maps/map_directory.h"
+#include "maps/visibility.h"
+
+namespace evloc::ros_node {
+namespace {
+
+EventBuffer ToBuffer(EventColumns columns) {
+  EventBuffer events;
+  events.t_ns = std::move(columns.t_ns);
+  events.x = std::move(columns.x);
+  events.y = std::move(columns.y);
+  events.polarity = std::move(columns.polarity);
+  return events;
+}
+
+EventColumns ToColumns(EventBuffer events) {
+  EventColumns columns;
+  columns.t_ns = std::move(events.t_ns);
+  columns.x = std::move(events.x);
+  columns.y = std::move(events.y);
+  columns.polarity = std::move(events.polarity);
+  return columns;
+}
+
+Rigid3d ToRigid(const PoseFields& pose) {
+  for (const double value : pose.position) {
+    if (!std::isfinite(value)) throw InvalidArgumentError("pose: a position is not finite");
+  }
+  for (const double value : pose.orientation) {
+    if (!std::isfinite(value)) throw InvalidArgumentError("pose: an orientation is not finite");
+  }
+  Eigen::Quaterniond rotation(pose.orientation[3], pose.orientation[0], pose.orientation[1],
+                              pose.orientation[2]);
+  if (std::abs(rotation.norm() - 1.0) > kPoseQuaternionNormTolerance) {
+    throw InvalidArgumentError("pose: the quaternion's norm is " + std::to_string(rotation.norm()) +
+                               ", not within 1e-3 of 1");
+  }
+  rotation.normalize();
+  return Rigid3d(rotation, Eigen::Vector3d(pose.position[0], pose.position[1], pose.position[2]));
+}
+
+StepOutput ToOutput(const tracking::PoseEstimate& step) {
+  StepOutput out;
+  out.t_ns = step.t_ns;
+  const Rigid3d& pose = step.world_from_cam;
+  out.pose.position = {pose.translation.x(), pose.translation.y(), pose.translation.z()};
+  out.pose.orientation = {pose.rotation.x(), pose.rotation.y(), pose.rotation.z(),
+                          pose.rotation.w()};
+  // world_from_cam * Exp(v, omega): to first order the position moves by R v and the orientation
+  // turns by R omega about the map's axes.
+  Matrix6d rotate = Matrix6d::Zero();
+  const Eigen::Matrix3d r = pose.rotation.toRotationMatrix();
+  rotate.topLeftCorner<3, 3>() = r;
+  rotate.bottomRightCorner<3, 3>() = r;
+  const Matrix6d turned = rotate * step.covariance * rotate.transpose();
+  // Exactly symmetric, as consumers of the message (robot_localization) expect.
+  const Matrix6d covariance = 0.5 * (turned + turned.transpose());
+  for (int row = 0; row < 6; ++row) {
+    for (int col = 0; col < 6; ++col) out.covariance[6 * row + col] = covariance(row, col);
+  }
+  out.status = tracking::TrackingStatusName(step.status);
+  out.tracking = step.status == tracking::TrackingStatus::kTracking;
+  out.alignment = step.quality.alignment;
+  out.on_edge_fraction = step.quality.on_edge_fraction;
+  out.points_used = static_cast<uint32_t>(std::max(0, step.quality.points_used));
+  out.step_ms = step.timings.total_ms;
+  return out;
+}
+
+std::optional<SensorSize> Bounds(uint32_t width, uint32_t height) {
+  if (width > 65535 || height > 65535) {
+    throw InvalidArgumentError("expected a width and height of at most 65535, found " +
+                               std::to_string(width) + "x" + std::to_string(height));
+  }
+  if (width == 0 || height == 0) return std::nullopt;
+  return SensorSize{static_cast<int>(width), static_cast<int>(height)};
+}
+
+}  // namespace
+
+struct NodeCore::State {
+  NodeCoreOptions options;
+  tracking::TrackerOptions tracker_options;
+  Map map;
+  std::unique_ptr<VisibilityIndex> visibility;
+  std::unique_ptr<tracking::StaticMapSource> source;
+  std::optional<Camera> camera;
+  bool initial_pose_known = false;
+  std::optional<Rigid3d> initial_world_from_cam;
+  std::optional<int64_t> initial_t_ns;
+  std::unique_ptr<tracking::EventStreamTracker> stream;
+  // Events kept before the start, one buffer per message, in order.
+  std::deque<EventBuffer> pending;
+  // The events at the last message's last time, given to the tracker with the next message.
+  EventBuffer held;
+  std::optional<int64_t> last_event_t_ns;
+  // The event stream's size (first message that states one) and its EVT 3.0 decoder.
+  std::optional<SensorSize> sensor_size;
+  std::unique_ptr<Evt3Decoder> evt3;
+};
+
+NodeCore::NodeCore(const NodeCoreOptions& options) : state_(std::make_unique<State>()) {
+  State& s = *state_;
+  s.options = options;
+  if (options.map_path.empty()) {
+    throw InvalidArgumentError("parameter ~map is required: the map file (.evmap) or folder");
+  }
+  if (!std::isfinite(options.buffer_s) || options.buffer_s < 0 || options.buffer_s > 60) {
+    throw InvalidArgumentError("parameter ~buffer_s must be in 0..60 seconds");
+  }
+  if (options.step_rate_hz != 0) s.tracker_options.step_rate_hz = options.step_rate_hz;
+  try {
+    s.tracker_options.Check();
+  } catch (const InvalidArgumentError& error) {
+    throw InvalidArgumentError("parameter ~rate: " + std::string(error.what()));
+  }
+  if (options.init_pose == "none") {
+    mode_ = InitialPoseMode::kSearch;
+    s.initial_pose_known = true;
+  } else if (options.init_pose == "topic") {
+    mode_ = InitialPoseMode::kHint;
+  } else {
+    mode_ = InitialPoseMode::kParameter;
+    s.initial_world_from_cam = ParsePoseText("parameter ~init_pose", options.init_pose);
+    s.initial_pose_known = true;
+  }
+  if (!options.init_stamp.empty()) {
+    try {
+      s.initial_t_ns = ParseSecondsAsNanoseconds(options.init_stamp);
+    } catch (const Error& error) {
+      throw InvalidArgumentError("parameter ~init_stamp: " + std::string(error.what()) +
+                                 " (seconds, e.g. 1700000000.000123456)");
+    }
+  }
+  s.map = LoadMap(ResolveMapFile(options.map_path));
+  s.visibility = std::make_unique<VisibilityIndex>(s.map);
+  s.source = std::make_unique<tracking::StaticMapSource>(s.map, s.visibility.get());
+  if (!options.calib_path.empty()) s.camera = ReadCalibrationFile(options.calib_path, 0, 0);
+}
+
+NodeCore::~NodeCore() = default;
+
+bool NodeCore::has_camera() const { return state_->camera.has_value(); }
+
+std::string NodeCore::waiting_for() const {
+  if (state_->stream) return "";
+  if (!state_->camera) return "camera_info";
+  if (!state_->initial_pose_known) return "a pose on initialpose";
+  return "events";
+}
+
+std::string NodeCore::camera_description() const {
+  if (!state_->camera) return "";
+  return std::to_string(state_->camera->width) + "x" + std::to_string(state_->camera->height) +
+         " " + CameraModelName(state_->camera->model);
+}
+
+std::string NodeCore::map_description() const {
+  return state_->options.map_path + " (" + std::to_string(state_->map.size()) + " points, " +
+         std::to_string(state_->map.keyframes.size()) + " keyframes)";
+}
+
+std::vector<StepOutput> NodeCore::AddEventArray(uint32_t width, uint32_t height,
+                                                EventColumns events) {
+  ++counters_.messages;
+  try {
+    const std::optional<SensorSize> bounds = Bounds(width, height);
+    if (bounds && !state_->sensor_size) state_->sensor_size = bounds;
+    const size_t count = events.t_ns.size();
+    if (events.x.size() != count || events.y.size() != count || events.polarity.size() != count) {
+      throw InvalidArgumentError("event columns of different lengths");
+    }
+    if (bounds) {
+      size_t kept = 0;
+      for (size_t i = 0; i < count; ++i) {
+        if (events.x[i] >= bounds->width || events.y[i] >= bounds->height) continue;
+        events.t_ns[kept] = events.t_ns[i];
+        events.x[kept] = events.x[i];
+        events.y[kept] = events.y[i];
+        events.polarity[kept] = events.polarity[i];
+        ++kept;
+      }
+      counters_.decoder_dropped_events += count - kept;
+      events.t_ns.resize(kept);
+      events.x.resize(kept);
+      events.y.resize(kept);
+      events.polarity.resize(kept);
+    }
+    return HandleEvents(std::move(events));
+  } catch (...) {
+    ++counters_.rejected_messages;
+    throw;
+  }
+}
+
+std::vector<StepOutput> NodeCore::AddEventPacket(uint32_t width, uint32_t height, int64_t stamp_ns,
+                                                 const std::string& encoding, bool is_bigendian,
+                                                 const uint8_t* data, size_t size) {
+  ++counters_.messages;
+  try {
+    const std::optional<SensorSize> bounds = Bounds(width, height);
+    if (bounds && !state_->sensor_size) state_->sensor_size = bounds;
+    if (is_bigendian) throw InvalidArgumentError("big-endian event packets are not supported");
+    EventBuffer events;
+    uint64_t dropped = 0;
+    // As the bag reader: mono events bounded by this packet's size, EVT 3.0 by the stream's.
+    DecodeEventPacketEvents(encoding, stamp_ns, data, size,
+                            encoding == "mono" ? bounds : state_->sensor_size,
+                            "event packets (EVT 3.0)", &events, &dropped, &state_->evt3);
+    counters_.decoder_dropped_events += dropped;
+    return HandleEvents(ToColumns(std::move(events)));
+  } catch (...) {
+    ++counters_.rejected_messages;
+    throw;
+  }
+}
+
+std::vector<StepOutput> NodeCore::HandleEvents(EventColumns columns) {
+  State& s = *state_;
+  if (columns.t_ns.empty()) return {};
+  EventBuffer events = ToBuffer(std::move(columns));
+  if (!std::is_sorted(events.t_ns.begin(), events.t_ns.end())) {
+    throw InvalidArgumentError("the message's events are not in time order");
+  }
+  if (s.last_event_t_ns && events.t_ns.front() < *s.last_event_t_ns) {
+    throw InvalidArgumentError(
+        "the message goes back in time (" +
+        std::to_string((*s.last_event_t_ns - events.t_ns.front()) * 1e-9) +
+        " s before the last event): publish one event stream, in time order");
+  }
+  counters_.events += events.size();
+  s.last_event_t_ns = events.t_ns.back();
+  if (s.stream) return Track(events);
+  s.pending.push_back(std::move(events));
+  // Keep buffer_s of event time (the time surfaces forget older events).
+  const int64_t keep_from_ns =
+      *s.last_event_t_ns - static_cast<int64_t>(std::llround(s.options.buffer_s * 1e9));
+  while (s.pending.size() > 1 && s.pending.front().t_ns.back() < keep_from_ns) {
+    counters_.buffer_dropped_events += s.pending.front().size();
+    s.pending.pop_front();
+  }
+  return TryStart();
+}
+
+bool NodeCore::SetCameraInfo(const CameraInfoFields& info, std::vector<StepOutput>* steps) {
+  if (state_->camera) return false;
+  state_->camera =
+      CameraFromRosCameraInfo(info.width, info.height, info.distortion_model, info.d, info.k);
+  *steps = TryStart();
+  return true;
+}
+
+void NodeCore::SetPoseHint(const PoseFields& pose, int64_t stamp_ns,
+                           std::vector<StepOutput>* steps) {
+  State& s = *state_;
+  const Rigid3d world_from_cam = ToRigid(pose);
+  if (s.stream && s.stream->started()) {
+    const int64_t t_ns = std::max(stamp_ns, s.last_event_t_ns.value_or(stamp_ns));
+    s.stream->mutable_tracker().Reset(world_from_cam, t_ns);
+    return;
+  }
+  if (mode_ != InitialPoseMode::kHint) return;
+  s.initial_world_from_cam = world_from_cam;
+  if (stamp_ns > 0) s.initial_t_ns = stamp_ns;
+  s.initial_pose_known = true;
+  *steps = TryStart();
+}
+
+std::vector<StepOutput> NodeCore::TryStart() {
+  State& s = *state_;
+  if (s.stream || !s.camera || !s.initial_pose_known || s.pending.empty()) return {};
+  const int64_t initial_t_ns = s.initial_t_ns.value_or(s.pending.front().t_ns.front());
+  s.stream = std::make_unique<tracking::EventStreamTracker>(*s.source, *s.camera, s.tracker_options,
+                                                            s.initial_world_from_cam, initial_t_ns);
+  std::vector<StepOutput> steps;
+  std::deque<EventBuffer> pending = std::move(s.pending);
+  s.pending.clear();
+  for (const EventBuffer& events : pending) {
+    for (StepOutput& step : Track(events)) steps.push_back(std::move(step));
+  }
+  return steps;
+}
+
+std::vector<StepOutput> NodeCore::Track(const EventBuffer& events) {
+  State& s = *state_;
+  // Every later event is at or after this message's last time t: the steps before t are due now
+  // (Tracker::AdvanceTo(t - 1) runs them: the same steps and poses as when the next message
+  // triggers them). The events at t itself wait for the next message, as AdvanceTo needs.
+  EventBuffer& held = s.held;
+  const int64_t last_t_ns = events.t_ns.back();
+  EventBuffer now;
+  now.reserve(held.size() + events.size());
+  for (size_t i = 0; i < held.size(); ++i) now.push_back(held[i]);
+  held.clear();
+  for (size_t i = 0; i < events.size(); ++i) {
+    (events.t_ns[i] < last_t_ns ? now : held).push_back(events[i]);
+  }
+  std::vector<tracking::PoseEstimate> estimates;
+  if (!now.empty()) estimates = s.stream->AddEvents(now);
+  for (tracking::PoseEstimate& step : s.stream->AdvanceTo(last_t_ns - 1)) {
+    estimates.push_back(std::move(step));
+  }
+  std::vector<StepOutput> steps;
+  steps.reserve(estimates.size());
+  for (const tracking::PoseEstimate& step : estimates) steps.push_back(ToOutput(step));
+  counters_.steps += steps.size();
+  return steps;
+}
+
+}  // namespace evloc::ros_node

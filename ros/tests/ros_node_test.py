@@ -1,0 +1,349 @@
+#!/usr/bin/python3
+"""The evloc ROS node end to end (docs/ros.md), run by ctest as evloc_ros_node_test.
+
+1. evloc-sim renders a short DAVIS240 sequence with its exact map; core/events/testing/
+   write_test_bags.py writes it as a bag with Debian's python3-rosbag (dvs_msgs/EventArray in
+   messages of 1 ms, sensor_msgs/CameraInfo, geometry_msgs/PoseStamped ground truth).
+2. evloc-track tracks the bag from the first ground-truth pose: the reference.
+3. A roscore on a free loopback port; ros/launch/evloc.launch starts the node (found through
+   ROS_PACKAGE_PATH=<build>/ros/package) at the same pose; this script listens to /dvs/events,
+   /evloc/pose, /evloc/status and /tf; `rosbag play` plays the bag in real time.
+4. Checks: the published poses are evloc-track's, line for line in TUM text (bit-identical
+   doubles); every TRACKING pose has its TF map -> camera; the statuses are TRACKING.
+5. Measures the end-to-end latency from an events message (as this listener receives it) to the
+   pose it made due (as this listener receives it), and prints it.
+
+Exit 77 (ctest: skipped, with the reason printed) when Debian's ROS 1 packages are missing
+(scripts/install-deps.sh installs them). --out DIR keeps the figures: latency.json, poses.txt,
+and trajectory.png (node, evloc-track and ground truth seen from above), the picture of
+docs/ros.md.
+"""
+
+import argparse
+import json
+import os
+import shutil
+import signal
+import socket
+import struct
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+
+
+def skip(reason):
+    print("SKIPPED: " + reason + " (run scripts/install-deps.sh)")
+    sys.exit(77)
+
+
+try:
+    import rosbag
+    import rosgraph
+    import rospy
+    from geometry_msgs.msg import PoseWithCovarianceStamped
+except ImportError as error:
+    skip("/usr/bin/python3 lacks ROS 1's Python packages: %s" % error)
+for tool in ("roscore", "roslaunch", "rosbag"):
+    if shutil.which(tool) is None:
+        skip("%s is not installed" % tool)
+
+
+def run(command, **kwargs):
+    result = subprocess.run(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            **kwargs)
+    if result.returncode != 0:
+        sys.exit("FAILED: %s exited %d:\n%s" % (" ".join(command), result.returncode,
+                                                 result.stdout[-4000:]))
+    return result.stdout
+
+
+def free_port():
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+def seconds_text(t_ns):
+    return "%d.%09d" % (t_ns // 1_000_000_000, t_ns % 1_000_000_000)
+
+
+def tum_line(t_ns, values):
+    # evloc's TUM writer: exact nanoseconds, shortest round-trip doubles (Python's repr).
+    return seconds_text(t_ns) + "".join(" " + repr(float(v)) for v in values)
+
+
+def last_event_ns(data):
+    """The last event's time of a serialized dvs_msgs/EventArray (None when it has none)."""
+    frame_id_length = struct.unpack_from("<I", data, 12)[0]
+    offset = 16 + frame_id_length + 8
+    count = struct.unpack_from("<I", data, offset)[0]
+    if count == 0:
+        return None
+    seconds, nanoseconds = struct.unpack_from("<II", data, offset + 4 + 13 * (count - 1) + 4)
+    return seconds * 1_000_000_000 + nanoseconds
+
+
+def percentile(values, fraction):
+    ordered = sorted(values)
+    return ordered[min(len(ordered) - 1, int(round(fraction * (len(ordered) - 1))))]
+
+
+def stop(process, name):
+    """Ends a process this script started (its own process group), politely first."""
+    if process is None or process.poll() is not None:
+        return
+    try:
+        os.killpg(process.pid, signal.SIGINT)
+        process.wait(timeout=15)
+    except (subprocess.TimeoutExpired, ProcessLookupError):
+        try:
+            os.killpg(process.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        process.wait()
+    print("stopped %s" % name)
+
+
+def main():
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--build", required=True)
+    parser.add_argument("--source", required=True)
+    parser.add_argument("--out", help="folder for latency.json, poses.txt and trajectory.png")
+    parser.add_argument("--duration", default="1.0", help="seconds of the rendered sequence")
+    args = parser.parse_args()
+    build, source = os.path.abspath(args.build), os.path.abspath(args.source)
+    node = os.path.join(build, "ros/package/evloc_ros/evloc_ros_node")
+    if not os.access(node, os.X_OK):
+        sys.exit("FAILED: %s is not built (cmake --build build --target evloc_ros_node)" % node)
+
+    work = tempfile.mkdtemp(prefix="evloc-ros-node-")
+    roscore = launch = player = None
+    try:
+        dataset = os.path.join(work, "dataset")
+        started = time.monotonic()
+        run([os.path.join(build, "tools/sim/evloc-sim"), "render", "--out", dataset, "--camera",
+             "davis240", "--motion", "slow", "--duration", args.duration, "--seed", "3",
+             "--events-txt"])
+        bag_path = os.path.join(work, "sequence.bag")
+        run(["/usr/bin/python3", os.path.join(source, "core/events/testing/write_test_bags.py"),
+             "--from-dataset", dataset, bag_path])
+        print("rendered and bagged in %.1f s" % (time.monotonic() - started))
+
+        # The first ground-truth pose, as the bag holds it: the start of both runs.
+        with rosbag.Bag(bag_path) as bag:
+            _, first, _ = next(bag.read_messages(topics=["/optitrack/davis"]))
+        stamp_ns = first.header.stamp.to_nsec()
+        p, q = first.pose.position, first.pose.orientation
+        init_pose = " ".join(repr(v) for v in (p.x, p.y, p.z, q.x, q.y, q.z, q.w))
+        track_out = os.path.join(work, "track.txt")
+        run([os.path.join(build, "localizer/offline/evloc-track"), "--map",
+             os.path.join(dataset, "gt_map"), "--dataset", bag_path, "--init-pose", init_pose,
+             "--out", track_out, "--quiet"])
+        with open(track_out) as handle:
+            reference = [line.strip() for line in handle if line.strip() and line[0] != "#"]
+
+        port = free_port()
+        env = dict(os.environ)
+        env.update({
+            "ROS_MASTER_URI": "http://127.0.0.1:%d" % port, "ROS_IP": "127.0.0.1",
+            "ROS_HOME": os.path.join(work, "ros_home"), "ROS_LOG_DIR": os.path.join(work, "log"),
+            "ROS_PACKAGE_PATH": os.path.join(build, "ros/package"),
+        })
+        os.environ.update(env)
+        roscore = subprocess.Popen(["roscore", "-p", str(port)], env=env,
+                                   stdout=open(os.path.join(work, "roscore.log"), "w"),
+                                   stderr=subprocess.STDOUT, start_new_session=True)
+        master = rosgraph.Master("/evloc_ros_node_test")
+        deadline = time.monotonic() + 60
+        while not master.is_online():
+            if time.monotonic() > deadline or roscore.poll() is not None:
+                sys.exit("FAILED: roscore did not start on port %d" % port)
+            time.sleep(0.2)
+
+        lock = threading.Lock()
+        messages, poses, statuses, transforms = [], [], [], []
+
+        def on_events(message):
+            arrival = time.monotonic()
+            with lock:
+                messages.append((arrival, message._buff))
+
+        def on_pose(message):
+            arrival = time.monotonic()
+            with lock:
+                poses.append((arrival, message))
+
+        rospy.init_node("evloc_ros_node_test", anonymous=True, disable_signals=True)
+        rospy.Subscriber("/dvs/events", rospy.AnyMsg, on_events, queue_size=100000,
+                         tcp_nodelay=True)
+        rospy.Subscriber("/evloc/pose", PoseWithCovarianceStamped, on_pose, queue_size=100000,
+                         tcp_nodelay=True)
+        launch = subprocess.Popen(
+            ["roslaunch", os.path.join(source, "ros/launch/evloc.launch"),
+             "map:=" + os.path.join(dataset, "gt_map"), "init_pose:=" + init_pose,
+             "init_stamp:=" + seconds_text(stamp_ns)],
+            env=env, stdout=open(os.path.join(work, "roslaunch.log"), "w"),
+            stderr=subprocess.STDOUT, start_new_session=True)
+        # Wait until the node subscribes to the events (it has loaded the map).
+        deadline = time.monotonic() + 120
+        while True:
+            _, subscribers, _ = master.getSystemState()
+            nodes = dict(subscribers).get("/dvs/events", [])
+            if "/evloc" in nodes:
+                break
+            if time.monotonic() > deadline or launch.poll() is not None:
+                with open(os.path.join(work, "roslaunch.log")) as handle:
+                    sys.exit("FAILED: the node did not subscribe to /dvs/events:\n" +
+                             handle.read()[-4000:])
+            time.sleep(0.2)
+        # evloc_msgs/TrackingStatus has no Python package: decode it with genpy from the
+        # definition the node sends in its connection header.
+        import genpy.dynamic
+        status_classes = {}
+
+        def on_status(message):
+            definition = message._connection_header["message_definition"]
+            if "class" not in status_classes:
+                status_classes["class"] = genpy.dynamic.generate_dynamic(
+                    "evloc_msgs/TrackingStatus", definition)["evloc_msgs/TrackingStatus"]
+            decoded = status_classes["class"]()
+            decoded.deserialize(message._buff)
+            with lock:
+                statuses.append(decoded)
+
+        rospy.Subscriber("/evloc/status", rospy.AnyMsg, on_status, queue_size=100000)
+        from tf2_msgs.msg import TFMessage
+        rospy.Subscriber("/tf", TFMessage, lambda m: transforms.extend(m.transforms),
+                         queue_size=100000)
+        time.sleep(1.0)
+
+        player = subprocess.Popen(["rosbag", "play", "--quiet", "--wait-for-subscribers",
+                                   "--topics", "/dvs/events", "/dvs/camera_info", "--", bag_path],
+                                  env=env, stdout=open(os.path.join(work, "play.log"), "w"),
+                                  stderr=subprocess.STDOUT, start_new_session=True)
+        if player.wait(timeout=300) != 0:
+            with open(os.path.join(work, "play.log")) as handle:
+                sys.exit("FAILED: rosbag play failed:\n" + handle.read()[-4000:])
+        # Wait for the last poses (the node may still be working through its queue).
+        deadline = time.monotonic() + 120
+        count = -1
+        while time.monotonic() < deadline:
+            time.sleep(2.0)
+            with lock:
+                if len(poses) == count:
+                    break
+                count = len(poses)
+
+        with lock:
+            poses_seen, messages_seen = list(poses), list(messages)
+        tracking = [m for _, m in poses_seen
+                    if m.pose.covariance[0] < 1e5]  # LOST and search steps carry 1e6 variances
+        published = [tum_line(m.header.stamp.to_nsec(),
+                              (m.pose.pose.position.x, m.pose.pose.position.y,
+                               m.pose.pose.position.z, m.pose.pose.orientation.x,
+                               m.pose.pose.orientation.y, m.pose.pose.orientation.z,
+                               m.pose.pose.orientation.w)) for _, m in poses_seen]
+        failures = []
+        if len(reference) < 100:
+            failures.append("evloc-track gave only %d poses" % len(reference))
+        if published != reference:
+            mismatch = next((i for i, (a, b) in enumerate(zip(published, reference)) if a != b),
+                            min(len(published), len(reference)))
+            failures.append(
+                "the node published %d poses, evloc-track wrote %d; first difference at %d:\n"
+                "  node:        %s\n  evloc-track: %s" % (
+                    len(published), len(reference), mismatch,
+                    published[mismatch] if mismatch < len(published) else "(none)",
+                    reference[mismatch] if mismatch < len(reference) else "(none)"))
+        camera_transforms = [t for t in transforms
+                             if t.header.frame_id == "map" and t.child_frame_id == "camera"]
+        if len(camera_transforms) != len(tracking):
+            failures.append("%d TF transforms map -> camera for %d TRACKING poses" % (
+                len(camera_transforms), len(tracking)))
+        step_statuses = [s.status for s in statuses if s.status != "WAITING"]
+        if len(step_statuses) != len(published) or set(step_statuses) != {"TRACKING"}:
+            failures.append("statuses: %d step statuses (%s) for %d poses" % (
+                len(step_statuses), ", ".join(sorted(set(step_statuses))), len(published)))
+
+        # Latency: each pose against the events message that made it due (the first whose last
+        # event is after the pose's time), both as this listener received them.
+        arrivals = []
+        for arrival, data in messages_seen:
+            last = last_event_ns(data)
+            if last is not None:
+                arrivals.append((last, arrival))
+        latencies = []
+        index = 0
+        for arrival, message in poses_seen:
+            t_ns = message.header.stamp.to_nsec()
+            while index < len(arrivals) and arrivals[index][0] <= t_ns:
+                index += 1
+            if index < len(arrivals):
+                latencies.append((arrival - arrivals[index][1]) * 1e3)
+        node_latencies = [s.latency_ms for s in statuses if s.status != "WAITING"]
+        report = {
+            "poses": len(published), "reference_poses": len(reference),
+            "events_messages": len(messages_seen),
+            "latency_ms": {
+                "p50": percentile(latencies, 0.5), "p90": percentile(latencies, 0.9),
+                "p99": percentile(latencies, 0.99), "max": max(latencies)} if latencies else None,
+            "node_latency_ms": {
+                "p50": percentile(node_latencies, 0.5), "p90": percentile(node_latencies, 0.9),
+                "p99": percentile(node_latencies, 0.99),
+                "max": max(node_latencies)} if node_latencies else None,
+        }
+        print(json.dumps(report, indent=2))
+        if args.out:
+            os.makedirs(args.out, exist_ok=True)
+            with open(os.path.join(args.out, "latency.json"), "w") as handle:
+                json.dump(report, handle, indent=2)
+            with open(os.path.join(args.out, "poses.txt"), "w") as handle:
+                handle.write("\n".join(published) + "\n")
+            plot(args.out, published, reference, os.path.join(dataset, "groundtruth.txt"))
+        if failures:
+            for name in ("roslaunch.log", "play.log"):
+                with open(os.path.join(work, name)) as handle:
+                    print("---- %s (end)\n%s" % (name, handle.read()[-3000:]))
+            sys.exit("FAILED:\n" + "\n".join(failures))
+        print("PASSED: %d poses identical to evloc-track's; %d TF transforms; latency p50 %.2f ms"
+              % (len(published), len(camera_transforms), report["latency_ms"]["p50"]))
+    finally:
+        stop(player, "rosbag play")
+        stop(launch, "roslaunch")
+        try:
+            rospy.signal_shutdown("done")
+        except Exception:
+            pass
+        stop(roscore, "roscore")
+        shutil.rmtree(work, ignore_errors=True)
+
+
+def plot(out, published, reference, groundtruth_path):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    def columns(lines):
+        rows = [[float(v) for v in line.split()] for line in lines]
+        return [r[1] for r in rows], [r[2] for r in rows]
+
+    with open(groundtruth_path) as handle:
+        truth = [l for l in handle if l.strip() and not l.startswith("#")]
+    figure, axes = plt.subplots(figsize=(6, 4.5), dpi=100)
+    axes.plot(*columns(truth), color="0.6", linewidth=4, label="ground truth")
+    axes.plot(*columns(reference), color="tab:blue", linewidth=2, label="evloc-track")
+    axes.plot(*columns(published), color="tab:orange", linestyle="--", linewidth=1.5,
+              label="evloc_ros_node (/evloc/pose)")
+    axes.set_xlabel("x (m)")
+    axes.set_ylabel("y (m)")
+    axes.set_title("ROS node vs evloc-track on the same bag")
+    axes.axis("equal")
+    axes.legend()
+    figure.tight_layout()
+    figure.savefig(os.path.join(out, "trajectory.png"))
+
+
+if __name__ == "__main__":
+    main()
