@@ -303,13 +303,18 @@ std::vector<StepOutput> NodeCore::Track(const EventBuffer& events) {
   // triggers them). The events at t itself wait for the next message, as AdvanceTo needs.
   EventBuffer& held = s.held;
   const int64_t last_t_ns = events.t_ns.back();
+  // The events are sorted: those at last_t_ns are the tail.
+  const size_t split = static_cast<size_t>(
+      std::lower_bound(events.t_ns.begin(), events.t_ns.end(), last_t_ns) - events.t_ns.begin());
   EventBuffer now;
-  now.reserve(held.size() + events.size());
-  for (size_t i = 0; i < held.size(); ++i) now.push_back(held[i]);
-  held.clear();
-  for (size_t i = 0; i < events.size(); ++i) {
-    (events.t_ns[i] < last_t_ns ? now : held).push_back(events[i]);
+  if (held.empty()) {
+    now.Append(events, 0, split);
+  } else {
+    now = std::move(held);
+    now.Append(events, 0, split);
   }
+  held.clear();
+  held.Append(events, split, events.size() - split);
   std::vector<tracking::PoseEstimate> estimates;
   if (!now.empty()) estimates = s.stream->AddEvents(now);
   for (tracking::PoseEstimate& step : s.stream->AdvanceTo(last_t_ns - 1)) {

@@ -3,7 +3,8 @@
 
 1. evloc-sim renders a short DAVIS240 sequence with its exact map; core/events/testing/
    write_test_bags.py writes it as a bag with Debian's python3-rosbag (dvs_msgs/EventArray in
-   messages of 1 ms, sensor_msgs/CameraInfo, geometry_msgs/PoseStamped ground truth).
+   messages of 1 ms, sensor_msgs/CameraInfo, geometry_msgs/PoseStamped ground truth), its times
+   moved to 1700000000 s (rosbag play refuses a record time of 0, where the simulation starts).
 2. evloc-track tracks the bag from the first ground-truth pose: the reference.
 3. A roscore on a free loopback port; ros/launch/evloc.launch starts the node (found through
    ROS_PACKAGE_PATH=<build>/ros/package) at the same pose; this script listens to /dvs/events,
@@ -31,6 +32,10 @@ import sys
 import tempfile
 import threading
 import time
+
+
+# The bag's times: the simulated dataset's (from 0) moved to a realistic epoch.
+BAG_OFFSET_S = 1700000000
 
 
 def skip(reason):
@@ -112,6 +117,8 @@ def main():
     parser.add_argument("--source", required=True)
     parser.add_argument("--out", help="folder for latency.json, poses.txt and trajectory.png")
     parser.add_argument("--duration", default="1.0", help="seconds of the rendered sequence")
+    parser.add_argument("--play-rate", default="1.0",
+                        help="rosbag play's rate (1: real time; the latency of docs/ros.md)")
     args = parser.parse_args()
     build, source = os.path.abspath(args.build), os.path.abspath(args.source)
     node = os.path.join(build, "ros/package/evloc_ros/evloc_ros_node")
@@ -128,7 +135,7 @@ def main():
              "--events-txt"])
         bag_path = os.path.join(work, "sequence.bag")
         run(["/usr/bin/python3", os.path.join(source, "core/events/testing/write_test_bags.py"),
-             "--from-dataset", dataset, bag_path])
+             "--from-dataset", dataset, bag_path, str(BAG_OFFSET_S)])
         print("rendered and bagged in %.1f s" % (time.monotonic() - started))
 
         # The first ground-truth pose, as the bag holds it: the start of both runs.
@@ -138,9 +145,11 @@ def main():
         p, q = first.pose.position, first.pose.orientation
         init_pose = " ".join(repr(v) for v in (p.x, p.y, p.z, q.x, q.y, q.z, q.w))
         track_out = os.path.join(work, "track.txt")
+        track_started = time.monotonic()
         run([os.path.join(build, "localizer/offline/evloc-track"), "--map",
              os.path.join(dataset, "gt_map"), "--dataset", bag_path, "--init-pose", init_pose,
              "--out", track_out, "--quiet"])
+        track_wall_s = time.monotonic() - track_started
         with open(track_out) as handle:
             reference = [line.strip() for line in handle if line.strip() and line[0] != "#"]
 
@@ -220,6 +229,7 @@ def main():
         time.sleep(1.0)
 
         player = subprocess.Popen(["rosbag", "play", "--quiet", "--wait-for-subscribers",
+                                   "--rate", args.play_rate,
                                    "--topics", "/dvs/events", "/dvs/camera_info", "--", bag_path],
                                   env=env, stdout=open(os.path.join(work, "play.log"), "w"),
                                   stderr=subprocess.STDOUT, start_new_session=True)
@@ -238,8 +248,6 @@ def main():
 
         with lock:
             poses_seen, messages_seen = list(poses), list(messages)
-        tracking = [m for _, m in poses_seen
-                    if m.pose.covariance[0] < 1e5]  # LOST and search steps carry 1e6 variances
         published = [tum_line(m.header.stamp.to_nsec(),
                               (m.pose.pose.position.x, m.pose.pose.position.y,
                                m.pose.pose.position.z, m.pose.pose.orientation.x,
@@ -257,12 +265,13 @@ def main():
                     len(published), len(reference), mismatch,
                     published[mismatch] if mismatch < len(published) else "(none)",
                     reference[mismatch] if mismatch < len(reference) else "(none)"))
+        step_statuses = [s.status for s in statuses if s.status != "WAITING"]
+        tracking = step_statuses.count("TRACKING")
         camera_transforms = [t for t in transforms
                              if t.header.frame_id == "map" and t.child_frame_id == "camera"]
-        if len(camera_transforms) != len(tracking):
+        if len(camera_transforms) != tracking:
             failures.append("%d TF transforms map -> camera for %d TRACKING poses" % (
-                len(camera_transforms), len(tracking)))
-        step_statuses = [s.status for s in statuses if s.status != "WAITING"]
+                len(camera_transforms), tracking))
         if len(step_statuses) != len(published) or set(step_statuses) != {"TRACKING"}:
             failures.append("statuses: %d step statuses (%s) for %d poses" % (
                 len(step_statuses), ", ".join(sorted(set(step_statuses))), len(published)))
@@ -283,12 +292,21 @@ def main():
             if index < len(arrivals):
                 latencies.append((arrival - arrivals[index][1]) * 1e3)
         node_latencies = [s.latency_ms for s in statuses if s.status != "WAITING"]
+        step_ms = [s.step_ms for s in statuses if s.status != "WAITING"]
+        quarter = max(1, len(latencies) // 4)
         report = {
             "poses": len(published), "reference_poses": len(reference),
-            "events_messages": len(messages_seen),
+            "events_messages": len(messages_seen), "play_rate": float(args.play_rate),
+            "evloc_track_wall_s": track_wall_s,
             "latency_ms": {
                 "p50": percentile(latencies, 0.5), "p90": percentile(latencies, 0.9),
                 "p99": percentile(latencies, 0.99), "max": max(latencies)} if latencies else None,
+            "latency_p50_ms_first_quarter": percentile(latencies[:quarter], 0.5)
+            if latencies else None,
+            "latency_p50_ms_last_quarter": percentile(latencies[-quarter:], 0.5)
+            if latencies else None,
+            "step_ms": {"p50": percentile(step_ms, 0.5), "p90": percentile(step_ms, 0.9),
+                        "max": max(step_ms)} if step_ms else None,
             "node_latency_ms": {
                 "p50": percentile(node_latencies, 0.5), "p90": percentile(node_latencies, 0.9),
                 "p99": percentile(node_latencies, 0.99),
@@ -321,26 +339,32 @@ def main():
 
 
 def plot(out, published, reference, groundtruth_path):
+    """Position over time: the node's poses, evloc-track's and the ground truth."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    def columns(lines):
-        rows = [[float(v) for v in line.split()] for line in lines]
-        return [r[1] for r in rows], [r[2] for r in rows]
+    def rows(lines):
+        return [[float(v) for v in line.split()] for line in lines]
 
     with open(groundtruth_path) as handle:
-        truth = [l for l in handle if l.strip() and not l.startswith("#")]
-    figure, axes = plt.subplots(figsize=(6, 4.5), dpi=100)
-    axes.plot(*columns(truth), color="0.6", linewidth=4, label="ground truth")
-    axes.plot(*columns(reference), color="tab:blue", linewidth=2, label="evloc-track")
-    axes.plot(*columns(published), color="tab:orange", linestyle="--", linewidth=1.5,
-              label="evloc_ros_node (/evloc/pose)")
-    axes.set_xlabel("x (m)")
-    axes.set_ylabel("y (m)")
-    axes.set_title("ROS node vs evloc-track on the same bag")
-    axes.axis("equal")
-    axes.legend()
+        truth = rows(l for l in handle if l.strip() and not l.startswith("#"))
+    node, track = rows(published), rows(reference)
+    # The bag's times are the dataset's moved by BAG_OFFSET_S.
+    t0 = float(BAG_OFFSET_S)
+    t0_truth = 0.0
+    figure, axes = plt.subplots(3, 1, figsize=(7, 6), dpi=100, sharex=True)
+    for axis, column, name in zip(axes, (1, 2, 3), ("x", "y", "z")):
+        axis.plot([r[0] - t0_truth for r in truth], [r[column] for r in truth], color="0.6",
+                  linewidth=4, label="ground truth")
+        axis.plot([r[0] - t0 for r in track], [r[column] for r in track], color="tab:blue",
+                  linewidth=2, label="evloc-track")
+        axis.plot([r[0] - t0 for r in node], [r[column] for r in node], color="tab:orange",
+                  linestyle="--", linewidth=1.5, label="evloc_ros_node (/evloc/pose)")
+        axis.set_ylabel(name + " (m)")
+    axes[0].set_title("The ROS node's poses and evloc-track's on the same bag")
+    axes[0].legend(loc="best", fontsize=8)
+    axes[-1].set_xlabel("time (s)")
     figure.tight_layout()
     figure.savefig(os.path.join(out, "trajectory.png"))
 
