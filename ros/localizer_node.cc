@@ -47,6 +47,7 @@ void ReadNodeParameters(const ros::NodeHandle& private_node, NodeCoreOptions* co
   core->init_stamp = StringParam(private_node, "init_stamp", core->init_stamp);
   core->step_rate_hz = NumberParam(private_node, "rate", core->step_rate_hz);
   core->buffer_s = NumberParam(private_node, "buffer_s", core->buffer_s);
+  core->max_gap_s = NumberParam(private_node, "max_gap_s", core->max_gap_s);
   ros_options->map_frame = StringParam(private_node, "map_frame", ros_options->map_frame);
   ros_options->camera_frame = StringParam(private_node, "camera_frame", ros_options->camera_frame);
   if (ros_options->map_frame.empty() || ros_options->camera_frame.empty() ||
@@ -231,6 +232,13 @@ void LocalizerNode::OnInitialPose(
 }
 
 void LocalizerNode::Publish(const std::vector<StepOutput>& steps, Clock::time_point arrival) {
+  if (core_.counters().restarts != restarts_logged_) {
+    restarts_logged_ = core_.counters().restarts;
+    ROS_WARN(
+        "evloc: the events jumped forward more than ~max_gap_s: tracking (re)started at the "
+        "new events from the last good pose (%llu times so far)",
+        static_cast<unsigned long long>(restarts_logged_));
+  }
   for (const StepOutput& step : steps) {
     pose_publisher_.publish(ToPoseMessage(step, options_.map_frame));
     if (tf_broadcaster_ && step.tracking) {

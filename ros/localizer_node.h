@@ -85,6 +85,8 @@ class LocalizerNode {
   ros::Publisher pose_publisher_;
   ros::Publisher status_publisher_;
   std::unique_ptr<tf2_ros::TransformBroadcaster> tf_broadcaster_;
+  // Restarts already logged.
+  uint64_t restarts_logged_ = 0;
 };
 
 }  // namespace evloc::ros_node

@@ -123,6 +123,10 @@ NodeCore::NodeCore(const NodeCoreOptions& options) : state_(std::make_unique<Sta
   if (!std::isfinite(options.buffer_s) || options.buffer_s < 0 || options.buffer_s > 60) {
     throw InvalidArgumentError("parameter ~buffer_s must be in 0..60 seconds");
   }
+  if (!std::isfinite(options.max_gap_s) || options.max_gap_s <= 0 || options.max_gap_s > 3600) {
+    throw InvalidArgumentError("parameter ~max_gap_s must be in (0, 3600] seconds");
+  }
+  max_gap_ns_ = static_cast<int64_t>(std::llround(options.max_gap_s * 1e9));
   if (options.step_rate_hz != 0) s.tracker_options.step_rate_hz = options.step_rate_hz;
   try {
     s.tracker_options.Check();
@@ -243,8 +247,28 @@ std::vector<StepOutput> NodeCore::HandleEvents(EventColumns columns) {
         std::to_string((*s.last_event_t_ns - events.t_ns.front()) * 1e-9) +
         " s before the last event): publish one event stream, in time order");
   }
+  if (events.t_ns.back() - events.t_ns.front() > max_gap_ns_) {
+    throw InvalidArgumentError("the message's events span " +
+                               std::to_string((events.t_ns.back() - events.t_ns.front()) * 1e-9) +
+                               " s, more than ~max_gap_s (" + std::to_string(s.options.max_gap_s) +
+                               " s): publish shorter packets");
+  }
   counters_.events += events.size();
+  const bool jumped = s.last_event_t_ns && events.t_ns.front() - *s.last_event_t_ns > max_gap_ns_;
   s.last_event_t_ns = events.t_ns.back();
+  if (s.stream && s.stream->started() && jumped) {
+    // Restart at the new events from the last good pose instead of stepping through the jump.
+    s.held.clear();
+    tracking::Tracker& tracker = s.stream->mutable_tracker();
+    const tracking::TrackingStatus status = tracker.status();
+    if (status == tracking::TrackingStatus::kInitializing ||
+        status == tracking::TrackingStatus::kRelocalizing) {
+      tracker.StartWithoutPose(events.t_ns.front());
+    } else {
+      tracker.Reset(tracker.last_good_world_from_cam(), events.t_ns.front());
+    }
+    ++counters_.restarts;
+  }
   if (s.stream) return Track(events);
   s.pending.push_back(std::move(events));
   // Keep buffer_s of event time (the time surfaces forget older events).
@@ -284,7 +308,14 @@ void NodeCore::SetPoseHint(const PoseFields& pose, int64_t stamp_ns,
 std::vector<StepOutput> NodeCore::TryStart() {
   State& s = *state_;
   if (s.stream || !s.camera || !s.initial_pose_known || s.pending.empty()) return {};
-  const int64_t initial_t_ns = s.initial_t_ns.value_or(s.pending.front().t_ns.front());
+  const int64_t first_t_ns = s.pending.front().t_ns.front();
+  int64_t initial_t_ns = s.initial_t_ns.value_or(first_t_ns);
+  if (first_t_ns - initial_t_ns > max_gap_ns_) {
+    // The initial time lies far before the events: start at the first event, not after
+    // stepping through the gap.
+    initial_t_ns = first_t_ns;
+    ++counters_.restarts;
+  }
   s.stream = std::make_unique<tracking::EventStreamTracker>(*s.source, *s.camera, s.tracker_options,
                                                             s.initial_world_from_cam, initial_t_ns);
   std::vector<StepOutput> steps;

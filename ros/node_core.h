@@ -48,6 +48,12 @@ struct NodeCoreOptions {
   // ~buffer_s: while waiting for a camera or a pose, the events of this many seconds (event time)
   // are kept to prime the time surfaces; older ones are dropped.
   double buffer_s = 1.0;
+  // ~max_gap_s: the longest time a message's events may span, and the longest jump forward from
+  // the last event (or from ~init_stamp at the start). The tracker runs every step of a jump (a
+  // jump of hours would be millions of steps): a message that spans more is rejected; after a
+  // longer jump the tracker restarts at the new events from its last good pose (and a start
+  // waits for no ~init_stamp that far back: it starts at the first event).
+  double max_gap_s = 5.0;
 };
 
 // An events message's events, as columns.
@@ -109,6 +115,8 @@ struct NodeCounters {
   uint64_t buffer_dropped_events = 0;
   // Steps returned.
   uint64_t steps = 0;
+  // Restarts after a jump forward longer than max_gap_s (and starts moved to the first event).
+  uint64_t restarts = 0;
 };
 
 // The ROS-free node. Not thread-safe (the node calls it from the thread that spins).
@@ -123,8 +131,8 @@ class NodeCore {
 
   // A dvs_msgs/EventArray's events: those outside width x height (when both are non-zero) are
   // dropped. Returns the steps that became due. Throws InvalidArgumentError (nothing kept) for a
-  // size over 65535, events out of time order (within the message or before the last one), or a
-  // tracking error.
+  // size over 65535, events out of time order (within the message or before the last one),
+  // events spanning more than max_gap_s, or a tracking error.
   std::vector<StepOutput> AddEventArray(uint32_t width, uint32_t height, EventColumns events);
   // An event_camera_msgs/EventPacket: encoding "mono" or "evt3", little endian (core/events'
   // DecodeEventPacketEvents, as the bag reader). Throws as AddEventArray, and ParseError for a
@@ -160,6 +168,7 @@ class NodeCore {
   std::vector<StepOutput> Track(const EventBuffer& events);
 
   InitialPoseMode mode_ = InitialPoseMode::kHint;
+  int64_t max_gap_ns_ = 0;
   NodeCounters counters_;
   std::unique_ptr<State> state_;
 };

@@ -205,6 +205,34 @@ TEST(NodeCore, RejectsMessagesOutOfOrderOrMalformed) {
   EXPECT_FALSE(core.has_camera());
 }
 
+TEST(NodeCore, AJumpForwardRestartsInsteadOfSteppingThroughIt) {
+  const Scene& scene = TestScene();
+  NodeCoreOptions options;
+  options.map_path = scene.map_path.string();
+  options.init_pose = PoseText(tracking::testing::SmoothMotion(0));
+  options.init_stamp = "0";
+  NodeCore core(options);
+  std::vector<StepOutput> steps;
+  core.SetCameraInfo(PinholeInfo(), &steps);
+  size_t end = 0;
+  while (scene.events.t_ns[end] < 50'000'000) ++end;
+  const size_t first_steps = core.AddEventArray(320, 240, Slice(scene.events, 0, end)).size();
+  EXPECT_GE(first_steps, 10u);
+  // The same events an hour later: a restart, not a million steps.
+  EventColumns later = Slice(scene.events, end, end + 2000);
+  for (int64_t& t : later.t_ns) t += int64_t{3600} * 1'000'000'000;
+  const auto after = core.AddEventArray(320, 240, later);
+  EXPECT_EQ(core.counters().restarts, 1u);
+  // Only the steps of the new events' own span (300 Hz), not the hour's million.
+  const double span_steps = static_cast<double>(later.t_ns.back() - later.t_ns.front()) * 300e-9;
+  EXPECT_LE(static_cast<double>(after.size()), span_steps + 2);
+  // A message spanning more than max_gap_s is refused.
+  EventColumns long_message = Slice(scene.events, end + 3000, end + 3002);
+  long_message.t_ns[0] = later.t_ns.back() + 1;
+  long_message.t_ns[1] = long_message.t_ns[0] + 6'000'000'000;
+  EXPECT_THROW(core.AddEventArray(320, 240, long_message), InvalidArgumentError);
+}
+
 TEST(NodeCore, ParametersAreChecked) {
   const Scene& scene = TestScene();
   NodeCoreOptions options;
@@ -219,6 +247,9 @@ TEST(NodeCore, ParametersAreChecked) {
   options.step_rate_hz = -3;
   EXPECT_THROW(NodeCore{options}, InvalidArgumentError);
   options.step_rate_hz = 0;
+  options.max_gap_s = 0;
+  EXPECT_THROW(NodeCore{options}, InvalidArgumentError);
+  options.max_gap_s = 5;
   options.map_path = "/nonexistent/map.evmap";
   EXPECT_THROW(NodeCore{options}, Error);
 }
