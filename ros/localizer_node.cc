@@ -48,6 +48,10 @@ void ReadNodeParameters(const ros::NodeHandle& private_node, NodeCoreOptions* co
   core->step_rate_hz = NumberParam(private_node, "rate", core->step_rate_hz);
   core->buffer_s = NumberParam(private_node, "buffer_s", core->buffer_s);
   core->max_gap_s = NumberParam(private_node, "max_gap_s", core->max_gap_s);
+  core->server = StringParam(private_node, "server", core->server);
+  core->map_name = StringParam(private_node, "map_name", core->map_name);
+  core->token_file = StringParam(private_node, "token_file", core->token_file);
+  core->tls_ca = StringParam(private_node, "tls_ca", core->tls_ca);
   ros_options->map_frame = StringParam(private_node, "map_frame", ros_options->map_frame);
   ros_options->camera_frame = StringParam(private_node, "camera_frame", ros_options->camera_frame);
   if (ros_options->map_frame.empty() || ros_options->camera_frame.empty() ||
@@ -146,7 +150,19 @@ geometry_msgs::TransformStamped ToTransform(const StepOutput& step, const std::s
 
 LocalizerNode::LocalizerNode(ros::NodeHandle& node, const NodeCoreOptions& core_options,
                              const NodeRosOptions& options)
-    : options_(options), core_(core_options) {
+    : options_(options),
+      core_(
+          core_options,
+          // Service mode: the server's steps arrive on the stream's reader thread (publishing is
+          // thread-safe in roscpp).
+          [this](const StepOutput& step) { PublishStep(step, std::nullopt); },
+          [](const std::string& error) {
+            if (error.empty()) {
+              ROS_INFO("evloc: the localizer server ended the session");
+            } else {
+              ROS_ERROR("evloc: the localizer server ended the session: %s", error.c_str());
+            }
+          }) {
   pose_publisher_ = node.advertise<geometry_msgs::PoseWithCovarianceStamped>("pose", 1000);
   status_publisher_ = node.advertise<evloc_msgs::TrackingStatus>("status", 1000, true);
   if (options_.publish_tf) tf_broadcaster_ = std::make_unique<tf2_ros::TransformBroadcaster>();
@@ -239,24 +255,33 @@ void LocalizerNode::Publish(const std::vector<StepOutput>& steps, Clock::time_po
         "new events from the last good pose (%llu times so far)",
         static_cast<unsigned long long>(restarts_logged_));
   }
-  for (const StepOutput& step : steps) {
-    pose_publisher_.publish(ToPoseMessage(step, options_.map_frame));
-    if (tf_broadcaster_ && step.tracking) {
-      tf_broadcaster_->sendTransform(ToTransform(step, options_.map_frame, options_.camera_frame));
-    }
-    evloc_msgs::TrackingStatus status;
-    status.header.stamp = ToRosTime(step.t_ns);
-    status.header.frame_id = options_.camera_frame;
-    status.status = step.status;
-    status.alignment = step.alignment;
-    status.on_edge_fraction = step.on_edge_fraction;
-    status.points_used = step.points_used;
-    status.step_ms = step.step_ms;
-    status.latency_ms = std::chrono::duration<double, std::milli>(Clock::now() - arrival).count();
+  for (const StepOutput& step : steps) PublishStep(step, arrival);
+}
+
+void LocalizerNode::PublishStep(const StepOutput& step,
+                                const std::optional<Clock::time_point>& arrival) {
+  pose_publisher_.publish(ToPoseMessage(step, options_.map_frame));
+  if (tf_broadcaster_ && step.tracking) {
+    tf_broadcaster_->sendTransform(ToTransform(step, options_.map_frame, options_.camera_frame));
+  }
+  evloc_msgs::TrackingStatus status;
+  status.header.stamp = ToRosTime(step.t_ns);
+  status.header.frame_id = options_.camera_frame;
+  status.status = step.status;
+  status.alignment = step.alignment;
+  status.on_edge_fraction = step.on_edge_fraction;
+  status.points_used = step.points_used;
+  status.step_ms = step.step_ms;
+  // In-process: from the message's arrival; from a server the message is not known (-1).
+  status.latency_ms =
+      arrival ? std::chrono::duration<double, std::milli>(Clock::now() - *arrival).count() : -1;
+  if (arrival) {
+    // The counters belong to the spinning thread: a server's step (on the stream's thread)
+    // leaves them 0.
     status.events = core_.counters().events;
     status.dropped_events = core_.counters().decoder_dropped_events;
-    status_publisher_.publish(status);
   }
+  status_publisher_.publish(status);
 }
 
 void LocalizerNode::PublishWaiting() {

@@ -9,6 +9,7 @@
 
 #include <chrono>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -74,17 +75,21 @@ class LocalizerNode {
   void OnInitialPose(const geometry_msgs::PoseWithCovarianceStamped::ConstPtr& message);
   // Publishes the steps made due by a message that arrived at `arrival`.
   void Publish(const std::vector<StepOutput>& steps, Clock::time_point arrival);
+  // Publishes one step: pose, TF (TRACKING), status (latency from `arrival` when known).
+  void PublishStep(const StepOutput& step, const std::optional<Clock::time_point>& arrival);
   void PublishWaiting();
 
   NodeRosOptions options_;
+  // Declared before core_: the publishers must exist when the server's first step arrives, and
+  // outlive core_, whose destructor ends the stream and joins its reader.
+  ros::Publisher pose_publisher_;
+  ros::Publisher status_publisher_;
+  std::unique_ptr<tf2_ros::TransformBroadcaster> tf_broadcaster_;
   NodeCore core_;
   ros::Subscriber events_subscriber_;
   ros::Subscriber packets_subscriber_;
   ros::Subscriber camera_info_subscriber_;
   ros::Subscriber initial_pose_subscriber_;
-  ros::Publisher pose_publisher_;
-  ros::Publisher status_publisher_;
-  std::unique_ptr<tf2_ros::TransformBroadcaster> tf_broadcaster_;
   // Restarts already logged.
   uint64_t restarts_logged_ = 0;
 };

@@ -1,20 +1,32 @@
 #include "ros/node_core.h"
 
 #include <algorithm>
+#include <atomic>
+#include <chrono>
 #include <cmath>
+#include <condition_variable>
+#include <mutex>
+#include <thread>
 #include <utility>
+
+#include <grpcpp/grpcpp.h>
 
 #include "core/camera/calibration_file.h"
 #include "core/common/error.h"
+#include "core/common/file_util.h"
 #include "core/dataset/pose_text.h"
 #include "core/dataset/rosbag_dataset.h"
 #include "core/events/prophesee_decoder.h"
 #include "core/events/rosbag_events.h"
 #include "core/trajectory/tum_io.h"
+#include "evloc/localizer.grpc.pb.h"
 #include "localizer/offline/offline_tracking.h"
+#include "localizer/wire/packed_events.h"
+#include "localizer/wire/status_name.h"
 #include "maps/map.h"
 #include "maps/map_directory.h"
 #include "maps/visibility.h"
+#include "proto/convert/proto_convert.h"
 
 namespace evloc::ros_node {
 namespace {
@@ -54,10 +66,11 @@ Rigid3d ToRigid(const PoseFields& pose) {
   return Rigid3d(rotation, Eigen::Vector3d(pose.position[0], pose.position[1], pose.position[2]));
 }
 
-StepOutput ToOutput(const tracking::PoseEstimate& step) {
+// A step's fields; the covariance (body-frame (v, omega), row-major) turned into ROS's.
+StepOutput ToOutput(int64_t t_ns, const Rigid3d& pose, const Matrix6d& body_covariance,
+                    const std::string& status) {
   StepOutput out;
-  out.t_ns = step.t_ns;
-  const Rigid3d& pose = step.world_from_cam;
+  out.t_ns = t_ns;
   out.pose.position = {pose.translation.x(), pose.translation.y(), pose.translation.z()};
   out.pose.orientation = {pose.rotation.x(), pose.rotation.y(), pose.rotation.z(),
                           pose.rotation.w()};
@@ -67,18 +80,58 @@ StepOutput ToOutput(const tracking::PoseEstimate& step) {
   const Eigen::Matrix3d r = pose.rotation.toRotationMatrix();
   rotate.topLeftCorner<3, 3>() = r;
   rotate.bottomRightCorner<3, 3>() = r;
-  const Matrix6d turned = rotate * step.covariance * rotate.transpose();
+  const Matrix6d turned = rotate * body_covariance * rotate.transpose();
   // Exactly symmetric, as consumers of the message (robot_localization) expect.
   const Matrix6d covariance = 0.5 * (turned + turned.transpose());
   for (int row = 0; row < 6; ++row) {
     for (int col = 0; col < 6; ++col) out.covariance[6 * row + col] = covariance(row, col);
   }
-  out.status = tracking::TrackingStatusName(step.status);
-  out.tracking = step.status == tracking::TrackingStatus::kTracking;
+  out.status = status;
+  out.tracking = status == "TRACKING";
+  return out;
+}
+
+StepOutput ToOutput(const tracking::PoseEstimate& step) {
+  StepOutput out = ToOutput(step.t_ns, step.world_from_cam, step.covariance,
+                            tracking::TrackingStatusName(step.status));
   out.alignment = step.quality.alignment;
   out.on_edge_fraction = step.quality.on_edge_fraction;
   out.points_used = static_cast<uint32_t>(std::max(0, step.quality.points_used));
   out.step_ms = step.timings.total_ms;
+  return out;
+}
+
+// A PoseUpdate of the server. Throws InvalidArgumentError for a malformed one.
+StepOutput ToOutput(const api::PoseUpdate& update) {
+  const char* status = "LOST";
+  switch (update.status()) {
+    case api::TRACKING:
+      status = "TRACKING";
+      break;
+    case api::LOST:
+      status = "LOST";
+      break;
+    case api::INITIALIZING:
+      status = "INITIALIZING";
+      break;
+    case api::RELOCALIZING:
+      status = "RELOCALIZING";
+      break;
+    default:
+      throw InvalidArgumentError("PoseUpdate with an unknown status");
+  }
+  Matrix6d covariance = Matrix6d::Identity() * 1e6;
+  if (update.covariance_size() == 36) {
+    for (int i = 0; i < 36; ++i) covariance(i / 6, i % 6) = update.covariance(i);
+  }
+  const Rigid3d pose =
+      update.has_world_from_cam()
+          ? RigidFromProtoExact(update.world_from_cam(), "PoseUpdate.world_from_cam")
+          : Rigid3d();
+  StepOutput out = ToOutput(update.t_ns(), pose, covariance, status);
+  out.on_edge_fraction = update.quality().on_edge_fraction();
+  out.points_used = update.quality().points_used();
+  out.step_ms = update.step_ms();
   return out;
 }
 
@@ -112,13 +165,37 @@ struct NodeCore::State {
   // The event stream's size (first message that states one) and its EVT 3.0 decoder.
   std::optional<SensorSize> sensor_size;
   std::unique_ptr<Evt3Decoder> evt3;
+
+  // Service mode: the Track stream and the thread that reads its responses.
+  StepCallback on_step;
+  StreamEndCallback on_end;
+  std::unique_ptr<api::Localizer::Stub> stub;
+  grpc::ClientContext context;
+  std::unique_ptr<grpc::ClientReaderWriter<api::TrackRequest, api::TrackResponse>> track;
+  std::thread reader;
+  std::mutex mutex;
+  std::condition_variable ended_changed;
+  bool ended = false;
+  // False once a write failed (the server ended the stream: the reader reports why).
+  bool writable = true;
 };
 
-NodeCore::NodeCore(const NodeCoreOptions& options) : state_(std::make_unique<State>()) {
+NodeCore::NodeCore(const NodeCoreOptions& options, StepCallback on_step, StreamEndCallback on_end)
+    : state_(std::make_unique<State>()) {
   State& s = *state_;
   s.options = options;
-  if (options.map_path.empty()) {
-    throw InvalidArgumentError("parameter ~map is required: the map file (.evmap) or folder");
+  s.on_step = std::move(on_step);
+  s.on_end = std::move(on_end);
+  service_ = !options.server.empty();
+  if (service_ && options.map_name.empty()) {
+    throw InvalidArgumentError(
+        "parameter ~map_name is required with ~server: the map's name on "
+        "the server");
+  }
+  if (!service_ && options.map_path.empty()) {
+    throw InvalidArgumentError(
+        "parameter ~map is required: the map file (.evmap) or folder (or "
+        "~server and ~map_name for a localizer server)");
   }
   if (!std::isfinite(options.buffer_s) || options.buffer_s < 0 || options.buffer_s > 60) {
     throw InvalidArgumentError("parameter ~buffer_s must be in 0..60 seconds");
@@ -151,18 +228,125 @@ NodeCore::NodeCore(const NodeCoreOptions& options) : state_(std::make_unique<Sta
                                  " (seconds, e.g. 1700000000.000123456)");
     }
   }
-  s.map = LoadMap(ResolveMapFile(options.map_path));
-  s.visibility = std::make_unique<VisibilityIndex>(s.map);
-  s.source = std::make_unique<tracking::StaticMapSource>(s.map, s.visibility.get());
+  if (service_) {
+    grpc::ChannelArguments arguments;
+    std::shared_ptr<grpc::ChannelCredentials> credentials = grpc::InsecureChannelCredentials();
+    if (!options.tls_ca.empty()) {
+      grpc::SslCredentialsOptions ssl;
+      ssl.pem_root_certs = ReadFileToString(options.tls_ca);
+      credentials = grpc::SslCredentials(ssl);
+    }
+    s.stub =
+        api::Localizer::NewStub(grpc::CreateCustomChannel(options.server, credentials, arguments));
+    if (!options.token_file.empty()) {
+      std::string token = ReadFileToString(options.token_file);
+      while (!token.empty() && (token.back() == '\n' || token.back() == '\r')) token.pop_back();
+      if (token.empty()) {
+        throw InvalidArgumentError("parameter ~token_file: " + options.token_file + " is empty");
+      }
+      s.context.AddMetadata("authorization", "Bearer " + token);
+    }
+  } else {
+    s.map = LoadMap(ResolveMapFile(options.map_path));
+    s.visibility = std::make_unique<VisibilityIndex>(s.map);
+    s.source = std::make_unique<tracking::StaticMapSource>(s.map, s.visibility.get());
+  }
   if (!options.calib_path.empty()) s.camera = ReadCalibrationFile(options.calib_path, 0, 0);
 }
 
-NodeCore::~NodeCore() = default;
+NodeCore::~NodeCore() {
+  State& s = *state_;
+  if (!s.track) return;
+  // End the session: no more requests; the server answers with SessionEnd and closes. A server
+  // that does not within 10 s is cancelled.
+  s.track->WritesDone();
+  {
+    std::unique_lock<std::mutex> lock(s.mutex);
+    if (!s.ended_changed.wait_for(lock, std::chrono::seconds(10), [&] { return s.ended; })) {
+      s.context.TryCancel();
+    }
+  }
+  s.reader.join();
+}
+
+void NodeCore::OpenStream(int64_t initial_t_ns) {
+  State& s = *state_;
+  s.track = s.stub->Track(&s.context);
+  api::TrackRequest request;
+  api::SessionStart* start = request.mutable_start();
+  start->set_map_name(s.options.map_name);
+  *start->mutable_camera() = CameraToProto(*s.camera);
+  if (s.initial_world_from_cam) {
+    *start->mutable_initial_world_from_cam() = RigidToProto(*s.initial_world_from_cam);
+  }
+  start->set_initial_t_ns(initial_t_ns);
+  if (s.options.step_rate_hz != 0)
+    start->mutable_options()->set_step_rate_hz(s.options.step_rate_hz);
+  start->set_client_name("evloc_ros_node");
+  api::TrackResponse response;
+  if (!s.track->Write(request) || !s.track->Read(&response) || !response.has_started()) {
+    const grpc::Status status = s.track->Finish();
+    s.track.reset();
+    throw IoError("localizer server " + s.options.server + ": the session did not start: " +
+                  wire::StatusCodeName(status.error_code()) + ": " + status.error_message());
+  }
+  s.reader = std::thread([&s] {
+    api::TrackResponse message;
+    std::string error;
+    while (s.track->Read(&message)) {
+      if (!message.has_pose() || !s.on_step) continue;
+      try {
+        s.on_step(ToOutput(message.pose()));
+      } catch (const Error& failure) {
+        error = failure.what();
+      }
+    }
+    const grpc::Status status = s.track->Finish();
+    if (!status.ok()) {
+      error =
+          std::string(wire::StatusCodeName(status.error_code())) + ": " + status.error_message();
+    }
+    {
+      std::lock_guard<std::mutex> lock(s.mutex);
+      s.ended = true;
+    }
+    s.ended_changed.notify_all();
+    if (s.on_end) s.on_end(error);
+  });
+}
+
+void NodeCore::SendEvents(const EventBuffer& events, int64_t end_t_ns) {
+  State& s = *state_;
+  if (!s.writable) return;
+  // PACKED offsets reach 2^31 - 1 ns from a packet's base: longer spans go in several packets,
+  // each ending at its last event (its window), the last one at end_t_ns.
+  size_t begin = 0;
+  do {
+    const int64_t base = begin < events.size() ? events.t_ns[begin] : end_t_ns;
+    const size_t end =
+        static_cast<size_t>(std::upper_bound(events.t_ns.begin() + begin, events.t_ns.end(),
+                                             base + wire::kMaxPackedOffsetNs) -
+                            events.t_ns.begin());
+    api::TrackRequest request;
+    api::EventPacket* packet = request.mutable_events();
+    packet->set_encoding(api::EVENT_ENCODING_PACKED);
+    packet->set_time_base_ns(base);
+    packet->set_data(wire::EncodePackedEvents(events, begin, end, base));
+    packet->set_end_t_ns(end == events.size() ? end_t_ns : events.t_ns[end - 1]);
+    if (!s.track->Write(request)) {
+      s.writable = false;
+      return;
+    }
+    begin = end;
+  } while (begin < events.size());
+}
 
 bool NodeCore::has_camera() const { return state_->camera.has_value(); }
 
+bool NodeCore::started() const { return state_->stream || state_->track; }
+
 std::string NodeCore::waiting_for() const {
-  if (state_->stream) return "";
+  if (started()) return "";
   if (!state_->camera) return "camera_info";
   if (!state_->initial_pose_known) return "a pose on initialpose";
   return "events";
@@ -175,6 +359,9 @@ std::string NodeCore::camera_description() const {
 }
 
 std::string NodeCore::map_description() const {
+  if (service_) {
+    return "'" + state_->options.map_name + "' on the localizer server " + state_->options.server;
+  }
   return state_->options.map_path + " (" + std::to_string(state_->map.size()) + " points, " +
          std::to_string(state_->map.keyframes.size()) + " keyframes)";
 }
@@ -269,7 +456,7 @@ std::vector<StepOutput> NodeCore::HandleEvents(EventColumns columns) {
     }
     ++counters_.restarts;
   }
-  if (s.stream) return Track(events);
+  if (started()) return Track(events);
   s.pending.push_back(std::move(events));
   // Keep buffer_s of event time (the time surfaces forget older events).
   const int64_t keep_from_ns =
@@ -293,6 +480,14 @@ void NodeCore::SetPoseHint(const PoseFields& pose, int64_t stamp_ns,
                            std::vector<StepOutput>* steps) {
   State& s = *state_;
   const Rigid3d world_from_cam = ToRigid(pose);
+  if (s.track && s.writable) {
+    // The server resets its tracker at the hint (PoseHint: at or after the session time).
+    api::TrackRequest request;
+    *request.mutable_pose_hint()->mutable_world_from_cam() = RigidToProto(world_from_cam);
+    request.mutable_pose_hint()->set_t_ns(std::max(stamp_ns, s.last_event_t_ns.value_or(stamp_ns)));
+    if (!s.track->Write(request)) s.writable = false;
+    return;
+  }
   if (s.stream && s.stream->started()) {
     const int64_t t_ns = std::max(stamp_ns, s.last_event_t_ns.value_or(stamp_ns));
     s.stream->mutable_tracker().Reset(world_from_cam, t_ns);
@@ -307,7 +502,7 @@ void NodeCore::SetPoseHint(const PoseFields& pose, int64_t stamp_ns,
 
 std::vector<StepOutput> NodeCore::TryStart() {
   State& s = *state_;
-  if (s.stream || !s.camera || !s.initial_pose_known || s.pending.empty()) return {};
+  if (started() || !s.camera || !s.initial_pose_known || s.pending.empty()) return {};
   const int64_t first_t_ns = s.pending.front().t_ns.front();
   int64_t initial_t_ns = s.initial_t_ns.value_or(first_t_ns);
   if (first_t_ns - initial_t_ns > max_gap_ns_) {
@@ -316,8 +511,12 @@ std::vector<StepOutput> NodeCore::TryStart() {
     initial_t_ns = first_t_ns;
     ++counters_.restarts;
   }
-  s.stream = std::make_unique<tracking::EventStreamTracker>(*s.source, *s.camera, s.tracker_options,
-                                                            s.initial_world_from_cam, initial_t_ns);
+  if (service_) {
+    OpenStream(initial_t_ns);
+  } else {
+    s.stream = std::make_unique<tracking::EventStreamTracker>(
+        *s.source, *s.camera, s.tracker_options, s.initial_world_from_cam, initial_t_ns);
+  }
   std::vector<StepOutput> steps;
   std::deque<EventBuffer> pending = std::move(s.pending);
   s.pending.clear();
@@ -346,6 +545,10 @@ std::vector<StepOutput> NodeCore::Track(const EventBuffer& events) {
   }
   held.clear();
   held.Append(events, split, events.size() - split);
+  if (service_) {
+    SendEvents(now, last_t_ns - 1);
+    return {};
+  }
   std::vector<tracking::PoseEstimate> estimates;
   if (!now.empty()) estimates = s.stream->AddEvents(now);
   for (tracking::PoseEstimate& step : s.stream->AdvanceTo(last_t_ns - 1)) {

@@ -10,6 +10,7 @@
 #include <chrono>
 #include <cstdint>
 #include <deque>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <string>
@@ -54,6 +55,15 @@ struct NodeCoreOptions {
   // longer jump the tracker restarts at the new events from its last good pose (and a start
   // waits for no ~init_stamp that far back: it starts at the first event).
   double max_gap_s = 5.0;
+  // ~server: a localizer server (host:port, docs/api.md) to stream the events to instead of
+  // tracking in-process; empty: in-process against ~map.
+  std::string server;
+  // ~map_name: the map's name on the server (with ~server; then ~map is not read).
+  std::string map_name;
+  // ~token_file: a file with the server's bearer token (docs/api.md, "Authentication").
+  std::string token_file;
+  // ~tls_ca: PEM root certificates to verify a TLS server with; empty: plaintext.
+  std::string tls_ca;
 };
 
 // An events message's events, as columns.
@@ -119,12 +129,21 @@ struct NodeCounters {
   uint64_t restarts = 0;
 };
 
-// The ROS-free node. Not thread-safe (the node calls it from the thread that spins).
+// Called with each step a localizer server sent (service mode), on the stream's reader thread.
+using StepCallback = std::function<void(const StepOutput& step)>;
+// Called once when the server's stream ends, with what happened ("" after a normal end).
+using StreamEndCallback = std::function<void(const std::string& error)>;
+
+// The ROS-free node. Not thread-safe (the node calls it from the thread that spins); in service
+// mode the steps come on a thread of their own through the StepCallback.
 class NodeCore {
  public:
-  // Checks the options, loads the map (and the calibration file). Throws InvalidArgumentError
-  // naming the parameter for a bad option, and what LoadMap and ReadCalibrationFile throw.
-  explicit NodeCore(const NodeCoreOptions& options);
+  // Checks the options, loads the map (in-process) and the calibration file. Throws
+  // InvalidArgumentError naming the parameter for a bad option, and what LoadMap and
+  // ReadCalibrationFile throw. In service mode (options.server) the steps go to `on_step` and
+  // the Add* methods return none; `on_end` hears of the stream's end.
+  explicit NodeCore(const NodeCoreOptions& options, StepCallback on_step = {},
+                    StreamEndCallback on_end = {});
   ~NodeCore();
   NodeCore(const NodeCore&) = delete;
   NodeCore& operator=(const NodeCore&) = delete;
@@ -166,8 +185,16 @@ class NodeCore {
   std::vector<StepOutput> HandleEvents(EventColumns events);
   std::vector<StepOutput> TryStart();
   std::vector<StepOutput> Track(const EventBuffer& events);
+  // Service mode: opens the Track stream (SessionStart, SessionStarted) and its reader thread.
+  void OpenStream(int64_t initial_t_ns);
+  // Service mode: sends events < `end` tracked up to end_t_ns, in PACKED packets.
+  void SendEvents(const EventBuffer& events, int64_t end_t_ns);
+
+  // True once tracking started (in-process, or the server's session opened).
+  bool started() const;
 
   InitialPoseMode mode_ = InitialPoseMode::kHint;
+  bool service_ = false;
   int64_t max_gap_ns_ = 0;
   NodeCounters counters_;
   std::unique_ptr<State> state_;

@@ -7,10 +7,12 @@
    moved to 1700000000 s (rosbag play refuses a record time of 0, where the simulation starts).
 2. evloc-track tracks the bag from the first ground-truth pose: the reference.
 3. A roscore on a free loopback port; ros/launch/evloc.launch starts the node (found through
-   ROS_PACKAGE_PATH=<build>/ros/package) at the same pose; this script listens to /dvs/events,
-   /evloc/pose, /evloc/status and /tf; `rosbag play` plays the bag in real time.
-4. Checks: the published poses are evloc-track's, line for line in TUM text (bit-identical
-   doubles); every TRACKING pose has its TF map -> camera; the statuses are TRACKING.
+   ROS_PACKAGE_PATH=<build>/ros/package) at the same pose, twice: tracking in-process, then
+   streaming to an evloc-localizer on loopback (server:=, map_name:=); this script listens to
+   /dvs/events, /evloc/pose, /evloc/status and /tf; `rosbag play` plays the bag in real time.
+4. Checks, for each run: the published poses are evloc-track's, line for line in TUM text
+   (bit-identical doubles); every TRACKING pose has its TF map -> camera; the statuses are
+   TRACKING.
 5. Measures the end-to-end latency from an events message (as this listener receives it) to the
    pose it made due (as this listener receives it), and prints it.
 
@@ -117,16 +119,20 @@ def main():
     parser.add_argument("--source", required=True)
     parser.add_argument("--out", help="folder for latency.json, poses.txt and trajectory.png")
     parser.add_argument("--duration", default="1.0", help="seconds of the rendered sequence")
+    parser.add_argument("--mode", choices=("inprocess", "service", "both"), default="both",
+                        help="the node tracking in-process, streaming to a localizer server, or "
+                        "one run of each")
     parser.add_argument("--play-rate", default="1.0",
                         help="rosbag play's rate (1: real time; the latency of docs/ros.md)")
     args = parser.parse_args()
     build, source = os.path.abspath(args.build), os.path.abspath(args.source)
-    node = os.path.join(build, "ros/package/evloc_ros/evloc_ros_node")
-    if not os.access(node, os.X_OK):
-        sys.exit("FAILED: %s is not built (cmake --build build --target evloc_ros_node)" % node)
+    for tool in ("ros/package/evloc_ros/evloc_ros_node", "localizer/service/evloc-localizer",
+                 "localizer/offline/evloc-track", "tools/sim/evloc-sim"):
+        if not os.access(os.path.join(build, tool), os.X_OK):
+            sys.exit("FAILED: %s is not built (cmake --build %s)" % (tool, build))
 
     work = tempfile.mkdtemp(prefix="evloc-ros-node-")
-    roscore = launch = player = None
+    roscore = launch = player = server = None
     try:
         dataset = os.path.join(work, "dataset")
         started = time.monotonic()
@@ -189,24 +195,6 @@ def main():
                          tcp_nodelay=True)
         rospy.Subscriber("/evloc/pose", PoseWithCovarianceStamped, on_pose, queue_size=100000,
                          tcp_nodelay=True)
-        launch = subprocess.Popen(
-            ["roslaunch", os.path.join(source, "ros/launch/evloc.launch"),
-             "map:=" + os.path.join(dataset, "gt_map"), "init_pose:=" + init_pose,
-             "init_stamp:=" + seconds_text(stamp_ns)],
-            env=env, stdout=open(os.path.join(work, "roslaunch.log"), "w"),
-            stderr=subprocess.STDOUT, start_new_session=True)
-        # Wait until the node subscribes to the events (it has loaded the map).
-        deadline = time.monotonic() + 120
-        while True:
-            _, subscribers, _ = master.getSystemState()
-            nodes = dict(subscribers).get("/dvs/events", [])
-            if "/evloc" in nodes:
-                break
-            if time.monotonic() > deadline or launch.poll() is not None:
-                with open(os.path.join(work, "roslaunch.log")) as handle:
-                    sys.exit("FAILED: the node did not subscribe to /dvs/events:\n" +
-                             handle.read()[-4000:])
-            time.sleep(0.2)
         # evloc_msgs/TrackingStatus has no Python package: decode it with genpy from the
         # definition the node sends in its connection header.
         import genpy.dynamic
@@ -224,118 +212,184 @@ def main():
 
         rospy.Subscriber("/evloc/status", rospy.AnyMsg, on_status, queue_size=100000)
         from tf2_msgs.msg import TFMessage
-        rospy.Subscriber("/tf", TFMessage, lambda m: transforms.extend(m.transforms),
-                         queue_size=100000)
-        time.sleep(1.0)
 
-        player = subprocess.Popen(["rosbag", "play", "--quiet", "--wait-for-subscribers",
-                                   "--rate", args.play_rate,
-                                   "--topics", "/dvs/events", "/dvs/camera_info", "--", bag_path],
-                                  env=env, stdout=open(os.path.join(work, "play.log"), "w"),
-                                  stderr=subprocess.STDOUT, start_new_session=True)
-        if player.wait(timeout=300) != 0:
-            with open(os.path.join(work, "play.log")) as handle:
-                sys.exit("FAILED: rosbag play failed:\n" + handle.read()[-4000:])
-        # Wait for the last poses (the node may still be working through its queue).
-        deadline = time.monotonic() + 120
-        count = -1
-        while time.monotonic() < deadline:
-            time.sleep(2.0)
+        def on_tf(message):
             with lock:
-                if len(poses) == count:
-                    break
-                count = len(poses)
+                transforms.extend(message.transforms)
 
-        with lock:
-            poses_seen, messages_seen = list(poses), list(messages)
-        published = [tum_line(m.header.stamp.to_nsec(),
-                              (m.pose.pose.position.x, m.pose.pose.position.y,
-                               m.pose.pose.position.z, m.pose.pose.orientation.x,
-                               m.pose.pose.orientation.y, m.pose.pose.orientation.z,
-                               m.pose.pose.orientation.w)) for _, m in poses_seen]
+        rospy.Subscriber("/tf", TFMessage, on_tf, queue_size=100000)
+
         failures = []
-        if len(reference) < 100:
-            failures.append("evloc-track gave only %d poses" % len(reference))
-        if published != reference:
-            mismatch = next((i for i, (a, b) in enumerate(zip(published, reference)) if a != b),
-                            min(len(published), len(reference)))
-            failures.append(
-                "the node published %d poses, evloc-track wrote %d; first difference at %d:\n"
-                "  node:        %s\n  evloc-track: %s" % (
-                    len(published), len(reference), mismatch,
-                    published[mismatch] if mismatch < len(published) else "(none)",
-                    reference[mismatch] if mismatch < len(reference) else "(none)"))
-        step_statuses = [s.status for s in statuses if s.status != "WAITING"]
-        tracking = step_statuses.count("TRACKING")
-        camera_transforms = [t for t in transforms
-                             if t.header.frame_id == "map" and t.child_frame_id == "camera"]
-        if len(camera_transforms) != tracking:
-            failures.append("%d TF transforms map -> camera for %d TRACKING poses" % (
-                len(camera_transforms), tracking))
-        if len(step_statuses) != len(published) or set(step_statuses) != {"TRACKING"}:
-            failures.append("statuses: %d step statuses (%s) for %d poses" % (
-                len(step_statuses), ", ".join(sorted(set(step_statuses))), len(published)))
-
-        # Latency: each pose against the events message that made it due (the first whose last
-        # event is after the pose's time), both as this listener received them.
-        arrivals = []
-        for arrival, data in messages_seen:
-            last = last_event_ns(data)
-            if last is not None:
-                arrivals.append((last, arrival))
-        latencies = []
-        index = 0
-        for arrival, message in poses_seen:
-            t_ns = message.header.stamp.to_nsec()
-            while index < len(arrivals) and arrivals[index][0] <= t_ns:
-                index += 1
-            if index < len(arrivals):
-                latencies.append((arrival - arrivals[index][1]) * 1e3)
-        node_latencies = [s.latency_ms for s in statuses if s.status != "WAITING"]
-        step_ms = [s.step_ms for s in statuses if s.status != "WAITING"]
-        quarter = max(1, len(latencies) // 4)
-        report = {
-            "poses": len(published), "reference_poses": len(reference),
-            "events_messages": len(messages_seen), "play_rate": float(args.play_rate),
-            "evloc_track_wall_s": track_wall_s,
-            "latency_ms": {
-                "p50": percentile(latencies, 0.5), "p90": percentile(latencies, 0.9),
-                "p99": percentile(latencies, 0.99), "max": max(latencies)} if latencies else None,
-            "latency_p50_ms_first_quarter": percentile(latencies[:quarter], 0.5)
-            if latencies else None,
-            "latency_p50_ms_last_quarter": percentile(latencies[-quarter:], 0.5)
-            if latencies else None,
-            "step_ms": {"p50": percentile(step_ms, 0.5), "p90": percentile(step_ms, 0.9),
-                        "max": max(step_ms)} if step_ms else None,
-            "node_latency_ms": {
-                "p50": percentile(node_latencies, 0.5), "p90": percentile(node_latencies, 0.9),
-                "p99": percentile(node_latencies, 0.99),
-                "max": max(node_latencies)} if node_latencies else None,
-        }
-        print(json.dumps(report, indent=2))
+        reports = {}
+        modes = ["inprocess", "service"] if args.mode == "both" else [args.mode]
+        for mode in modes:
+            with lock:
+                del messages[:], poses[:], statuses[:], transforms[:]
+            launch_args = ["init_pose:=" + init_pose, "init_stamp:=" + seconds_text(stamp_ns)]
+            if mode == "service":
+                # A localizer server on loopback serving the sequence's map as "gt_map".
+                maps = os.path.join(work, "maps")
+                os.makedirs(maps, exist_ok=True)
+                if not os.path.exists(os.path.join(maps, "gt_map")):
+                    os.symlink(os.path.join(dataset, "gt_map"), os.path.join(maps, "gt_map"))
+                server_port = free_port()
+                server = subprocess.Popen(
+                    [os.path.join(build, "localizer/service/evloc-localizer"), "serve", "--maps",
+                     maps, "--listen", "127.0.0.1:%d" % server_port],
+                    stdout=open(os.path.join(work, "server.log"), "w"),
+                    stderr=subprocess.STDOUT, start_new_session=True)
+                launch_args += ["server:=127.0.0.1:%d" % server_port, "map_name:=gt_map"]
+            else:
+                launch_args += ["map:=" + os.path.join(dataset, "gt_map")]
+            launch = subprocess.Popen(
+                ["roslaunch", os.path.join(source, "ros/launch/evloc.launch")] + launch_args,
+                env=env, stdout=open(os.path.join(work, "roslaunch.log"), "w"),
+                stderr=subprocess.STDOUT, start_new_session=True)
+            # Wait until the node subscribes to the events (it has loaded the map).
+            deadline = time.monotonic() + 120
+            while True:
+                _, subscribers, _ = master.getSystemState()
+                if "/evloc" in dict(subscribers).get("/dvs/events", []):
+                    break
+                if time.monotonic() > deadline or launch.poll() is not None:
+                    with open(os.path.join(work, "roslaunch.log")) as handle:
+                        sys.exit("FAILED (%s): the node did not subscribe to /dvs/events:\n%s" % (
+                            mode, handle.read()[-4000:]))
+                time.sleep(0.2)
+            time.sleep(1.0)
+            player = subprocess.Popen(
+                ["rosbag", "play", "--quiet", "--wait-for-subscribers", "--rate", args.play_rate,
+                 "--topics", "/dvs/events", "/dvs/camera_info", "--", bag_path],
+                env=env, stdout=open(os.path.join(work, "play.log"), "w"),
+                stderr=subprocess.STDOUT, start_new_session=True)
+            if player.wait(timeout=300) != 0:
+                with open(os.path.join(work, "play.log")) as handle:
+                    sys.exit("FAILED: rosbag play failed:\n" + handle.read()[-4000:])
+            # Wait for the last poses (the node may still be working through its queue).
+            deadline = time.monotonic() + 120
+            count = -1
+            while time.monotonic() < deadline:
+                time.sleep(2.0)
+                with lock:
+                    if len(poses) == count:
+                        break
+                    count = len(poses)
+            stop(launch, "roslaunch (%s)" % mode)
+            launch = None
+            if server is not None:
+                stop(server, "evloc-localizer")
+                server = None
+            with lock:
+                poses_seen, messages_seen = list(poses), list(messages)
+                statuses_seen, transforms_seen = list(statuses), list(transforms)
+            mode_failures, report, published = check_run(
+                mode, reference, poses_seen, messages_seen, statuses_seen, transforms_seen)
+            report.update({"play_rate": float(args.play_rate),
+                           "evloc_track_wall_s": track_wall_s})
+            reports[mode] = report
+            failures += mode_failures
+            if mode_failures:
+                for name in ("roslaunch.log", "play.log", "server.log"):
+                    if os.path.exists(os.path.join(work, name)):
+                        with open(os.path.join(work, name)) as handle:
+                            print("---- %s (end)\n%s" % (name, handle.read()[-3000:]))
+            if args.out:
+                os.makedirs(args.out, exist_ok=True)
+                with open(os.path.join(args.out, "poses_%s.txt" % mode), "w") as handle:
+                    handle.write("\n".join(published) + "\n")
+                if mode == modes[0]:
+                    plot(args.out, published, reference,
+                         os.path.join(dataset, "groundtruth.txt"))
+        print(json.dumps(reports, indent=2))
         if args.out:
-            os.makedirs(args.out, exist_ok=True)
             with open(os.path.join(args.out, "latency.json"), "w") as handle:
-                json.dump(report, handle, indent=2)
-            with open(os.path.join(args.out, "poses.txt"), "w") as handle:
-                handle.write("\n".join(published) + "\n")
-            plot(args.out, published, reference, os.path.join(dataset, "groundtruth.txt"))
+                json.dump(reports, handle, indent=2)
         if failures:
-            for name in ("roslaunch.log", "play.log"):
-                with open(os.path.join(work, name)) as handle:
-                    print("---- %s (end)\n%s" % (name, handle.read()[-3000:]))
             sys.exit("FAILED:\n" + "\n".join(failures))
-        print("PASSED: %d poses identical to evloc-track's; %d TF transforms; latency p50 %.2f ms"
-              % (len(published), len(camera_transforms), report["latency_ms"]["p50"]))
+        print("PASSED: " + "; ".join(
+            "%s: %d poses identical to evloc-track's, latency p50 %.2f ms" % (
+                mode, report["poses"], report["latency_ms"]["p50"])
+            for mode, report in reports.items()))
     finally:
         stop(player, "rosbag play")
         stop(launch, "roslaunch")
+        stop(server, "evloc-localizer")
         try:
             rospy.signal_shutdown("done")
         except Exception:
             pass
         stop(roscore, "roscore")
         shutil.rmtree(work, ignore_errors=True)
+
+
+def check_run(mode, reference, poses_seen, messages_seen, statuses, transforms):
+    """The checks and figures of one run of the node."""
+    published = [tum_line(m.header.stamp.to_nsec(),
+                          (m.pose.pose.position.x, m.pose.pose.position.y,
+                           m.pose.pose.position.z, m.pose.pose.orientation.x,
+                           m.pose.pose.orientation.y, m.pose.pose.orientation.z,
+                           m.pose.pose.orientation.w)) for _, m in poses_seen]
+    failures = []
+    if len(reference) < 100:
+        failures.append("evloc-track gave only %d poses" % len(reference))
+    if published != reference:
+        mismatch = next((i for i, (a, b) in enumerate(zip(published, reference)) if a != b),
+                        min(len(published), len(reference)))
+        failures.append(
+            "%s: the node published %d poses, evloc-track wrote %d; first difference at %d:\n"
+            "  node:        %s\n  evloc-track: %s" % (
+                mode, len(published), len(reference), mismatch,
+                published[mismatch] if mismatch < len(published) else "(none)",
+                reference[mismatch] if mismatch < len(reference) else "(none)"))
+    step_statuses = [s.status for s in statuses if s.status != "WAITING"]
+    tracking = step_statuses.count("TRACKING")
+    camera_transforms = [t for t in transforms
+                         if t.header.frame_id == "map" and t.child_frame_id == "camera"]
+    if len(camera_transforms) != tracking:
+        failures.append("%s: %d TF transforms map -> camera for %d TRACKING poses" % (
+            mode, len(camera_transforms), tracking))
+    if len(step_statuses) != len(published) or set(step_statuses) != {"TRACKING"}:
+        failures.append("%s: %d step statuses (%s) for %d poses" % (
+            mode, len(step_statuses), ", ".join(sorted(set(step_statuses))), len(published)))
+
+    # Latency: each pose against the events message that made it due (the first whose last
+    # event is after the pose's time), both as this listener received them.
+    arrivals = []
+    for arrival, data in messages_seen:
+        last = last_event_ns(data)
+        if last is not None:
+            arrivals.append((last, arrival))
+    latencies = []
+    index = 0
+    for arrival, message in poses_seen:
+        t_ns = message.header.stamp.to_nsec()
+        while index < len(arrivals) and arrivals[index][0] <= t_ns:
+            index += 1
+        if index < len(arrivals):
+            latencies.append((arrival - arrivals[index][1]) * 1e3)
+    node_latencies = [s.latency_ms for s in statuses
+                      if s.status != "WAITING" and s.latency_ms >= 0]
+    step_ms = [s.step_ms for s in statuses if s.status != "WAITING"]
+    quarter = max(1, len(latencies) // 4)
+
+    def summary(values):
+        if not values:
+            return None
+        return {"p50": percentile(values, 0.5), "p90": percentile(values, 0.9),
+                "p99": percentile(values, 0.99), "max": max(values)}
+
+    report = {
+        "poses": len(published), "reference_poses": len(reference),
+        "events_messages": len(messages_seen), "tf_transforms": len(camera_transforms),
+        "latency_ms": summary(latencies),
+        "latency_p50_ms_first_quarter": percentile(latencies[:quarter], 0.5)
+        if latencies else None,
+        "latency_p50_ms_last_quarter": percentile(latencies[-quarter:], 0.5)
+        if latencies else None,
+        "step_ms": summary(step_ms),
+        "node_latency_ms": summary(node_latencies),
+    }
+    return failures, report, published
 
 
 def plot(out, published, reference, groundtruth_path):
