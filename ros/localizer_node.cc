@@ -176,6 +176,17 @@ LocalizerNode::LocalizerNode(ros::NodeHandle& node, const NodeCoreOptions& core_
     camera_info_subscriber_ = node.subscribe("camera_info", 10, &LocalizerNode::OnCameraInfo, this);
   }
   initial_pose_subscriber_ = node.subscribe("initialpose", 10, &LocalizerNode::OnInitialPose, this);
+  if (!core_options.server.empty()) {
+    flow_timer_ =
+        node.createSteadyTimer(ros::WallDuration(0.005), [this](const ros::SteadyTimerEvent&) {
+          try {
+            core_.Poll();
+          } catch (const std::exception& error) {
+            ROS_ERROR_THROTTLE(1.0, "evloc: sending to the localizer server failed: %s",
+                               error.what());
+          }
+        });
+  }
   ROS_INFO("evloc: map %s; camera %s; first pose from %s", core_.map_description().c_str(),
            core_.has_camera() ? core_.camera_description().c_str() : "from camera_info",
            core_.initial_pose_mode() == InitialPoseMode::kParameter ? "~init_pose"

@@ -90,6 +90,8 @@ class LocalizerNode {
   ros::Subscriber packets_subscriber_;
   ros::Subscriber camera_info_subscriber_;
   ros::Subscriber initial_pose_subscriber_;
+  // Service mode: sends the events held back while the server was behind (every 5 ms).
+  ros::SteadyTimer flow_timer_;
   // Restarts already logged.
   uint64_t restarts_logged_ = 0;
 };

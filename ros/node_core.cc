@@ -178,6 +178,14 @@ struct NodeCore::State {
   bool ended = false;
   // False once a write failed (the server ended the stream: the reader reports why).
   bool writable = true;
+  // Flow control (docs/api.md, "Flow control and backpressure"): the end times of the packets
+  // sent and not yet answered by a pose at or after them (guarded by `mutex`), the server's queue
+  // capacity, and the events held back while too many packets are in flight, sent later as one
+  // larger packet (the poses do not depend on how events are split into packets).
+  std::deque<int64_t> in_flight_ends;
+  size_t queue_capacity = 256;
+  EventBuffer unsent;
+  int64_t unsent_end_t_ns = 0;
 };
 
 NodeCore::NodeCore(const NodeCoreOptions& options, StepCallback on_step, StreamEndCallback on_end)
@@ -257,6 +265,7 @@ NodeCore::NodeCore(const NodeCoreOptions& options, StepCallback on_step, StreamE
 NodeCore::~NodeCore() {
   State& s = *state_;
   if (!s.track) return;
+  FlushEvents();
   // End the session: no more requests; the server answers with SessionEnd and closes. A server
   // that does not within 10 s is cancelled.
   s.track->WritesDone();
@@ -290,11 +299,21 @@ void NodeCore::OpenStream(int64_t initial_t_ns) {
     throw IoError("localizer server " + s.options.server + ": the session did not start: " +
                   wire::StatusCodeName(status.error_code()) + ": " + status.error_message());
   }
+  if (response.started().queue_capacity() > 0) {
+    s.queue_capacity = response.started().queue_capacity();
+  }
   s.reader = std::thread([&s] {
     api::TrackResponse message;
     std::string error;
     while (s.track->Read(&message)) {
-      if (!message.has_pose() || !s.on_step) continue;
+      if (!message.has_pose()) continue;
+      {
+        std::lock_guard<std::mutex> lock(s.mutex);
+        while (!s.in_flight_ends.empty() && s.in_flight_ends.front() <= message.pose().t_ns()) {
+          s.in_flight_ends.pop_front();
+        }
+      }
+      if (!s.on_step) continue;
       try {
         s.on_step(ToOutput(message.pose()));
       } catch (const Error& failure) {
@@ -318,6 +337,39 @@ void NodeCore::OpenStream(int64_t initial_t_ns) {
 void NodeCore::SendEvents(const EventBuffer& events, int64_t end_t_ns) {
   State& s = *state_;
   if (!s.writable) return;
+  s.unsent.Append(events);
+  s.unsent_end_t_ns = end_t_ns;
+  // Hold the events back while a quarter of the server's queue is in flight (it is behind), up to
+  // half a second or 500,000 events: then they go anyway (a server that stays behind ends the
+  // session with RESOURCE_EXHAUSTED, which the node logs).
+  size_t in_flight = 0;
+  {
+    std::lock_guard<std::mutex> lock(s.mutex);
+    in_flight = s.in_flight_ends.size();
+  }
+  const bool held_long =
+      !s.unsent.empty() &&
+      (s.unsent.t_ns.back() - s.unsent.t_ns.front() > 500'000'000 || s.unsent.size() >= 500'000);
+  if (in_flight >= std::max<size_t>(1, s.queue_capacity / 4) && !held_long) return;
+  FlushEvents();
+}
+
+void NodeCore::Poll() {
+  State& s = *state_;
+  if (!s.track || (s.unsent.empty() && s.unsent_end_t_ns == 0)) return;
+  size_t in_flight = 0;
+  {
+    std::lock_guard<std::mutex> lock(s.mutex);
+    in_flight = s.in_flight_ends.size();
+  }
+  if (in_flight < std::max<size_t>(1, s.queue_capacity / 4)) FlushEvents();
+}
+
+void NodeCore::FlushEvents() {
+  State& s = *state_;
+  if (!s.writable || (s.unsent.empty() && s.unsent_end_t_ns == 0)) return;
+  const EventBuffer& events = s.unsent;
+  const int64_t end_t_ns = s.unsent_end_t_ns;
   // PACKED offsets reach 2^31 - 1 ns from a packet's base: longer spans go in several packets,
   // each ending at its last event (its window), the last one at end_t_ns.
   size_t begin = 0;
@@ -332,13 +384,20 @@ void NodeCore::SendEvents(const EventBuffer& events, int64_t end_t_ns) {
     packet->set_encoding(api::EVENT_ENCODING_PACKED);
     packet->set_time_base_ns(base);
     packet->set_data(wire::EncodePackedEvents(events, begin, end, base));
-    packet->set_end_t_ns(end == events.size() ? end_t_ns : events.t_ns[end - 1]);
+    const int64_t packet_end_t_ns = end == events.size() ? end_t_ns : events.t_ns[end - 1];
+    packet->set_end_t_ns(packet_end_t_ns);
+    {
+      std::lock_guard<std::mutex> lock(s.mutex);
+      s.in_flight_ends.push_back(packet_end_t_ns);
+    }
     if (!s.track->Write(request)) {
       s.writable = false;
-      return;
+      break;
     }
     begin = end;
   } while (begin < events.size());
+  s.unsent.clear();
+  s.unsent_end_t_ns = 0;
 }
 
 bool NodeCore::has_camera() const { return state_->camera.has_value(); }
@@ -481,6 +540,7 @@ void NodeCore::SetPoseHint(const PoseFields& pose, int64_t stamp_ns,
   State& s = *state_;
   const Rigid3d world_from_cam = ToRigid(pose);
   if (s.track && s.writable) {
+    FlushEvents();
     // The server resets its tracker at the hint (PoseHint: at or after the session time).
     api::TrackRequest request;
     *request.mutable_pose_hint()->mutable_world_from_cam() = RigidToProto(world_from_cam);

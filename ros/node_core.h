@@ -168,6 +168,10 @@ class NodeCore {
   // InvalidArgumentError for a non-finite pose or a quaternion not within 1e-3 of unit norm.
   void SetPoseHint(const PoseFields& pose, int64_t stamp_ns, std::vector<StepOutput>* steps);
 
+  // Service mode: sends the events held back (flow control) once the server has caught up; the
+  // node calls it from a timer on the spinning thread. Nothing in-process.
+  void Poll();
+
   // True once a camera is known (from ~calib or camera info).
   bool has_camera() const;
   // What the node waits for ("" once tracking).
@@ -187,8 +191,11 @@ class NodeCore {
   std::vector<StepOutput> Track(const EventBuffer& events);
   // Service mode: opens the Track stream (SessionStart, SessionStarted) and its reader thread.
   void OpenStream(int64_t initial_t_ns);
-  // Service mode: sends events < `end` tracked up to end_t_ns, in PACKED packets.
+  // Service mode: sends the events (all before end_t_ns), tracked up to end_t_ns, in PACKED
+  // packets; holds them back while the server is behind (flow control).
   void SendEvents(const EventBuffer& events, int64_t end_t_ns);
+  // Service mode: sends what SendEvents held back.
+  void FlushEvents();
 
   // True once tracking started (in-process, or the server's session opened).
   bool started() const;

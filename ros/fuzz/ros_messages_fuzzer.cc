@@ -6,6 +6,7 @@
 // wire bytes is not fuzzed here: it is Debian's roscpp, before the node's code.
 #include <cstddef>
 #include <cstdint>
+#include <cstdlib>
 #include <cstring>
 #include <memory>
 #include <string>
@@ -112,5 +113,10 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   } catch (const evloc::Error&) {
     // A rejected message: the node logs it and goes on.
   }
+  // The counters stay consistent.
+  static uint64_t events_before = 0;
+  const evloc::ros_node::NodeCounters& counters = core.counters();
+  if (counters.events < events_before || counters.rejected_messages > counters.messages) abort();
+  events_before = counters.events;
   return 0;
 }

@@ -265,11 +265,12 @@ def main():
             if player.wait(timeout=300) != 0:
                 with open(os.path.join(work, "play.log")) as handle:
                     sys.exit("FAILED: rosbag play failed:\n" + handle.read()[-4000:])
-            # Wait for the last poses (the node may still be working through its queue).
+            # Wait for the last poses (the node or the server may still be working through its
+            # queue): until none came for 5 s.
             deadline = time.monotonic() + 120
             count = -1
             while time.monotonic() < deadline:
-                time.sleep(2.0)
+                time.sleep(5.0)
                 with lock:
                     if len(poses) == count:
                         break
@@ -289,7 +290,7 @@ def main():
             reports[mode] = report
             failures += mode_failures
             if mode_failures:
-                for name in ("roslaunch.log", "play.log", "server.log"):
+                for name in ("roslaunch.log", "server.log"):
                     if os.path.exists(os.path.join(work, name)):
                         with open(os.path.join(work, name)) as handle:
                             print("---- %s (end)\n%s" % (name, handle.read()[-3000:]))
