@@ -170,7 +170,11 @@ struct NodeCore::State {
   StepCallback on_step;
   StreamEndCallback on_end;
   std::unique_ptr<api::Localizer::Stub> stub;
-  grpc::ClientContext context;
+  // The bearer token's metadata value ("Bearer T"), empty without ~token_file.
+  std::string authorization;
+  // The call's context: a new one for each attempt to open the stream (gRPC allows one call per
+  // context).
+  std::unique_ptr<grpc::ClientContext> context;
   std::unique_ptr<grpc::ClientReaderWriter<api::TrackRequest, api::TrackResponse>> track;
   std::thread reader;
   std::mutex mutex;
@@ -252,7 +256,7 @@ NodeCore::NodeCore(const NodeCoreOptions& options, StepCallback on_step, StreamE
       if (token.empty()) {
         throw InvalidArgumentError("parameter ~token_file: " + options.token_file + " is empty");
       }
-      s.context.AddMetadata("authorization", "Bearer " + token);
+      s.authorization = "Bearer " + token;
     }
   } else {
     s.map = LoadMap(ResolveMapFile(options.map_path));
@@ -265,14 +269,18 @@ NodeCore::NodeCore(const NodeCoreOptions& options, StepCallback on_step, StreamE
 NodeCore::~NodeCore() {
   State& s = *state_;
   if (!s.track) return;
-  FlushEvents();
+  try {
+    FlushEvents();
+  } catch (const std::exception&) {
+    // Nothing more can be sent: end the session all the same.
+  }
   // End the session: no more requests; the server answers with SessionEnd and closes. A server
   // that does not within 10 s is cancelled.
   s.track->WritesDone();
   {
     std::unique_lock<std::mutex> lock(s.mutex);
     if (!s.ended_changed.wait_for(lock, std::chrono::seconds(10), [&] { return s.ended; })) {
-      s.context.TryCancel();
+      s.context->TryCancel();
     }
   }
   s.reader.join();
@@ -280,7 +288,9 @@ NodeCore::~NodeCore() {
 
 void NodeCore::OpenStream(int64_t initial_t_ns) {
   State& s = *state_;
-  s.track = s.stub->Track(&s.context);
+  s.context = std::make_unique<grpc::ClientContext>();
+  if (!s.authorization.empty()) s.context->AddMetadata("authorization", s.authorization);
+  s.track = s.stub->Track(s.context.get());
   api::TrackRequest request;
   api::SessionStart* start = request.mutable_start();
   start->set_map_name(s.options.map_name);

@@ -36,7 +36,7 @@ PACKAGES=(
   # roscore, roslaunch and rosbag play and listens with rospy
   libroscpp-dev libtf2-ros-dev python3-gencpp python3-genmsg ros-std-msgs ros-sensor-msgs
   ros-geometry-msgs python3-roslaunch python3-rospy python3-std-msgs python3-sensor-msgs
-  python3-geometry-msgs python3-tf2-msgs
+  python3-geometry-msgs python3-tf2-msgs python3-rostopic
   # TLS test certificates
   openssl
   # the service capacity plot (scripts/plot-capacity.py, docs/benchmarks.md)
