@@ -48,6 +48,12 @@ void ReadNodeParameters(const ros::NodeHandle& private_node, NodeCoreOptions* co
   core->step_rate_hz = NumberParam(private_node, "rate", core->step_rate_hz);
   core->buffer_s = NumberParam(private_node, "buffer_s", core->buffer_s);
   core->max_gap_s = NumberParam(private_node, "max_gap_s", core->max_gap_s);
+  const double max_pixels =
+      NumberParam(private_node, "max_camera_pixels", static_cast<double>(core->max_camera_pixels));
+  if (max_pixels != std::floor(max_pixels) || max_pixels < 1 || max_pixels > 1e9) {
+    throw InvalidArgumentError("parameter ~max_camera_pixels must be a whole number in 1..1e9");
+  }
+  core->max_camera_pixels = static_cast<int64_t>(max_pixels);
   core->server = StringParam(private_node, "server", core->server);
   core->map_name = StringParam(private_node, "map_name", core->map_name);
   core->token_file = StringParam(private_node, "token_file", core->token_file);

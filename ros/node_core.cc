@@ -263,7 +263,14 @@ NodeCore::NodeCore(const NodeCoreOptions& options, StepCallback on_step, StreamE
     s.visibility = std::make_unique<VisibilityIndex>(s.map);
     s.source = std::make_unique<tracking::StaticMapSource>(s.map, s.visibility.get());
   }
-  if (!options.calib_path.empty()) s.camera = ReadCalibrationFile(options.calib_path, 0, 0);
+  if (options.max_camera_pixels < 1) {
+    throw InvalidArgumentError("parameter ~max_camera_pixels must be positive");
+  }
+  if (!options.calib_path.empty()) {
+    const Camera camera = ReadCalibrationFile(options.calib_path, 0, 0);
+    CheckCameraSize(camera);
+    s.camera = camera;
+  }
 }
 
 NodeCore::~NodeCore() {
@@ -537,10 +544,22 @@ std::vector<StepOutput> NodeCore::HandleEvents(EventColumns columns) {
   return TryStart();
 }
 
+void NodeCore::CheckCameraSize(const Camera& camera) const {
+  const int64_t pixels = int64_t{camera.width} * camera.height;
+  if (pixels > state_->options.max_camera_pixels) {
+    throw InvalidArgumentError("camera " + std::to_string(camera.width) + "x" +
+                               std::to_string(camera.height) + " has " + std::to_string(pixels) +
+                               " pixels, more than ~max_camera_pixels (" +
+                               std::to_string(state_->options.max_camera_pixels) + ")");
+  }
+}
+
 bool NodeCore::SetCameraInfo(const CameraInfoFields& info, std::vector<StepOutput>* steps) {
   if (state_->camera) return false;
-  state_->camera =
+  const Camera camera =
       CameraFromRosCameraInfo(info.width, info.height, info.distortion_model, info.d, info.k);
+  CheckCameraSize(camera);
+  state_->camera = camera;
   *steps = TryStart();
   return true;
 }

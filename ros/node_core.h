@@ -18,6 +18,7 @@
 
 namespace evloc {
 class EventBuffer;
+struct Camera;
 }  // namespace evloc
 
 namespace evloc::ros_node {
@@ -55,6 +56,9 @@ struct NodeCoreOptions {
   // longer jump the tracker restarts at the new events from its last good pose (and a start
   // waits for no ~init_stamp that far back: it starts at the first event).
   double max_gap_s = 5.0;
+  // ~max_camera_pixels: the largest camera (width x height) accepted; the tracker's memory grows
+  // with it (as the server's --max-camera-pixels, same default).
+  int64_t max_camera_pixels = int64_t{1} << 22;
   // ~server: a localizer server (host:port, docs/api.md) to stream the events to instead of
   // tracking in-process; empty: in-process against ~map.
   std::string server;
@@ -199,6 +203,8 @@ class NodeCore {
 
   // True once tracking started (in-process, or the server's session opened).
   bool started() const;
+  // Throws InvalidArgumentError for a camera over max_camera_pixels.
+  void CheckCameraSize(const Camera& camera) const;
 
   InitialPoseMode mode_ = InitialPoseMode::kHint;
   bool service_ = false;

@@ -203,6 +203,12 @@ TEST(NodeCore, RejectsMessagesOutOfOrderOrMalformed) {
     EXPECT_NE(std::string(error.what()).find("rational_polynomial"), std::string::npos);
   }
   EXPECT_FALSE(core.has_camera());
+  // A camera the tracker's tables would not fit in memory for (found by the fuzzer).
+  CameraInfoFields huge = PinholeInfo();
+  huge.width = 65535;
+  huge.height = 65535;
+  EXPECT_THROW(core.SetCameraInfo(huge, &steps), InvalidArgumentError);
+  EXPECT_FALSE(core.has_camera());
 }
 
 TEST(NodeCore, AJumpForwardRestartsInsteadOfSteppingThroughIt) {
