@@ -37,6 +37,12 @@ PACKAGES=(
   python3-rosbag python3-roslz4
   # the independent writer of the AEDAT4 tests (core/events/testing/write_test_aedat4.py)
   python3-flatbuffers python3-lz4 python3-zstandard
+  # the ROS 1 node (ros/, docs/ros.md): roscpp and tf2_ros, the message definitions and Debian's
+  # gencpp (the node's message headers are generated from ros/msg at build time); its test runs
+  # roscore, roslaunch and rosbag play and listens with rospy
+  libroscpp-dev libtf2-ros-dev python3-gencpp python3-genmsg ros-std-msgs ros-sensor-msgs
+  ros-geometry-msgs python3-roslaunch python3-rospy python3-std-msgs python3-sensor-msgs
+  python3-geometry-msgs python3-tf2-msgs python3-rostopic
   # TLS test certificates
   openssl
   # the service capacity plot (scripts/plot-capacity.py, docs/benchmarks.md)

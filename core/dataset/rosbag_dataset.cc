@@ -1,5 +1,6 @@
 #include "core/dataset/rosbag_dataset.h"
 
+#include <array>
 #include <cmath>
 #include <cstring>
 
@@ -33,25 +34,15 @@ bool HasTopicOfType(const RosbagReader& bag, const std::string& topic, const std
 
 }  // namespace
 
-Camera DecodeRosCameraInfo(const RosbagMessage& message, const std::string& source) {
-  RosMessageCursor cursor(message, source);
-  cursor.Header();
-  Camera camera;
-  const uint32_t height = cursor.U32("height");
-  const uint32_t width = cursor.U32("width");
+Camera CameraFromRosCameraInfo(uint32_t width, uint32_t height, const std::string& model,
+                               const std::vector<double>& d, const std::array<double, 9>& k) {
   if (width == 0 || height == 0 || width > 65536 || height > 65536) {
-    cursor.Fail("expected a width and height in 1..65536, found " + std::to_string(width) + "x" +
-                std::to_string(height));
+    throw InvalidArgumentError("expected a width and height in 1..65536, found " +
+                               std::to_string(width) + "x" + std::to_string(height));
   }
+  Camera camera;
   camera.width = static_cast<int>(width);
   camera.height = static_cast<int>(height);
-  const size_t model_offset = cursor.offset();
-  const std::string model = cursor.String("distortion_model");
-  const uint32_t count = cursor.ArrayLength("D", 8);
-  std::vector<double> d(count);
-  for (double& value : d) value = cursor.F64("D");
-  double k[9];
-  for (double& value : k) value = cursor.F64("K");
   camera.fx = k[0];
   camera.cx = k[2];
   camera.fy = k[4];
@@ -68,21 +59,44 @@ Camera DecodeRosCameraInfo(const RosbagMessage& message, const std::string& sour
     camera.model = CameraModel::kEquidistant;
     camera.distortion = d;
   } else {
-    throw ParseError(source, RosbagPosition(message, model_offset),
-                     std::string(kCameraInfo) + " on " + message.connection->topic +
-                         ": unsupported distortion model '" + model + "' with " +
-                         std::to_string(d.size()) +
-                         " coefficients (evloc reads plumb_bob with 5, equidistant with 4, or "
-                         "all zeros)");
+    throw InvalidArgumentError("unsupported distortion model '" + model + "' with " +
+                               std::to_string(d.size()) +
+                               " coefficients (evloc reads plumb_bob with 5, equidistant with 4, "
+                               "or all zeros)");
   }
   try {
     camera.Check();
   } catch (const InvalidArgumentError& error) {
-    throw ParseError(source, RosbagPosition(message, 0),
-                     std::string(kCameraInfo) + " on " + message.connection->topic +
-                         ": invalid camera: " + error.what());
+    throw InvalidArgumentError(std::string("invalid camera: ") + error.what());
   }
   return camera;
+}
+
+Camera DecodeRosCameraInfo(const RosbagMessage& message, const std::string& source) {
+  RosMessageCursor cursor(message, source);
+  cursor.Header();
+  const uint32_t height = cursor.U32("height");
+  const uint32_t width = cursor.U32("width");
+  if (width == 0 || height == 0 || width > 65536 || height > 65536) {
+    cursor.Fail("expected a width and height in 1..65536, found " + std::to_string(width) + "x" +
+                std::to_string(height));
+  }
+  const size_t model_offset = cursor.offset();
+  const std::string model = cursor.String("distortion_model");
+  const uint32_t count = cursor.ArrayLength("D", 8);
+  std::vector<double> d(count);
+  for (double& value : d) value = cursor.F64("D");
+  std::array<double, 9> k;
+  for (double& value : k) value = cursor.F64("K");
+  try {
+    return CameraFromRosCameraInfo(width, height, model, d, k);
+  } catch (const InvalidArgumentError& error) {
+    // A refused model is reported where the model is; an invalid camera at the message.
+    const bool model_refused = std::string(error.what()).rfind("unsupported", 0) == 0;
+    throw ParseError(
+        source, RosbagPosition(message, model_refused ? model_offset : 0),
+        std::string(kCameraInfo) + " on " + message.connection->topic + ": " + error.what());
+  }
 }
 
 TimedPose DecodeRosPoseStamped(const RosbagMessage& message, const std::string& source) {

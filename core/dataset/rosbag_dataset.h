@@ -4,9 +4,11 @@
 // section 7; docs/dataset-format.md).
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <filesystem>
 #include <string>
+#include <vector>
 
 #include <opencv2/core.hpp>
 
@@ -22,6 +24,14 @@ namespace evloc {
 // Throws InvalidArgumentError, listing the bag's topics, when the camera-info topic is missing or
 // a topic has an unexpected type; ParseError for malformed bags and messages.
 Dataset ReadRosbagDataset(const std::filesystem::path& path, const DatasetReaderOptions& options);
+
+// The camera of a sensor_msgs/CameraInfo's fields (the one rule of the bag reader and the ROS
+// node): no distortion (every coefficient zero) is a pinhole, plumb_bob (radtan) with 5 (or 4)
+// coefficients radial-tangential, equidistant (fisheye) with 4 equidistant; fx, fy, cx, cy from K.
+// Throws InvalidArgumentError ("unsupported distortion model ..." for another model, "invalid
+// camera: ..." when Camera::Check fails, or a size outside 1..65536).
+Camera CameraFromRosCameraInfo(uint32_t width, uint32_t height, const std::string& model,
+                               const std::vector<double>& d, const std::array<double, 9>& k);
 
 // Decodes a sensor_msgs/CameraInfo: plumb_bob (5 coefficients, radtan), equidistant (4) or no
 // distortion (pinhole). Throws ParseError for other models or a malformed message.

@@ -15,6 +15,13 @@
 
 namespace evloc {
 
+size_t BufferEventReader::Read(size_t max_events, EventBuffer* out) {
+  const size_t count = std::min(max_events, events_.size() - next_);
+  out->Append(events_, next_, count);
+  next_ += count;
+  return count;
+}
+
 void PacketEventReader::DecodeFirstPacket() {
   if (!DecodeNextPacket(&pending_)) ended_ = true;
 }

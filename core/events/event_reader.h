@@ -28,6 +28,22 @@ class EventReader {
   virtual uint64_t dropped_event_count() const { return 0; }
 };
 
+// Serves events already in memory (kept by reference) through the EventReader interface: for
+// in-process callers and tests of code that reads an EventReader.
+class BufferEventReader final : public EventReader {
+ public:
+  // Reads `events`, which must outlive the reader.
+  explicit BufferEventReader(const EventBuffer& events) : events_(events) {}
+  // Appends up to `max_events` events to `out`; 0 at the end.
+  size_t Read(size_t max_events, EventBuffer* out) override;
+  // Unknown: the buffer has no sensor size.
+  std::optional<SensorSize> sensor_size() const override { return std::nullopt; }
+
+ private:
+  const EventBuffer& events_;
+  size_t next_ = 0;
+};
+
 // An EventReader over a source that decodes whole packets at a time (the messages of a ROS1 bag,
 // the packets of an AEDAT4 file): Read() decodes the next packet straight into the caller's
 // buffer and keeps the events beyond `max_events` for the next call, so at most one packet's

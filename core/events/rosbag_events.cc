@@ -89,19 +89,50 @@ void DecodeEventPacket(const RosbagMessage& message, RosMessageCursor* cursor,
     *sensor_size = SensorSize{static_cast<int>(width), static_cast<int>(height)};
   }
   if (big_endian) cursor->Fail("big-endian event packets are not supported");
-  const uint8_t* p = cursor->here();
+  if (!IsEventPacketEncoding(encoding)) {
+    throw ParseError(source, RosbagPosition(message, encoding_offset),
+                     std::string(kEventPacket) + " on " + message.connection->topic +
+                         ": unsupported encoding '" + encoding + "' (evloc decodes evt3 and mono)");
+  }
+  try {
+    // Mono events are bounded by this packet's size, the EVT 3.0 decoder by the stream's.
+    const std::optional<SensorSize> bounds =
+        encoding == "mono" ? (bounded ? std::optional<SensorSize>(SensorSize{
+                                            static_cast<int>(width), static_cast<int>(height)})
+                                      : std::nullopt)
+                           : *sensor_size;
+    DecodeEventPacketEvents(encoding, stamp_ns, cursor->here(), size, bounds,
+                            source + " (" + message.connection->topic + ", EVT 3.0)", out, dropped,
+                            evt3);
+  } catch (const InvalidArgumentError& error) {
+    cursor->Fail(error.what());
+  }
+  cursor->Skip(size);
+}
+
+}  // namespace
+
+bool IsEventPacketEncoding(const std::string& encoding) {
+  return encoding == "mono" || encoding == "evt3";
+}
+
+void DecodeEventPacketEvents(const std::string& encoding, int64_t stamp_ns, const uint8_t* data,
+                             size_t size, const std::optional<SensorSize>& sensor_size,
+                             const std::string& source, EventBuffer* out, uint64_t* dropped,
+                             std::unique_ptr<Evt3Decoder>* evt3) {
   if (encoding == "mono") {
     // 64-bit little-endian words: [63] polarity, [62:48] y, [47:32] x, [31:0] dt (ns after
     // the header stamp).
     if (size % 8 != 0) {
-      cursor->Fail("mono events: expected a multiple of 8 bytes, found " + std::to_string(size));
+      throw InvalidArgumentError("mono events: expected a multiple of 8 bytes, found " +
+                                 std::to_string(size));
     }
     for (size_t i = 0; i < size / 8; ++i) {
       uint64_t word;
-      std::memcpy(&word, p + 8 * i, 8);
+      std::memcpy(&word, data + 8 * i, 8);
       const auto x = static_cast<uint16_t>((word >> 32) & 0xffff);
       const auto y = static_cast<uint16_t>((word >> 48) & 0x7fff);
-      if (bounded && (x >= width || y >= height)) {
+      if (sensor_size && (x >= sensor_size->width || y >= sensor_size->height)) {
         ++*dropped;
         continue;
       }
@@ -111,24 +142,20 @@ void DecodeEventPacket(const RosbagMessage& message, RosMessageCursor* cursor,
   } else if (encoding == "evt3") {
     if (!*evt3) {
       PropheseeDecoderOptions options;
-      options.sensor_size = *sensor_size;
-      options.source = source + " (" + message.connection->topic + ", EVT 3.0)";
+      options.sensor_size = sensor_size;
+      options.source = source;
       *evt3 = std::make_unique<Evt3Decoder>(options);
     }
     const uint64_t before =
         (*evt3)->statistics().dropped_outside_sensor + (*evt3)->statistics().dropped_before_state;
-    (*evt3)->Decode(p, size, out);
+    (*evt3)->Decode(data, size, out);
     *dropped += (*evt3)->statistics().dropped_outside_sensor +
                 (*evt3)->statistics().dropped_before_state - before;
   } else {
-    throw ParseError(source, RosbagPosition(message, encoding_offset),
-                     std::string(kEventPacket) + " on " + message.connection->topic +
-                         ": unsupported encoding '" + encoding + "' (evloc decodes evt3 and mono)");
+    throw InvalidArgumentError("unsupported encoding '" + encoding +
+                               "' (evloc decodes evt3 and mono)");
   }
-  cursor->Skip(size);
 }
-
-}  // namespace
 
 bool IsRosbagEventType(const std::string& type) {
   return type == kDvsEventArray || type == kPropheseeEventArray || type == kEventPacket;

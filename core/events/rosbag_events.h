@@ -31,6 +31,21 @@ struct RosbagEventOptions {
   void Check() const;
 };
 
+// True for the event_camera_msgs/EventPacket encodings evloc decodes: "mono" and "evt3".
+bool IsEventPacketEncoding(const std::string& encoding);
+
+// Decodes the `size` bytes of an event_camera_msgs/EventPacket's `events` field (little-endian) in
+// `encoding` and appends them to `out` (the one decoder of the bag reader and the ROS node):
+// "mono" (64-bit words, times in ns after `stamp_ns`, the header stamp) or "evt3" through `*evt3`
+// (created on first use, named `source` in its errors; one per stream: its time base carries over
+// between packets). Events outside `sensor_size` (when set) are dropped and counted in
+// `*dropped`. Throws InvalidArgumentError for another encoding or a mono payload that is not
+// whole words, ParseError for a malformed EVT 3.0 payload.
+void DecodeEventPacketEvents(const std::string& encoding, int64_t stamp_ns, const uint8_t* data,
+                             size_t size, const std::optional<SensorSize>& sensor_size,
+                             const std::string& source, EventBuffer* out, uint64_t* dropped,
+                             std::unique_ptr<Evt3Decoder>* evt3);
+
 // Decodes the events of one message (any of the supported types) and appends them to `out`.
 // `sensor_size` receives the message's width and height when both are non-zero. Events outside
 // that size are dropped and counted in `*dropped`. EventPacket EVT 3.0 payloads go through

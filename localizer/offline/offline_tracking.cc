@@ -158,6 +158,48 @@ void OfflineTrackingOptions::Check() const {
   }
 }
 
+EventStreamTracker::EventStreamTracker(const MapSource& source, const Camera& camera,
+                                       const TrackerOptions& options,
+                                       const std::optional<Rigid3d>& initial_world_from_cam,
+                                       int64_t initial_t_ns, bool discard_events_before_start)
+    : tracker_(source, camera, options),
+      initial_world_from_cam_(initial_world_from_cam),
+      initial_t_ns_(initial_t_ns),
+      discard_events_before_start_(discard_events_before_start) {}
+
+std::vector<PoseEstimate> EventStreamTracker::AddEvents(
+    const EventBuffer& events, const std::function<void(const Tracker&)>& before_tracking) {
+  if (started_) {
+    if (before_tracking) before_tracking(tracker_);
+    return tracker_.AddEvents(events);
+  }
+  // Split the events at the initial time: those up to it are stored before the Reset so that
+  // the surfaces are primed, the rest are tracked.
+  size_t split = 0;
+  while (split < events.size() && events.t_ns[split] <= initial_t_ns_) ++split;
+  if (split == events.size()) {
+    if (!discard_events_before_start_ && !events.empty()) tracker_.AddEvents(events);
+    return {};
+  }
+  EventBuffer head;
+  EventBuffer tail;
+  for (size_t i = 0; i < events.size(); ++i) (i < split ? head : tail).push_back(events[i]);
+  if (!head.empty() && !discard_events_before_start_) tracker_.AddEvents(head);
+  if (initial_world_from_cam_) {
+    tracker_.Reset(*initial_world_from_cam_, initial_t_ns_);
+  } else {
+    tracker_.StartWithoutPose(initial_t_ns_);
+  }
+  started_ = true;
+  if (before_tracking) before_tracking(tracker_);
+  return tracker_.AddEvents(tail);
+}
+
+std::vector<PoseEstimate> EventStreamTracker::AdvanceTo(int64_t t_ns) {
+  if (!started_) return {};
+  return tracker_.AdvanceTo(t_ns);
+}
+
 OfflineTrackingResult TrackEventStream(EventReader& reader, const Map& map,
                                        const VisibilityIndex* visibility, const Camera& camera,
                                        const std::optional<Rigid3d>& initial_world_from_cam,
@@ -179,11 +221,13 @@ OfflineTrackingResult TrackEventStream(EventReader& reader, const MapSource& sou
     throw InvalidArgumentError("offline tracking: event streams need the events input mode");
   }
   const auto start = std::chrono::steady_clock::now();
-  Tracker tracker(source, camera, options.tracker);
-  if (options.image_hypotheses) tracker.SetImageHypothesisSource(options.image_hypotheses);
+  EventStreamTracker stream(source, camera, options.tracker, initial_world_from_cam, initial_t_ns,
+                            options.discard_events_before_start);
+  if (options.image_hypotheses) {
+    stream.mutable_tracker().SetImageHypothesisSource(options.image_hypotheses);
+  }
   OfflineTrackingResult result;
   EventBuffer batch;
-  bool started = false;
   std::optional<ReadAheadQueue> read_ahead;
   if (options.read_ahead_batches > 0) {
     read_ahead.emplace(reader, options.read_batch_events, options.read_ahead_batches);
@@ -209,33 +253,11 @@ OfflineTrackingResult TrackEventStream(EventReader& reader, const MapSource& sou
       batch = std::move(kept);
       if (batch.empty()) continue;
     }
-    if (!started) {
-      // Split the batch at the initial time: events up to it are stored before the Reset so that
-      // the surfaces are primed, the rest are tracked.
-      size_t split = 0;
-      while (split < batch.size() && batch.t_ns[split] <= initial_t_ns) ++split;
-      if (split == batch.size()) {
-        if (!options.discard_events_before_start) tracker.AddEvents(batch);
-        continue;
-      }
-      EventBuffer head;
-      EventBuffer tail;
-      for (size_t i = 0; i < batch.size(); ++i) (i < split ? head : tail).push_back(batch[i]);
-      if (!head.empty() && !options.discard_events_before_start) tracker.AddEvents(head);
-      if (initial_world_from_cam) {
-        tracker.Reset(*initial_world_from_cam, initial_t_ns);
-      } else {
-        tracker.StartWithoutPose(initial_t_ns);
-      }
-      started = true;
-      batch = std::move(tail);
-    }
-    if (between_batches) between_batches(tracker);
-    for (const PoseEstimate& step : tracker.AddEvents(batch)) {
-      Record(step, tracker, on_step, &result);
+    for (const PoseEstimate& step : stream.AddEvents(batch, between_batches)) {
+      Record(step, stream.tracker(), on_step, &result);
     }
   }
-  result.final_filter_counts = tracker.event_filter().counts();
+  result.final_filter_counts = stream.tracker().event_filter().counts();
   result.wall_s = SecondsSince(start);
   return result;
 }

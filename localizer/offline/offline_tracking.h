@@ -90,6 +90,41 @@ struct OfflineTrackingResult {
 // Called after every step, for progress display and debug output; `tracker` is the live tracker.
 using StepCallback = std::function<void(const PoseEstimate& step, const Tracker& tracker)>;
 
+// A Tracker fed an event stream in pieces of any size, started as every offline run and the ROS
+// node start it: events up to `initial_t_ns` prime the time surfaces (or are dropped with
+// `discard_events_before_start`), then the tracker is Reset at `initial_world_from_cam` (or
+// started without a pose when it is nullopt) at `initial_t_ns`, and later events are tracked. The
+// same events give the same steps however they are split into pieces. Not thread-safe.
+class EventStreamTracker {
+ public:
+  // `source` must outlive the tracker. Throws InvalidArgumentError as Tracker's constructor does.
+  EventStreamTracker(const MapSource& source, const Camera& camera, const TrackerOptions& options,
+                     const std::optional<Rigid3d>& initial_world_from_cam, int64_t initial_t_ns,
+                     bool discard_events_before_start = false);
+
+  // Adds the next events (time-ordered, also across calls) and returns the steps that became
+  // due. `before_tracking`, when set, runs once the tracker has started, just before the events
+  // after the initial time are tracked. Throws what Tracker::AddEvents throws.
+  std::vector<PoseEstimate> AddEvents(
+      const EventBuffer& events, const std::function<void(const Tracker&)>& before_tracking = {});
+  // Tracker::AdvanceTo once started (every event with t_ns <= `t_ns` has been given); nothing
+  // before.
+  std::vector<PoseEstimate> AdvanceTo(int64_t t_ns);
+  // True once the initial time has passed (the tracker was Reset or started without a pose).
+  bool started() const { return started_; }
+  // The tracker.
+  const Tracker& tracker() const { return tracker_; }
+  // The tracker, e.g. for a new pose hint (Tracker::Reset) after the start.
+  Tracker& mutable_tracker() { return tracker_; }
+
+ private:
+  Tracker tracker_;
+  std::optional<Rigid3d> initial_world_from_cam_;
+  int64_t initial_t_ns_ = 0;
+  bool discard_events_before_start_ = false;
+  bool started_ = false;
+};
+
 // Tracks the events of `reader` from `initial_world_from_cam` at `initial_t_ns`, or without a
 // pose (Tracker::StartWithoutPose) when it is nullopt; events before initial_t_ns only prime the
 // time surfaces (or are dropped with discard_events_before_start). With read_ahead_batches > 0 a

@@ -14,23 +14,6 @@
 namespace evloc::tracking {
 namespace {
 
-// Serves an in-memory event buffer through the EventReader interface.
-class BufferEventReader : public EventReader {
- public:
-  explicit BufferEventReader(const EventBuffer& events) : events_(events) {}
-  size_t Read(size_t max_events, EventBuffer* out) override {
-    const size_t count = std::min(max_events, events_.size() - next_);
-    for (size_t i = 0; i < count; ++i) out->push_back(events_[next_ + i]);
-    next_ += count;
-    return count;
-  }
-  std::optional<SensorSize> sensor_size() const override { return std::nullopt; }
-
- private:
-  const EventBuffer& events_;
-  size_t next_ = 0;
-};
-
 Camera TestCamera() { return Camera::Pinhole(320, 240, 250, 250, 159.5, 119.5); }
 
 constexpr int64_t kDurationNs = 600'000'000;

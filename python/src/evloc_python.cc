@@ -155,23 +155,6 @@ EventBuffer EventsFromArrays(const Int64Array& t_ns, const Uint16Array& x, const
   return events;
 }
 
-// An EventReader over events already in memory (the arrays given to track_events).
-class BufferEventReader : public EventReader {
- public:
-  explicit BufferEventReader(EventBuffer events) : events_(std::move(events)) {}
-  size_t Read(size_t max_events, EventBuffer* out) override {
-    const size_t count = std::min(max_events, events_.size() - position_);
-    out->Append(events_, position_, count);
-    position_ += count;
-    return count;
-  }
-  std::optional<SensorSize> sensor_size() const override { return std::nullopt; }
-
- private:
-  EventBuffer events_;
-  size_t position_ = 0;
-};
-
 // An event file or a dataset's events, read in chunks.
 class PyEventReader {
  public:
@@ -778,7 +761,8 @@ PYBIND11_MODULE(_evloc, m) {
         const Camera checked_camera = CameraFromDict(camera);
         const tracking::OfflineTrackingOptions options = TrackingOptionsFromFlags(flags);
         const std::optional<Rigid3d> initial = OptionalPose(initial_pose);
-        BufferEventReader reader(EventsFromArrays(t_ns, x, y, polarity));
+        const EventBuffer events = EventsFromArrays(t_ns, x, y, polarity);
+        BufferEventReader reader(events);
         const VisibilityIndex* visibility = map.Visibility();
         tracking::OfflineTrackingResult result;
         {

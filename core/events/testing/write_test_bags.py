@@ -8,9 +8,11 @@ Usage: write_test_bags.py OUT_DIR
        1,000; payloads packed with numpy, written raw by rosbag)
        write_test_bags.py --small OUT_DIR   (the same topics with at most 8 events per message,
        two messages per topic and no images: fuzzing seeds of 2-4 KB, test_<compression>.bag)
-       write_test_bags.py --from-dataset DIR OUT.bag   (an lz4 bag of a dataset folder with
-       events.txt, calib.yaml (pinhole or radtan) and groundtruth.txt: /dvs/events in messages
-       of 1 ms, /dvs/camera_info, /optitrack/davis; for tests/end_to_end_test.cc)
+       write_test_bags.py --from-dataset DIR OUT.bag [OFFSET_S]   (an lz4 bag of a dataset folder
+       with events.txt, calib.yaml (pinhole or radtan) and groundtruth.txt: /dvs/events in
+       messages of 1 ms, /dvs/camera_info, /optitrack/davis; for tests/end_to_end_test.cc; every
+       time moved by the whole seconds OFFSET_S, default 0: ROS's C++ rosbag play refuses record
+       times of 0, where a simulated sequence starts; ros/tests/ros_node_test.py)
 
 Message classes come from genpy.dynamic (the ROS message generator, fed the message
 definitions below), so the payload serialization is genpy's, not evloc's. Writes, for each
@@ -119,7 +121,7 @@ def write_bench_bags(count, out):
                           t=ros_time(stamp), raw=True)
 
 
-def write_dataset_bag(folder, out):
+def write_dataset_bag(folder, out, offset_ns=0):
     import yaml
 
     dvs = classes("dvs_msgs/EventArray")
@@ -138,7 +140,7 @@ def write_dataset_bag(folder, out):
         K=[fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0], R=[1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0],
         P=[fx, 0, cx, 0, 0, fy, cy, 0, 0, 0, 1, 0], binning_x=0, binning_y=0,
         roi=cam["sensor_msgs/RegionOfInterest"]())))
-    seconds_to_ns = lambda text: int(text.split(".")[0]) * 1_000_000_000 + int(
+    seconds_to_ns = lambda text: offset_ns + int(text.split(".")[0]) * 1_000_000_000 + int(
         (text.split(".") + [""])[1].ljust(9, "0")[:9])
     with open(folder + "/groundtruth.txt") as handle:
         for m, line in enumerate(l for l in handle if l.strip() and not l.startswith("#")):
@@ -183,7 +185,8 @@ def write_dataset_bag(folder, out):
 
 def main():
     if sys.argv[1] == "--from-dataset":
-        write_dataset_bag(sys.argv[2], sys.argv[3])
+        offset_s = int(sys.argv[4]) if len(sys.argv) > 4 else 0
+        write_dataset_bag(sys.argv[2], sys.argv[3], offset_s * 1_000_000_000)
         return
     if sys.argv[1] == "--bench":
         write_bench_bags(int(sys.argv[2]), sys.argv[3])

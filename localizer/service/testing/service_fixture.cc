@@ -46,14 +46,6 @@ EventBuffer TestEvents(int64_t duration_ns) {
       duration_ns);
 }
 
-size_t BufferEventReader::Read(size_t max_events, EventBuffer* out) {
-  const size_t count = std::min(max_events, events_.size() - next_);
-  out->Append(events_.t_ns.data() + next_, events_.x.data() + next_, events_.y.data() + next_,
-              events_.polarity.data() + next_, count);
-  next_ += count;
-  return count;
-}
-
 TemporaryFolder::TemporaryFolder() {
   static std::atomic<int> counter{0};
   std::random_device random;

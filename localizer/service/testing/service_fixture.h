@@ -35,20 +35,8 @@ Camera TestCamera();
 // Ideal edge events of TestMap() seen along testing::SmoothMotion over [0, duration_ns].
 EventBuffer TestEvents(int64_t duration_ns);
 
-// Serves an in-memory event buffer (kept by reference) through the EventReader interface.
-class BufferEventReader : public EventReader {
- public:
-  // Reads `events`, which must outlive the reader.
-  explicit BufferEventReader(const EventBuffer& events) : events_(events) {}
-  // Appends up to `max_events` events to `out`; 0 at the end.
-  size_t Read(size_t max_events, EventBuffer* out) override;
-  // Unknown: the buffer has no sensor size.
-  std::optional<SensorSize> sensor_size() const override { return std::nullopt; }
-
- private:
-  const EventBuffer& events_;
-  size_t next_ = 0;
-};
+// The reader of in-memory events (core/events).
+using evloc::BufferEventReader;
 
 // A fresh temporary folder removed on destruction.
 class TemporaryFolder {
