@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "core/camera/calibration_file.h"
 #include "core/common/cli.h"
 #include "core/common/error.h"
 #include "tools/sim/render_command.h"
@@ -42,6 +43,8 @@ render options:
   --speed M/S           vehicle speed along the route; default 5
   --path-start M        where along the route the path starts, metres; default 0
   --map-spacing M       spacing of the ground-truth map's points along edges; default 0.01
+  --map-until S         the ground-truth map from the path's first S seconds only (a map of the
+                        part of the scene seen then); default: the whole path
   --motion NAME         slow | mid | fast | aggressive; default: mid
   --trajectory FILE     TUM trajectory replayed relative to its first pose instead of --motion
   --duration S          seconds; default 10 for --motion, the whole file for --trajectory
@@ -61,6 +64,12 @@ render options:
   --clean               perfect event pixel: no threshold mismatch, refractory period, noise, leak,
                         hot pixels, low-pass or read-out limit
   --events-txt          also write events.txt (ECD text format)
+  --depth-camera        also a depth camera beside the event camera (docs/simulator.md, "Depth
+                        camera"): VGA, f = 525, 5 cm to the right, its own frames in
+                        depth_camera.txt with depth_camchain.yaml
+  --depth-fps F         the depth camera's rate, Hz; default 30
+  --depth-noise M       its depth noise at 1 m (growing with depth squared), metres; default 0.0015
+  --depth-camera-yaml FILE  its intrinsics instead of the VGA preset
   --force               replace an existing non-empty output folder
 
 survey options (photos of the car park with exact poses, for evloc-mapper build --known-poses):
@@ -132,13 +141,20 @@ void RequireKnownCamera(bool has_camera_yaml, const std::string& preset) {
 
 int RunRender(const std::vector<std::string>& args) {
   const auto flags = ParseFlags(
-      args, {"--out",           "--camera",      "--camera-yaml", "--scene",      "--motion",
-             "--trajectory",    "--duration",    "--fps",         "--lighting",   "--seed",
-             "--render-motion", "--sensor",      "--noise-rate",  "--hot-pixels", "--cutoff",
-             "--site-seed",     "--time-of-day", "--path",        "--speed",      "--path-start",
-             "--map-spacing"},
-      {"--clean", "--events-txt", "--force"});
+      args,
+      {"--out",           "--camera",      "--camera-yaml", "--scene",       "--motion",
+       "--trajectory",    "--duration",    "--fps",         "--lighting",    "--seed",
+       "--render-motion", "--sensor",      "--noise-rate",  "--hot-pixels",  "--cutoff",
+       "--site-seed",     "--time-of-day", "--path",        "--speed",       "--path-start",
+       "--map-spacing",   "--map-until",   "--depth-fps",   "--depth-noise", "--depth-camera-yaml"},
+      {"--clean", "--events-txt", "--force", "--depth-camera"});
   evloc::sim::RenderCommandOptions options;
+  const bool depth_flags = flags.contains("--depth-fps") || flags.contains("--depth-noise") ||
+                           flags.contains("--depth-camera-yaml");
+  if (depth_flags && !flags.contains("--depth-camera")) {
+    throw UsageError("--depth-fps, --depth-noise and --depth-camera-yaml need --depth-camera.");
+  }
+  if (flags.contains("--depth-camera")) options.depth_camera.emplace();
   if (!flags.contains("--out")) throw UsageError("render needs --out DIR.");
   if (flags.contains("--motion") && flags.contains("--trajectory")) {
     throw UsageError("--motion and --trajectory exclude each other.");
@@ -163,6 +179,7 @@ int RunRender(const std::vector<std::string>& args) {
     if (flag == "--speed") options.speed_m_per_s = ParseDoubleFlag(flag, value);
     if (flag == "--path-start") options.path_start_m = ParseDoubleFlag(flag, value);
     if (flag == "--map-spacing") options.map_spacing_m = ParseDoubleFlag(flag, value);
+    if (flag == "--map-until") options.map_until_s = ParseDoubleFlag(flag, value);
     if (flag == "--motion") options.motion = evloc::sim::ParseMotionProfile(value);
     if (flag == "--trajectory") options.trajectory_file = value;
     if (flag == "--duration") options.duration_s = ParseDoubleFlag(flag, value);
@@ -179,6 +196,11 @@ int RunRender(const std::vector<std::string>& args) {
     if (flag == "--cutoff") options.photoreceptor_cutoff_hz = ParseDoubleFlag(flag, value);
     if (flag == "--clean") options.clean = true;
     if (flag == "--events-txt") options.events_txt = true;
+    if (flag == "--depth-fps") options.depth_camera->fps = ParseDoubleFlag(flag, value);
+    if (flag == "--depth-noise") options.depth_camera->noise_at_1m_m = ParseDoubleFlag(flag, value);
+    if (flag == "--depth-camera-yaml") {
+      options.depth_camera->camera = evloc::ReadCalibrationFile(value, 0, 0);
+    }
     if (flag == "--force") options.force = true;
   });
   RequireKnownCamera(options.camera_yaml.has_value(), options.camera_preset);
