@@ -234,8 +234,10 @@ struct DepthCameraStream {
   Camera camera;
   // p_event = event_from_depth * p_depth.
   Rigid3d event_from_depth;
-  // Its depth frames in time order (16-bit PNG, millimetres).
+  // Its depth frames in time order (16-bit PNG).
   std::vector<TimedFile> frames;
+  // Units per metre of those PNGs (pass to ReadDepthPng): millimetres.
+  double units_per_metre = kEvlocDepthUnitsPerMetre;
 };
 
 // A loaded dataset: its calibration, the lists of images and depth maps, ground truth and where
