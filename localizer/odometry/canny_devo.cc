@@ -25,6 +25,9 @@ tracking::TrackerOptions CannyDevoOptions::DefaultTrackerOptions() {
   tracking::TrackerOptions options;
   options.use_polarity = false;
   options.decay_time_s = 0.01;
+  // A reference map has no viewpoints to search from: a lost step stays LOST (the hand-over
+  // restarts DEVO from its last good pose instead, handover.h).
+  options.lost_steps_before_relocalization = 0;
   return options;
 }
 

@@ -111,28 +111,44 @@ int MapOdometryHandover::VisibleMapPoints(const Rigid3d& world_from_cam) const {
   return visible;
 }
 
+bool MapOdometryHandover::RestartOdometry(const Rigid3d& world_from_cam, int64_t t_ns,
+                                          const Vector6d& velocity, double decay_time_s) {
+  // The camera at the depth frame's time: moved back from t_ns with the velocity.
+  const double dt_s = static_cast<double>(depth_t_ns_ - t_ns) * 1e-9;
+  const Rigid3d world_from_cam_at_depth = world_from_cam * ExpSE3(velocity * dt_s);
+  if (!devo_->Restart(world_from_cam, t_ns, velocity, depth_m_, world_from_cam_at_depth,
+                      decay_time_s)) {
+    return false;
+  }
+  // DEVO's steps before its start belong to no pose.
+  pending_odometry_.clear();
+  tracking::PoseEstimate start;
+  start.t_ns = t_ns;
+  start.world_from_cam = world_from_cam;
+  start.status = tracking::TrackingStatus::kTracking;
+  last_odometry_ = start;
+  return true;
+}
+
 bool MapOdometryHandover::StartOdometry(const Rigid3d& world_from_cam, int64_t t_ns,
                                         const Vector6d& velocity, double decay_time_s) {
   if (!has_depth_) {
     ++counts_.odometry_start_failures;
     return false;
   }
-  // The camera at the depth frame's time: moved back from t_ns with the velocity.
-  const double dt_s = static_cast<double>(depth_t_ns_ - t_ns) * 1e-9;
-  const Rigid3d world_from_cam_at_depth = world_from_cam * ExpSE3(velocity * dt_s);
-  if (!devo_->Restart(world_from_cam, t_ns, velocity, depth_m_, world_from_cam_at_depth,
-                      decay_time_s)) {
+  if (!RestartOdometry(world_from_cam, t_ns, velocity, decay_time_s)) {
     ++counts_.odometry_start_failures;
     return false;
   }
-  // DEVO's steps before its start belong to no hand-over.
-  pending_odometry_.clear();
   tracking::PoseEstimate start;
   start.t_ns = t_ns;
   start.world_from_cam = world_from_cam;
   start.status = tracking::TrackingStatus::kTracking;
   start.covariance = last_good_map_ ? last_good_map_->covariance : Matrix6d::Identity() * 1e-4;
   last_odometry_ = start;
+  last_good_odometry_ = start;
+  last_good_odometry_velocity_ = velocity;
+  restart_depth_t_ns_ = depth_t_ns_;
   handover_t_ns_ = t_ns;
   handover_covariance_ = start.covariance;
   travelled_m_ = 0;
@@ -224,6 +240,23 @@ std::vector<HandoverEstimate> MapOdometryHandover::Report(
     }
     // On odometry.
     tracking::PoseEstimate odometry = OdometryAt(map_step.t_ns);
+    if (odometry.status == tracking::TrackingStatus::kTracking) {
+      last_good_odometry_ = odometry;
+      last_good_odometry_velocity_ = devo_->tracker().velocity();
+    } else if (i + 1 == map_steps.size() && has_depth_ && depth_t_ns_ != restart_depth_t_ns_ &&
+               last_good_odometry_) {
+      // DEVO lost its reference: start it again from its last good pose with the newest depth
+      // frame (once per depth frame), keeping the hand-over's drift (the error stays).
+      const double dt_s = static_cast<double>(map_step.t_ns - last_good_odometry_->t_ns) * 1e-9;
+      const Rigid3d start =
+          last_good_odometry_->world_from_cam * ExpSE3(last_good_odometry_velocity_ * dt_s);
+      restart_depth_t_ns_ = depth_t_ns_;
+      if (RestartOdometry(start, map_step.t_ns, last_good_odometry_velocity_,
+                          last_good_odometry_->quality.decay_time_ms * 1e-3)) {
+        ++counts_.odometry_restarts;
+        odometry.world_from_cam = start;
+      }
+    }
     travelled_m_ +=
         (odometry.world_from_cam.translation - previous_odometry_pose_.translation).norm();
     previous_odometry_pose_ = odometry.world_from_cam;

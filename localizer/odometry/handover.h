@@ -93,6 +93,8 @@ struct HandoverCounts {
   int64_t map_probes = 0;
   // Hand-overs that could not start DEVO (no depth frame yet, or too few reference points).
   int64_t odometry_start_failures = 0;
+  // DEVO started again from its last good pose after it lost its reference.
+  int64_t odometry_restarts = 0;
   // Depth frames received.
   int64_t depth_frames = 0;
 };
@@ -138,6 +140,10 @@ class MapOdometryHandover {
   // Starts DEVO at t_ns from `world_from_cam` with the latest depth frame; false when it cannot.
   bool StartOdometry(const Rigid3d& world_from_cam, int64_t t_ns, const Vector6d& velocity,
                      double decay_time_s);
+  // Starts DEVO's tracker again at t_ns from `world_from_cam` with the latest depth frame; false
+  // when the reference map has too few points.
+  bool RestartOdometry(const Rigid3d& world_from_cam, int64_t t_ns, const Vector6d& velocity,
+                       double decay_time_s);
   // The odometry's pose at t_ns (its step at t_ns, or the latest one moved by its velocity).
   tracking::PoseEstimate OdometryAt(int64_t t_ns);
   // The covariance added to the odometry's since the hand-over.
@@ -166,6 +172,10 @@ class MapOdometryHandover {
   // DEVO's steps not yet matched to a map step, and its latest one.
   std::deque<tracking::PoseEstimate> pending_odometry_;
   std::optional<tracking::PoseEstimate> last_odometry_;
+  // DEVO's last TRACKING pose and its velocity then; the depth frame of its last (re)start.
+  std::optional<tracking::PoseEstimate> last_good_odometry_;
+  Vector6d last_good_odometry_velocity_ = Vector6d::Zero();
+  int64_t restart_depth_t_ns_ = -1;
   // The hand-over: its time, covariance and the path length since.
   int64_t handover_t_ns_ = 0;
   Matrix6d handover_covariance_ = Matrix6d::Zero();
