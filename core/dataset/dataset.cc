@@ -108,11 +108,15 @@ void DatasetWriter::AddImage(int64_t t_ns, const cv::Mat& image) {
   images_.push_back({t_ns, relative});
 }
 
-void DatasetWriter::AddDepth(int64_t t_ns, const cv::Mat& depth_m) {
+namespace {
+
+// A depth map in metres (CV_32FC1) as 16-bit millimetres: rounded, 0 where there is no depth,
+// clipped at 65.535 m.
+cv::Mat DepthToMillimetres(const cv::Mat& depth_m, const char* what) {
   if (depth_m.type() != CV_32FC1) {
-    throw InvalidArgumentError("DatasetWriter::AddDepth expects CV_32FC1 depth in metres.");
+    throw InvalidArgumentError(std::string("DatasetWriter::") + what +
+                               " expects CV_32FC1 depth in metres.");
   }
-  CheckIncreasing(depth_, t_ns, "depth");
   cv::Mat millimetres(depth_m.size(), CV_16UC1);
   for (int row = 0; row < depth_m.rows; ++row) {
     const float* in = depth_m.ptr<float>(row);
@@ -122,9 +126,90 @@ void DatasetWriter::AddDepth(int64_t t_ns, const cv::Mat& depth_m) {
       out[col] = static_cast<uint16_t>(std::clamp(mm, 0.0, 65535.0));
     }
   }
+  return millimetres;
+}
+
+// One camera of a Kalibr camchain (`name:` and its fields), with T_cn_cnm1 when given.
+std::string KalibrCameraText(const std::string& name, const Camera& camera,
+                             const std::optional<Rigid3d>& cam_from_previous) {
+  camera.Check();
+  std::string distortion_model;
+  std::vector<double> coefficients = camera.distortion;
+  switch (camera.model) {
+    case CameraModel::kPinhole:
+      distortion_model = "none";
+      break;
+    case CameraModel::kRadialTangential:
+      if (coefficients.size() == 5 && coefficients[4] != 0.0) {
+        throw InvalidArgumentError("a Kalibr camchain cannot state the radtan k3 of camera " +
+                                   name + "; use a camera with k3 = 0");
+      }
+      coefficients.resize(4);
+      distortion_model = "radtan";
+      break;
+    case CameraModel::kEquidistant:
+      distortion_model = "equidistant";
+      break;
+  }
+  std::ostringstream out;
+  out.precision(17);
+  out << name << ":\n";
+  if (cam_from_previous) {
+    if (!cam_from_previous->IsFinite()) {
+      throw InvalidArgumentError("the extrinsic of camera " + name + " is not finite");
+    }
+    const Eigen::Matrix3d rotation = cam_from_previous->RotationMatrix();
+    out << "  T_cn_cnm1:\n";
+    for (int row = 0; row < 3; ++row) {
+      out << "  - [" << rotation(row, 0) << ", " << rotation(row, 1) << ", " << rotation(row, 2)
+          << ", " << cam_from_previous->translation[row] << "]\n";
+    }
+    out << "  - [0.0, 0.0, 0.0, 1.0]\n";
+  }
+  out << "  camera_model: pinhole\n  distortion_coeffs: [";
+  for (size_t i = 0; i < coefficients.size(); ++i) out << (i ? ", " : "") << coefficients[i];
+  out << "]\n  distortion_model: " << distortion_model << "\n  intrinsics: [" << camera.fx << ", "
+      << camera.fy << ", " << camera.cx << ", " << camera.cy << "]\n  resolution: [" << camera.width
+      << ", " << camera.height << "]\n";
+  return out.str();
+}
+
+}  // namespace
+
+void DatasetWriter::AddDepth(int64_t t_ns, const cv::Mat& depth_m) {
+  const cv::Mat millimetres = DepthToMillimetres(depth_m, "AddDepth");
+  CheckIncreasing(depth_, t_ns, "depth");
   const fs::path relative = fs::path("depth") / NumberedName("depth", depth_.size());
   WritePngAtomically(staging_dir_ / relative, millimetres);
   depth_.push_back({t_ns, relative});
+}
+
+void DatasetWriter::WriteDepthCamera(const Camera& event_camera, const Camera& depth_camera,
+                                     const Rigid3d& event_from_depth) {
+  const std::string text =
+      "# evloc dataset: cam0 the event camera, cam1 the depth camera (docs/dataset-format.md)\n" +
+      KalibrCameraText("cam0", event_camera, std::nullopt) +
+      KalibrCameraText("cam1", depth_camera, event_from_depth.Inverse());
+  WriteFileAtomically(staging_dir_ / dataset_files::kDepthCamchainYaml, text);
+  std::error_code error;
+  fs::create_directories(staging_dir_ / "depth_camera", error);
+  if (error) {
+    throw IoError("cannot create '" + (staging_dir_ / "depth_camera").string() +
+                  "': " + error.message());
+  }
+  has_depth_camera_ = true;
+}
+
+void DatasetWriter::AddDepthCameraFrame(int64_t t_ns, const cv::Mat& depth_m) {
+  if (!has_depth_camera_) {
+    throw InvalidArgumentError("DatasetWriter::AddDepthCameraFrame: call WriteDepthCamera first.");
+  }
+  const cv::Mat millimetres = DepthToMillimetres(depth_m, "AddDepthCameraFrame");
+  CheckIncreasing(depth_camera_frames_, t_ns, "depth camera frame");
+  const fs::path relative =
+      fs::path("depth_camera") / NumberedName("depth", depth_camera_frames_.size());
+  WritePngAtomically(staging_dir_ / relative, millimetres);
+  depth_camera_frames_.push_back({t_ns, relative});
 }
 
 void DatasetWriter::WriteGroundTruth(const Trajectory& ground_truth) {
@@ -139,6 +224,10 @@ void DatasetWriter::Commit() {
   if (committed_) throw InvalidArgumentError("DatasetWriter::Commit called twice.");
   WriteFileAtomically(staging_dir_ / dataset_files::kImagesTxt, FormatTimedFileList(images_));
   WriteFileAtomically(staging_dir_ / dataset_files::kDepthTxt, FormatTimedFileList(depth_));
+  if (has_depth_camera_) {
+    WriteFileAtomically(staging_dir_ / dataset_files::kDepthCameraTxt,
+                        FormatTimedFileList(depth_camera_frames_));
+  }
   std::error_code error;
   if (fs::is_empty(staging_dir_ / "gt_map", error)) fs::remove(staging_dir_ / "gt_map", error);
   if (fs::exists(out_dir_, error)) {
@@ -305,6 +394,9 @@ Dataset ReadDataset(const fs::path& root, const DatasetReaderOptions& options) {
   if (fs::exists(root / dataset_files::kDepthTxt)) {
     dataset.depth = ReadTimedFileList(root / dataset_files::kDepthTxt, root);
   }
+  if (fs::exists(root / dataset_files::kDepthCamchainYaml)) {
+    dataset.depth_camera = ReadDepthCameraStream(root, dataset.camera);
+  }
   CheckListedFilesExist(dataset);
   if (fs::exists(root / dataset_files::kGroundTruthTxt)) {
     dataset.ground_truth = ReadTumTrajectory(root / dataset_files::kGroundTruthTxt);
@@ -329,8 +421,44 @@ Dataset ReadDataset(const fs::path& root, const DatasetReaderOptions& options) {
   return dataset;
 }
 
+DepthCameraStream ReadDepthCameraStream(const fs::path& root, const Camera& event_camera) {
+  const fs::path camchain = root / dataset_files::kDepthCamchainYaml;
+  const Calibration calibration = ReadCalibration(camchain, 0, 0);
+  if (calibration.format != CalibrationFormat::kKalibrCamchain || calibration.cameras.size() != 2) {
+    throw ParseError(camchain.string(), "cam0",
+                     "expected a Kalibr camchain of two cameras: cam0 the event camera, cam1 the "
+                     "depth camera with T_cn_cnm1");
+  }
+  const RigCamera& event = calibration.cameras[0];
+  const RigCamera& depth = calibration.cameras[1];
+  if (event.camera.width != event_camera.width || event.camera.height != event_camera.height) {
+    throw ParseError(camchain.string(), "cam0",
+                     "its resolution " + std::to_string(event.camera.width) + "x" +
+                         std::to_string(event.camera.height) + " is not the dataset camera's " +
+                         std::to_string(event_camera.width) + "x" +
+                         std::to_string(event_camera.height) +
+                         ": cam0 must be the event camera of calib.yaml");
+  }
+  if (!depth.cam_from_cam0) {
+    throw ParseError(camchain.string(), "cam1",
+                     "the depth camera needs T_cn_cnm1 (its pose relative to the event camera)");
+  }
+  const fs::path list = root / dataset_files::kDepthCameraTxt;
+  if (!fs::exists(list)) {
+    throw IoError("dataset '" + root.string() + "' has " + dataset_files::kDepthCamchainYaml +
+                  " but no " + dataset_files::kDepthCameraTxt + " (the depth camera's frames).");
+  }
+  DepthCameraStream stream;
+  stream.camera = depth.camera;
+  stream.event_from_depth = depth.cam_from_cam0->Inverse();
+  stream.frames = ReadTimedFileList(list, root);
+  return stream;
+}
+
 void CheckListedFilesExist(const Dataset& dataset) {
-  for (const auto* list : {&dataset.images, &dataset.depth}) {
+  std::vector<const std::vector<TimedFile>*> lists = {&dataset.images, &dataset.depth};
+  if (dataset.depth_camera) lists.push_back(&dataset.depth_camera->frames);
+  for (const auto* list : lists) {
     for (const TimedFile& file : *list) {
       if (!fs::exists(file.path)) {
         throw IoError("dataset '" + dataset.root.string() + "' lists '" + file.path.string() +

@@ -43,6 +43,13 @@ inline constexpr char kEventsTxt[] = "events.txt";
 inline constexpr char kImagesTxt[] = "images.txt";
 // Depth list: `t_s relative_path` (16-bit PNG, millimetres, 0 = no depth).
 inline constexpr char kDepthTxt[] = "depth.txt";
+// The depth camera beside the event camera (docs/dataset-format.md, "Depth camera"): a Kalibr
+// camchain, cam0 the event camera (calib.yaml's), cam1 the depth camera with T_cn_cnm1 =
+// depth_from_event.
+inline constexpr char kDepthCamchainYaml[] = "depth_camchain.yaml";
+// The depth camera's frames: `t_s depth_camera/depth_NNNNNNNN.png` (16-bit PNG, millimetres,
+// 0 = no depth), at its own times.
+inline constexpr char kDepthCameraTxt[] = "depth_camera.txt";
 // Ground truth, TUM: `t tx ty tz qx qy qz qw`, world_from_cam.
 inline constexpr char kGroundTruthTxt[] = "groundtruth.txt";
 // TUM RGB-D layout: colour image list `t_s rgb/T.png` (instead of images.txt).
@@ -88,19 +95,28 @@ class DatasetWriter {
   // Writes depth/depth_NNNNNNNN.png (16-bit, millimetres rounded, 0 where depth is 0, clipped at
   // 65.535 m) from a CV_32FC1 depth in metres, and lists it for depth.txt.
   void AddDepth(int64_t t_ns, const cv::Mat& depth_m);
+  // Writes depth_camchain.yaml: `event_camera` as cam0, `depth_camera` as cam1 with the extrinsic
+  // (p_event = event_from_depth * p_depth). Throws InvalidArgumentError for a camera that fails
+  // Check(), a non-finite extrinsic, or a camera model Kalibr cannot state.
+  void WriteDepthCamera(const Camera& event_camera, const Camera& depth_camera,
+                        const Rigid3d& event_from_depth);
+  // Writes depth_camera/depth_NNNNNNNN.png (as AddDepth) and lists it for depth_camera.txt.
+  void AddDepthCameraFrame(int64_t t_ns, const cv::Mat& depth_m);
   // Writes groundtruth.txt (TUM, world_from_cam).
   void WriteGroundTruth(const Trajectory& ground_truth);
   // Writes info.json.
   void WriteInfo(const nlohmann::json& info);
-  // Writes images.txt and depth.txt, removes gt_map/ when nothing was written there, then moves
-  // OUT.partial to OUT (replacing OUT when forced).
-  // Throws IoError when the rename fails.
+  // Writes images.txt, depth.txt (and depth_camera.txt when a depth camera was written), removes
+  // gt_map/ when nothing was written there, then moves OUT.partial to OUT (replacing OUT when
+  // forced). Throws IoError when the rename fails.
   void Commit();
 
   // Number of images added.
   size_t num_images() const { return images_.size(); }
   // Number of depth maps added.
   size_t num_depth_maps() const { return depth_.size(); }
+  // Number of depth-camera frames added.
+  size_t num_depth_camera_frames() const { return depth_camera_frames_.size(); }
 
  private:
   std::filesystem::path out_dir_;
@@ -108,6 +124,8 @@ class DatasetWriter {
   DatasetWriterOptions options_;
   std::vector<TimedFile> images_;  // paths relative to the dataset folder
   std::vector<TimedFile> depth_;
+  std::vector<TimedFile> depth_camera_frames_;
+  bool has_depth_camera_ = false;
   bool committed_ = false;
 };
 
@@ -210,6 +228,18 @@ struct Aedat4DatasetSource {
   bool has_frames = false;
 };
 
+// A depth camera beside the event camera, and its frames (depth_camchain.yaml, depth_camera.txt).
+struct DepthCameraStream {
+  // The depth camera.
+  Camera camera;
+  // p_event = event_from_depth * p_depth.
+  Rigid3d event_from_depth;
+  // Its depth frames in time order (16-bit PNG).
+  std::vector<TimedFile> frames;
+  // Units per metre of those PNGs (pass to ReadDepthPng): millimetres.
+  double units_per_metre = kEvlocDepthUnitsPerMetre;
+};
+
 // A loaded dataset: its calibration, the lists of images and depth maps, ground truth and where
 // its events are. Image and depth pixels are read on demand.
 struct Dataset {
@@ -221,6 +251,8 @@ struct Dataset {
   std::vector<TimedFile> images;
   // Depth maps in time order (empty when there is no depth.txt).
   std::vector<TimedFile> depth;
+  // The depth camera and its frames, when the folder has depth_camchain.yaml.
+  std::optional<DepthCameraStream> depth_camera;
   // Ground truth world_from_cam, when groundtruth.txt exists.
   std::optional<Trajectory> ground_truth;
   // The event file (events.evb preferred, else events.txt), when one exists; open it with
@@ -247,6 +279,12 @@ struct Dataset {
 // for malformed lists, InvalidArgumentError when the folder has neither calib.yaml nor calib.txt,
 // or is an unfinished OUT.partial.
 Dataset ReadDataset(const std::filesystem::path& root, const DatasetReaderOptions& options = {});
+
+// Reads the depth camera of a dataset folder: depth_camchain.yaml (the calibration reader; two
+// cameras, cam0 of `event_camera`'s size, cam1 with T_cn_cnm1) and depth_camera.txt. Throws
+// ParseError naming the file for a camchain that is not that, IoError when the list is missing.
+DepthCameraStream ReadDepthCameraStream(const std::filesystem::path& root,
+                                        const Camera& event_camera);
 
 // Throws IoError naming the dataset and the file when an image or depth map it lists does not
 // exist.

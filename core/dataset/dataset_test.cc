@@ -61,6 +61,69 @@ TEST(Dataset, WriterReaderRoundTrip) {
   fs::remove_all(root);
 }
 
+TEST(Dataset, DepthCameraRoundTripWithItsOwnIntrinsicsRateAndExtrinsic) {
+  const fs::path root = evloc::testing::MakeTempDir("dataset_depth_camera");
+  const fs::path out = root / "seq";
+  Camera camera = Camera::Pinhole(16, 12, 20, 21, 7.5, 5.5);
+  camera.model = CameraModel::kRadialTangential;
+  camera.distortion = {-0.1, 0.02, 0.001, -0.002, 0.0};
+  const Camera depth_camera = Camera::Pinhole(20, 15, 18, 18, 9.5, 7.0);
+  const Rigid3d event_from_depth(
+      Eigen::Quaterniond(Eigen::AngleAxisd(0.02, Eigen::Vector3d(0.3, 1, 0.1).normalized())),
+      Eigen::Vector3d(0.05, -0.01, 0.002));
+  {
+    DatasetWriter writer(out, {});
+    writer.WriteCamera(camera);
+    EXPECT_THROW(writer.AddDepthCameraFrame(0, cv::Mat(15, 20, CV_32FC1, cv::Scalar(1))),
+                 InvalidArgumentError);
+    writer.WriteDepthCamera(camera, depth_camera, event_from_depth);
+    for (int i = 0; i < 4; ++i) {  // 15 Hz, not the frames' rate
+      cv::Mat depth(15, 20, CV_32FC1, cv::Scalar(0.8 + 0.25 * i));
+      depth.at<float>(2, 3) = 0;
+      writer.AddDepthCameraFrame(10'000'000LL + i * 66'666'667, depth);
+    }
+    writer.Commit();
+  }
+  const Dataset dataset = ReadDataset(out);
+  ASSERT_TRUE(dataset.depth_camera.has_value());
+  EXPECT_EQ(dataset.depth_camera->camera, depth_camera);
+  EXPECT_LT(
+      (dataset.depth_camera->event_from_depth.translation - event_from_depth.translation).norm(),
+      1e-12);
+  EXPECT_LT(
+      dataset.depth_camera->event_from_depth.rotation.angularDistance(event_from_depth.rotation),
+      1e-12);
+  ASSERT_EQ(dataset.depth_camera->frames.size(), 4u);
+  EXPECT_EQ(dataset.depth_camera->frames[3].t_ns, 10'000'000LL + 3 * 66'666'667);
+  const cv::Mat depth = ReadDepthPng(dataset.depth_camera->frames[2].path);
+  EXPECT_EQ(depth.cols, 20);
+  EXPECT_NEAR(depth.at<float>(5, 5), 1.3, 1e-6);
+  EXPECT_EQ(depth.at<float>(2, 3), 0.0f);
+  EXPECT_TRUE(dataset.depth.empty());
+
+  // A camchain whose cam0 is not the event camera, or whose depth camera has no extrinsic, is
+  // refused, naming the file.
+  const std::string camchain = (out / dataset_files::kDepthCamchainYaml).string();
+  std::ofstream(camchain) << "cam0:\n  camera_model: pinhole\n  distortion_model: none\n"
+                             "  distortion_coeffs: []\n  intrinsics: [20, 21, 7.5, 5.5]\n"
+                             "  resolution: [16, 12]\ncam1:\n  camera_model: pinhole\n"
+                             "  distortion_model: none\n  distortion_coeffs: []\n"
+                             "  intrinsics: [18, 18, 9.5, 7]\n  resolution: [20, 15]\n";
+  try {
+    ReadDataset(out);
+    FAIL() << "a depth camera without T_cn_cnm1 was accepted";
+  } catch (const ParseError& error) {
+    EXPECT_NE(std::string(error.what()).find("T_cn_cnm1"), std::string::npos) << error.what();
+    EXPECT_NE(std::string(error.what()).find("depth_camchain.yaml"), std::string::npos);
+  }
+  // A radtan k3 cannot be stated in a camchain.
+  camera.distortion[4] = 0.01;
+  DatasetWriter writer(root / "k3", {});
+  EXPECT_THROW(writer.WriteDepthCamera(camera, depth_camera, event_from_depth),
+               InvalidArgumentError);
+  fs::remove_all(root);
+}
+
 TEST(Dataset, RefusesNonEmptyOutputWithoutForceAndReplacesWithForce) {
   const fs::path root = evloc::testing::MakeTempDir("dataset_force");
   const fs::path out = root / "seq";

@@ -25,6 +25,9 @@ tracking::TrackerOptions CannyDevoOptions::DefaultTrackerOptions() {
   tracking::TrackerOptions options;
   options.use_polarity = false;
   options.decay_time_s = 0.01;
+  // A reference map has no viewpoints to search from: a lost step stays LOST (the hand-over
+  // restarts DEVO from its last good pose instead, handover.h).
+  options.lost_steps_before_relocalization = 0;
   return options;
 }
 
@@ -94,7 +97,8 @@ std::vector<tracking::PoseEstimate> CannyDevo::AddEvents(const EventBuffer& even
 }
 
 ReferenceFrameInfo CannyDevo::BuildReference(const Rigid3d& world_from_cam, int64_t t_ns,
-                                             const cv::Mat& depth_m, double decay_time_s) {
+                                             const cv::Mat& depth_m, double decay_time_s,
+                                             const Rigid3d& event_from_depth) {
   const auto start = std::chrono::steady_clock::now();
   const double start_cpu_ms = ThreadCpuMilliseconds();
   const Camera& ideal = table_.ideal_camera();
@@ -142,9 +146,8 @@ ReferenceFrameInfo CannyDevo::BuildReference(const Rigid3d& world_from_cam, int6
   info.t_ns = t_ns;
   info.world_from_cam = world_from_cam;
   info.decay_time_s = decay_time_s;
-  std::vector<ReferencePoint> points =
-      BuildReferenceMap(ideal, semi_dense, depth_camera_, depth_m, event_from_depth_,
-                        options_.reference, &info.stats);
+  std::vector<ReferencePoint> points = BuildReferenceMap(
+      ideal, semi_dense, depth_camera_, depth_m, event_from_depth, options_.reference, &info.stats);
   // Even subsampling to the budget.
   std::vector<Eigen::Vector3f> positions_in_cam;
   positions_in_cam.reserve(points.size());
@@ -204,8 +207,8 @@ void CannyDevo::Start(const Rigid3d& world_from_cam, int64_t t_ns, const cv::Mat
   if (t_ns < last_event_t_ns_) {
     throw InvalidArgumentError("CannyDevo::Start: events after the start time were given");
   }
-  const ReferenceFrameInfo info =
-      BuildReference(world_from_cam, t_ns, depth_m, options_.mapping_decay_time_s);
+  const ReferenceFrameInfo info = BuildReference(world_from_cam, t_ns, depth_m,
+                                                 options_.mapping_decay_time_s, event_from_depth_);
   if (info.points < options_.min_reference_points) {
     throw InvalidArgumentError(
         "CannyDevo::Start: the first reference map has " + std::to_string(info.points) +
@@ -217,14 +220,52 @@ void CannyDevo::Start(const Rigid3d& world_from_cam, int64_t t_ns, const cv::Mat
   started_ = true;
 }
 
-std::vector<tracking::PoseEstimate> CannyDevo::AddDepthFrame(int64_t t_ns, const cv::Mat& depth_m) {
-  if (!started_) throw InvalidArgumentError("CannyDevo::AddDepthFrame: call Start first");
+bool CannyDevo::Restart(const Rigid3d& world_from_cam, int64_t t_ns, const Vector6d& velocity,
+                        const cv::Mat& depth_m, const Rigid3d& world_from_cam_at_depth,
+                        double decay_time_s) {
+  if (!(decay_time_s > 0)) decay_time_s = options_.mapping_decay_time_s;
+  // The depth camera at its frame's time, seen from the event camera at t_ns.
+  const Rigid3d event_from_depth =
+      (world_from_cam.Inverse() * world_from_cam_at_depth) * event_from_depth_;
+  const ReferenceFrameInfo info =
+      BuildReference(world_from_cam, t_ns, depth_m, decay_time_s, event_from_depth);
+  if (info.points < options_.min_reference_points) {
+    Stop();
+    return false;
+  }
+  references_.push_back(info);
+  tracker_->Reset(world_from_cam, t_ns, velocity);
+  has_step_ = false;
+  started_ = true;
+  return true;
+}
+
+void CannyDevo::Stop() {
+  // A tracker that was never reset only keeps its surfaces up to date.
+  tracker_ = std::make_unique<tracking::Tracker>(source_, event_camera_, options_.tracker);
+  started_ = false;
+  has_step_ = false;
+}
+
+std::vector<tracking::PoseEstimate> CannyDevo::AdvanceTo(int64_t t_ns) {
   std::vector<tracking::PoseEstimate> steps = tracker_->AdvanceTo(t_ns);
   if (!steps.empty()) {
     last_step_ = steps.back();
     has_step_ = true;
   }
-  if (!has_step_ || last_step_.status != tracking::TrackingStatus::kTracking) return steps;
+  return steps;
+}
+
+std::vector<tracking::PoseEstimate> CannyDevo::AddDepthFrame(int64_t t_ns, const cv::Mat& depth_m) {
+  if (!started_) throw InvalidArgumentError("CannyDevo::AddDepthFrame: call Start first");
+  std::vector<tracking::PoseEstimate> steps = AdvanceTo(t_ns);
+  ConsiderDepthFrame(t_ns, depth_m);
+  return steps;
+}
+
+void CannyDevo::ConsiderDepthFrame(int64_t t_ns, const cv::Mat& depth_m) {
+  if (!started_) throw InvalidArgumentError("CannyDevo::ConsiderDepthFrame: call Start first");
+  if (!has_step_ || last_step_.status != tracking::TrackingStatus::kTracking) return;
   // The pose at the depth frame: the last step's, moved on by the tracker's velocity.
   const double dt_s = static_cast<double>(t_ns - last_step_.t_ns) * 1e-9;
   const Rigid3d world_from_cam = last_step_.world_from_cam * ExpSE3(tracker_->velocity() * dt_s);
@@ -235,12 +276,11 @@ std::vector<tracking::PoseEstimate> CannyDevo::AddDepthFrame(int64_t t_ns, const
   if (reference_from_cam.translation.norm() <=
           options_.reference_max_baseline_fraction * current.median_depth_m &&
       rotation_deg <= options_.reference_max_rotation_deg) {
-    return steps;
+    return;
   }
-  const ReferenceFrameInfo info =
-      BuildReference(world_from_cam, t_ns, depth_m, last_step_.quality.decay_time_ms * 1e-3);
+  const ReferenceFrameInfo info = BuildReference(
+      world_from_cam, t_ns, depth_m, last_step_.quality.decay_time_ms * 1e-3, event_from_depth_);
   if (info.points >= options_.min_reference_points) references_.push_back(info);
-  return steps;
 }
 
 }  // namespace evloc::odometry

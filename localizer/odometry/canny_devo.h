@@ -123,6 +123,23 @@ class CannyDevo {
   // up to t_ns and returns them, then takes the frame as the new reference when the motion since
   // the current one demands it and the tracker is TRACKING.
   std::vector<tracking::PoseEstimate> AddDepthFrame(int64_t t_ns, const cv::Mat& depth_m);
+  // The same without running steps: takes the frame as the new reference when the motion since
+  // the current one demands it and the tracker is TRACKING (the pose at t_ns: the last step's
+  // moved by the velocity). Every event up to t_ns must have been given.
+  void ConsiderDepthFrame(int64_t t_ns, const cv::Mat& depth_m);
+
+  // Starts again (or for the first time) at t_ns at `world_from_cam`, moving with `velocity`
+  // (body-frame twist per second), from a depth frame taken earlier, when the event camera was at
+  // `world_from_cam_at_depth` (the depth is warped into the camera at t_ns through both poses and
+  // the extrinsic); the semi-dense region is the time surface's at t_ns with `decay_time_s`.
+  // Every event up to t_ns must have been given. Returns false (and stays stopped) when the
+  // reference map has fewer than min_reference_points points. Used by the hand-over from a map.
+  bool Restart(const Rigid3d& world_from_cam, int64_t t_ns, const Vector6d& velocity,
+               const cv::Mat& depth_m, const Rigid3d& world_from_cam_at_depth, double decay_time_s);
+  // Stops tracking: later events only prime the time surfaces again (until Start or Restart).
+  void Stop();
+  // Runs the steps due up to t_ns (every event up to t_ns given), as Tracker::AdvanceTo.
+  std::vector<tracking::PoseEstimate> AdvanceTo(int64_t t_ns);
 
   // True once Start succeeded.
   bool started() const { return started_; }
@@ -134,9 +151,11 @@ class CannyDevo {
   const std::vector<ReferencePoint>& reference_points() const { return reference_points_; }
 
  private:
-  // Builds the reference map of the depth frame at t_ns with the camera at world_from_cam.
+  // Builds the reference map of the depth frame at t_ns with the camera at world_from_cam;
+  // `event_from_depth` maps the depth camera's frame into the event camera's at t_ns.
   ReferenceFrameInfo BuildReference(const Rigid3d& world_from_cam, int64_t t_ns,
-                                    const cv::Mat& depth_m, double decay_time_s);
+                                    const cv::Mat& depth_m, double decay_time_s,
+                                    const Rigid3d& event_from_depth);
 
   Camera event_camera_;
   Camera depth_camera_;

@@ -89,6 +89,26 @@ VoRunResult RunCannyVo(const Dataset& dataset, const std::optional<Rigid3d>& ini
   return result;
 }
 
+DepthCameraStream DevoDepthStream(const Dataset& dataset) {
+  if (dataset.depth_camera) {
+    if (dataset.depth_camera->frames.empty()) {
+      throw InvalidArgumentError("dataset '" + dataset.root.string() +
+                                 "': its depth camera has no frames (depth_camera.txt is empty)");
+    }
+    return *dataset.depth_camera;
+  }
+  if (dataset.depth.empty()) {
+    throw InvalidArgumentError("dataset '" + dataset.root.string() +
+                               "' has no depth (neither a depth camera, depth_camchain.yaml with "
+                               "depth_camera.txt, nor depth.txt): Canny-DEVO needs it");
+  }
+  DepthCameraStream stream;
+  stream.camera = dataset.camera;
+  stream.frames = dataset.depth;
+  stream.units_per_metre = dataset.depth_units_per_metre;
+  return stream;
+}
+
 void DevoRunOptions::Check() const {
   devo.Check();
   if (warm_up_ns < 0) throw InvalidArgumentError("DevoRunOptions: warm_up_ns must be >= 0");
@@ -103,13 +123,10 @@ DevoRunResult RunCannyDevo(const Dataset& dataset,
                            const std::function<void(const tracking::PoseEstimate&)>& on_step) {
   options.Check();
   const auto start = std::chrono::steady_clock::now();
-  if (dataset.depth.empty()) {
-    throw InvalidArgumentError("dataset '" + dataset.root.string() +
-                               "' has no depth maps (depth.txt): Canny-DEVO needs them");
-  }
+  const DepthCameraStream depth_stream = DevoDepthStream(dataset);
+  const std::vector<TimedFile>& depth_frames = depth_stream.frames;
   const std::unique_ptr<EventReader> reader = OpenDatasetEvents(dataset);
-  // Depth from the event camera itself (evloc-sim renders it so).
-  CannyDevo devo(dataset.camera, dataset.camera, Rigid3d(), options.devo);
+  CannyDevo devo(dataset.camera, depth_stream.camera, depth_stream.event_from_depth, options.devo);
   DevoRunResult result;
   auto record = [&](const std::vector<tracking::PoseEstimate>& steps) {
     for (const tracking::PoseEstimate& step : steps) {
@@ -120,14 +137,14 @@ DevoRunResult RunCannyDevo(const Dataset& dataset,
     }
   };
   size_t next_depth = 0;
-  while (next_depth < dataset.depth.size() &&
-         dataset.depth[next_depth].t_ns < initial_t_ns + options.warm_up_ns) {
+  while (next_depth < depth_frames.size() &&
+         depth_frames[next_depth].t_ns < initial_t_ns + options.warm_up_ns) {
     ++next_depth;
   }
   // Handles the depth frame `next_depth` (every event up to its time has been given).
   auto handle_depth = [&]() {
-    const TimedFile& file = dataset.depth[next_depth];
-    const cv::Mat depth = ReadDepthPng(file.path, dataset.depth_units_per_metre);
+    const TimedFile& file = depth_frames[next_depth];
+    const cv::Mat depth = ReadDepthPng(file.path, depth_stream.units_per_metre);
     if (!devo.started()) {
       devo.Start(OdometryStartPose(dataset, initial_world_from_cam, file.t_ns), file.t_ns, depth);
     } else {
@@ -145,8 +162,8 @@ DevoRunResult RunCannyDevo(const Dataset& dataset,
     while (begin < batch.size()) {
       // Events up to the next depth frame's time, then that frame.
       size_t end = batch.size();
-      if (next_depth < dataset.depth.size()) {
-        const int64_t t_depth = dataset.depth[next_depth].t_ns;
+      if (next_depth < depth_frames.size()) {
+        const int64_t t_depth = depth_frames[next_depth].t_ns;
         end = static_cast<size_t>(
             std::upper_bound(batch.t_ns.begin() + begin, batch.t_ns.end(), t_depth) -
             batch.t_ns.begin());
@@ -155,7 +172,7 @@ DevoRunResult RunCannyDevo(const Dataset& dataset,
       part.Append(batch, begin, end - begin);
       record(devo.AddEvents(part));
       begin = end;
-      if (begin < batch.size() && next_depth < dataset.depth.size()) handle_depth();
+      if (begin < batch.size() && next_depth < depth_frames.size()) handle_depth();
     }
   }
   if (!devo.started()) {

@@ -96,11 +96,16 @@ struct DevoRunResult {
   double wall_s = 0;
 };
 
-// Runs Canny-DEVO over the events and depth maps of `dataset` (depth from the event camera
-// itself, as evloc-sim renders it: identity extrinsic), from the first depth frame at least
-// warm_up_ns after `initial_t_ns`, which starts at OdometryStartPose; the events before it only
-// fill the time surfaces. Calls `on_step` after every step. Throws InvalidArgumentError when the
-// dataset has no events or no depth, IoError / ParseError for unreadable files.
+// The depth a DEVO run over `dataset` uses: its depth camera (depth_camchain.yaml,
+// depth_camera.txt) when it has one, else depth.txt taken as the event camera's own depth
+// (identity extrinsic). Throws InvalidArgumentError naming the dataset when it has neither.
+DepthCameraStream DevoDepthStream(const Dataset& dataset);
+
+// Runs Canny-DEVO over the events and the depth (DevoDepthStream) of `dataset`, from the first
+// depth frame at least warm_up_ns after `initial_t_ns`, which starts at OdometryStartPose; the
+// events before it only fill the time surfaces. Calls `on_step` after every step. Throws
+// InvalidArgumentError when the dataset has no events or no depth, IoError / ParseError for
+// unreadable files.
 DevoRunResult RunCannyDevo(const Dataset& dataset,
                            const std::optional<Rigid3d>& initial_world_from_cam,
                            int64_t initial_t_ns, const DevoRunOptions& options,

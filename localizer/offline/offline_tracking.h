@@ -83,6 +83,9 @@ struct OfflineTrackingResult {
   EventFilterCounts final_filter_counts;
   // The search episodes, in order.
   std::vector<RelocalizationEpisode> relocalizations;
+  // Where each step's pose came from, "map" or "odometry" (hand-over runs, handover_track.h;
+  // empty otherwise).
+  std::vector<std::string> pose_sources;
   // Wall-clock time of the run (reading included), seconds.
   double wall_s = 0;
 };

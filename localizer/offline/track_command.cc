@@ -16,6 +16,7 @@
 #include "core/geo/geo_trajectory.h"
 #include "core/trajectory/tum_io.h"
 #include "localizer/offline/debug_images.h"
+#include "localizer/offline/handover_track.h"
 #include "localizer/offline/odometry_track.h"
 #include "localizer/relocalization/event_image_hypotheses.h"
 #include "localizer/tracking/event_filter.h"
@@ -54,6 +55,9 @@ nlohmann::json StepsToJson(const OfflineTrackingResult& result) {
                      {"search_verified_steps", step.search.verified_steps},
                      {"search_best_alignment", step.search.best_alignment},
                      {"search_second_alignment", step.search.second_alignment}});
+  }
+  for (size_t i = 0; i < result.pose_sources.size() && i < steps.size(); ++i) {
+    steps[i]["source"] = result.pose_sources[i];
   }
   // What the noise filters did between two steps (packet-granular: each packet is filtered whole
   // before the steps it completes run).
@@ -231,6 +235,12 @@ void TrackCommandOptions::Check() const {
   if (start_s && (!std::isfinite(*start_s) || *start_s < 0)) {
     throw InvalidArgumentError("--start must be a number of seconds >= 0");
   }
+  if (handover && (odometry || tracking.tracker.input != TrackerInput::kEvents || no_initial_pose ||
+                   tracking.tracker.events_per_step)) {
+    throw InvalidArgumentError(
+        "--handover needs map tracking of events at a fixed rate (--mode events, no "
+        "--events-per-step) from an initial pose");
+  }
   if (geo_path && odometry) {
     throw InvalidArgumentError("--geo needs a map with a geo anchor; --mode vo and devo have none");
   }
@@ -297,6 +307,10 @@ Options:
                          events (Canny-EVT, default), frames (Canny-VT on images.txt), or the
                          mapless odometry without --map: vo (Canny-VO on images and depth) or
                          devo (Canny-DEVO on events and depth) (docs/tracking.md)
+  --handover             with a map and a dataset with depth: where the map is not seen, continue
+                         by Canny-DEVO from the last good pose and come back to the map once it is
+                         seen again and verified; --stats gives each step's source (map, odometry)
+                         (docs/tracking.md, "Hand-over")
   --rate HZ              tracking steps per second of event time (default 300)
   --events-per-step N    a step every N events instead of a fixed rate
   --variant NAME         EVT (default), EVT-PR, EVT-OH or EVT-- (docs/tracking.md, "Variants")
@@ -360,6 +374,10 @@ TrackCommandOptions ParseTrackCommandLine(const std::vector<std::string>& argume
     }
     if (flag == "--quiet") {
       options.quiet = true;
+      continue;
+    }
+    if (flag == "--handover") {
+      options.handover = true;
       continue;
     }
     const std::string& value = TakeFlagValue(arguments, &i);
@@ -543,6 +561,7 @@ OfflineTrackingResult RunTrackCommand(const TrackCommandOptions& options, std::o
     return result;
   }
   if (IsSiteDirectory(options.map_path)) {
+    if (options.handover) throw InvalidArgumentError("--handover needs a whole map, not a site");
     return RunSiteTrack(options, dataset, tracking, initial_world_from_cam, initial_t_ns,
                         events_mode, log);
   }
@@ -587,7 +606,19 @@ OfflineTrackingResult RunTrackCommand(const TrackCommandOptions& options, std::o
   };
 
   OfflineTrackingResult result;
-  if (events_mode) {
+  if (options.handover) {
+    const HandoverTrackResult run =
+        TrackWithHandover(dataset, map, &visibility, *initial_world_from_cam, initial_t_ns,
+                          tracking, odometry::HandoverOptions(), on_step);
+    result = run.result;
+    if (!options.quiet) {
+      log << "evloc-track: hand-over: " << run.counts.to_odometry << " to odometry, "
+          << run.counts.to_map << " back to the map (verified), " << run.counts.odometry_poses
+          << " poses from odometry, " << run.counts.map_probes << " map probes, "
+          << run.counts.odometry_start_failures << " failed odometry starts, "
+          << run.counts.depth_frames << " depth frames\n";
+    }
+  } else if (events_mode) {
     if (!dataset.events_path) {
       throw InvalidArgumentError("dataset '" + options.dataset_path.string() +
                                  "' has no events.evb or events.txt (use --mode frames for "

@@ -68,6 +68,9 @@ struct TrackCommandOptions {
   bool help = false;
   // Mapless odometry instead of map tracking (--mode vo | devo; no --map).
   std::optional<odometry::OdometryMode> odometry;
+  // Map tracking with the hand-over to Canny-DEVO where the map is not seen (--handover; events
+  // mode, a whole map and a dataset with depth).
+  bool handover = false;
   // The offline run's options (--mode, --rate, --events-per-step, --polarity, --occlusion,
   // --variant, --max-points, --tau).
   OfflineTrackingOptions tracking;

@@ -691,7 +691,8 @@ class TrackCall final : public TrackReactor,
     MemoryBudget& memory = service_.memory();
     const uint64_t events = item.item.events.size();
     const int64_t bytes = static_cast<int64_t>(events) * kDecodedEventBytes +
-                          static_cast<int64_t>(item.item.gray.total());
+                          static_cast<int64_t>(item.item.gray.total()) +
+                          static_cast<int64_t>(item.item.depth_m.total() * sizeof(float));
     std::optional<MemoryBudget::Reservation> reservation = memory.TryReserve(bytes);
     if (!reservation) {
       ++service_.counters().limited;
@@ -1076,6 +1077,7 @@ class TrackCall final : public TrackReactor,
     ServerCounters& counters = service_.counters();
     const auto dequeued = Clock::now();
     std::vector<tracking::PoseEstimate> estimates;
+    std::vector<odometry::PoseSource> sources;
     item_cpu_start_s_ = ThreadCpuSeconds();
     if (item.item.kind == SessionItem::Kind::kGnssFix && !tracker_->geo()) {
       FailFromWorker({grpc::StatusCode::FAILED_PRECONDITION,
@@ -1083,7 +1085,8 @@ class TrackCall final : public TrackReactor,
       return;
     }
     try {
-      estimates = tracker_->Process(item.item, [this] { return ShouldStop(); });
+      estimates = tracker_->Process(
+          item.item, [this] { return ShouldStop(); }, &sources);
     } catch (const std::exception& error) {
       service_.Log(LogLevel::kError,
                    "session " + std::to_string(id_) +
@@ -1099,14 +1102,17 @@ class TrackCall final : public TrackReactor,
     item.reservation.Release();
     service_.UpdateHealth();
     if (item.item.kind == SessionItem::Kind::kFrame) ++frames_;
+    if (item.item.kind == SessionItem::Kind::kDepth) ++depth_frames_;
     events_ += item.item.events.size();
     counters.events += static_cast<int64_t>(item.item.events.size());
     tracked_end_t_ns_ = item.item.t_ns;
     ++progress_;
     SendPendingNotice();
-    for (const tracking::PoseEstimate& estimate : estimates) {
+    for (size_t i = 0; i < estimates.size(); ++i) {
+      const tracking::PoseEstimate& estimate = estimates[i];
       api::TrackResponse response;
-      *response.mutable_pose() = PoseUpdateFromEstimate(estimate, tracker_->geo());
+      *response.mutable_pose() = PoseUpdateFromEstimate(estimate, tracker_->geo(), sources[i]);
+      if (sources[i] == odometry::PoseSource::kOdometry) ++odometry_poses_;
       const bool no_estimate = tracking::HasNoEstimate(estimate.status);
       ++poses_;
       lost_poses_ += no_estimate ? 1 : 0;
@@ -1165,6 +1171,8 @@ class TrackCall final : public TrackReactor,
       totals->set_packets(packets_read_);
       totals->set_events(events_);
       totals->set_frames(frames_);
+      totals->set_depth_frames(depth_frames_);
+      totals->set_odometry_poses(odometry_poses_);
       totals->set_backpressure_notices(backpressure_notices_);
       totals->set_raw_time_adjustments(raw_time_adjustments_);
       totals->set_duration_s(std::chrono::duration<double>(Clock::now() - session_start_).count());
@@ -1364,6 +1372,8 @@ class TrackCall final : public TrackReactor,
   std::atomic<int64_t> tracked_end_t_ns_{0};
   uint64_t events_ = 0;
   uint64_t frames_ = 0;
+  uint64_t depth_frames_ = 0;
+  uint64_t odometry_poses_ = 0;
   uint64_t poses_ = 0;
   uint64_t lost_poses_ = 0;
   double cpu_before_item_s_ = 0;

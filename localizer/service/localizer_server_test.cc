@@ -25,6 +25,7 @@
 #include "core/common/file_util.h"
 #include "core/common/log.h"
 #include "core/events/event_reader.h"
+#include "localizer/odometry/testing/handover_scene.h"
 #include "localizer/offline/offline_tracking.h"
 #include "localizer/service/session.h"
 #include "localizer/service/testing/service_fixture.h"
@@ -252,6 +253,113 @@ TEST_F(LocalizerServerTest, PoseArrivesAfterThePacketThatEndsItsStep) {
   reader.join();
   const grpc::Status status = stream->Finish();
   EXPECT_TRUE(status.ok()) << status.error_message();
+}
+
+TEST_F(LocalizerServerTest, HandsOverToOdometryAwayFromTheMapAndBackWithDepthFrames) {
+  // The hand-over scene (localizer/odometry/testing): the map covers what the camera sees first;
+  // it turns away for a while and comes back.
+  testing::WriteTestMap(folder_.path(), "handover", odometry::testing::HandoverMap());
+  // The client sends as fast as it can: a queue deep enough for the whole stream.
+  StartServer([](LocalizerServerOptions& options) {
+    options.queue_packets = 2048;
+    options.queue_events = int64_t{1} << 24;
+  });
+  const int64_t start_ns = odometry::testing::kStartNs;
+  api::TrackRequest start;
+  api::SessionStart* session = start.mutable_start();
+  session->set_map_name("handover");
+  *session->mutable_camera() = CameraToProto(odometry::testing::HandoverEventCamera());
+  *session->mutable_initial_world_from_cam() =
+      RigidToProto(odometry::testing::HandoverMotion(start_ns));
+  session->set_initial_t_ns(start_ns);
+  session->mutable_options()->set_step_rate_hz(200);
+  *session->mutable_depth_camera()->mutable_camera() =
+      CameraToProto(odometry::testing::HandoverDepthCamera());
+  *session->mutable_depth_camera()->mutable_event_from_depth() =
+      RigidToProto(odometry::testing::HandoverEventFromDepth());
+  std::vector<api::TrackRequest> requests{start};
+  // 5 ms packets; each depth frame right after the packet that reaches its time.
+  const std::vector<int64_t> depth_times = odometry::testing::HandoverDepthTimes();
+  size_t next_depth = 0;
+  for (api::TrackRequest& packet :
+       testing::PackedPackets(odometry::testing::HandoverEvents(), 5'000'000)) {
+    const int64_t end_ns = packet.events().end_t_ns();
+    requests.push_back(std::move(packet));
+    while (next_depth < depth_times.size() && depth_times[next_depth] <= end_ns) {
+      requests.push_back(testing::DepthFrameRequest(
+          depth_times[next_depth], odometry::testing::HandoverDepthFrame(depth_times[next_depth])));
+      ++next_depth;
+    }
+  }
+  const TrackOutcome outcome = RunTrack(*stub_, requests);
+  ASSERT_TRUE(outcome.status.ok()) << outcome.status.error_message();
+  int64_t previous_t = -1;
+  int odometry_poses = 0;
+  int away_poses = 0;
+  api::PoseSource last_source = api::POSE_SOURCE_UNSPECIFIED;
+  Rigid3d last_pose;
+  int64_t last_t = 0;
+  for (const api::TrackResponse& response : outcome.responses) {
+    if (!response.has_pose()) continue;
+    const api::PoseUpdate& pose = response.pose();
+    if (previous_t >= 0) {
+      EXPECT_EQ(pose.t_ns() - previous_t, 5'000'000) << "a gap";
+    }
+    previous_t = pose.t_ns();
+    EXPECT_NE(pose.source(), api::POSE_SOURCE_UNSPECIFIED);
+    ASSERT_TRUE(pose.has_world_from_cam()) << "every step has a pose at " << pose.t_ns();
+    if (pose.source() == api::POSE_SOURCE_ODOMETRY) ++odometry_poses;
+    if (pose.t_ns() >= odometry::testing::kAwayNs && pose.t_ns() <= odometry::testing::kReturnNs) {
+      ++away_poses;
+      EXPECT_EQ(pose.source(), api::POSE_SOURCE_ODOMETRY) << pose.t_ns();
+    }
+    last_source = pose.source();
+    last_pose = RigidFromProto(pose.world_from_cam(), "pose");
+    last_t = pose.t_ns();
+  }
+  EXPECT_GT(away_poses, 90);
+  EXPECT_EQ(last_source, api::POSE_SOURCE_MAP) << "back on the map at the end";
+  EXPECT_LT((last_pose.translation - odometry::testing::HandoverMotion(last_t).translation).norm(),
+            0.02);
+  ASSERT_EQ(outcome.Count(api::TrackResponse::kEnd), 1);
+  const api::SessionEnd& end = outcome.responses.back().end();
+  EXPECT_EQ(end.depth_frames(), depth_times.size());
+  EXPECT_EQ(end.odometry_poses(), static_cast<uint64_t>(odometry_poses));
+}
+
+TEST_F(LocalizerServerTest, DepthFramesNeedADepthCameraAndTheirEvents) {
+  StartServer();
+  cv::Mat depth(4, 6, CV_32FC1, cv::Scalar(1.5));
+  // No depth camera in the SessionStart.
+  TrackOutcome outcome = RunTrack(
+      *stub_, std::vector<api::TrackRequest>{
+                  TestSessionStart(), testing::DepthFrameRequest(testing::kInitialTimeNs, depth)});
+  EXPECT_EQ(outcome.status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_NE(outcome.status.error_message().find("depth_camera"), std::string::npos)
+      << outcome.status.error_message();
+  // A frame of the wrong size, and one after the events sent.
+  api::TrackRequest start = TestSessionStart();
+  *start.mutable_start()->mutable_depth_camera()->mutable_camera() =
+      CameraToProto(Camera::Pinhole(6, 4, 5, 5, 2.5, 1.5));
+  *start.mutable_start()->mutable_depth_camera()->mutable_event_from_depth() =
+      RigidToProto(Rigid3d());
+  outcome = RunTrack(
+      *stub_, std::vector<api::TrackRequest>{
+                  start, testing::DepthFrameRequest(testing::kInitialTimeNs,
+                                                    cv::Mat(5, 6, CV_32FC1, cv::Scalar(1)))});
+  EXPECT_EQ(outcome.status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  outcome =
+      RunTrack(*stub_, std::vector<api::TrackRequest>{
+                           start, testing::DepthFrameRequest(testing::kInitialTimeNs + 1, depth)});
+  EXPECT_EQ(outcome.status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_NE(outcome.status.error_message().find("send the events up to its time first"),
+            std::string::npos)
+      << outcome.status.error_message();
+  // Accepted at the session time.
+  outcome =
+      RunTrack(*stub_, std::vector<api::TrackRequest>{
+                           start, testing::DepthFrameRequest(testing::kInitialTimeNs, depth)});
+  EXPECT_TRUE(outcome.status.ok()) << outcome.status.error_message();
 }
 
 TEST_F(LocalizerServerTest, FirstMessageMustBeSessionStart) {

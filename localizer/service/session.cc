@@ -100,9 +100,11 @@ double GnssSearchRadiusM(const GnssPrior& prior, const GeoAnchor& anchor) {
 }
 
 api::PoseUpdate PoseUpdateFromEstimate(const tracking::PoseEstimate& estimate,
-                                       const GeoReference* geo) {
+                                       const GeoReference* geo, odometry::PoseSource source) {
   api::PoseUpdate update;
   update.set_t_ns(estimate.t_ns);
+  update.set_source(source == odometry::PoseSource::kOdometry ? api::POSE_SOURCE_ODOMETRY
+                                                              : api::POSE_SOURCE_MAP);
   switch (estimate.status) {
     case tracking::TrackingStatus::kTracking:
       update.set_status(api::TRACKING);
@@ -151,22 +153,56 @@ api::PoseUpdate PoseUpdateFromEstimate(const tracking::PoseEstimate& estimate,
   return update;
 }
 
-cv::Mat GrayFromProto(uint32_t width, uint32_t height, const std::string& pixels,
-                      const Camera& camera, const std::string& what) {
+namespace {
+
+// Checks an image message's size against the camera's and its byte count (`field` names the
+// bytes, `bytes_per_pixel` their size).
+void CheckImageBytes(uint32_t width, uint32_t height, const std::string& bytes,
+                     const Camera& camera, const std::string& what, const char* field,
+                     size_t bytes_per_pixel) {
   if (width != static_cast<uint32_t>(camera.width) ||
       height != static_cast<uint32_t>(camera.height)) {
     throw InvalidArgumentError(what + ": size " + std::to_string(width) + "x" +
                                std::to_string(height) + " differs from the camera's " +
                                std::to_string(camera.width) + "x" + std::to_string(camera.height));
   }
-  const size_t expected = static_cast<size_t>(camera.width) * static_cast<size_t>(camera.height);
-  if (pixels.size() != expected) {
-    throw InvalidArgumentError(what + ": gray holds " + std::to_string(pixels.size()) +
-                               " bytes, expected width * height = " + std::to_string(expected));
+  const size_t expected =
+      static_cast<size_t>(camera.width) * static_cast<size_t>(camera.height) * bytes_per_pixel;
+  if (bytes.size() != expected) {
+    throw InvalidArgumentError(
+        what + ": " + field + " holds " + std::to_string(bytes.size()) + " bytes, expected " +
+        (bytes_per_pixel == 1 ? "width * height = " : "2 * width * height = ") +
+        std::to_string(expected));
   }
+}
+
+}  // namespace
+
+cv::Mat GrayFromProto(uint32_t width, uint32_t height, const std::string& pixels,
+                      const Camera& camera, const std::string& what) {
+  CheckImageBytes(width, height, pixels, camera, what, "gray", 1);
   cv::Mat gray(camera.height, camera.width, CV_8UC1);
-  std::memcpy(gray.data, pixels.data(), expected);
+  std::memcpy(gray.data, pixels.data(), pixels.size());
   return gray;
+}
+
+cv::Mat DepthFromProto(const api::DepthFrame& frame, const Camera& depth_camera,
+                       std::optional<int64_t> previous_t_ns) {
+  CheckImageBytes(frame.width(), frame.height(), frame.depth_mm(), depth_camera, "DepthFrame",
+                  "depth_mm", 2);
+  if (previous_t_ns && frame.t_ns() <= *previous_t_ns) {
+    throw InvalidArgumentError("DepthFrame: time " + std::to_string(frame.t_ns()) +
+                               " ns is not after the previous depth frame's " +
+                               std::to_string(*previous_t_ns) + " ns");
+  }
+  cv::Mat depth_m(depth_camera.height, depth_camera.width, CV_32FC1);
+  const auto* bytes = reinterpret_cast<const unsigned char*>(frame.depth_mm().data());
+  float* out = depth_m.ptr<float>(0);  // continuous
+  for (size_t i = 0; i < depth_m.total(); ++i) {
+    const unsigned millimetres = bytes[2 * i] | (static_cast<unsigned>(bytes[2 * i + 1]) << 8);
+    out[i] = static_cast<float>(millimetres) * 1e-3f;
+  }
+  return depth_m;
 }
 
 cv::Mat FrameFromProto(const api::Frame& frame, const Camera& camera,
@@ -227,6 +263,30 @@ SessionSettings SessionSettingsFromProto(const api::SessionStart& start,
     }
     settings.initial_velocity =
         wire::TwistFromProto(start.initial_velocity(), "SessionStart.initial_velocity");
+  }
+  if (start.has_depth_camera()) {
+    if (start.options().frames()) {
+      throw InvalidArgumentError(
+          "SessionStart.depth_camera: the hand-over to odometry needs an event session (not "
+          "options.frames)");
+    }
+    DepthCameraSettings depth;
+    depth.camera = CameraFromProto(start.depth_camera().camera(), "SessionStart.depth_camera");
+    const int64_t depth_pixels = int64_t{depth.camera.width} * depth.camera.height;
+    if (depth_pixels > limits.max_camera_pixels) {
+      throw InvalidArgumentError("SessionStart.depth_camera: " + std::to_string(depth_pixels) +
+                                 " pixels exceeds this server's limit of " +
+                                 std::to_string(limits.max_camera_pixels) +
+                                 " (evloc-localizer --max-camera-pixels)");
+    }
+    if (!start.depth_camera().has_event_from_depth()) {
+      throw InvalidArgumentError(
+          "SessionStart.depth_camera.event_from_depth is missing: the depth camera's pose "
+          "relative to the event camera");
+    }
+    depth.event_from_depth = RigidFromProto(start.depth_camera().event_from_depth(),
+                                            "SessionStart.depth_camera.event_from_depth");
+    settings.depth_camera = depth;
   }
   CheckSessionTime(start.initial_t_ns(), "SessionStart.initial_t_ns");
   CheckSessionTime(start.sensor_time_offset_ns(), "SessionStart.sensor_time_offset_ns");
@@ -398,7 +458,9 @@ RequestValidator::RequestValidator(const SessionSettings& settings, const Sessio
       max_steps_per_request_(limits.max_steps_per_request),
       session_t_ns_(settings.initial_t_ns),
       decoder_(SensorSize{settings.camera.width, settings.camera.height},
-               settings.sensor_time_offset_ns, limits.max_packet_events) {}
+               settings.sensor_time_offset_ns, limits.max_packet_events) {
+  if (settings.depth_camera) depth_camera_ = settings.depth_camera->camera;
+}
 
 grpc::Status RequestValidator::Accept(const api::TrackRequest& request, SessionItem* item) {
   try {
@@ -462,9 +524,30 @@ grpc::Status RequestValidator::Accept(const api::TrackRequest& request, SessionI
         session_t_ns_ = std::max(session_t_ns_, item->t_ns);
         break;
       }
+      case api::TrackRequest::kDepth: {
+        if (!depth_camera_) {
+          return InvalidArgument(
+              "a DepthFrame needs SessionStart.depth_camera (the depth camera and its pose "
+              "relative to the event camera)");
+        }
+        const int64_t t_ns = request.depth().t_ns();
+        CheckSessionTime(t_ns, "DepthFrame: t_ns");
+        const int64_t events_until = decoder_.end_t_ns().value_or(session_t_ns_);
+        if (t_ns > events_until) {
+          return InvalidArgument("DepthFrame at " + std::to_string(t_ns) +
+                                 " ns lies after the end of the last packet (" +
+                                 std::to_string(events_until) +
+                                 " ns): send the events up to its time first");
+        }
+        item->kind = SessionItem::Kind::kDepth;
+        item->depth_m = DepthFromProto(request.depth(), *depth_camera_, last_depth_t_ns_);
+        item->t_ns = t_ns;
+        last_depth_t_ns_ = t_ns;
+        break;
+      }
       default:
         return InvalidArgument(
-            "an empty TrackRequest (set start, events, frame, pose_hint or gnss_fix)");
+            "an empty TrackRequest (set start, events, frame, pose_hint, gnss_fix or depth)");
     }
   } catch (const InvalidArgumentError& error) {
     return InvalidArgument(error.what());
@@ -539,6 +622,42 @@ SessionTracker::SessionTracker(std::shared_ptr<const LoadedMap> map,
     tracker_.SetImageHypothesisSource(&*image_hypotheses_);
   }
   if (takes_frames_) StartTracker();
+  if (settings.depth_camera) {
+    handover_ = std::make_unique<odometry::MapOdometryHandover>(
+        tracker_, *source_, settings.camera, settings.depth_camera->camera,
+        settings.depth_camera->event_from_depth, odometry::HandoverOptions());
+  }
+}
+
+void SessionTracker::Append(std::vector<odometry::HandoverEstimate> reported,
+                            std::vector<tracking::PoseEstimate>* estimates) {
+  for (odometry::HandoverEstimate& estimate : reported) {
+    estimates->push_back(std::move(estimate.estimate));
+    sources_.push_back(estimate.source);
+  }
+}
+
+void SessionTracker::FeedEvents(const EventBuffer& events,
+                                std::vector<tracking::PoseEstimate>* estimates) {
+  if (handover_) {
+    Append(handover_->AddEvents(events), estimates);
+    return;
+  }
+  for (tracking::PoseEstimate& estimate : tracker_.AddEvents(events)) {
+    estimates->push_back(std::move(estimate));
+    sources_.push_back(odometry::PoseSource::kMap);
+  }
+}
+
+void SessionTracker::Advance(int64_t t_ns, std::vector<tracking::PoseEstimate>* estimates) {
+  if (handover_) {
+    Append(handover_->AdvanceTo(t_ns), estimates);
+    return;
+  }
+  for (tracking::PoseEstimate& estimate : tracker_.AdvanceTo(t_ns)) {
+    estimates->push_back(std::move(estimate));
+    sources_.push_back(odometry::PoseSource::kMap);
+  }
 }
 
 void SessionTracker::StartTracker() {
@@ -561,8 +680,18 @@ void SessionTracker::StartTracker() {
   started_ = true;
 }
 
-std::vector<tracking::PoseEstimate> SessionTracker::Process(const SessionItem& item,
-                                                            const StopFunction& stop) {
+std::vector<tracking::PoseEstimate> SessionTracker::Process(
+    const SessionItem& item, const StopFunction& stop, std::vector<odometry::PoseSource>* sources) {
+  sources_.clear();
+  std::vector<tracking::PoseEstimate> estimates = ProcessItem(item, stop);
+  // Frame sessions report map poses only.
+  sources_.resize(estimates.size(), odometry::PoseSource::kMap);
+  if (sources != nullptr) *sources = std::move(sources_);
+  return estimates;
+}
+
+std::vector<tracking::PoseEstimate> SessionTracker::ProcessItem(const SessionItem& item,
+                                                                const StopFunction& stop) {
   if (stopped_) return {};
   if (gnss_prior_t_ns_ && item.t_ns - *gnss_prior_t_ns_ > kGnssPriorLifetimeNs) {
     tracker_.ClearSearchPrior();  // the fix is too old to narrow a search
@@ -589,6 +718,10 @@ std::vector<tracking::PoseEstimate> SessionTracker::Process(const SessionItem& i
       tracker_.Reset(item.world_from_cam, item.t_ns);
       started_ = true;
       advanced_t_ns_ = std::max(advanced_t_ns_, item.t_ns);
+      return {};
+    case SessionItem::Kind::kDepth:
+      if (!handover_) throw InvalidArgumentError("DepthFrame in a session without a depth camera");
+      handover_->AddDepthFrame(item.t_ns, item.depth_m);
       return {};
     case SessionItem::Kind::kGnssFix: {
       if (!geo_) throw InvalidArgumentError("GnssFix for a map without a geo anchor");
@@ -624,9 +757,9 @@ std::vector<tracking::PoseEstimate> SessionTracker::AddEvents(const EventBuffer&
     } else {
       tracked = nullptr;
     }
-    if (!priming->empty()) tracker_.AddEvents(*priming);
+    if (!priming->empty()) FeedEvents(*priming, &estimates);
     if (!tracked && end_t_ns < settings_.initial_t_ns) {
-      tracker_.AdvanceTo(end_t_ns);
+      Advance(end_t_ns, &estimates);
       return estimates;
     }
     StartTracker();
@@ -664,14 +797,10 @@ void SessionTracker::TrackInPeriods(const EventBuffer& events, int64_t end_t_ns,
                       events.polarity.data() + next, stop_index - next);
         slice = &slice_;
       }
-      for (tracking::PoseEstimate& estimate : tracker_.AddEvents(*slice)) {
-        estimates->push_back(std::move(estimate));
-      }
+      FeedEvents(*slice, estimates);
       next = stop_index;
     }
-    for (tracking::PoseEstimate& estimate : tracker_.AdvanceTo(slice_end)) {
-      estimates->push_back(std::move(estimate));
-    }
+    Advance(slice_end, estimates);
     bound = std::max(bound, slice_end);
     advanced_t_ns_ = bound;
     if (slice_end >= end_t_ns) return;

@@ -22,6 +22,7 @@
 #include "core/geo/geo_anchor.h"
 #include "core/geometry/rigid3.h"
 #include "evloc/localizer.pb.h"
+#include "localizer/odometry/handover.h"
 #include "localizer/relocalization/event_image_hypotheses.h"
 #include "localizer/service/map_registry.h"
 #include "localizer/tracking/tiled_map_source.h"
@@ -46,9 +47,25 @@ GnssPrior GnssPriorFromProto(const api::GnssFix& fix, const std::string& what);
 api::MapDescription DescribeMap(const LoadedMap& map);
 // Describes a map from what the registry read of it (ListMaps, without loading it).
 api::MapDescription DescribeMap(const MapDescriptionData& map);
-// A PoseUpdate for a tracker step (latency_us left at 0: set when handed to the transport).
+// A PoseUpdate for a tracker step (latency_us left at 0: set when handed to the transport), from
+// `source` (the map tracker, or odometry during a hand-over).
 api::PoseUpdate PoseUpdateFromEstimate(const tracking::PoseEstimate& estimate,
-                                       const GeoReference* geo = nullptr);
+                                       const GeoReference* geo = nullptr,
+                                       odometry::PoseSource source = odometry::PoseSource::kMap);
+
+// The depth camera of a session (SessionStart.depth_camera).
+struct DepthCameraSettings {
+  // The depth camera.
+  Camera camera;
+  // p_event = event_from_depth * p_depth.
+  Rigid3d event_from_depth;
+};
+
+// Validates a DepthFrame against the depth camera and the previous depth frame time and returns
+// its depth in metres (CV_32FC1, 0 = none). Throws InvalidArgumentError for a size mismatch, a
+// wrong byte count or a time not after `previous_t_ns`.
+cv::Mat DepthFromProto(const api::DepthFrame& frame, const Camera& depth_camera,
+                       std::optional<int64_t> previous_t_ns);
 
 // Validates raw grey pixels (`what` names them in errors) against the camera's size and returns
 // them (CV_8UC1, a copy). Throws InvalidArgumentError for a size mismatch or a wrong byte count.
@@ -76,6 +93,8 @@ struct SessionSettings {
   tracking::TrackerOptions tracker;
   // Session time = sensor time + this, for raw Prophesee packets, ns.
   int64_t sensor_time_offset_ns = 0;
+  // The depth camera of a session that streams DepthFrames (the hand-over to odometry).
+  std::optional<DepthCameraSettings> depth_camera;
 };
 
 // Largest |time| a session accepts (initial time, packet ends, frame and hint times, event
@@ -188,6 +207,8 @@ struct SessionItem {
     kPoseHint,
     // A GnssFix: `gnss` at `t_ns`, a prior for the next relocalizations.
     kGnssFix,
+    // A DepthFrame: `depth_m` taken at `t_ns`.
+    kDepth,
   };
   // The kind of request.
   Kind kind = Kind::kEvents;
@@ -195,6 +216,8 @@ struct SessionItem {
   EventBuffer events;
   // kFrame: the grey pixels (CV_8UC1, the camera's size).
   cv::Mat gray;
+  // kDepth: the depth in metres (CV_32FC1, the depth camera's size).
+  cv::Mat depth_m;
   // kPoseHint: the pose.
   Rigid3d world_from_cam;
   // kGnssFix: the fix.
@@ -242,6 +265,8 @@ class RequestValidator {
   int64_t session_t_ns_;
   PacketDecoder decoder_;
   std::optional<int64_t> last_frame_t_ns_;
+  std::optional<Camera> depth_camera_;
+  std::optional<int64_t> last_depth_t_ns_;
   std::optional<int64_t> latest_t_ns_;
 };
 
@@ -281,8 +306,11 @@ class SessionTracker {
   // `stop` (when set) is asked before each period: a stop takes effect within one step. After a
   // stop, stopped() is true and the tracker must not be used again. Throws only on a bug (the
   // server reports INTERNAL).
+  // `sources`, when not null, receives where each returned pose came from (the map tracker, or
+  // odometry in a session with a depth camera).
   std::vector<tracking::PoseEstimate> Process(const SessionItem& item,
-                                              const StopFunction& stop = {});
+                                              const StopFunction& stop = {},
+                                              std::vector<odometry::PoseSource>* sources = nullptr);
 
   // True when the session tracks frames.
   bool takes_frames() const { return takes_frames_; }
@@ -297,6 +325,8 @@ class SessionTracker {
   // map points that may be visible from `world_from_cam` reprojected onto it (CV_8UC3; green on
   // an active pixel, red not). Empty before the tracker started.
   cv::Mat SurfacePicture(const Rigid3d& world_from_cam, int64_t t_ns) const;
+  // The hand-over to odometry (sessions with a depth camera), else null.
+  const odometry::MapOdometryHandover* handover() const { return handover_.get(); }
 
  private:
   std::vector<tracking::PoseEstimate> AddEvents(const EventBuffer& events, int64_t end_t_ns,
@@ -308,6 +338,16 @@ class SessionTracker {
   // Starts the tracker at the initial pose and time, or without a pose (it searches the map);
   // throws InvalidArgumentError for a frame session without a pose.
   void StartTracker();
+  // Process without the sources.
+  std::vector<tracking::PoseEstimate> ProcessItem(const SessionItem& item,
+                                                  const StopFunction& stop);
+  // Feeds events to the tracker (through the hand-over when there is one) and appends the steps.
+  void FeedEvents(const EventBuffer& events, std::vector<tracking::PoseEstimate>* estimates);
+  // Advances the tracker (through the hand-over when there is one) and appends the steps.
+  void Advance(int64_t t_ns, std::vector<tracking::PoseEstimate>* estimates);
+  // Appends hand-over poses to `estimates` and their sources to sources_.
+  void Append(std::vector<odometry::HandoverEstimate> reported,
+              std::vector<tracking::PoseEstimate>* estimates);
 
   std::shared_ptr<const LoadedMap> map_;
   SessionSettings settings_;
@@ -320,6 +360,10 @@ class SessionTracker {
   // tracker is destroyed.
   std::optional<relocalization::EventImageHypotheses> image_hypotheses_;
   tracking::Tracker tracker_;
+  // The hand-over to Canny-DEVO (sessions with a depth camera).
+  std::unique_ptr<odometry::MapOdometryHandover> handover_;
+  // The sources of the poses of the current Process call.
+  std::vector<odometry::PoseSource> sources_;
   std::optional<GeoReference> geo_;
   // Session time of the GNSS fix behind the tracker's search prior, ns.
   std::optional<int64_t> gnss_prior_t_ns_;

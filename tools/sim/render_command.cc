@@ -177,6 +177,10 @@ void RenderCommandOptions::Check() const {
     throw InvalidArgumentError("render: --map-spacing must be a positive distance in metres.");
   }
   if (carpark) site.Check();
+  if (depth_camera) depth_camera->Check();
+  if (map_until_s && !(*map_until_s >= 0 && std::isfinite(*map_until_s))) {
+    throw InvalidArgumentError("render: --map-until must be a time >= 0 in seconds.");
+  }
   if (!(keyframe_interval_s > 0) || !(max_pixel_motion_px > 0)) {
     throw InvalidArgumentError(
         "render: keyframe interval and pixel motion bound must be positive.");
@@ -244,16 +248,58 @@ nlohmann::json RunRenderCommand(const RenderCommandOptions& options) {
   writer.WriteCamera(camera);
   const Renderer renderer(scene, camera);
   EventFiles event_files(writer.staging_dir(), camera, options.events_txt);
+  std::optional<int64_t> first_frame_t_ns;
   const SequenceStats stats = SimulateSequence(
       [&](const Rigid3d& pose, cv::Mat* gray, cv::Mat* rgb, cv::Mat* depth) {
         renderer.Render(pose, gray, rgb, depth);
       },
       camera, *motion, sequence, [&](const EventBuffer& events) { event_files.Write(events); },
       [&](int64_t t_ns, const cv::Mat& image, const cv::Mat& depth_m) {
+        if (!first_frame_t_ns) first_frame_t_ns = t_ns;
         writer.AddImage(t_ns, image);
         writer.AddDepth(t_ns, depth_m);
       });
   event_files.Close();
+
+  // The depth camera: its own frames from its own pose, triggered with the frame camera.
+  nlohmann::json depth_camera_info = nullptr;
+  if (options.depth_camera) {
+    const auto depth_start = Clock::now();
+    DepthSensorOptions depth_options = *options.depth_camera;
+    depth_options.first_frame_t_ns = first_frame_t_ns.value_or(0);
+    depth_options.seed = options.seed;
+    const DepthSensor sensor(scene, depth_options);
+    writer.WriteDepthCamera(camera, depth_options.camera, depth_options.event_from_depth);
+    DepthModelCounts counts;
+    int64_t frames = 0;
+    for (int64_t index = 0; sensor.FrameTimeNs(index) <= motion->duration_ns(); ++index) {
+      const int64_t t_ns = sensor.FrameTimeNs(index);
+      writer.AddDepthCameraFrame(t_ns, sensor.Capture(motion->WorldFromCam(t_ns), index, &counts));
+      ++frames;
+    }
+    depth_camera_info = {{"camera", CameraJson(depth_options.camera)},
+                         {"fps", depth_options.fps},
+                         {"event_from_depth",
+                          {{"translation",
+                            {depth_options.event_from_depth.translation.x(),
+                             depth_options.event_from_depth.translation.y(),
+                             depth_options.event_from_depth.translation.z()}},
+                           {"rotation_xyzw",
+                            {depth_options.event_from_depth.rotation.x(),
+                             depth_options.event_from_depth.rotation.y(),
+                             depth_options.event_from_depth.rotation.z(),
+                             depth_options.event_from_depth.rotation.w()}}}},
+                         {"noise_at_1m_m", depth_options.noise_at_1m_m},
+                         {"quantization_m", depth_options.quantization_m},
+                         {"frames", frames},
+                         {"pixels_hit", counts.exact},
+                         {"holes_out_of_range", counts.out_of_range},
+                         {"holes_discontinuity", counts.discontinuity},
+                         {"holes_dark", counts.dark},
+                         {"holes_specular", counts.specular},
+                         {"pixels_measured", counts.measured},
+                         {"seconds", SecondsSince(depth_start)}};
+  }
 
   const Trajectory ground_truth = SampleMotion(*motion, options.ground_truth_rate_hz);
   writer.WriteGroundTruth(ground_truth);
@@ -261,7 +307,11 @@ nlohmann::json RunRenderCommand(const RenderCommandOptions& options) {
   const auto map_start = Clock::now();
   std::vector<Rigid3d> keyframes;
   const auto keyframe_step = static_cast<int64_t>(std::llround(options.keyframe_interval_s * 1e9));
-  for (int64_t t = 0; t <= motion->duration_ns(); t += keyframe_step) {
+  const int64_t map_end_ns =
+      options.map_until_s ? std::min(motion->duration_ns(),
+                                     static_cast<int64_t>(std::llround(*options.map_until_s * 1e9)))
+                          : motion->duration_ns();
+  for (int64_t t = 0; t <= map_end_ns; t += keyframe_step) {
     keyframes.push_back(motion->WorldFromCam(t));
   }
   GroundTruthMapOptions map_options;
@@ -300,7 +350,8 @@ nlohmann::json RunRenderCommand(const RenderCommandOptions& options) {
         {"max_pixel_motion_px", options.max_pixel_motion_px},
         {"max_render_motion_px", options.max_render_motion_px},
         {"ground_truth_rate_hz", options.ground_truth_rate_hz},
-        {"keyframe_interval_s", options.keyframe_interval_s}}},
+        {"keyframe_interval_s", options.keyframe_interval_s},
+        {"map_until_s", options.map_until_s ? *options.map_until_s : -1.0}}},
       {"camera", CameraJson(camera)},
       {"esim", EsimJson(sequence.esim)},
       {"frames",
@@ -336,6 +387,7 @@ nlohmann::json RunRenderCommand(const RenderCommandOptions& options) {
         {"esim", stats.esim_seconds},
         {"frames", stats.frame_seconds},
         {"ground_truth_map", map_seconds}}}};
+  if (!depth_camera_info.is_null()) info["depth_camera"] = depth_camera_info;
   info["timings_s"]["total"] = SecondsSince(total_start);
   writer.WriteInfo(info);
   writer.Commit();

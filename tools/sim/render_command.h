@@ -12,6 +12,7 @@
 
 #include "core/camera/camera.h"
 #include "tools/sim/carpark.h"
+#include "tools/sim/depth_sensor.h"
 #include "tools/sim/events_from_frames.h"
 #include "tools/sim/frame_sensor.h"
 #include "tools/sim/motion.h"
@@ -73,12 +74,19 @@ struct RenderCommandOptions {
   bool clean = false;
   // Also write events.txt (ECD text).
   bool events_txt = false;
+  // The depth camera beside the event camera (`--depth-camera`; its frames in depth_camera.txt,
+  // docs/simulator.md "Depth camera"); its first frame is taken with the frame camera's first
+  // frame and its noise seed is `seed`. Unset: no depth camera.
+  std::optional<DepthSensorOptions> depth_camera;
   // Replace an existing non-empty output folder.
   bool force = false;
   // Ground-truth rate, Hz (>= 200).
   double ground_truth_rate_hz = 1000;
   // Interval between ground-truth map keyframes along the path, seconds.
   double keyframe_interval_s = 0.5;
+  // The ground-truth map from the keyframes of the first this many seconds only (a map of the
+  // part of the scene seen then, `--map-until`); unset: the whole path.
+  std::optional<double> map_until_s;
   // Largest image motion between consecutive ESIM images, pixels.
   double max_pixel_motion_px = 0.5;
   // Largest image motion between two renders, pixels (images in between are interpolated along

@@ -414,6 +414,9 @@ void Surface::Check() const {
   if (!std::isfinite(shading) || shading <= 0 || shading > 1) {
     throw InvalidArgumentError(where + " has shading outside (0, 1]");
   }
+  if (!std::isfinite(specular) || specular < 0 || specular > 1) {
+    throw InvalidArgumentError(where + " has specular outside [0, 1]");
+  }
   texture.Check(where + " texture");
 }
 
@@ -706,6 +709,11 @@ Scene MakeDefaultRoom() {
     table.face_textures = AllFaces(wood);
     table.face_textures[4] = top;
     AddBox(table, &scene);
+    // A varnished top: glossy for the simulated depth camera (its pattern is lost near the
+    // mirror direction), invisible to the event and frame cameras.
+    for (Surface& surface : scene.surfaces) {
+      if (surface.name == "table_top/+z") surface.specular = 0.8f;
+    }
     const double leg_height = table_center.z() - 0.5 * table_size.z();
     for (int i = 0; i < 4; ++i) {
       BoxSpec leg;

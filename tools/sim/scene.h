@@ -164,6 +164,10 @@ struct Surface {
   double height = 1;
   // Constant shading factor in (0, 1]: irradiance = albedo * shading.
   float shading = 1.0f;
+  // Fraction of the light reflected as by a mirror, in [0, 1] (0: matte). Only the simulated
+  // depth camera reads it: its projected pattern is lost where it sees such a surface near the
+  // mirror direction (depth_sensor.h).
+  float specular = 0.0f;
   // The albedo texture in (u, v) metres.
   Texture texture;
 

@@ -296,6 +296,9 @@ Scene ParseSceneJson(const std::string& text, const std::string& source) {
       } else {
         surface.shading = scene.lighting.ShadingFor(surface.Normal());
       }
+      if (const auto specular = quad.find("specular"); specular != quad.end()) {
+        surface.specular = static_cast<float>(reader.Number(*specular, path + "/specular"));
+      }
       surface.texture =
           reader.TextureValue(reader.Require(quad, "texture", path), path + "/texture");
       try {
@@ -376,6 +379,7 @@ std::string SceneToJson(const Scene& scene) {
     quad["width"] = surface.width;
     quad["height"] = surface.height;
     quad["shading"] = surface.shading;
+    if (surface.specular != 0.0f) quad["specular"] = surface.specular;
     quad["texture"] = TextureToJson(surface.texture);
     document["quads"].push_back(std::move(quad));
   }

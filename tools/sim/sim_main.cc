@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "core/camera/calibration_file.h"
 #include "core/common/cli.h"
 #include "core/common/cli_app.h"
 #include "core/common/error.h"
@@ -41,8 +42,18 @@ void DeclareCameraAndSiteFlags(CommandLine& line, std::string* camera_preset,
            });
 }
 
-// The flags of `render` over `options`.
-void DeclareRender(CommandLine& line, evloc::sim::RenderCommandOptions* options) {
+// The depth camera's flags of `render`, applied once every flag is read (they need
+// --depth-camera).
+struct DepthCameraFlags {
+  bool enabled = false;
+  std::optional<double> fps;
+  std::optional<double> noise_at_1m_m;
+  std::optional<std::string> camera_yaml;
+};
+
+// The flags of `render` over `options` and `depth`.
+void DeclareRender(CommandLine& line, evloc::sim::RenderCommandOptions* options,
+                   DepthCameraFlags* depth) {
   line.Add("--out", "DIR", "output dataset folder (written as DIR.partial, renamed when complete)",
            &options->out_dir);
   DeclareCameraAndSiteFlags(line, &options->camera_preset, &options->camera_yaml, &options->site,
@@ -67,6 +78,12 @@ void DeclareRender(CommandLine& line, evloc::sim::RenderCommandOptions* options)
       .Add("--map-spacing", "M",
            "spacing of the ground-truth map's points along edges; default 0.01",
            &options->map_spacing_m)
+      .Add("--map-until", "S",
+           "the ground-truth map from the path's first S seconds only (a map of the part of the "
+           "scene seen then); default: the whole path",
+           [options](const std::string& flag, const std::string& value) {
+             options->map_until_s = evloc::ParseDoubleFlag(flag, value);
+           })
       .Add("--motion", "NAME", "slow | mid | fast | aggressive; default: mid",
            [options](const std::string&, const std::string& value) {
              options->motion = evloc::sim::ParseMotionProfile(value);
@@ -111,6 +128,23 @@ void DeclareRender(CommandLine& line, evloc::sim::RenderCommandOptions* options)
               "perfect event pixel: no threshold mismatch, refractory period, noise, leak, hot "
               "pixels, low-pass or read-out limit",
               &options->clean)
+      .Group("Depth camera")
+      .Switch("--depth-camera",
+              "also a depth camera beside the event camera (docs/simulator.md, \"Depth camera\"): "
+              "VGA, f = 525, 5 cm to the right, its own frames in depth_camera.txt with "
+              "depth_camchain.yaml",
+              &depth->enabled)
+      .Add("--depth-fps", "F", "the depth camera's rate, Hz; default 30",
+           [depth](const std::string& flag, const std::string& value) {
+             depth->fps = evloc::ParseDoubleFlag(flag, value);
+           })
+      .Add("--depth-noise", "M",
+           "its depth noise at 1 m (growing with depth squared), metres; default 0.0015",
+           [depth](const std::string& flag, const std::string& value) {
+             depth->noise_at_1m_m = evloc::ParseDoubleFlag(flag, value);
+           })
+      .Add("--depth-camera-yaml", "FILE", "its intrinsics instead of the VGA preset",
+           [depth](const std::string&, const std::string& value) { depth->camera_yaml = value; })
       .Group("Output")
       .Switch("--events-txt", "also write events.txt (ECD text format)", &options->events_txt)
       .Switch("--force", "replace an existing non-empty output folder", &options->force);
@@ -176,7 +210,21 @@ void RequireKnownCamera(bool has_camera_yaml, const std::string& preset) {
   }
 }
 
-int RunRender(const CommandLine& line, evloc::sim::RenderCommandOptions& options) {
+int RunRender(const CommandLine& line, evloc::sim::RenderCommandOptions& options,
+              const DepthCameraFlags& depth) {
+  const bool depth_flags = line.Count("--depth-fps") > 0 || line.Count("--depth-noise") > 0 ||
+                           line.Count("--depth-camera-yaml") > 0;
+  if (depth_flags && !depth.enabled) {
+    throw UsageError("--depth-fps, --depth-noise and --depth-camera-yaml need --depth-camera.");
+  }
+  if (depth.enabled) {
+    options.depth_camera.emplace();
+    if (depth.fps) options.depth_camera->fps = *depth.fps;
+    if (depth.noise_at_1m_m) options.depth_camera->noise_at_1m_m = *depth.noise_at_1m_m;
+    if (depth.camera_yaml) {
+      options.depth_camera->camera = evloc::ReadCalibrationFile(*depth.camera_yaml, 0, 0);
+    }
+  }
   if (line.Count("--out") == 0) throw UsageError("render needs --out DIR.");
   if (line.Count("--motion") > 0 && line.Count("--trajectory") > 0) {
     throw UsageError("--motion and --trajectory exclude each other.");
@@ -228,6 +276,7 @@ int RunEventsFromFrames(const CommandLine& line,
 int main(int argc, char** argv) {
   return evloc::RunTool("evloc-sim", argc, argv, [](const std::vector<std::string>& args) {
     evloc::sim::RenderCommandOptions render_options;
+    DepthCameraFlags depth_flags;
     evloc::sim::SurveyCommandOptions survey_options;
     evloc::sim::EventsFromFramesCommandOptions events_options;
     bool clean_events = false;
@@ -241,7 +290,7 @@ int main(int argc, char** argv) {
         line.Subcommand("render", "--out DIR [options]",
                         "Renders a scene along a motion into a dataset: events, frames, depth, "
                         "ground truth and the exact ground-truth map.");
-    DeclareRender(render, &render_options);
+    DeclareRender(render, &render_options, &depth_flags);
     CommandLine& survey = line.Subcommand(
         "survey", "--out DIR [options]",
         "Photos of the car park with exact poses, for evloc-mapper build --known-poses.");
@@ -269,7 +318,7 @@ int main(int argc, char** argv) {
         std::cout << chosen->Help();
         return evloc::kExitSuccess;
       }
-      if (chosen == &render) return RunRender(render, render_options);
+      if (chosen == &render) return RunRender(render, render_options, depth_flags);
       if (chosen == &survey) return RunSurvey(survey, survey_options);
       return RunEventsFromFrames(events_from_frames, events_options, clean_events);
     } catch (const UsageError&) {

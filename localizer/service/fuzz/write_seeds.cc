@@ -2,9 +2,9 @@
 // (docs/reliability.md §4) into OUT_DIR/packets and OUT_DIR/requests, in the input formats the
 // targets read (session_packets_fuzzer.cc, session_requests_fuzzer.cc), from the synthetic test
 // scene: PACKED, EVT 3.0 and EVT 2.0 packet streams; event sessions (PACKED and EVT 3.0, with a
-// pose hint and empty packets) and a frame session; and OUT_DIR/locate, the Locate requests of
-// locate_request_fuzzer.cc (locate_fuzz_common.h); and OUT_DIR/viewer, HTTP requests of every
-// route of the live viewer (viewer_requests_fuzzer.cc).
+// pose hint and empty packets; with a depth camera and DepthFrames) and a frame session; and
+// OUT_DIR/locate, the Locate requests of locate_request_fuzzer.cc (locate_fuzz_common.h); and
+// OUT_DIR/viewer, HTTP requests of every route of the live viewer (viewer_requests_fuzzer.cc).
 #include <filesystem>
 #include <fstream>
 #include <iostream>
@@ -106,9 +106,10 @@ Camera SmallCamera() { return Camera::Pinhole(80, 60, 62.5, 62.5, 39.5, 29.5); }
 // that the first one primes the surfaces); with `pose_hint` a PoseHint and an empty packet in the
 // middle; with `filters` every noise filter on, the hot-pixel learning period (1 ms) ending within
 // the seed's windows; with `velocity` an initial velocity (a resumed session); with `gnss_fix`
-// the session tracks the anchored map.
+// the session tracks the anchored map; with `depth` the session has a depth camera (16x12) and a
+// DepthFrame follows every third packet (TrackRequest.depth, the hand-over to odometry).
 std::string RequestsSeed(api::EventEncoding encoding, bool pose_hint, bool filters = false,
-                         bool velocity = false, bool gnss_fix = false) {
+                         bool velocity = false, bool gnss_fix = false, bool depth = false) {
   const int64_t start_ns = testing::kInitialTimeNs - kWindowNs;
   std::string seed;
   api::TrackRequest start = testing::TestSessionStart();
@@ -131,6 +132,13 @@ std::string RequestsSeed(api::EventEncoding encoding, bool pose_hint, bool filte
         wire::TwistToProto((Vector6d() << 0.2, -0.1, 0.05, 0.3, 0.1, -0.2).finished());
   }
   if (gnss_fix) start.mutable_start()->set_map_name(kAnchoredTestMapName);
+  const Camera depth_camera = Camera::Pinhole(16, 12, 14, 14, 7.5, 5.5);
+  if (depth) {
+    *start.mutable_start()->mutable_depth_camera()->mutable_camera() = CameraToProto(depth_camera);
+    *start.mutable_start()->mutable_depth_camera()->mutable_event_from_depth() =
+        RigidToProto(Rigid3d(Eigen::Quaterniond(Eigen::AngleAxisd(0.02, Eigen::Vector3d::UnitY())),
+                             Eigen::Vector3d(0.04, 0.0, 0.0)));
+  }
   AppendRecord(start.SerializeAsString(), &seed);
   std::vector<EventBuffer> windows = Windows(start_ns);
   for (EventBuffer& window : windows) {
@@ -162,6 +170,13 @@ std::string RequestsSeed(api::EventEncoding encoding, bool pose_hint, bool filte
       fix.mutable_gnss_fix()->set_vertical_accuracy_m(5.0);
       fix.mutable_gnss_fix()->set_t_ns(window_start + kWindowNs);
       AppendRecord(fix.SerializeAsString(), &seed);
+    }
+    if (depth && i % 3 == 2) {
+      // A plane 2 m away with a hole.
+      cv::Mat depth_m(depth_camera.height, depth_camera.width, CV_32FC1, cv::Scalar(2.0));
+      depth_m(cv::Rect(3, 2, 4, 3)).setTo(0.0f);
+      AppendRecord(
+          testing::DepthFrameRequest(window_start + kWindowNs, depth_m).SerializeAsString(), &seed);
     }
     if (pose_hint && i == packets.size() / 2) {
       api::TrackRequest hint;
@@ -226,6 +241,9 @@ int Main(int argc, char** argv) {
             RequestsSeed(api::EVENT_ENCODING_PACKED, false, /*filters=*/false,
                          /*velocity=*/true));
   WriteFile(out / "requests" / "frames", FrameSeed());
+  WriteFile(out / "requests" / "packed_depth",
+            RequestsSeed(api::EVENT_ENCODING_PACKED, false, /*filters=*/false, /*velocity=*/false,
+                         /*gnss_fix=*/false, /*depth=*/true));
   WriteFile(out / "requests" / "packed_gnss_fix",
             RequestsSeed(api::EVENT_ENCODING_PACKED, false, /*filters=*/false, /*velocity=*/false,
                          /*gnss_fix=*/true));

@@ -1,6 +1,9 @@
 #include "localizer/service/testing/service_fixture.h"
 
 #include <algorithm>
+#include <cmath>
+
+#include <algorithm>
 #include <atomic>
 #include <random>
 #include <thread>
@@ -109,6 +112,26 @@ api::TrackRequest TestSessionStart() {
   start->set_initial_t_ns(kInitialTimeNs);
   start->mutable_options()->set_step_rate_hz(200);
   start->set_client_name("test");
+  return request;
+}
+
+api::TrackRequest DepthFrameRequest(int64_t t_ns, const cv::Mat& depth_m) {
+  api::TrackRequest request;
+  api::DepthFrame* frame = request.mutable_depth();
+  frame->set_t_ns(t_ns);
+  frame->set_width(static_cast<uint32_t>(depth_m.cols));
+  frame->set_height(static_cast<uint32_t>(depth_m.rows));
+  std::string bytes(depth_m.total() * 2, '\0');
+  for (int y = 0; y < depth_m.rows; ++y) {
+    for (int x = 0; x < depth_m.cols; ++x) {
+      const double value = std::round(depth_m.at<float>(y, x) * 1000.0);
+      const auto millimetres = static_cast<uint16_t>(std::clamp(value, 0.0, 65535.0));
+      const size_t i = static_cast<size_t>(y) * depth_m.cols + x;
+      bytes[2 * i] = static_cast<char>(millimetres & 0xff);
+      bytes[2 * i + 1] = static_cast<char>(millimetres >> 8);
+    }
+  }
+  frame->set_depth_mm(std::move(bytes));
   return request;
 }
 

@@ -10,6 +10,8 @@
 #include <string>
 #include <vector>
 
+#include <opencv2/core.hpp>
+
 #include "core/camera/camera.h"
 #include "core/events/event.h"
 #include "core/events/event_reader.h"
@@ -69,6 +71,10 @@ std::unique_ptr<api::Localizer::Stub> ConnectStub(int port);
 // A SessionStart for the test map and camera at the synthetic motion's pose at kInitialTimeNs,
 // 200 Hz steps.
 api::TrackRequest TestSessionStart();
+
+// A DepthFrame request of `depth_m` (CV_32FC1 metres, 0 = none) taken at t_ns: little-endian
+// uint16 millimetres.
+api::TrackRequest DepthFrameRequest(int64_t t_ns, const cv::Mat& depth_m);
 
 // PACKED EventPackets of `events`, one per `packet_ns` window starting at the first event.
 std::vector<api::TrackRequest> PackedPackets(const EventBuffer& events, int64_t packet_ns);
