@@ -27,7 +27,7 @@ class StderrProgress : public ProgressListener {
 // same arguments and `--chunk-index K`.
 int RunChunkedBuild(const BuildCommandLine& command_line, StderrProgress* progress) {
   ChunkedBuildOptions options = command_line.chunked_options;
-  if (options.workers > 1 && !options.only_chunk && !options.merge_only) {
+  if (options.workers > 1 && !options.only_chunk && !options.merge_only && !options.plan_only) {
     std::error_code error;
     const std::filesystem::path self = std::filesystem::read_symlink("/proc/self/exe", error);
     if (error) throw IoError("cannot find this program to start workers: " + error.message());
@@ -39,6 +39,10 @@ int RunChunkedBuild(const BuildCommandLine& command_line, StderrProgress* progre
   }
   const ChunkedBuildReport report =
       BuildChunkedSite(options, command_line.quiet ? nullptr : progress);
+  if (options.plan_only) {
+    std::cout << report.chunk_sizes.size() << " chunks by " << report.method << "\n";
+    return kExitSuccess;
+  }
   if (options.only_chunk) {
     std::cout << "chunk " << *options.only_chunk
               << (report.reused_chunks.empty() ? " computed" : " already finished") << "\n";
@@ -162,6 +166,8 @@ Chunked build (docs/mapper.md, "Chunked build"; automatic above 1000 photos):
   --memory-budget BYTES    peak memory of the build (K, M, G suffixes): refused up front when
                            one chunk cannot fit; fewer workers when they do not fit together
   --chunk-index K          compute chunk K only (a worker, a pod of an Indexed Job)
+  --plan-only              write the plan (CHUNK_WORKSPACE/plan.json), print the chunk count
+                           and stop
   --merge-only             merge the finished chunks into the site (every chunk must be done)
   --tile-size M            the site's tile edge (default 50)
   --tile-overlap M         the site's tile overlap (default 10)
@@ -204,6 +210,11 @@ BuildCommandLine ParseBuildCommandLine(const std::vector<std::string>& arguments
     if (flag == "--merge-only") {
       command_line.chunked = true;
       command_line.chunked_options.merge_only = true;
+      continue;
+    }
+    if (flag == "--plan-only") {
+      command_line.chunked = true;
+      command_line.chunked_options.plan_only = true;
       continue;
     }
     if (flag == "--fast-nondeterministic") {

@@ -86,6 +86,9 @@ struct ChunkedBuildOptions {
   std::vector<std::string> worker_command;
   // Compute only this chunk (an Indexed Job's pod, a worker process) and stop.
   std::optional<size_t> only_chunk;
+  // Compute nothing: write the plan (plan.json in the chunk workspace) and stop (the chunk count
+  // an Indexed Job needs).
+  bool plan_only = false;
   // Compute no chunk: merge the finished ones (all must be there) into the site.
   bool merge_only = false;
   // Peak memory the build may use, bytes (all workers together); std::nullopt: no bound.
