@@ -23,6 +23,7 @@
 #include "core/common/error.h"
 #include "core/common/file_util.h"
 #include "core/common/provenance.h"
+#include "core/common/text_lines.h"
 #include "core/dataset/pose_text.h"
 #include "core/geometry/rigid3.h"
 #include "mapper/build_stages.h"
@@ -96,32 +97,6 @@ std::string PoseLines(const std::map<std::string, Rigid3d>& poses) {
          << "\n";
   }
   return text.str();
-}
-
-std::map<std::string, Rigid3d> ParsePoseLines(const std::string& text, const fs::path& source) {
-  std::map<std::string, Rigid3d> poses;
-  std::istringstream stream(text);
-  std::string line;
-  size_t number = 0;
-  while (std::getline(stream, line)) {
-    ++number;
-    if (line.empty() || line[0] == '#') continue;
-    const size_t space = line.find(' ');
-    if (space == std::string::npos || space == 0) {
-      throw ParseError::AtLine(source.string(), static_cast<int64_t>(number),
-                               "expected IMAGE_NAME tx ty tz qx qy qz qw");
-    }
-    const std::string name = line.substr(0, space);
-    try {
-      const Rigid3d pose = ParsePoseText("pose", std::string_view(line).substr(space + 1));
-      if (!poses.emplace(name, pose).second) {
-        throw InvalidArgumentError("image " + name + " appears twice");
-      }
-    } catch (const InvalidArgumentError& error) {
-      throw ParseError::AtLine(source.string(), static_cast<int64_t>(number), error.what());
-    }
-  }
-  return poses;
 }
 
 // The fingerprint of a chunk's inputs: its photos (names, sizes, content hashes), camera, COLMAP
@@ -522,6 +497,27 @@ uint64_t EstimatedChunkPeakBytes(size_t num_photos, int width, int height) {
   return static_cast<uint64_t>(fixed + per_photo * static_cast<double>(num_photos));
 }
 
+std::map<std::string, Rigid3d> ParseChunkPoses(std::string_view text, const std::string& source) {
+  std::map<std::string, Rigid3d> poses;
+  ForEachDataLine(text, [&](int64_t number, const std::string& line) {
+    const size_t start = line.find_first_not_of(" \t");
+    const size_t space = line.find_first_of(" \t", start);
+    if (space == std::string::npos) {
+      throw ParseError::AtLine(source, number, "expected IMAGE_NAME tx ty tz qx qy qz qw");
+    }
+    const std::string name = line.substr(start, space - start);
+    try {
+      const Rigid3d pose = ParsePoseText("pose", std::string_view(line).substr(space + 1));
+      if (!poses.emplace(name, pose).second) {
+        throw InvalidArgumentError("image " + name + " appears twice");
+      }
+    } catch (const InvalidArgumentError& error) {
+      throw ParseError::AtLine(source, number, error.what());
+    }
+  });
+  return poses;
+}
+
 std::string ChunkFolderName(size_t index) {
   std::ostringstream text;
   text << "chunk_" << std::setw(4) << std::setfill('0') << index;
@@ -531,8 +527,8 @@ std::string ChunkFolderName(size_t index) {
 ChunkResult ReadChunkResult(const fs::path& directory) {
   ChunkResult result;
   result.map = LoadMap(directory / kChunkMapFile);
-  result.world_from_cams =
-      ParsePoseLines(ReadFileToString(directory / kChunkPosesFile), directory / kChunkPosesFile);
+  result.world_from_cams = ParseChunkPoses(ReadFileToString(directory / kChunkPosesFile),
+                                           (directory / kChunkPosesFile).string());
   result.inputs_fingerprint = RecordedFingerprint(directory);
   if (result.inputs_fingerprint.empty()) {
     throw ParseError((directory / kChunkInputsFile).string(), "byte 0",

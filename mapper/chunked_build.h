@@ -18,6 +18,7 @@
 #include <map>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <Eigen/Core>
@@ -117,6 +118,11 @@ struct ChunkResult {
 
 // Folder name of chunk `index` inside the chunk workspace ("chunk_0007").
 std::string ChunkFolderName(size_t index);
+
+// Parses a chunk's poses.txt: `IMAGE_NAME tx ty tz qx qy qz qw` lines (world_from_cam, the
+// pose-text rule of docs/dataset-format.md), `#` comments and empty lines skipped, each name once.
+// Throws ParseError naming `source` and the line.
+std::map<std::string, Rigid3d> ParseChunkPoses(std::string_view text, const std::string& source);
 
 // Reads the finished chunk folder `directory` (map.evmap with LoadMap's checks, poses.txt as
 // `IMAGE_NAME tx ty tz qx qy qz qw` lines, inputs.txt). Throws IoError / ParseError naming the

@@ -53,3 +53,6 @@ evloc_add_test(NAME evloc_mapper_accuracy_test
   SOURCES ${CMAKE_CURRENT_LIST_DIR}/map_builder_accuracy_test.cc
   LIBS evloc_mapper_pipeline evloc_map_accuracy
   LABELS long)
+
+evloc_add_fuzzer(NAME evloc_chunk_poses_fuzzer SOURCES ${CMAKE_CURRENT_LIST_DIR}/fuzz/chunk_poses_fuzzer.cc
+  LIBS evloc_mapper_pipeline)
