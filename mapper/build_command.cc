@@ -303,9 +303,14 @@ BuildCommandLine ParseBuildCommandLine(const std::vector<std::string>& arguments
   if (command_line.help) return command_line;
   if (options.image_dir.empty()) throw InvalidArgumentError("--images DIR is required");
   if (options.output_dir.empty()) throw InvalidArgumentError("--out MAPDIR is required");
-  if (!command_line.chunked) {
-    command_line.chunked =
-        ListInputImages(options.image_dir, options.image_list).size() > kChunkedBuildAbovePhotos;
+  if (!command_line.chunked && !camera_flag) {
+    // A bad image folder or list is the build's error (exit 1), not the command line's: count
+    // only what can be listed.
+    try {
+      command_line.chunked =
+          ListInputImages(options.image_dir, options.image_list).size() > kChunkedBuildAbovePhotos;
+    } catch (const Error&) {
+    }
   }
   if (camera_flag) {
     // The camera size is the images' size.
@@ -317,6 +322,7 @@ BuildCommandLine ParseBuildCommandLine(const std::vector<std::string>& arguments
                                  (options.image_dir / images[0].name).string());
     }
     options.camera = ParseCameraFlag(*camera_flag, first.cols, first.rows);
+    command_line.chunked = command_line.chunked || images.size() > kChunkedBuildAbovePhotos;
   }
   chunked.build = options;
   if (command_line.chunked) chunked.Check();
