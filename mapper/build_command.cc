@@ -23,6 +23,50 @@ class StderrProgress : public ProgressListener {
   }
 };
 
+// The chunked build of a parsed command line; worker processes run this program again with the
+// same arguments and `--chunk-index K`.
+int RunChunkedBuild(const BuildCommandLine& command_line, StderrProgress* progress) {
+  ChunkedBuildOptions options = command_line.chunked_options;
+  if (options.workers > 1 && !options.only_chunk && !options.merge_only && !options.plan_only) {
+    std::error_code error;
+    const std::filesystem::path self = std::filesystem::read_symlink("/proc/self/exe", error);
+    if (error) throw IoError("cannot find this program to start workers: " + error.message());
+    options.worker_command = {self.string(), "build"};
+    for (const std::string& argument : command_line.arguments) {
+      options.worker_command.push_back(argument);
+    }
+    options.worker_command.push_back("--quiet");
+  }
+  const ChunkedBuildReport report =
+      BuildChunkedSite(options, command_line.quiet ? nullptr : progress);
+  if (options.plan_only) {
+    std::cout << report.chunk_sizes.size() << " chunks by " << report.method << "\n";
+    return kExitSuccess;
+  }
+  if (options.only_chunk) {
+    std::cout << "chunk " << *options.only_chunk
+              << (report.reused_chunks.empty() ? " computed" : " already finished") << "\n";
+    return kExitSuccess;
+  }
+  const MapBuildReport& build = report.build;
+  std::cout << "site written to " << options.build.output_dir.string() << ": " << report.num_tiles
+            << " tiles (version " << report.site_version << "), " << build.num_points << " points, "
+            << build.num_keyframes << " keyframes, " << build.num_registered << "/"
+            << build.num_images << " images registered, " << report.chunk_sizes.size()
+            << " chunks by " << report.method << " (" << report.computed_chunks.size()
+            << " computed, " << report.reused_chunks.size() << " reused)";
+  if (build.alignment_rms_m) {
+    std::cout << ", alignment RMS " << *build.alignment_rms_m << " m (scale "
+              << *build.alignment_scale << ")";
+  }
+  std::cout << "\n";
+  if (!build.alignment_warning.empty()) {
+    std::cerr << "evloc-mapper build: WARNING: --accept-bad-alignment: " << build.alignment_warning
+              << "; the site is probably wrong (report.json: alignment.warning)\n";
+  }
+  return kExitSuccess;
+}
+
 }  // namespace
 
 Camera ParseCameraFlag(const std::string& value, int width, int height) {
@@ -107,6 +151,26 @@ Geo-reference (docs/geo.md; one source at most):
   --geo-exif               the GNSS tags in the photos' EXIF data; the camera centres are
                            aligned to them robustly
   --geo-inlier-threshold M  a point agrees with the alignment within M metres (default 10)
+Chunked build (docs/mapper.md, "Chunked build"; automatic above 1000 photos):
+  --chunked                cut the photos into overlapping chunks (by position with
+                           --known-poses or --align-to, else by input order of a timed
+                           --images-list), build each, align (Sim(3) and a global adjustment)
+                           and merge them; MAPDIR becomes a site of tiles
+  --chunk-size N           core photos per chunk (default 250)
+  --chunk-overlap M        photos within M metres of a chunk join it (default 6)
+  --chunk-overlap-photos N by input order: N photos on each side join a chunk (default 20)
+  --chunk-workspace DIR    finished chunks and their COLMAP workspaces, kept for a restart
+                           (default: MAPDIR.chunks)
+  --workers N              chunks computed at once, each by a worker process (default 1: in
+                           this process)
+  --memory-budget BYTES    peak memory of the build (K, M, G suffixes): refused up front when
+                           one chunk cannot fit; fewer workers when they do not fit together
+  --chunk-index K          compute chunk K only (a worker, a pod of an Indexed Job)
+  --plan-only              write the plan (CHUNK_WORKSPACE/plan.json), print the chunk count
+                           and stop
+  --merge-only             merge the finished chunks into the site (every chunk must be done)
+  --tile-size M            the site's tile edge (default 50)
+  --tile-overlap M         the site's tile overlap (default 10)
 Output:
   --quiet                  no progress output
   --help                   this text
@@ -116,6 +180,8 @@ Output:
 BuildCommandLine ParseBuildCommandLine(const std::vector<std::string>& arguments) {
   BuildCommandLine command_line;
   MapBuilderOptions& options = command_line.options;
+  ChunkedBuildOptions& chunked = command_line.chunked_options;
+  command_line.arguments.assign(arguments.begin() + (arguments.empty() ? 0 : 1), arguments.end());
   std::optional<std::string> camera_flag;
   std::string recorded = "evloc-mapper build";
   for (size_t i = 1; i < arguments.size(); ++i) {
@@ -135,6 +201,20 @@ BuildCommandLine ParseBuildCommandLine(const std::vector<std::string>& arguments
     }
     if (flag == "--geo-exif") {
       options.geo.exif = true;
+      continue;
+    }
+    if (flag == "--chunked") {
+      command_line.chunked = true;
+      continue;
+    }
+    if (flag == "--merge-only") {
+      command_line.chunked = true;
+      command_line.chunked_options.merge_only = true;
+      continue;
+    }
+    if (flag == "--plan-only") {
+      command_line.chunked = true;
+      command_line.chunked_options.plan_only = true;
       continue;
     }
     if (flag == "--fast-nondeterministic") {
@@ -196,6 +276,25 @@ BuildCommandLine ParseBuildCommandLine(const std::vector<std::string>& arguments
       options.geo.alignment.inlier_threshold_m = ParseDoubleFlag(flag, value);
     } else if (flag == "--voxel-size") {
       options.merge.voxel_size = ParseDoubleFlag(flag, value);
+    } else if (flag == "--chunk-size") {
+      chunked.chunking.chunk_size = static_cast<size_t>(ParseUnsignedFlag(flag, value));
+    } else if (flag == "--chunk-overlap") {
+      chunked.chunking.overlap_m = ParseDoubleFlag(flag, value);
+    } else if (flag == "--chunk-overlap-photos") {
+      chunked.chunking.overlap_photos = static_cast<size_t>(ParseUnsignedFlag(flag, value));
+    } else if (flag == "--chunk-workspace") {
+      chunked.chunk_workspace = value;
+    } else if (flag == "--workers") {
+      chunked.workers = ParseIntFlag(flag, value);
+    } else if (flag == "--memory-budget") {
+      chunked.memory_budget_bytes = ParseByteSizeFlag(flag, value);
+    } else if (flag == "--chunk-index") {
+      chunked.only_chunk = static_cast<size_t>(ParseUnsignedFlag(flag, value));
+      command_line.chunked = true;
+    } else if (flag == "--tile-size") {
+      chunked.tile_size_m = ParseDoubleFlag(flag, value);
+    } else if (flag == "--tile-overlap") {
+      chunked.tile_overlap_m = ParseDoubleFlag(flag, value);
     } else {
       throw InvalidArgumentError("unknown flag '" + flag + "' (see --help)");
     }
@@ -204,6 +303,15 @@ BuildCommandLine ParseBuildCommandLine(const std::vector<std::string>& arguments
   if (command_line.help) return command_line;
   if (options.image_dir.empty()) throw InvalidArgumentError("--images DIR is required");
   if (options.output_dir.empty()) throw InvalidArgumentError("--out MAPDIR is required");
+  if (!command_line.chunked && !camera_flag) {
+    // A bad image folder or list is the build's error (exit 1), not the command line's: count
+    // only what can be listed.
+    try {
+      command_line.chunked =
+          ListInputImages(options.image_dir, options.image_list).size() > kChunkedBuildAbovePhotos;
+    } catch (const Error&) {
+    }
+  }
   if (camera_flag) {
     // The camera size is the images' size.
     const std::vector<InputImage> images = ListInputImages(options.image_dir, options.image_list);
@@ -214,7 +322,10 @@ BuildCommandLine ParseBuildCommandLine(const std::vector<std::string>& arguments
                                  (options.image_dir / images[0].name).string());
     }
     options.camera = ParseCameraFlag(*camera_flag, first.cols, first.rows);
+    command_line.chunked = command_line.chunked || images.size() > kChunkedBuildAbovePhotos;
   }
+  chunked.build = options;
+  if (command_line.chunked) chunked.Check();
   return command_line;
 }
 
@@ -227,6 +338,7 @@ int RunBuildCommand(int argc, char** argv) {
       return kExitSuccess;
     }
     StderrProgress progress;
+    if (command_line.chunked) return RunChunkedBuild(command_line, &progress);
     const MapBuildReport report =
         BuildMap(command_line.options, command_line.quiet ? nullptr : &progress);
     std::cout << "map written to " << command_line.options.output_dir.string() << ": "

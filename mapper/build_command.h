@@ -4,6 +4,7 @@
 #include <string>
 #include <vector>
 
+#include "mapper/chunked_build.h"
 #include "mapper/map_builder.h"
 
 namespace evloc::mapper {
@@ -16,7 +17,18 @@ struct BuildCommandLine {
   bool quiet = false;
   // --help: print the usage and exit 0.
   bool help = false;
+  // --chunked (or more photos than chunked_above): the chunked build into a site
+  // (mapper/chunked_build.h); chunked.build is `options` then.
+  bool chunked = false;
+  // The chunked build's own options (chunk size and overlap, workers, memory budget, chunk
+  // workspace, --chunk-index, --merge-only, tiles).
+  ChunkedBuildOptions chunked_options;
+  // The arguments after `build` as given, for the worker processes.
+  std::vector<std::string> arguments;
 };
+
+// A build of more photos than this is chunked without --chunked.
+inline constexpr size_t kChunkedBuildAbovePhotos = 1000;
 
 // Parses the flags after `build` (argv[0] is the program or subcommand name and is skipped).
 // Throws InvalidArgumentError naming the flag for an unknown flag, a missing or malformed value.

@@ -2,6 +2,8 @@
 
 #include <sys/resource.h>
 
+#include <algorithm>
+
 #include <nlohmann/json.hpp>
 
 namespace evloc::mapper {
@@ -23,6 +25,16 @@ double ProcessCpuSeconds() {
 
 }  // namespace
 
+uint64_t PeakResidentBytes() {
+  uint64_t peak = 0;
+  for (const int who : {RUSAGE_SELF, RUSAGE_CHILDREN}) {
+    rusage usage{};
+    if (getrusage(who, &usage) != 0) continue;
+    peak = std::max<uint64_t>(peak, static_cast<uint64_t>(usage.ru_maxrss) * 1024);  // KiB
+  }
+  return peak;
+}
+
 StageClock::StageClock(ProgressListener* listener, MapBuildReport* report)
     : listener_(listener), report_(report), start_(Clock::now()) {}
 
@@ -40,7 +52,7 @@ void StageClock::Run(const std::string& stage, const std::function<bool()>& body
   const double cpu_begin = ProcessCpuSeconds();
   const bool reused = body();
   report_->timings.push_back({stage, std::chrono::duration<double>(Clock::now() - begin).count(),
-                              ProcessCpuSeconds() - cpu_begin, reused});
+                              ProcessCpuSeconds() - cpu_begin, reused, PeakResidentBytes()});
   Progress(stage, 1, 1);
 }
 
@@ -153,7 +165,8 @@ std::string MapBuildReportToJson(const MapBuildReport& report) {
     timings.push_back({{"stage", timing.stage},
                        {"seconds", timing.seconds},
                        {"cpu_seconds", timing.cpu_seconds},
-                       {"reused", timing.reused}});
+                       {"reused", timing.reused},
+                       {"peak_rss_mb", static_cast<double>(timing.peak_rss_bytes) / (1 << 20)}});
   }
   json["timings"] = timings;
   json["colmap_seconds"] = report.TotalSeconds("colmap");

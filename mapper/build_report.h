@@ -4,6 +4,7 @@
 
 #include <chrono>
 #include <cstddef>
+#include <cstdint>
 #include <functional>
 #include <map>
 #include <optional>
@@ -47,7 +48,15 @@ struct StageTiming {
   double cpu_seconds = 0.0;
   // True when the stage's result was reused from the COLMAP workspace.
   bool reused = false;
+  // Peak resident memory at the end of the stage, bytes: the larger of this process's peak and
+  // the largest peak of its waited-for children (COLMAP, chunk workers), since the process began
+  // (getrusage ru_maxrss). The stage that raised it is the first whose value reaches it.
+  uint64_t peak_rss_bytes = 0;
 };
+
+// PeakResidentBytes of StageTiming: max(ru_maxrss of this process, of its waited-for children),
+// bytes.
+uint64_t PeakResidentBytes();
 
 // What BuildMap did, written to report.json.
 struct MapBuildReport {

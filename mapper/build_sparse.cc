@@ -177,6 +177,33 @@ SparseReconstruction ReconstructSparse(const MapBuilderOptions& options, const B
   return sparse;
 }
 
+Sim3d FitAlignmentToReference(const MapBuilderOptions& options, const std::vector<Rigid3d>& model,
+                              const std::vector<Rigid3d>& reference,
+                              const std::string& likely_cause, MapBuildReport* report) {
+  const PoseAlignment alignment = AlignPoses(model, reference);
+  const Sim3d& world_from_model = alignment.reference_from_model;
+  report->alignment_num_images = alignment.num_poses;
+  report->alignment_rms_m = alignment.centre_rms;
+  report->alignment_max_m = alignment.centre_max;
+  report->alignment_rotation_rms_deg = alignment.rotation_rms_deg;
+  report->alignment_rotation_max_deg = alignment.rotation_max_deg;
+  report->alignment_scale = world_from_model.scale;
+  report->alignment_reference_spread_m = alignment.reference_spread;
+  report->world_from_model = world_from_model;
+  if (const std::optional<std::string> violation =
+          AlignmentLimitViolation(alignment, options.alignment_limits)) {
+    if (!options.accept_bad_alignment) {
+      throw InvalidArgumentError(
+          "--align-to " + options.align_to->string() + ": " + *violation + ". " + likely_cause +
+          " or the reference poses belong to other images; no map was written. To build it "
+          "anyway pass --accept-bad-alignment, or raise --max-alignment-residual / "
+          "--max-alignment-rotation");
+    }
+    report->alignment_warning = *violation;
+  }
+  return world_from_model;
+}
+
 void AlignToReference(const MapBuilderOptions& options, const BuildInputs& inputs,
                       const StageClock& clock, SparseReconstruction* sparse,
                       MapBuildReport* report) {
@@ -195,29 +222,11 @@ void AlignToReference(const MapBuilderOptions& options, const BuildInputs& input
                                  " registered images have a reference pose in " +
                                  options.align_to->string() + "; the alignment needs 3");
     }
-    const PoseAlignment alignment = AlignPoses(model_poses, reference_poses);
-    const Sim3d& world_from_model = alignment.reference_from_model;
-    report->alignment_num_images = alignment.num_poses;
-    report->alignment_rms_m = alignment.centre_rms;
-    report->alignment_max_m = alignment.centre_max;
-    report->alignment_rotation_rms_deg = alignment.rotation_rms_deg;
-    report->alignment_rotation_max_deg = alignment.rotation_max_deg;
-    report->alignment_scale = world_from_model.scale;
-    report->alignment_reference_spread_m = alignment.reference_spread;
-    report->world_from_model = world_from_model;
-    if (const std::optional<std::string> violation =
-            AlignmentLimitViolation(alignment, options.alignment_limits)) {
-      if (!options.accept_bad_alignment) {
-        throw InvalidArgumentError(
-            "--align-to " + options.align_to->string() + ": " + *violation +
-            ". The COLMAP reconstruction is probably wrong (see the COLMAP logs in " +
-            sparse->log_dir.string() +
-            ") or the reference poses belong to other images; no map was written. To build it "
-            "anyway pass --accept-bad-alignment, or raise --max-alignment-residual / "
-            "--max-alignment-rotation");
-      }
-      report->alignment_warning = *violation;
-    }
+    const Sim3d world_from_model = FitAlignmentToReference(
+        options, model_poses, reference_poses,
+        "The COLMAP reconstruction is probably wrong (see the COLMAP logs in " +
+            sparse->log_dir.string() + ")",
+        report);
     for (auto& [id, image] : sparse->model.images) {
       image.cam_from_world =
           world_from_model.TransformPose(image.cam_from_world.Inverse()).Inverse();

@@ -65,6 +65,15 @@ struct SparseReconstruction {
 SparseReconstruction ReconstructSparse(const MapBuilderOptions& options, const BuildInputs& inputs,
                                        const StageClock& clock, MapBuildReport* report);
 
+// Fits the Sim(3) from `model` to `reference` world_from_cam poses (AlignPoses), records it in
+// the report (alignment figures, world_from_model) and checks it against options'
+// alignment_limits: beyond them it throws InvalidArgumentError (with `likely_cause` in the
+// message) unless options.accept_bad_alignment, which records the warning instead. For stage 3
+// and the chunked build's merged model.
+Sim3d FitAlignmentToReference(const MapBuilderOptions& options, const std::vector<Rigid3d>& model,
+                              const std::vector<Rigid3d>& reference,
+                              const std::string& likely_cause, MapBuildReport* report);
+
 // Stage 3: with --align-to, fits the Sim(3) from the model to the reference poses, checks it
 // against the limits and applies it to the model's poses and points (report: the alignment
 // figures). Throws InvalidArgumentError when the alignment is refused.

@@ -1,13 +1,14 @@
 #include "mapper/colmap_runner.h"
 
 #include <fcntl.h>
-#include <spawn.h>
+#include <sys/prctl.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <cerrno>
+#include <csignal>
 #include <cstdlib>
 #include <cstring>
 #include <deque>
@@ -131,12 +132,6 @@ void RunLoggedCommand(const std::vector<std::string>& arguments,
   for (const std::string& argument : arguments) argv.push_back(const_cast<char*>(argument.c_str()));
   argv.push_back(nullptr);
 
-  posix_spawn_file_actions_t actions;
-  posix_spawn_file_actions_init(&actions);
-  posix_spawn_file_actions_addopen(&actions, STDIN_FILENO, "/dev/null", O_RDONLY, 0);
-  posix_spawn_file_actions_addopen(&actions, STDOUT_FILENO, log_path.c_str(),
-                                   O_WRONLY | O_CREAT | O_APPEND, 0644);
-  posix_spawn_file_actions_adddup2(&actions, STDOUT_FILENO, STDERR_FILENO);
   std::string command_line;
   for (const std::string& argument : arguments)
     command_line += (command_line.empty() ? "" : " ") + argument;
@@ -145,11 +140,32 @@ void RunLoggedCommand(const std::vector<std::string>& arguments,
     log << "$ " << command_line << "\n";
     if (!log) throw IoError("cannot write the log file " + log_path.string());
   }
-  pid_t pid = 0;
-  const int spawn_status = posix_spawn(&pid, argv[0], &actions, nullptr, argv.data(), environ);
-  posix_spawn_file_actions_destroy(&actions);
-  if (spawn_status != 0) {
-    throw IoError("cannot start " + arguments[0] + ": " + std::strerror(spawn_status));
+  // Opened before the fork: the child only duplicates descriptors and execs.
+  const int input = ::open("/dev/null", O_RDONLY | O_CLOEXEC);
+  const int output = ::open(log_path.c_str(), O_WRONLY | O_CREAT | O_APPEND | O_CLOEXEC, 0644);
+  if (input < 0 || output < 0) {
+    if (input >= 0) ::close(input);
+    if (output >= 0) ::close(output);
+    throw IoError("cannot open the log file " + log_path.string());
+  }
+  const pid_t parent = ::getpid();
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    // The child dies with the thread that started it: a killed build (a resumable chunked build,
+    // docs/mapper.md) leaves no COLMAP behind writing into the workspace a restart reuses.
+    ::prctl(PR_SET_PDEATHSIG, SIGKILL);
+    if (::getppid() != parent) ::_exit(127);
+    ::dup2(input, STDIN_FILENO);
+    ::dup2(output, STDOUT_FILENO);
+    ::dup2(output, STDERR_FILENO);
+    ::execve(argv[0], argv.data(), environ);
+    ::_exit(127);
+  }
+  const int fork_error = errno;
+  ::close(input);
+  ::close(output);
+  if (pid < 0) {
+    throw IoError("cannot start " + arguments[0] + ": " + std::strerror(fork_error));
   }
   int status = 0;
   while (::waitpid(pid, &status, 0) < 0) {
