@@ -53,32 +53,27 @@ void EventImage::Insert(const EventBuffer& events, size_t begin, size_t end) {
   last_t_ns_ = events.t_ns[end - 1];
 }
 
+float EventImage::Decayed(size_t pixel, int64_t t_ns) const {
+  if (last_t_ns_per_pixel_[pixel] == kNever) return 0.0f;
+  return value_[pixel] *
+         static_cast<float>(
+             std::exp(-static_cast<double>(t_ns - last_t_ns_per_pixel_[pixel]) * (1.0 / tau_ns_)));
+}
+
 double EventImage::Value(int x, int y, int64_t t_ns) const {
   if (x < 0 || y < 0 || x >= width_ || y >= height_) return 0.0;
-  const size_t pixel = static_cast<size_t>(y) * width_ + x;
-  if (last_t_ns_per_pixel_[pixel] == kNever) return 0.0;
-  return value_[pixel] *
-         std::exp(-static_cast<double>(t_ns - last_t_ns_per_pixel_[pixel]) / tau_ns_);
+  return Decayed(static_cast<size_t>(y) * width_ + x, t_ns);
 }
 
 cv::Mat EventImage::Render(int64_t t_ns) const {
   cv::Mat image(height_, width_, CV_8UC1, cv::Scalar(128));
   if (!any_) return image;
   const size_t pixels = value_.size();
-  std::vector<float> decayed(pixels, 0.0f);
+  std::vector<float> decayed(pixels);
+  for (size_t i = 0; i < pixels; ++i) decayed[i] = Decayed(i, t_ns);
   // The percentiles are over every pixel (those that never fired are at the integrator's rest
   // value, 0), as measured in docs/relocalization.md.
-  std::vector<float> seen;
-  seen.reserve(pixels);
-  const double inverse_tau = 1.0 / tau_ns_;
-  for (size_t i = 0; i < pixels; ++i) {
-    if (last_t_ns_per_pixel_[i] != kNever) {
-      decayed[i] =
-          value_[i] * static_cast<float>(std::exp(
-                          -static_cast<double>(t_ns - last_t_ns_per_pixel_[i]) * inverse_tau));
-    }
-    seen.push_back(decayed[i]);
-  }
+  std::vector<float> seen = decayed;
   const auto quantile = [&seen](double q) {
     const size_t k =
         std::min(seen.size() - 1, static_cast<size_t>(q * static_cast<double>(seen.size())));

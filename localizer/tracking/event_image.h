@@ -45,6 +45,9 @@ class EventImage {
   cv::Mat Render(int64_t t_ns) const;
 
  private:
+  // The value of `pixel` (row-major index) decayed to t_ns.
+  float Decayed(size_t pixel, int64_t t_ns) const;
+
   int width_;
   int height_;
   double tau_ns_;

@@ -159,8 +159,7 @@ std::vector<PoseEstimate> Tracker::Ingest(const EventBuffer& events) {
 
 void Tracker::InsertEvents(const EventBuffer& events, size_t begin, size_t end) {
   surface_.Insert(events, begin, end);
-  if (event_image_ &&
-      (status_ == TrackingStatus::kInitializing || status_ == TrackingStatus::kRelocalizing)) {
+  if (event_image_ && searching()) {
     event_image_->Insert(events, begin, end);
   }
 }
@@ -221,8 +220,7 @@ std::optional<PoseEstimate> Tracker::AddFrame(int64_t t_ns, const cv::Mat& gray)
 
 double Tracker::StepDecayTimeNs() const {
   const double longest_ns = options_.decay_time_s * 1e9;
-  if (search_decay_ns_ > 0 &&
-      (status_ == TrackingStatus::kInitializing || status_ == TrackingStatus::kRelocalizing)) {
+  if (search_decay_ns_ > 0 && searching()) {
     return search_decay_ns_;
   }
   if (options_.decay_trail_px <= 0 || status_ != TrackingStatus::kTracking || !has_selection_ ||
@@ -491,7 +489,7 @@ PoseEstimate Tracker::Step(int64_t t_ns) {
   estimate.timings.surface_ms = MillisecondsSince(step_start);
   estimate.search.episode = search_progress_.episode;
 
-  if (status_ == TrackingStatus::kInitializing || status_ == TrackingStatus::kRelocalizing) {
+  if (searching()) {
     const Clock::time_point search_start = Clock::now();
     SearchStep(t_ns, &estimate);
     estimate.timings.solve_ms = MillisecondsSince(search_start);

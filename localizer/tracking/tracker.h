@@ -249,6 +249,10 @@ class Tracker {
   Tracker(std::unique_ptr<const MapSource> owned, const MapSource* borrowed, const Camera& camera,
           const TrackerOptions& options);
 
+  // True while the global search runs (INITIALIZING or RELOCALIZING).
+  bool searching() const {
+    return status_ == TrackingStatus::kInitializing || status_ == TrackingStatus::kRelocalizing;
+  }
   // Runs the events that passed the noise filters into the surfaces and the steps they complete.
   std::vector<PoseEstimate> Ingest(const EventBuffer& events);
   // Events [begin, end) into the time surface and, while searching with an image source, into
