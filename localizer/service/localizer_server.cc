@@ -3,12 +3,14 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <condition_variable>
 #include <ctime>
 #include <deque>
 #include <fstream>
 #include <memory>
 #include <mutex>
 #include <sstream>
+#include <thread>
 #include <variant>
 #include <vector>
 
@@ -330,6 +332,29 @@ class LocalizerServer::Service final
   }
   bool draining() const { return draining_; }
 
+  // Track calls from TrackCall::Begin until their final status is handed to gRPC or they are done
+  // (refused ones too): the drain waits for them.
+  void CallBegun() {
+    std::lock_guard<std::mutex> lock(calls_mutex_);
+    ++calls_open_;
+  }
+  void CallEnded() {
+    {
+      std::lock_guard<std::mutex> lock(calls_mutex_);
+      --calls_open_;
+    }
+    calls_done_.notify_all();
+  }
+  int calls_open() {
+    std::lock_guard<std::mutex> lock(calls_mutex_);
+    return calls_open_;
+  }
+  // Waits until every Track call has ended or `deadline` passes; true when none is.
+  bool WaitForCalls(std::chrono::steady_clock::time_point deadline) {
+    std::unique_lock<std::mutex> lock(calls_mutex_);
+    return calls_done_.wait_until(lock, deadline, [this] { return calls_open_ == 0; });
+  }
+
   // Registers a Track stream from `peer` (a host, see PeerHost); RESOURCE_EXHAUSTED when the peer
   // has max_streams_per_peer open.
   grpc::Status OpenStream(const std::string& peer) {
@@ -595,6 +620,9 @@ class LocalizerServer::Service final
   std::map<std::string, int> streams_per_peer_;
   std::map<std::string, int> sessions_per_peer_;
   std::map<std::string, int> sessions_per_token_;
+  std::mutex calls_mutex_;
+  std::condition_variable calls_done_;
+  int calls_open_ = 0;
   // Declared last, stopped first: their threads may hold the last reference to a call, whose
   // destruction releases memory_ reservations.
   TrackingPool pool_;
@@ -637,6 +665,7 @@ class TrackCall final : public TrackReactor,
   // Starts the call; `self` owns it until gRPC calls OnDone.
   void Begin(std::shared_ptr<TrackCall> self) {
     self_ = std::move(self);
+    service_.CallBegun();
     call_start_ = Clock::now();
     last_change_ = call_start_;
     if (grpc::Status status = service_.Authenticate(*context_, &token_); !status.ok()) {
@@ -752,7 +781,7 @@ class TrackCall final : public TrackReactor,
       }
     }
     if (next) StartWrite(next);
-    if (finish) Finish(final_status_);
+    if (finish) FinishStream();
     if (wake) Wake();
   }
 
@@ -761,6 +790,7 @@ class TrackCall final : public TrackReactor,
       std::lock_guard<std::recursive_mutex> lock(context_mutex_);
       done_ = true;
     }
+    CountEnded();
     std::shared_ptr<TrackCall> self = std::move(self_);  // May destroy the call (last owner).
   }
 
@@ -823,8 +853,14 @@ class TrackCall final : public TrackReactor,
   // until its client reads.
   static constexpr size_t kMaxOutbound = 64;
 
-  // How long a draining session's call may stay open before it is cancelled.
-  static constexpr auto kDrainReadWait = std::chrono::seconds(1);
+  // How long a draining session's call may stay open before it is cancelled: half the drain
+  // timeout, at least 1 s. A session stops within a step of the drain, but its last responses
+  // and status go out only as fast as its client reads them (on a loaded machine that took over
+  // 1 s); the other half is left for the cancellations and the final statuses.
+  Clock::duration DrainReadWait() const {
+    return std::chrono::duration_cast<Clock::duration>(
+        std::chrono::duration<double>(std::max(1.0, 0.5 * options_.drain_timeout_s)));
+  }
 
   static double MicrosecondsSince(Clock::time_point start) {
     return std::chrono::duration<double, std::micro>(Clock::now() - start).count();
@@ -1269,7 +1305,20 @@ class TrackCall final : public TrackReactor,
         finish = true;
       }
     }
-    if (finish) Finish(final_status_);
+    if (finish) FinishStream();
+  }
+
+  // Hands the final status to gRPC (once the responses before it are written).
+  void FinishStream() {
+    Finish(final_status_);
+    CountEnded();
+  }
+
+  // Tells the service (once) that the call has ended for its client: its final status is handed
+  // to gRPC, or the call is done without one. gRPC calls OnDone only when the client's side is
+  // closed too, which a streaming client does after it has read the status.
+  void CountEnded() {
+    if (!counted_ended_.exchange(true)) service_.CallEnded();
   }
 
   // Schedules the next check of the call on the server's timer.
@@ -1303,7 +1352,7 @@ class TrackCall final : public TrackReactor,
         drain_start_ = now;
         Wake();
       }
-      if (!cancelled_ && (!handshake_done_ || now - drain_start_ > kDrainReadWait)) {
+      if (!cancelled_ && (!handshake_done_ || now - drain_start_ > DrainReadWait())) {
         cancelled_ = true;
         context_->TryCancel();
       }
@@ -1429,6 +1478,8 @@ class TrackCall final : public TrackReactor,
   bool finish_pending_ = false;
   // Set when a write failed (the client is gone); atomic for the pool's unlocked checks.
   std::atomic<bool> write_failed_{false};
+  // Set once CountEnded told the service.
+  std::atomic<bool> counted_ended_{false};
   Clock::time_point write_start_;
   wire::LogHistogram latencies_us_;
   wire::LogHistogram queue_us_;
@@ -1534,15 +1585,33 @@ int LocalizerServer::viewer_port() const { return viewer_ ? viewer_->port() : 0;
 
 ViewerBoard* LocalizerServer::viewer_board() { return service_->viewer_board(); }
 
+// How long the drain keeps the connections open after the last call ended (see Shutdown).
+constexpr auto kFinalStatusLinger = std::chrono::milliseconds(500);
+
 void LocalizerServer::Shutdown() {
   if (shut_down_.exchange(true)) return;
   // Health first (load balancers stop sending), then the sessions stop and gRPC refuses new
   // calls; calls still open at the deadline are cancelled. The metrics server stops last, so a
   // scrape during the drain sees it.
+  //
+  // A call is done for gRPC only when its client has closed its side too, and gRPC keeps a
+  // connection open until it is closed by the client or cancelled; but as soon as the last call
+  // on a connection is done after the shutdown began, it closes the connection, and a connection
+  // closed while its client is still sending (a streaming client sends until it reads its final
+  // status) is reset by the kernel, which throws away what the client had not read yet: the
+  // final status. So gRPC's shutdown starts only after every call has handed its final status
+  // to gRPC (or the drain timeout passed) and the clients have had 0.5 s to read it; then it
+  // cancels what is left at once.
+  const auto deadline = std::chrono::steady_clock::now() +
+                        std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                            std::chrono::duration<double>(drain_timeout_s_));
+  const bool had_calls = service_->calls_open() > 0;
   service_->StartDraining();
-  server_->Shutdown(std::chrono::system_clock::now() +
-                    std::chrono::duration_cast<std::chrono::system_clock::duration>(
-                        std::chrono::duration<double>(drain_timeout_s_)));
+  if (had_calls && service_->WaitForCalls(deadline)) {
+    std::this_thread::sleep_until(
+        std::min(deadline, std::chrono::steady_clock::now() + kFinalStatusLinger));
+  }
+  server_->Shutdown(std::chrono::system_clock::now());
   server_->Wait();
   viewer_.reset();
   metrics_.reset();

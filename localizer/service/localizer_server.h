@@ -229,7 +229,8 @@ class LocalizerServer {
   int port() const { return port_; }
   // Drains and stops; idempotent: health turns NOT_SERVING, new calls are refused, running
   // sessions stop within one step and end with UNAVAILABLE "draining" (or their SessionEnd when
-  // they were finishing), calls still open after drain_timeout_s are cancelled, then the metrics
+  // they were finishing), calls still open after drain_timeout_s are cancelled, the connections
+  // stay open 0.5 s after the last call ended (its client reads the status), then the metrics
   // server stops.
   void Shutdown();
   // Blocks until Shutdown() is called from another thread.
