@@ -40,9 +40,10 @@ PACKAGES=(
   # the ROS 1 node (ros/, docs/ros.md): roscpp and tf2_ros, the message definitions and Debian's
   # gencpp (the node's message headers are generated from ros/msg at build time); its test runs
   # roscore, roslaunch and rosbag play and listens with rospy
-  libroscpp-dev libtf2-ros-dev python3-gencpp python3-genmsg ros-std-msgs ros-sensor-msgs
-  ros-geometry-msgs python3-roslaunch python3-rospy python3-std-msgs python3-sensor-msgs
-  python3-geometry-msgs python3-tf2-msgs python3-rostopic
+  # (libsensor-msgs-dev: the C++ header of sensor_msgs/CameraInfo; nothing else pulls it in)
+  libroscpp-dev libtf2-ros-dev libsensor-msgs-dev python3-gencpp python3-genmsg ros-std-msgs
+  ros-sensor-msgs ros-geometry-msgs python3-roslaunch python3-rospy python3-std-msgs
+  python3-sensor-msgs python3-geometry-msgs python3-tf2-msgs python3-rostopic
   # TLS test certificates
   openssl
   # the service capacity plot (scripts/plot-capacity.py, docs/benchmarks.md)
