@@ -279,6 +279,14 @@ std::string LocalizerServerOptions::Describe() const {
 // ---------------------------------------------------------------------------------------------
 // The service.
 
+// How long the drain keeps the connections open after the last call ended (see Shutdown).
+constexpr auto kFinalStatusLinger = std::chrono::milliseconds(500);
+// The retry delay a draining server asks of the clients it stops or refuses
+// (grpc-retry-pushback-ms): the linger and as much again for the other calls to end, so that a
+// client's next attempt finds this replica's connections closed and its channel moves on to
+// another address, instead of being refused by the same replica again and again.
+constexpr auto kDrainRetryPushback = 2 * kFinalStatusLinger;
+
 class LocalizerServer::Service final
     : public api::Localizer::WithCallbackMethod_Track<api::Localizer::Service> {
  public:
@@ -1295,6 +1303,15 @@ class TrackCall final : public TrackReactor,
       }
     }
     if (!end_log_.empty()) service_.Log(LogLevel::kInfo, end_log_, end_fields_, id_);
+    // A session the drain stopped, or a call refused while draining, is asked to retry only once
+    // this replica has closed its connections (kDrainRetryPushback).
+    if (client_status.error_code() == grpc::StatusCode::UNAVAILABLE && service_.draining()) {
+      std::lock_guard<std::recursive_mutex> lock(context_mutex_);
+      if (!done_) {
+        context_->AddTrailingMetadata("grpc-retry-pushback-ms",
+                                      std::to_string(kDrainRetryPushback.count()));
+      }
+    }
     bool finish = false;
     {
       std::lock_guard<std::mutex> lock(mutex_);
@@ -1584,9 +1601,6 @@ int LocalizerServer::metrics_port() const { return metrics_ ? metrics_->port() :
 int LocalizerServer::viewer_port() const { return viewer_ ? viewer_->port() : 0; }
 
 ViewerBoard* LocalizerServer::viewer_board() { return service_->viewer_board(); }
-
-// How long the drain keeps the connections open after the last call ended (see Shutdown).
-constexpr auto kFinalStatusLinger = std::chrono::milliseconds(500);
 
 void LocalizerServer::Shutdown() {
   if (shut_down_.exchange(true)) return;

@@ -359,7 +359,13 @@ TEST_F(ReplayTest, ReconnectsToAnotherServerAndResumesFromTheLastPose) {
   options.report = folder_.path() / "report.json";
   std::thread stopper = ShutDownAfterPoses(*server_, 25);
   std::ostringstream log;
-  const ReplayResult result = RunReplay(options, log);
+  ReplayResult result;
+  try {
+    result = RunReplay(options, log);
+  } catch (const std::exception& error) {
+    stopper.join();  // Not left joinable: the failure is reported, not std::terminate.
+    FAIL() << "the replay failed: " << error.what() << "\n" << log.str();
+  }
   stopper.join();
 
   ASSERT_EQ(result.outages.size(), 1u) << log.str();
