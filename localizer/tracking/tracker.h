@@ -397,6 +397,13 @@ class Tracker {
   // step at search_credit_t_ns_.
   double search_credit_ns_ = 0;
   int64_t search_credit_t_ns_ = 0;
+  // With a CPU share a round starts only once the budget covers the CPU of the last whole round
+  // of this session (0: none ended yet), and the budget may save up that much: a round then runs
+  // on consecutive steps unless it costs more than the last one. (Spread over deferred steps, a
+  // round's hypotheses, pre-scored and aligned on the fields of its first step, were refined on
+  // events up to half a second newer, and failed.)
+  double last_round_cpu_ns_ = 0;
+  double round_cpu_ns_ = 0;  // The round in progress.
   // The decay time of the search's steps, nanoseconds (0: not chosen yet).
   double search_decay_ns_ = 0;
   std::optional<Eigen::Vector3d> search_center_;

@@ -276,7 +276,9 @@ struct TrackerOptions {
   // search work (SearchProgress::deferred) and the round goes on from the newest events at a later
   // step, so a live session whose search is slower than real time keeps up with its events
   // instead of queuing them. The budget is measured in the thread's CPU time, so with a share set
-  // the steps that search depend on the machine (a run is no longer bit-reproducible).
+  // the steps that search depend on the machine (a run is no longer bit-reproducible). After the
+  // first round, a round starts only once the budget covers the last round's CPU (the budget may
+  // save up that much), so that it runs on consecutive steps and its hypotheses stay fresh.
   double relocalization_cpu_share = 0.0;
   // The most CPU time the budget saves up while the search is idle or cheap, seconds (a burst:
   // a round's first step builds its fields).

@@ -92,6 +92,7 @@ void Tracker::BeginSearch(TrackingStatus status, int64_t t_ns) {
   search_start_t_ns_ = t_ns;
   search_credit_ns_ = options_.relocalization_cpu_burst_s * 1e9;
   search_credit_t_ns_ = t_ns;
+  round_cpu_ns_ = 0;  // A round in progress is dropped; the last whole round's cost is kept.
   search_phase_ = SearchPhase::kStart;
   ++search_progress_.episode;
   search_progress_.round = 0;
@@ -562,23 +563,42 @@ void Tracker::SearchStep(int64_t t_ns, PoseEstimate* estimate) {
 
   // The CPU share: the budget grows with event time (up to the burst); a step without credit
   // does no search work.
+  // A round about to start waits until the budget covers the last round's cost (it saves up
+  // that much even beyond the burst), so that it runs on consecutive steps.
   const bool bounded = options_.relocalization_cpu_share > 0;
+  const auto in_round = [this] {
+    return search_phase_ == SearchPhase::kPrescore || search_phase_ == SearchPhase::kCoarse ||
+           search_phase_ == SearchPhase::kRefine;
+  };
   int64_t cpu_start_ns = 0;
   if (bounded) {
     search_credit_ns_ =
         std::min(search_credit_ns_ + options_.relocalization_cpu_share *
                                          static_cast<double>(t_ns - search_credit_t_ns_),
-                 options_.relocalization_cpu_burst_s * 1e9);
+                 std::max(options_.relocalization_cpu_burst_s * 1e9, last_round_cpu_ns_));
     search_credit_t_ns_ = t_ns;
-    if (search_credit_ns_ <= 0) {
+    const bool saving_up =
+        search_phase_ == SearchPhase::kStart && search_credit_ns_ < last_round_cpu_ns_;
+    if (search_credit_ns_ <= 0 || saving_up) {
       progress.deferred = true;
       FinishSearchStep(t_ns, estimate);
       return;
     }
     cpu_start_ns = ThreadCpuTimeNs();
   }
+  const bool was_in_round = in_round();
   SearchWork(t_ns);
-  if (bounded) search_credit_ns_ -= static_cast<double>(ThreadCpuTimeNs() - cpu_start_ns);
+  if (bounded) {
+    const double used = static_cast<double>(ThreadCpuTimeNs() - cpu_start_ns);
+    search_credit_ns_ -= used;
+    // A round runs from the step that leaves kStart to the step that judges it (or finds no
+    // hypothesis); its cost is what the next round saves up for.
+    if (was_in_round || in_round()) round_cpu_ns_ += used;
+    if (!in_round()) {
+      if (round_cpu_ns_ > 0) last_round_cpu_ns_ = round_cpu_ns_;
+      round_cpu_ns_ = 0;
+    }
+  }
   FinishSearchStep(t_ns, estimate);
 }
 
