@@ -367,6 +367,15 @@ Dataset ReadDataset(const fs::path& root, const DatasetReaderOptions& options) {
   if (fs::is_regular_file(root, error) && IsAedat4File(root)) {
     return ReadAedat4Dataset(root, options);
   }
+  // --calib and --groundtruth are for AEDAT4 files, the only input without its own camera: on
+  // anything else they would be ignored, and a user would track with a camera they did not mean.
+  if (!options.aedat4.calibration.empty() || !options.aedat4.groundtruth.empty()) {
+    throw InvalidArgumentError(
+        "--calib and --groundtruth apply to AEDAT4 files only; '" + root.string() +
+        "' is not one (a ROS bag carries its camera info and ground-truth topics, a dataset "
+        "folder its calib.yaml and groundtruth.txt): drop the flags, or convert the recording "
+        "with evloc-convert and edit the folder's files.");
+  }
   if (IsTumRgbdFolder(root)) return ReadTumRgbdDataset(root);
   if (!fs::is_directory(root, error)) {
     throw IoError("dataset folder '" + root.string() + "' does not exist.");

@@ -58,6 +58,19 @@ TEST(Dataset, WriterReaderRoundTrip) {
   ASSERT_TRUE(dataset.info.has_value());
   EXPECT_EQ((*dataset.info)["seed"], 4);
   EXPECT_FALSE(dataset.events_path.has_value());
+  // --calib and --groundtruth (AEDAT4 only) on a dataset folder are refused, not ignored.
+  DatasetReaderOptions with_calib;
+  with_calib.aedat4.calibration = root / "other.yaml";
+  EXPECT_THROW(ReadDataset(out, with_calib), InvalidArgumentError);
+  DatasetReaderOptions with_groundtruth;
+  with_groundtruth.aedat4.groundtruth = root / "other.txt";
+  try {
+    ReadDataset(out, with_groundtruth);
+    ADD_FAILURE() << "--groundtruth on a dataset folder was accepted";
+  } catch (const InvalidArgumentError& error) {
+    EXPECT_NE(std::string(error.what()).find("AEDAT4 files only"), std::string::npos)
+        << error.what();
+  }
   fs::remove_all(root);
 }
 
