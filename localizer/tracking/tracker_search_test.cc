@@ -109,7 +109,7 @@ TEST(TrackerSearch, FindsItselfFromNoPoseAndEveryTrackingPoseIsRight) {
 // share the first round, whose cost the search does not know yet, is spread over 0.3 s of events,
 // and on a loaded machine (its steps dearer in CPU) over 0.5 s, too old for its hypotheses: then a
 // later round, which waits until the budget covers the last round's cost and runs on consecutive
-// steps, finds it (1.4-1.7 s in; before that wait, 3 of 12 loaded runs never found it in 3 s).
+// steps, finds it (1.4-1.8 s in; before that wait, 3 of 12 loaded runs never found it in 3 s).
 TEST(TrackerSearch, ACpuShareBoundsTheSearchWorkAndItStillFindsItself) {
   const EventBuffer events = SceneEvents(3'000'000'000);
   TrackerOptions options;
