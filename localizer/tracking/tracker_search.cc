@@ -561,10 +561,9 @@ void Tracker::SearchStep(int64_t t_ns, PoseEstimate* estimate) {
     return;
   }
 
-  // The CPU share: the budget grows with event time (up to the burst); a step without credit
-  // does no search work.
-  // A round about to start waits until the budget covers the last round's cost (it saves up
-  // that much even beyond the burst), so that it runs on consecutive steps.
+  // The CPU share: the budget grows with event time, up to the burst or the last whole round's
+  // cost if larger; a step without credit does no search work, and a round about to start waits
+  // until the budget covers the last round's cost, so that it runs on consecutive steps.
   const bool bounded = options_.relocalization_cpu_share > 0;
   const auto in_round = [this] {
     return search_phase_ == SearchPhase::kPrescore || search_phase_ == SearchPhase::kCoarse ||
