@@ -6,6 +6,7 @@
 
 #include <atomic>
 #include <cerrno>
+#include <cstdlib>
 #include <cstring>
 #include <fstream>
 #include <random>
@@ -139,6 +140,23 @@ ScopedFileLock::ScopedFileLock(const std::filesystem::path& path) {
 
 ScopedFileLock::~ScopedFileLock() {
   if (fd_ >= 0) ::close(fd_);  // Closing the last descriptor releases the flock.
+}
+
+PrivateTempFolder::PrivateTempFolder(std::string_view prefix, std::string_view purpose) {
+  std::error_code no_temp;
+  const std::filesystem::path temp = std::filesystem::temp_directory_path(no_temp);
+  std::string pattern = (temp / (std::string(prefix) + "-XXXXXX")).string();
+  if (no_temp || ::mkdtemp(pattern.data()) == nullptr) {
+    throw IoError("cannot make a private folder for " + std::string(purpose) + " under '" +
+                  temp.string() +
+                  "' (set TMPDIR to a writable folder; in Kubernetes mount an emptyDir at /tmp)");
+  }
+  path_ = pattern;
+}
+
+PrivateTempFolder::~PrivateTempFolder() {
+  std::error_code ignored;
+  std::filesystem::remove_all(path_, ignored);
 }
 
 }  // namespace evloc

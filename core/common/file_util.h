@@ -54,4 +54,21 @@ class ScopedFileLock {
   int fd_ = -1;
 };
 
+// A folder made for this process only (mode 0700, `TMPDIR/PREFIX-XXXXXX` by mkdtemp, TMPDIR
+// being std::filesystem::temp_directory_path()), removed with everything in it on destruction.
+class PrivateTempFolder {
+ public:
+  // Throws IoError naming the temporary directory and `purpose` (what the folder is for) when the
+  // folder cannot be made.
+  PrivateTempFolder(std::string_view prefix, std::string_view purpose);
+  ~PrivateTempFolder();
+  PrivateTempFolder(const PrivateTempFolder&) = delete;
+  PrivateTempFolder& operator=(const PrivateTempFolder&) = delete;
+
+  const std::filesystem::path& path() const { return path_; }
+
+ private:
+  std::filesystem::path path_;
+};
+
 }  // namespace evloc

@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <cctype>
-#include <cstdlib>
 #include <fstream>
 #include <map>
 #include <sstream>
@@ -323,22 +322,9 @@ ServerTlsFiles::ServerTlsFiles(std::filesystem::path cert_file, std::filesystem:
       interval_(std::max(1, reload_interval_s)),
       log_(std::move(log)) {
   published_ = ReadTlsFiles(cert_file_, key_file_, client_ca_file_);
-  std::error_code no_temp;
-  const std::filesystem::path temp = std::filesystem::temp_directory_path(no_temp);
-  std::string pattern = (temp / "evloc-tls-XXXXXX").string();
-  if (no_temp || ::mkdtemp(pattern.data()) == nullptr) {
-    throw IoError("cannot make a private folder for the TLS files under '" + temp.string() +
-                  "' (set TMPDIR to a writable folder; in Kubernetes mount an emptyDir at /tmp)");
-  }
-  folder_ = pattern;
-  try {
-    Publish(published_);
-  } catch (...) {
-    std::error_code ignored;
-    std::filesystem::remove_all(folder_, ignored);
-    throw;
-  }
-  const std::filesystem::path current = folder_ / kCurrent;
+  folder_ = std::make_unique<PrivateTempFolder>("evloc-tls", "the TLS files");
+  Publish(published_);  // On error, the folder goes with the half-built object.
+  const std::filesystem::path current = folder_->path() / kCurrent;
   const auto interval = static_cast<unsigned int>(interval_.count());
   auto provider =
       client_ca_file_
@@ -367,8 +353,6 @@ ServerTlsFiles::~ServerTlsFiles() {
   stop_cv_.notify_all();
   watcher_.join();
   credentials_.reset();
-  std::error_code ignored;
-  std::filesystem::remove_all(folder_, ignored);
 }
 
 int64_t ServerTlsFiles::reloads() const {
@@ -379,19 +363,20 @@ int64_t ServerTlsFiles::reloads() const {
 void ServerTlsFiles::Publish(const TlsPem& pem) {
   ++generation_;
   const std::string name = "gen-" + std::to_string(generation_);
-  const std::filesystem::path generation = folder_ / name;
+  const std::filesystem::path generation = folder_->path() / name;
   std::filesystem::create_directory(generation);
   WritePrivateFile(generation / "tls.crt", pem.cert);
   WritePrivateFile(generation / "tls.key", pem.key);
   if (client_ca_file_) WritePrivateFile(generation / "ca.crt", pem.client_ca);
   // Swap the link atomically: a new link under a temporary name renamed over the old one.
-  const std::filesystem::path link = folder_ / (std::string(kCurrent) + ".new");
+  const std::filesystem::path link = folder_->path() / (std::string(kCurrent) + ".new");
   std::error_code ignored;
   std::filesystem::remove(link, ignored);
   std::filesystem::create_directory_symlink(name, link);
-  std::filesystem::rename(link, folder_ / kCurrent);
+  std::filesystem::rename(link, folder_->path() / kCurrent);
   if (generation_ > 2) {
-    std::filesystem::remove_all(folder_ / ("gen-" + std::to_string(generation_ - 2)), ignored);
+    std::filesystem::remove_all(folder_->path() / ("gen-" + std::to_string(generation_ - 2)),
+                                ignored);
   }
 }
 

@@ -20,6 +20,7 @@
 #include <thread>
 #include <vector>
 
+#include "core/common/file_util.h"
 #include "core/common/log.h"
 
 namespace grpc {
@@ -184,7 +185,7 @@ class ServerTlsFiles {
   const std::optional<std::filesystem::path> client_ca_file_;
   const std::chrono::seconds interval_;
   const LogFunction log_;
-  std::filesystem::path folder_;
+  std::unique_ptr<PrivateTempFolder> folder_;
   int64_t generation_ = 0;
   TlsPem published_;
   std::shared_ptr<grpc::ServerCredentials> credentials_;

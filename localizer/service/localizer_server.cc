@@ -128,6 +128,7 @@ MapRegistryOptions LocalizerServerOptions::registry_options() const {
   options.max_map_memory_bytes = max_map_memory_bytes;
   options.max_tile_memory_bytes = max_map_memory_bytes;
   options.tile_loader_threads = tile_loader_threads;
+  if (keep_maps && map_keep_dir) options.keep_dir = *map_keep_dir;
   return options;
 }
 
@@ -232,6 +233,11 @@ std::string LocalizerServerOptions::Describe() const {
        << "queue-packets: " << queue_packets << "\n"
        << "backpressure-fraction: " << backpressure_fraction << "\n"
        << "map-memory: " << max_map_memory_bytes << " bytes (maps; and the tiles of sites)\n"
+       << "map-keep-dir: "
+       << (!keep_maps     ? std::string("none")
+           : map_keep_dir ? map_keep_dir->string()
+                          : std::string("a private folder under the temporary directory"))
+       << "\n"
        << "tile-loader-threads: " << tile_loader_threads << "\n"
        << "max-camera-pixels: " << max_camera_pixels << "\n"
        << "max-packet-span: " << max_packet_span_s << " s\n"
@@ -294,7 +300,11 @@ class LocalizerServer::Service final
       : options_(options),
         session_limits_(options.session_limits()),
         logger_(std::move(logger)),
-        registry_(options.registry_options()),
+        keep_folder_(options.keep_maps && !options.map_keep_dir
+                         ? std::make_unique<PrivateTempFolder>("evloc-kept-maps",
+                                                               "the last good map versions")
+                         : nullptr),
+        registry_(RegistryOptions(options)),
         memory_(options.max_memory_bytes),
         pool_(TrackingPool::ThreadsFor(options.tracking_threads)) {
     if (options.auth_tokens_file) {
@@ -595,6 +605,15 @@ class LocalizerServer::Service final
 
   const LocalizerServerOptions& options() const { return options_; }
   MapRegistry& registry() { return registry_; }
+  // The registry's options: the server's, with the private keep folder and the log's warnings.
+  MapRegistryOptions RegistryOptions(const LocalizerServerOptions& options) {
+    MapRegistryOptions registry = options.registry_options();
+    if (keep_folder_) registry.keep_dir = keep_folder_->path();
+    registry.warn = [this](const std::string& line) {
+      Log(LogLevel::kWarning, EscapeForLog(line, 2048));
+    };
+    return registry;
+  }
   ServerCounters& counters() { return counters_; }
   const ServerCounters& counters() const { return counters_; }
   const SessionLimits& session_limits() const { return session_limits_; }
@@ -612,6 +631,7 @@ class LocalizerServer::Service final
   LocalizerServerOptions options_;
   SessionLimits session_limits_;
   std::shared_ptr<Logger> logger_;
+  std::unique_ptr<PrivateTempFolder> keep_folder_;
   MapRegistry registry_;
   std::unique_ptr<TokenFile> tokens_;
   std::unique_ptr<ViewerBoard> viewer_board_;

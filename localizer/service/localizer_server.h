@@ -96,6 +96,14 @@ struct LocalizerServerOptions {
   // Background threads that load the sites' tiles and compose them for sessions
   // (--tile-loader-threads); never the tracking workers.
   int tile_loader_threads = 1;
+  // Keep a copy of each map version the server loaded, to serve again when the map's file stops
+  // loading (copied in place, truncated) after the version left the memory budget
+  // (--map-keep-dir none: false).
+  bool keep_maps = true;
+  // Where those copies go (--map-keep-dir DIR, an existing folder; copies there outlive the
+  // server and are used after a restart). Unset: a private folder under the temporary directory,
+  // made at start and removed at exit.
+  std::optional<std::filesystem::path> map_keep_dir;
   // Largest camera a session may declare, width * height pixels (--max-camera-pixels).
   int64_t max_camera_pixels = SessionLimits{}.max_camera_pixels;
   // Most a packet's end (or a PoseHint) may lie after the session time, seconds

@@ -6,6 +6,7 @@
 #include <new>
 #include <system_error>
 
+#include "core/common/file_util.h"
 #include "maps/map_directory.h"
 #include "maps/site.h"
 
@@ -87,6 +88,16 @@ void MapRegistryOptions::Check() const {
   if (tile_loader_threads < 1 || tile_loader_threads > 64) {
     throw InvalidArgumentError("map registry: the tile loader threads must be in 1..64");
   }
+  if (!keep_dir.empty()) {
+    if (!std::filesystem::is_directory(keep_dir, error)) {
+      throw InvalidArgumentError("map registry: the folder for kept map versions '" +
+                                 keep_dir.string() + "' is not a directory (create it first)");
+    }
+    if (std::filesystem::equivalent(keep_dir, maps_dir, error)) {
+      throw InvalidArgumentError(
+          "map registry: the folder for kept map versions must not be the map folder itself");
+    }
+  }
 }
 
 namespace {
@@ -136,7 +147,7 @@ std::optional<MapRegistry::FileStamp> MapRegistry::Stamp(const std::string& name
 }
 
 std::shared_ptr<const LoadedMap> MapRegistry::LoadVersion(const std::string& name,
-                                                          const FileStamp& stamp) const {
+                                                          const FileStamp& stamp) {
   return WithTypedErrors(name, [&] {
     auto loaded = std::make_shared<LoadedMap>();
     loaded->name = name;
@@ -152,14 +163,99 @@ std::shared_ptr<const LoadedMap> MapRegistry::LoadVersion(const std::string& nam
       loaded->memory_bytes = sizeof(Site) + loaded->site->manifest.tiles.size() * sizeof(SiteTile);
       return std::shared_ptr<const LoadedMap>(std::move(loaded));
     }
-    loaded->map = LoadMap(options_.maps_dir / name / kMapFileName);
+    const std::filesystem::path file = options_.maps_dir / name / kMapFileName;
+    // The header first (a file that is not a map is refused before it is read whole), then the
+    // bytes, parsed from memory so that the copy kept is exactly what was verified.
+    ReadMapFileHeader(file);
+    const std::string bytes = ReadFileToString(file);
+    loaded->map = LoadMapFromBytes(bytes, file.string());
     loaded->info = SummarizeMap(loaded->map);
     loaded->content_crc32c = loaded->info.content_crc32c;
     loaded->version = MapVersionString(loaded->content_crc32c);
     loaded->visibility = std::make_unique<VisibilityIndex>(loaded->map);
     loaded->memory_bytes = MapMemoryBytes(loaded->map);
+    Keep(*loaded, bytes);
     return std::shared_ptr<const LoadedMap>(std::move(loaded));
   });
+}
+
+void MapRegistry::Warn(const std::string& line) const {
+  if (options_.warn) options_.warn(line);
+}
+
+void MapRegistry::Keep(const LoadedMap& map, const std::string& bytes) {
+  if (options_.keep_dir.empty()) return;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (entries_[map.name].kept_version == map.version) return;
+  }
+  try {
+    WriteFileAtomically(options_.keep_dir / (map.name + ".evmap"), bytes);
+  } catch (const Error& error) {
+    // Serving goes on; only the fallback for a later bad file is missing.
+    Warn("map '" + map.name + "' version " + map.version +
+         ": cannot keep a copy to serve if its file stops loading: " + error.what());
+    return;
+  }
+  std::lock_guard<std::mutex> lock(mutex_);
+  entries_[map.name].kept_version = map.version;
+}
+
+std::shared_ptr<const LoadedMap> MapRegistry::RestoreKept(const std::string& name,
+                                                          const FileStamp& failed,
+                                                          const std::string& error) {
+  const auto current = [&]() -> std::shared_ptr<const LoadedMap> {
+    Entry& entry = entries_[name];
+    if (!entry.current) return nullptr;
+    lru_.splice(lru_.begin(), lru_, entry.lru_position);
+    return entry.current;
+  };
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (auto map = current()) return map;
+    if (options_.keep_dir.empty() || failed.site) return nullptr;
+  }
+  std::lock_guard<std::mutex> restore_lock(restore_mutex_);
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (auto map = current()) return map;  // Restored by another request meanwhile.
+    if (entries_[name].kept_failed_for == failed) return nullptr;
+  }
+  const std::filesystem::path kept = options_.keep_dir / (name + ".evmap");
+  std::error_code exists_error;
+  if (!std::filesystem::exists(kept, exists_error)) return nullptr;
+  std::shared_ptr<const LoadedMap> map;
+  try {
+    map = WithTypedErrors(name, [&] {
+      auto loaded = std::make_shared<LoadedMap>();
+      loaded->name = name;
+      // The failed file's version: the kept copy is what is served while that file stays.
+      loaded->file_bytes = failed.bytes;
+      loaded->file_time = failed.time;
+      loaded->map = LoadMap(kept);
+      loaded->info = SummarizeMap(loaded->map);
+      loaded->content_crc32c = loaded->info.content_crc32c;
+      loaded->version = MapVersionString(loaded->content_crc32c);
+      loaded->visibility = std::make_unique<VisibilityIndex>(loaded->map);
+      loaded->memory_bytes = MapMemoryBytes(loaded->map);
+      return std::shared_ptr<const LoadedMap>(std::move(loaded));
+    });
+  } catch (const Error& kept_error) {
+    Warn("map '" + name + "': its file does not load (" + error +
+         ") and neither does its kept copy: " + kept_error.what());
+    std::lock_guard<std::mutex> lock(mutex_);
+    entries_[name].kept_failed_for = failed;
+    return nullptr;
+  }
+  Warn("map '" + name + "': its file does not load (" + error +
+       "); serving its last good version " + map->version + " from the kept copy");
+  std::lock_guard<std::mutex> lock(mutex_);
+  ++loads_;
+  ++kept_restores_;
+  Entry& entry = entries_[name];
+  entry.kept_version = map->version;
+  InsertLocked(entry, map);
+  return map;
 }
 
 void MapRegistry::InsertLocked(Entry& entry, std::shared_ptr<const LoadedMap> map) {
@@ -247,13 +343,10 @@ std::shared_ptr<const LoadedMap> MapRegistry::Get(const std::string& name,
     return check_version(load->result.get());
   } catch (const MapNotFoundError&) {
     throw;
-  } catch (const Error&) {
-    std::lock_guard<std::mutex> lock(mutex_);
-    Entry& entry = entries_[name];
-    if (!entry.current) throw;
-    // Keep serving the version already loaded.
-    lru_.splice(lru_.begin(), lru_, entry.lru_position);
-    return check_version(entry.current);
+  } catch (const Error& error) {
+    // Keep serving the version already loaded, or the kept copy of the last good one.
+    if (auto map = RestoreKept(name, load->stamp, error.what())) return check_version(map);
+    throw;
   }
 }
 
@@ -322,6 +415,11 @@ uint64_t MapRegistry::cached_bytes() const {
 size_t MapRegistry::cached_maps() const {
   std::lock_guard<std::mutex> lock(mutex_);
   return cached_maps_;
+}
+
+int64_t MapRegistry::kept_restores() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return kept_restores_;
 }
 
 }  // namespace evloc::service

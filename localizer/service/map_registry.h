@@ -11,10 +11,17 @@
 // once, by the first request, while the others wait for that load only. A load that fails is
 // remembered for that file version (size and modification time): the file is not read again
 // until it changes.
+//
+// Durable last good versions: with a keep folder (MapRegistryOptions::keep_dir), the registry
+// writes the bytes of every map version it loaded there (`KEEP/NAME.evmap`, the bytes it
+// verified). When a map's file then stops loading (copied in place non-atomically, truncated,
+// crafted) and its last good version is no longer in the cache, the kept copy is loaded and served
+// instead, so a map never goes from "served" to "error" because of a bad file.
 #pragma once
 
 #include <cstdint>
 #include <filesystem>
+#include <functional>
 #include <list>
 #include <map>
 #include <memory>
@@ -96,9 +103,18 @@ struct MapRegistryOptions {
   uint64_t max_tile_memory_bytes = uint64_t{1} << 30;
   // Background threads of the tile cache (loads and compositions of the sites' tiles).
   int tile_loader_threads = 1;
+  // Folder (existing, writable) where each map version loaded is kept, to serve again when its
+  // file stops loading after the version left the cache; empty: nothing is kept. Takes disk
+  // space of one file per map name. Sites are not kept (evloc-mapper tile writes their manifests
+  // last and atomically).
+  std::filesystem::path keep_dir{};
+  // Called (from the request's thread, without the registry's lock) with a line for the operator
+  // when a version cannot be kept and when a kept version is served instead of a file that does
+  // not load. Optional.
+  std::function<void(const std::string& line)> warn{};
 
-  // Throws InvalidArgumentError when maps_dir is empty or not a directory, a budget is 0, or the
-  // loader threads are not in 1..64.
+  // Throws InvalidArgumentError when maps_dir is empty or not a directory, a budget is 0, the
+  // loader threads are not in 1..64, or keep_dir is given and is not a directory or is maps_dir.
   void Check() const;
 };
 
@@ -115,9 +131,10 @@ class MapRegistry {
   // The current version of map `name`: loaded on first use, and reloaded when map.evmap changed
   // (size or modification time) since it was loaded. When a reload fails (e.g. a file copied in
   // place non-atomically, or a crafted one) the previous version keeps being served while it is
-  // in the cache. `version`, when given, must equal the current version. Throws MapNotFoundError
-  // when there is no such map or version; IoError, ParseError or MapLoadError (never anything
-  // else) when the map cannot be loaded and no earlier version is in the cache.
+  // in the cache or kept (keep_dir). `version`, when given, must equal the current version.
+  // Throws MapNotFoundError when there is no such map or version; IoError, ParseError or
+  // MapLoadError (never anything else) when the map cannot be loaded and no earlier version is in
+  // the cache or kept.
   std::shared_ptr<const LoadedMap> Get(const std::string& name,
                                        const std::optional<std::string>& version = std::nullopt);
 
@@ -135,6 +152,8 @@ class MapRegistry {
   uint64_t cached_bytes() const;
   // Number of maps in the cache.
   size_t cached_maps() const;
+  // Number of times a kept copy was loaded because the map's file did not load.
+  int64_t kept_restores() const;
   // The sites' tile cache (its counters for the metrics).
   const TileCache& tile_cache() const { return *tiles_; }
 
@@ -163,19 +182,33 @@ class MapRegistry {
     std::optional<MapDescriptionData> description;
     // File version of `description`.
     FileStamp described;
+    // Version of the copy in keep_dir written by this registry (empty: none yet).
+    std::string kept_version;
+    // The file version after whose failure the kept copy did not load either (not tried again
+    // until the file changes).
+    std::optional<FileStamp> kept_failed_for;
   };
 
   // The file version of `name`'s site.manifest or else map.evmap; nullopt when neither exists.
   std::optional<FileStamp> Stamp(const std::string& name) const;
   // Loads `name` at `stamp`, converting every exception to an evloc Error.
-  std::shared_ptr<const LoadedMap> LoadVersion(const std::string& name,
-                                               const FileStamp& stamp) const;
+  std::shared_ptr<const LoadedMap> LoadVersion(const std::string& name, const FileStamp& stamp);
   // Makes `map` the current version of `entry` and evicts beyond the budget. Needs mutex_.
   void InsertLocked(Entry& entry, std::shared_ptr<const LoadedMap> map);
+  // Writes `bytes` (those `map` was loaded from) to keep_dir unless that version is kept already.
+  void Keep(const LoadedMap& map, const std::string& bytes);
+  // After `name`'s file (version `failed`) did not load, with `error`: the current version when
+  // one is in the cache, else the kept copy loaded and made the current version; null when there
+  // is neither (a kept copy that does not load is not tried again for the same file version).
+  std::shared_ptr<const LoadedMap> RestoreKept(const std::string& name, const FileStamp& failed,
+                                               const std::string& error);
+  void Warn(const std::string& line) const;
 
   MapRegistryOptions options_;
   std::shared_ptr<TileCache> tiles_;
   mutable std::mutex mutex_;
+  // Serialises the loads of kept copies (rare: only after a failure, for a map not in the cache).
+  std::mutex restore_mutex_;
   std::map<std::string, Entry> entries_;
   // Names of the cached maps, most recently used first.
   std::list<std::string> lru_;
@@ -183,6 +216,7 @@ class MapRegistry {
   size_t cached_maps_ = 0;
   int64_t loads_ = 0;
   int64_t load_attempts_ = 0;
+  int64_t kept_restores_ = 0;
 };
 
 // Formats a content checksum as a version string (8 lowercase hex digits).

@@ -187,6 +187,95 @@ TEST(MapRegistry, CacheEvictsLeastRecentlyUsedBeyondTheBudget) {
   EXPECT_THROW(zero.Check(), InvalidArgumentError);
 }
 
+// Finding 5, after eviction: the last good version of a map left the cache, then its file was
+// overwritten in place by one that does not load (a non-atomic copy, cut short). With a keep
+// folder the registry serves the kept copy of that version; without one, the error.
+TEST(MapRegistry, AKeptCopyServesTheLastGoodVersionAfterItLeftTheCacheAndTheFileBroke) {
+  testing::TemporaryFolder folder;
+  testing::TemporaryFolder keep;
+  const Map map = testing::TestMap();
+  for (const char* name : {"room", "hall"}) testing::WriteTestMap(folder.path(), name, map);
+  const std::filesystem::path room_file = folder.path() / "room" / kMapFileName;
+  const std::string good_bytes = ReadFileToString(room_file);
+  const auto break_room = [&] {  // In place: same inode, so a hard link would break too.
+    std::ofstream out(room_file, std::ios::binary | std::ios::trunc);
+    out << good_bytes.substr(0, good_bytes.size() / 2);
+  };
+  const auto run = [&](bool with_keep) -> std::string {
+    WriteFileAtomically(room_file, good_bytes);
+    MapRegistryOptions options{folder.path()};
+    options.max_map_memory_bytes = 1;  // Only the most recently used map stays.
+    std::vector<std::string> warnings;
+    if (with_keep) options.keep_dir = keep.path();
+    options.warn = [&](const std::string& line) { warnings.push_back(line); };
+    MapRegistry registry(options);
+    const std::string good_version = registry.Get("room")->version;
+    registry.Get("hall");
+    EXPECT_EQ(registry.cached_maps(), 1u);
+    break_room();
+    const auto served = registry.Get("room");
+    EXPECT_EQ(served->version, good_version);
+    EXPECT_EQ(served->map.size(), map.size());
+    EXPECT_EQ(registry.kept_restores(), 1);
+    EXPECT_EQ(registry.Get("room").get(), served.get());  // Not read again.
+    EXPECT_EQ(registry.load_attempts(), 3);
+    EXPECT_EQ(registry.Describe("room").version, good_version);
+    EXPECT_EQ(warnings.size(), 1u);
+    if (!warnings.empty()) {
+      EXPECT_NE(warnings[0].find("serving its last good version " + good_version),
+                std::string::npos)
+          << warnings[0];
+    }
+    // A good new file is served again as usual.
+    const Map coarser =
+        tracking::testing::MakeRectangleMap(tracking::testing::DefaultRectangles(), 0.02);
+    testing::WriteTestMap(folder.path(), "room", coarser);
+    EXPECT_EQ(registry.Get("room")->map.size(), coarser.size());
+    return good_version;
+  };
+  const std::string good_version = run(true);
+  EXPECT_TRUE(std::filesystem::exists(keep.path() / "room.evmap"));
+
+  // Without a keep folder the broken file is an error once the good version left the cache.
+  {
+    WriteFileAtomically(room_file, good_bytes);
+    MapRegistryOptions options{folder.path()};
+    options.max_map_memory_bytes = 1;
+    MapRegistry registry(options);
+    registry.Get("room");
+    registry.Get("hall");
+    break_room();
+    EXPECT_THROW(registry.Get("room"), ParseError);
+    EXPECT_EQ(registry.kept_restores(), 0);
+  }
+
+  // A kept copy that does not load either: the file's error, tried once per file version.
+  {
+    WriteFileAtomically(room_file, good_bytes);
+    MapRegistryOptions options{folder.path()};
+    options.max_map_memory_bytes = 1;
+    options.keep_dir = keep.path();
+    int warnings = 0;
+    options.warn = [&](const std::string&) { ++warnings; };
+    MapRegistry registry(options);
+    EXPECT_EQ(registry.Get("room")->version, good_version);
+    registry.Get("hall");
+    std::filesystem::resize_file(keep.path() / "room.evmap", 64);
+    break_room();
+    EXPECT_THROW(registry.Get("room"), ParseError);
+    EXPECT_THROW(registry.Get("room"), ParseError);
+    EXPECT_EQ(registry.kept_restores(), 0);
+    EXPECT_EQ(warnings, 1);
+  }
+
+  // The keep folder is checked.
+  MapRegistryOptions options{folder.path()};
+  options.keep_dir = keep.path() / "missing";
+  EXPECT_THROW(options.Check(), InvalidArgumentError);
+  options.keep_dir = folder.path();
+  EXPECT_THROW(options.Check(), InvalidArgumentError);
+}
+
 // Finding 6: ListMaps' descriptions come from the file's summary without loading the map, and
 // equal the loaded map's.
 TEST(MapRegistry, DescribesAMapWithoutLoadingIt) {

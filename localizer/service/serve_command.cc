@@ -32,6 +32,10 @@ Options:
                              and so are tiles no session uses (default 1G)
   --max-map-memory MIB       the same in MiB (default 1024)
   --tile-loader-threads N    background threads loading and composing sites' tiles (default 1)
+  --map-keep-dir DIR|none    where a copy of each map version loaded is kept, to serve again
+                             when the map's file stops loading after the version left the
+                             memory budget (default: a private folder under $TMPDIR, removed at
+                             exit; none: keep nothing)
   --max-camera-pixels N      largest camera a session may declare, width * height (default
                              4194304; a session's memory grows with it)
   --max-packet-span SECONDS  most a packet's end_t_ns (or a pose hint) may lie after the session
@@ -141,6 +145,13 @@ ServeCommand ParseServeCommandLine(const std::vector<std::string>& arguments) {
         throw InvalidArgumentError("--max-map-memory must be 1 .. 2^40 MiB, got " + value);
       }
       server.max_map_memory_bytes = static_cast<uint64_t>(mib) << 20;
+    } else if (flag == "--map-keep-dir") {
+      if (value == "none") {
+        server.keep_maps = false;
+      } else {
+        server.keep_maps = true;
+        server.map_keep_dir = value;
+      }
     } else if (flag == "--map-memory") {
       server.max_map_memory_bytes = ParseByteSizeFlag(flag, value);
       if (server.max_map_memory_bytes == 0) {

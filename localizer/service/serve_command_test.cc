@@ -90,7 +90,10 @@ TEST(ServeCommand, EveryFlagReachesItsOption) {
                                               "--max-connection-age-grace",
                                               "60",
                                               "--drain-timeout",
-                                              "7"};
+                                              "7",
+                                              "--map-keep-dir",
+                                              (folder.path() / "kept").string()};
+  std::filesystem::create_directories(folder.path() / "kept");
   const ServeCommand command = ParseServeCommandLine(arguments);
   const LocalizerServerOptions& server = command.server;
   EXPECT_EQ(server.maps_dir, folder.path());
@@ -136,6 +139,12 @@ TEST(ServeCommand, EveryFlagReachesItsOption) {
   EXPECT_EQ(server.drain_timeout_s, 7);
   EXPECT_NE(server.Describe().find("max-sessions: 3"), std::string::npos);
   EXPECT_NE(server.Describe().find("drain-timeout: 7 s"), std::string::npos);
+  EXPECT_TRUE(server.keep_maps);
+  EXPECT_EQ(server.map_keep_dir, folder.path() / "kept");
+  EXPECT_EQ(server.registry_options().keep_dir, folder.path() / "kept");
+  EXPECT_FALSE(
+      ParseServeCommandLine({"serve", "--maps", folder.path().string(), "--map-keep-dir", "none"})
+          .server.keep_maps);
 }
 
 TEST(ServeCommand, BadCommandLinesAreRejectedWithTheFlag) {
