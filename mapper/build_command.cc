@@ -49,6 +49,9 @@ int RunChunkedBuild(const BuildCommandLine& command_line, StderrProgress* progre
     return kExitSuccess;
   }
   const MapBuildReport& build = report.build;
+  for (const std::string& note : report.build.calibration_notes) {
+    std::cerr << "evloc-mapper build: note: " << note << "\n";
+  }
   std::cout << "site written to " << options.build.output_dir.string() << ": " << report.num_tiles
             << " tiles (version " << report.site_version << "), " << build.num_points << " points, "
             << build.num_keyframes << " keyframes, " << build.num_registered << "/"
@@ -356,6 +359,9 @@ int RunBuildCommand(int argc, char** argv) {
     std::cout << "\n";
     if (report.geo_anchor)
       std::cout << FormatGeoReference(*report.geo_anchor, report.geo_alignment, report.geo_inputs);
+    for (const std::string& note : report.calibration_notes) {
+      std::cerr << "evloc-mapper build: note: " << note << "\n";
+    }
     if (!report.relocalization_warning.empty()) {
       // Printed even with --quiet: the map cannot relocalize.
       std::cerr << "evloc-mapper build: WARNING: the map has no relocalization data: "

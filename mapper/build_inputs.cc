@@ -253,7 +253,8 @@ BuildInputs LoadInputs(const MapBuilderOptions& options) {
   std::optional<Camera>& camera = inputs.camera;
   camera = options.camera;
   if (options.calibration_file) {
-    camera = ReadCalibrationFile(*options.calibration_file, image_size.width, image_size.height);
+    camera = ReadCalibrationFile(*options.calibration_file, image_size.width, image_size.height,
+                                 &inputs.calibration_notes);
   }
   if (camera && (camera->width != image_size.width || camera->height != image_size.height)) {
     throw InvalidArgumentError("the camera is " + std::to_string(camera->width) + " x " +

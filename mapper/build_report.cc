@@ -111,6 +111,7 @@ std::string MapBuildReportToJson(const MapBuildReport& report) {
   json["images"] = report.num_images;
   json["images_registered"] = report.num_registered;
   json["images_without_pose"] = report.images_without_pose;
+  json["calibration_notes"] = report.calibration_notes;
   json["keyframes"] = report.num_keyframes;
   json["sparse_points"] = report.num_sparse_points;
   json["keyframe_points"] = report.num_keyframe_points;

@@ -66,6 +66,8 @@ struct MapBuildReport {
   size_t num_registered = 0;
   // Images left out because a time-keyed --known-poses trajectory does not cover their times.
   std::vector<std::string> images_without_pose;
+  // What the --calib reader read but did not use (e.g. a Kalibr camchain's imu fields).
+  std::vector<std::string> calibration_notes;
   // Keyframes of the map.
   size_t num_keyframes = 0;
   // Sparse COLMAP points.

@@ -38,6 +38,8 @@ struct BuildInputs {
   std::vector<std::string> images_without_pose;
   // The fixed intrinsics (--camera or --calib); std::nullopt: COLMAP estimates them.
   std::optional<Camera> camera;
+  // What the --calib reader read but did not use, one sentence each, prefixed with the file.
+  std::vector<std::string> calibration_notes;
   // Known world_from_cam per image name (--known-poses).
   std::map<std::string, Rigid3d> known_world_from_cams;
   // Reference world_from_cam per image name (--align-to).

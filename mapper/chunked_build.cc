@@ -684,6 +684,7 @@ ChunkedBuildReport BuildChunkedSite(const ChunkedBuildOptions& options,
   const BuildInputs inputs = LoadInputs(options.build);
   build.num_images = inputs.num_images;
   build.images_without_pose = inputs.images_without_pose;
+  build.calibration_notes = inputs.calibration_notes;
   build.pose_source = options.build.known_poses ? "known" : "estimated";
 
   // The plan.

@@ -38,6 +38,7 @@ MapBuildReport BuildMap(const MapBuilderOptions& options, ProgressListener* prog
   const BuildInputs inputs = LoadInputs(options);
   report.num_images = inputs.num_images;
   report.images_without_pose = inputs.images_without_pose;
+  report.calibration_notes = inputs.calibration_notes;
   // 2. COLMAP: features, matches, model (each reused from the workspace when its inputs match).
   SparseReconstruction sparse = ReconstructSparse(options, inputs, clock, &report);
   // 3. Sim(3) onto the reference poses (--align-to).

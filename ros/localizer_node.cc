@@ -193,6 +193,9 @@ LocalizerNode::LocalizerNode(ros::NodeHandle& node, const NodeCoreOptions& core_
           }
         });
   }
+  for (const std::string& note : core_.calibration_notes()) {
+    ROS_INFO("evloc: ~calib note: %s", note.c_str());
+  }
   ROS_INFO("evloc: map %s; camera %s; first pose from %s", core_.map_description().c_str(),
            core_.has_camera() ? core_.camera_description().c_str() : "from camera_info",
            core_.initial_pose_mode() == InitialPoseMode::kParameter ? "~init_pose"

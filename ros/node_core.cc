@@ -153,6 +153,8 @@ struct NodeCore::State {
   std::unique_ptr<VisibilityIndex> visibility;
   std::unique_ptr<tracking::StaticMapSource> source;
   std::optional<Camera> camera;
+  // What the calibration reader of ~calib ignored.
+  std::vector<std::string> calibration_notes;
   bool initial_pose_known = false;
   std::optional<Rigid3d> initial_world_from_cam;
   std::optional<int64_t> initial_t_ns;
@@ -267,7 +269,7 @@ NodeCore::NodeCore(const NodeCoreOptions& options, StepCallback on_step, StreamE
     throw InvalidArgumentError("parameter ~max_camera_pixels must be positive");
   }
   if (!options.calib_path.empty()) {
-    const Camera camera = ReadCalibrationFile(options.calib_path, 0, 0);
+    const Camera camera = ReadCalibrationFile(options.calib_path, 0, 0, &s.calibration_notes);
     CheckCameraSize(camera);
     s.camera = camera;
   }
@@ -426,6 +428,10 @@ std::string NodeCore::waiting_for() const {
   if (!state_->camera) return "camera_info";
   if (!state_->initial_pose_known) return "a pose on initialpose";
   return "events";
+}
+
+const std::vector<std::string>& NodeCore::calibration_notes() const {
+  return state_->calibration_notes;
 }
 
 std::string NodeCore::camera_description() const {

@@ -182,6 +182,9 @@ class NodeCore {
   std::string waiting_for() const;
   // The camera's description ("240x180 radtan"), empty before one.
   std::string camera_description() const;
+  // What the calibration reader of ~calib read but did not use, one sentence each (the node logs
+  // them).
+  const std::vector<std::string>& calibration_notes() const;
   // A one-line description of the map.
   std::string map_description() const;
   // The mode of the initial pose.

@@ -833,8 +833,21 @@ Calibration ReadCalibration(const std::filesystem::path& spec, int width, int he
                           height);
 }
 
-Camera ReadCalibrationFile(const std::filesystem::path& spec, int width, int height) {
-  return ReadCalibration(spec, width, height).selected.camera;
+std::vector<std::string> CalibrationNotes(const std::filesystem::path& spec,
+                                          const Calibration& calibration) {
+  const std::string file = ParseCalibrationSpec(spec).path.string();
+  std::vector<std::string> notes;
+  for (const std::string& note : calibration.notes) notes.push_back(file + ": " + note);
+  return notes;
+}
+
+Camera ReadCalibrationFile(const std::filesystem::path& spec, int width, int height,
+                           std::vector<std::string>* notes) {
+  Calibration calibration = ReadCalibration(spec, width, height);
+  if (notes != nullptr) {
+    for (std::string& note : CalibrationNotes(spec, calibration)) notes->push_back(std::move(note));
+  }
+  return calibration.selected.camera;
 }
 
 }  // namespace evloc

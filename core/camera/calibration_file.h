@@ -132,8 +132,14 @@ Calibration ParseCalibration(const std::string& text, const std::string& source,
 // cannot be read, and as ParseCalibration.
 Calibration ReadCalibration(const std::filesystem::path& spec, int width, int height);
 
+// The reader's notes of `calibration` read from `spec`, each prefixed with the file ("FILE:
+// ignored ..."), for a tool to print.
+std::vector<std::string> CalibrationNotes(const std::filesystem::path& spec,
+                                          const Calibration& calibration);
+
 // The camera of a --calib value (ReadCalibration(spec, width, height).selected.camera): the
-// calibration reader of every tool.
-Camera ReadCalibrationFile(const std::filesystem::path& spec, int width, int height);
+// calibration reader of every tool. `notes`, when given, receives CalibrationNotes (appended).
+Camera ReadCalibrationFile(const std::filesystem::path& spec, int width, int height,
+                           std::vector<std::string>* notes = nullptr);
 
 }  // namespace evloc

@@ -51,8 +51,8 @@ Dataset ReadAedat4Dataset(const std::filesystem::path& path, const DatasetReader
   const std::optional<SensorSize> size = events != nullptr ? events->size : std::nullopt;
   // A calibration without an image size (ECD calib.txt) takes the events stream's; with neither,
   // ReadCalibrationFile says so.
-  dataset.camera =
-      ReadCalibrationFile(streams.calibration, size ? size->width : 0, size ? size->height : 0);
+  dataset.camera = ReadCalibrationFile(streams.calibration, size ? size->width : 0,
+                                       size ? size->height : 0, &dataset.calibration_notes);
   if (size && (dataset.camera.width != size->width || dataset.camera.height != size->height)) {
     throw InvalidArgumentError(
         path.string() + ": the camera of " + streams.calibration.string() + " is " +

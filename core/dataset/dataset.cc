@@ -388,7 +388,8 @@ Dataset ReadDataset(const fs::path& root, const DatasetReaderOptions& options) {
   Dataset dataset;
   dataset.root = root;
   if (fs::exists(root / dataset_files::kCalibYaml)) {
-    dataset.camera = ReadCalibrationFile(root / dataset_files::kCalibYaml, 0, 0);
+    dataset.camera =
+        ReadCalibrationFile(root / dataset_files::kCalibYaml, 0, 0, &dataset.calibration_notes);
   } else if (fs::exists(root / dataset_files::kCalibTxt)) {
     dataset.camera =
         ReadEcdCalibration(root / dataset_files::kCalibTxt, options.ecd_width, options.ecd_height);

@@ -247,6 +247,9 @@ struct Dataset {
   std::filesystem::path root;
   // The camera (from calib.yaml, else from calib.txt with the reader's size).
   Camera camera;
+  // What the calibration reader read but did not use (e.g. a Kalibr camchain's imu fields), one
+  // sentence each, prefixed with the file: for the tools to print.
+  std::vector<std::string> calibration_notes;
   // Images in time order (empty when the folder has no images.txt).
   std::vector<TimedFile> images;
   // Depth maps in time order (empty when there is no depth.txt).

@@ -186,6 +186,30 @@ TEST(Dataset, ReadsARealEcdFolder) {
   EXPECT_EQ(gray.rows, 180);
 }
 
+// A calib.yaml in another tool's format is read through the detection; what its reader ignored
+// comes back with the dataset (the tools print it), naming the file.
+TEST(Dataset, CalibrationNotesOfTheReaderComeWithTheDataset) {
+  const fs::path root = evloc::testing::MakeTempDir("dataset_calibration_notes");
+  std::ofstream(root / "calib.yaml") << "image_width: 240\nimage_height: 180\n"
+                                        "camera_matrix: {rows: 3, cols: 3, data: [199, 0, 132, 0, "
+                                        "198, 110, 0, 0, 1]}\n"
+                                        "distortion_model: plumb_bob\n"
+                                        "distortion_coefficients: {rows: 1, cols: 5, data: [-0.3, "
+                                        "0.1, 0, 0, 0]}\n"
+                                        "lens_serial: 42\n";
+  const Dataset dataset = ReadDataset(root);
+  EXPECT_EQ(dataset.camera.width, 240);
+  ASSERT_EQ(dataset.calibration_notes.size(), 1u);
+  EXPECT_EQ(dataset.calibration_notes[0],
+            (root / "calib.yaml").string() + ": unknown key 'lens_serial' is ignored");
+  // evloc's own camera YAML has nothing to say.
+  DatasetWriter writer(root / "own", {});
+  writer.WriteCamera(dataset.camera);
+  writer.Commit();
+  EXPECT_TRUE(ReadDataset(root / "own").calibration_notes.empty());
+  fs::remove_all(root);
+}
+
 TEST(Dataset, ListErrorsNameTheLine) {
   const fs::path root = evloc::testing::MakeTempDir("dataset_list");
   std::ofstream(root / "images.txt") << "0.1 a.png\n0.05 b.png\n";

@@ -515,6 +515,9 @@ OfflineTrackingResult RunTrackCommand(const TrackCommandOptions& options, std::o
   reader_options.bag_topics = options.bag_topics;
   reader_options.aedat4 = options.aedat4;
   const Dataset dataset = ReadDataset(options.dataset_path, reader_options);
+  for (const std::string& note : dataset.calibration_notes) {
+    log << "evloc-track: note: " << note << "\n";
+  }
   const bool events_mode = options.tracking.tracker.input == TrackerInput::kEvents;
 
   // The initial pose, at the ground truth's start or else at the first measurement.

@@ -72,6 +72,10 @@ Camera ReadLocateCalibration(const LocateCommand& command, int image_width, int 
   const int width = command.width > 0 ? command.width : image_width;
   const int height = command.height > 0 ? command.height : image_height;
   const Calibration calibration = ReadCalibration(command.calib, width, height);
+  // On stderr: standard output holds the result (JSON with --json).
+  for (const std::string& note : CalibrationNotes(command.calib, calibration)) {
+    std::cerr << "evloc-localizer locate: note: " << note << "\n";
+  }
   const Camera& camera = calibration.selected.camera;
   if (calibration.size_from_file &&
       (camera.width != image_width || camera.height != image_height)) {

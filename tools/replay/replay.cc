@@ -260,6 +260,9 @@ class Replayer {
     reader_options.bag_topics = options.bag_topics;
     reader_options.aedat4 = options.aedat4;
     dataset_ = ReadDataset(options.dataset, reader_options);
+    for (const std::string& note : dataset_.calibration_notes) {
+      log_ << "evloc-replay: note: " << note << "\n";
+    }
     reader_ = OpenDatasetEvents(dataset_);
     source_ = std::make_unique<EventSource>(*reader_);
     if (!source_->has_event()) {

@@ -190,8 +190,10 @@ void RenderCommandOptions::Check() const {
 nlohmann::json RunRenderCommand(const RenderCommandOptions& options) {
   options.Check();
   const auto total_start = Clock::now();
-  const Camera camera = options.camera_yaml ? ReadCalibrationFile(*options.camera_yaml, 0, 0)
-                                            : CameraPreset(options.camera_preset);
+  std::vector<std::string> calibration_notes;
+  const Camera camera = options.camera_yaml
+                            ? ReadCalibrationFile(*options.camera_yaml, 0, 0, &calibration_notes)
+                            : CameraPreset(options.camera_preset);
   std::optional<CarPark> park;
   Scene scene;
   if (options.carpark) {
@@ -388,6 +390,7 @@ nlohmann::json RunRenderCommand(const RenderCommandOptions& options) {
         {"frames", stats.frame_seconds},
         {"ground_truth_map", map_seconds}}}};
   if (!depth_camera_info.is_null()) info["depth_camera"] = depth_camera_info;
+  if (!calibration_notes.empty()) info["calibration_notes"] = calibration_notes;
   info["timings_s"]["total"] = SecondsSince(total_start);
   writer.WriteInfo(info);
   writer.Commit();

@@ -222,7 +222,9 @@ int RunRender(const CommandLine& line, evloc::sim::RenderCommandOptions& options
     if (depth.fps) options.depth_camera->fps = *depth.fps;
     if (depth.noise_at_1m_m) options.depth_camera->noise_at_1m_m = *depth.noise_at_1m_m;
     if (depth.camera_yaml) {
-      options.depth_camera->camera = evloc::ReadCalibrationFile(*depth.camera_yaml, 0, 0);
+      std::vector<std::string> notes;
+      options.depth_camera->camera = evloc::ReadCalibrationFile(*depth.camera_yaml, 0, 0, &notes);
+      for (const std::string& note : notes) std::cerr << "evloc-sim render: note: " << note << "\n";
     }
   }
   if (line.Count("--out") == 0) throw UsageError("render needs --out DIR.");
@@ -235,6 +237,11 @@ int RunRender(const CommandLine& line, evloc::sim::RenderCommandOptions& options
   RequireKnownCamera(options.camera_yaml.has_value(), options.camera_preset);
   options.Check();
   const auto info = evloc::sim::RunRenderCommand(options);
+  if (info.contains("calibration_notes")) {
+    for (const auto& note : info["calibration_notes"]) {
+      std::cerr << "evloc-sim render: note: " << note.get<std::string>() << "\n";
+    }
+  }
   std::cout << "evloc-sim render: wrote " << options.out_dir.string() << ": "
             << info["counts"]["events"] << " events (" << info["counts"]["event_rate_per_s"]
             << " /s; noise " << info["counts"]["noise_events"] << ", leak "
