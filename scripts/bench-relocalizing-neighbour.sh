@@ -3,7 +3,7 @@
 # sessions of the same server? (docs/benchmarks.md, "A relocalizing neighbour").
 #
 #   scripts/bench-relocalizing-neighbour.sh --honest DIR --search DIR [--build DIR] [--out DIR]
-#        [--sessions N] [--seconds S] [--repeats R] [--rate HZ]
+#        [--sessions N] [--seconds S] [--repeats R] [--rate HZ] [--server-arg FLAG=VALUE ...]
 #
 #   --honest DIR   dataset with gt_map/ whose events N sessions track from their ground-truth pose
 #                  at real time (evloc-load), against that map
@@ -12,7 +12,8 @@
 #                  searches for the whole run (the worst case: it is never found)
 # Alternates R runs without and R runs with the searching session, S seconds each, and prints
 # the honest sessions' server latency and step time (p50 / p99) per run and the medians. The
-# server runs at --rate HZ (default 300) with every option at its default.
+# server runs at --rate HZ (default 300) with every other option at its default, or as the
+# repeatable --server-arg sets it (one word each: --server-arg --search-priority --server-arg idle).
 set -euo pipefail
 
 BUILD=build
@@ -21,9 +22,10 @@ SESSIONS=2
 SECONDS_PER_RUN=10
 REPEATS=3
 RATE=300
+SERVER_ARGS=()
 HONEST=""
 SEARCH=""
-usage() { sed -n '2,17p' "$0" | sed 's/^# \{0,1\}//'; }
+usage() { sed -n '2,16p' "$0" | sed 's/^# \{0,1\}//'; }
 while [[ $# -gt 0 ]]; do
   case "$1" in
     --build) BUILD="$2"; shift 2 ;;
@@ -34,6 +36,8 @@ while [[ $# -gt 0 ]]; do
     --seconds) SECONDS_PER_RUN="$2"; shift 2 ;;
     --repeats) REPEATS="$2"; shift 2 ;;
     --rate) RATE="$2"; shift 2 ;;
+    --server-arg) SERVER_ARGS+=("$2"); shift 2 ;;
+    --server-arg=*) SERVER_ARGS+=("${1#--server-arg=}"); shift ;;
     -h|--help) usage; exit 0 ;;
     *) echo "bench-relocalizing-neighbour: unknown argument '$1' (see --help)" >&2; exit 2 ;;
   esac
@@ -52,7 +56,8 @@ mkdir -p "$OUT/maps"
 ln -sfn "$(realpath "$HONEST/gt_map")" "$OUT/maps/honest"
 # shellcheck source=scripts/service-lib.sh
 source "$(dirname "${BASH_SOURCE[0]}")/service-lib.sh"
-start_localizer "$OUT/server.log" "$SERVER_BIN" --maps "$OUT/maps" --max-sessions 16 --rate "$RATE"
+start_localizer "$OUT/server.log" "$SERVER_BIN" --maps "$OUT/maps" --max-sessions 16 --rate "$RATE" \
+  ${SERVER_ARGS[@]+"${SERVER_ARGS[@]}"}
 trap 'kill "$SERVER_PID" 2>/dev/null || true; wait "$SERVER_PID" 2>/dev/null || true' EXIT
 ADDRESS="127.0.0.1:$PORT"
 echo "bench-relocalizing-neighbour: $(date -u +%FT%TZ), $(nproc) cores, $SESSIONS honest sessions" \

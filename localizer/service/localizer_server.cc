@@ -50,6 +50,10 @@ void LocalizerServerOptions::Check() const {
   if (tracking_threads < 0 || tracking_threads > 1024) {
     throw InvalidArgumentError("--tracking-threads must be in [0, 1024] (0: one per core)");
   }
+  if (search_threads < 0 || search_threads > 64) {
+    throw InvalidArgumentError(
+        "--search-threads must be in [0, 64] (0: searching sessions share the tracking workers)");
+  }
   if (max_message_bytes < 1024) {
     throw InvalidArgumentError("--max-message-bytes must be at least 1024");
   }
@@ -228,6 +232,8 @@ std::string LocalizerServerOptions::Describe() const {
        << (threads == 0 ? " (automatic)" : "") << "\n"
        << "tracking-threads: " << TrackingPool::ThreadsFor(tracking_threads)
        << (tracking_threads == 0 ? " (one per core)" : "") << "\n"
+       << "search-threads: " << search_threads << "\n"
+       << "search-priority: " << SearchPriorityName(search_priority) << "\n"
        << "max-message-bytes: " << max_message_bytes << "\n"
        << "idle-timeout: " << idle_timeout_s << " s\n"
        << "queue-packets: " << queue_packets << "\n"
@@ -306,13 +312,22 @@ class LocalizerServer::Service final
                          : nullptr),
         registry_(RegistryOptions(options)),
         memory_(options.max_memory_bytes),
-        pool_(TrackingPool::ThreadsFor(options.tracking_threads)) {
+        pool_(TrackingPool::ThreadsFor(options.tracking_threads), options.search_threads,
+              options.search_priority) {
     if (options.auth_tokens_file) {
       tokens_ = std::make_unique<TokenFile>(
           *options.auth_tokens_file, std::chrono::seconds(options.reload_interval_s),
           [this](LogLevel level, const std::string& line) { Log(level, line); });
     }
     if (options.viewer_address) viewer_board_ = std::make_unique<ViewerBoard>();
+    if (!pool_.background_priority_applied()) {
+      Log(LogLevel::kWarning,
+          std::string("the kernel refused the search workers' priority (--search-priority ") +
+              SearchPriorityName(options.search_priority) + "); they run at " +
+              (options.search_priority == TrackingPool::BackgroundPriority::kIdle
+                   ? "nice 19"
+                   : "the tracking workers' priority"));
+    }
   }
 
   // The health service to keep up to date (set once the server runs).
@@ -822,6 +837,11 @@ class TrackCall final : public TrackReactor,
     std::shared_ptr<TrackCall> self = std::move(self_);  // May destroy the call (last owner).
   }
 
+  // While searching the map, the session's slices run on the pool's background workers
+  // (--search-threads), so that its long search steps never hold a worker that tracking sessions
+  // wait for.
+  bool background() const override { return searching_.load(std::memory_order_relaxed); }
+
   // Runs on a worker of the tracking pool, never two at once: opens the session, then tracks one
   // queued request per slice; ends the call when the session is over.
   bool RunSlice() override {
@@ -1183,6 +1203,11 @@ class TrackCall final : public TrackReactor,
       Send(std::move(response), true, item.received, dequeued, no_estimate);
     }
     if (viewer_ && !estimates.empty()) PublishToViewer(estimates.back());
+    if (!estimates.empty()) {
+      const tracking::TrackingStatus status = estimates.back().status;
+      searching_ = status == tracking::TrackingStatus::kInitializing ||
+                   status == tracking::TrackingStatus::kRelocalizing;
+    }
     if (tracker_->stopped()) {
       if (cpu_exceeded_) {
         ++counters.limited;
@@ -1434,6 +1459,9 @@ class TrackCall final : public TrackReactor,
   api::SessionStart start_;
   std::atomic<bool> open_requested_{false};
   std::atomic<bool> opened_{false};
+  // The last step searched the map (INITIALIZING, RELOCALIZING): the pool runs the session on its
+  // background workers (background()).
+  std::atomic<bool> searching_{false};
   std::atomic<uint64_t> id_{0};
   std::unique_ptr<SessionTracker> tracker_;
   // The session's slot on the viewer's board (null without --viewer; the worker's only).

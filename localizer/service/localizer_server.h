@@ -19,6 +19,7 @@
 #include "localizer/service/auth.h"
 #include "localizer/service/map_registry.h"
 #include "localizer/service/session.h"
+#include "localizer/service/tracking_pool.h"
 #include "localizer/service/viewer_http.h"
 #include "localizer/tracking/tracker_options.h"
 
@@ -48,6 +49,13 @@ struct LocalizerServerOptions {
   // Tracking workers shared by every session (a session runs on one at a time, sessions take
   // turns one request each); 0: one per core (--tracking-threads).
   int tracking_threads = 0;
+  // Workers of their own for the sessions that search the map (INITIALIZING, RELOCALIZING), so
+  // that a search never holds a worker the tracking sessions wait for (--search-threads); 0:
+  // searching sessions share the tracking workers.
+  int search_threads = 1;
+  // The priority of those workers (--search-priority idle|low|normal): idle (SCHED_IDLE: only CPU
+  // that nothing else on the machine wants), low (nice 10) or the tracking workers' own.
+  TrackingPool::BackgroundPriority search_priority = TrackingPool::BackgroundPriority::kIdle;
   // Largest request message accepted, bytes; larger ones get RESOURCE_EXHAUSTED
   // (--max-message-bytes).
   int max_message_bytes = 4 << 20;

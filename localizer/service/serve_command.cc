@@ -22,6 +22,13 @@ Options:
                              streams hold none
   --tracking-threads N       tracking workers shared by every session (default 0: one per
                              core); a session runs on one worker at a time
+  --search-threads N         workers of their own for the sessions searching the map
+                             (INITIALIZING, RELOCALIZING), so a search never holds a tracking
+                             worker (default 1; 0: they share the tracking workers)
+  --search-priority P        idle (default: SCHED_IDLE, the search gets only CPU that nothing
+                             else in the server's cgroup wants: a container, a systemd unit),
+                             low (nice 10) or normal; on a machine shared with other busy
+                             programs in one cgroup, use low or normal (docs/api.md, "Threads")
   --max-message-bytes N      largest request message, bytes (default 4194304)
   --idle-timeout SECONDS     cancel a session that sends nothing this long (default 30)
   --queue-packets N          packets a session may have waiting (default 256)
@@ -131,6 +138,10 @@ ServeCommand ParseServeCommandLine(const std::vector<std::string>& arguments) {
       server.threads = static_cast<int>(ParseIntegerFlag(flag, value));
     } else if (flag == "--tracking-threads") {
       server.tracking_threads = static_cast<int>(ParseIntegerFlag(flag, value));
+    } else if (flag == "--search-threads") {
+      server.search_threads = static_cast<int>(ParseIntegerFlag(flag, value));
+    } else if (flag == "--search-priority") {
+      server.search_priority = ParseSearchPriority(value);
     } else if (flag == "--max-message-bytes") {
       server.max_message_bytes = static_cast<int>(ParseIntegerFlag(flag, value));
     } else if (flag == "--idle-timeout") {

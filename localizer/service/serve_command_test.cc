@@ -21,6 +21,10 @@ TEST(ServeCommand, EveryFlagReachesItsOption) {
                                               "9",
                                               "--tracking-threads",
                                               "3",
+                                              "--search-threads",
+                                              "2",
+                                              "--search-priority",
+                                              "low",
                                               "--max-message-bytes",
                                               "65536",
                                               "--idle-timeout",
@@ -101,6 +105,9 @@ TEST(ServeCommand, EveryFlagReachesItsOption) {
   EXPECT_EQ(server.max_sessions, 3);
   EXPECT_EQ(server.threads, 9);
   EXPECT_EQ(server.tracking_threads, 3);
+  EXPECT_EQ(server.search_threads, 2);
+  EXPECT_EQ(server.search_priority, TrackingPool::BackgroundPriority::kLow);
+  EXPECT_NE(server.Describe().find("search-priority: low"), std::string::npos);
   EXPECT_EQ(server.max_message_bytes, 65536);
   EXPECT_EQ(server.idle_timeout_s, 2.5);
   EXPECT_EQ(server.queue_packets, 16);
@@ -160,6 +167,10 @@ TEST(ServeCommand, BadCommandLinesAreRejectedWithTheFlag) {
   EXPECT_THROW(ParseServeCommandLine({"serve", "--maps", maps, "--threads", "3"}),
                InvalidArgumentError);
   EXPECT_THROW(ParseServeCommandLine({"serve", "--maps", maps, "--tracking-threads", "-1"}),
+               InvalidArgumentError);
+  EXPECT_THROW(ParseServeCommandLine({"serve", "--maps", maps, "--search-threads", "-1"}),
+               InvalidArgumentError);
+  EXPECT_THROW(ParseServeCommandLine({"serve", "--maps", maps, "--search-priority", "high"}),
                InvalidArgumentError);
   EXPECT_THROW(ParseServeCommandLine({"serve", "--maps", maps, "--max-camera-pixels", "0"}),
                InvalidArgumentError);

@@ -4,6 +4,10 @@
 #include <utility>
 
 #include <pthread.h>
+#include <sched.h>
+#include <sys/resource.h>
+#include <sys/syscall.h>
+#include <unistd.h>
 
 #include "core/common/error.h"
 
@@ -15,9 +19,13 @@ int TrackingPool::ThreadsFor(int requested) {
   return cores == 0 ? 1 : static_cast<int>(cores);
 }
 
-TrackingPool::TrackingPool(int threads) {
+TrackingPool::TrackingPool(int threads, int background_threads,
+                           BackgroundPriority background_priority) {
   if (threads < 0)
     throw InvalidArgumentError("TrackingPool: the thread count must not be negative");
+  if (background_threads < 0) {
+    throw InvalidArgumentError("TrackingPool: the background thread count must not be negative");
+  }
   const int count = ThreadsFor(threads);
   workers_.reserve(static_cast<size_t>(count));
   for (int i = 0; i < count; ++i) {
@@ -25,27 +33,62 @@ TrackingPool::TrackingPool(int threads) {
       // Named for top, perf and gdb (at most 15 characters).
       pthread_setname_np(pthread_self(),
                          ("evloc-track-" + std::to_string(i)).substr(0, 15).c_str());
-      WorkerLoop();
+      WorkerLoop(lane_);
     });
   }
+  std::atomic<int> refused{0};
+  std::atomic<int> started{0};
+  for (int i = 0; i < background_threads; ++i) {
+    background_workers_.emplace_back([this, i, background_priority, &refused, &started] {
+      pthread_setname_np(pthread_self(), ("evloc-bg-" + std::to_string(i)).substr(0, 15).c_str());
+      // Lowering a thread's priority needs no privilege. setpriority on a thread id sets that
+      // thread alone (Linux).
+      const auto set_nice = [](int nice) {
+        return setpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)), nice) == 0;
+      };
+      if (background_priority == BackgroundPriority::kIdle) {
+        // Where SCHED_IDLE is refused (a seccomp profile, another kernel): nice 19.
+        const sched_param param{};
+        if (pthread_setschedparam(pthread_self(), SCHED_IDLE, &param) != 0) {
+          ++refused;
+          set_nice(19);
+        }
+      } else if (background_priority == BackgroundPriority::kLow && !set_nice(10)) {
+        ++refused;
+      }
+      ++started;
+      WorkerLoop(background_lane_);
+    });
+  }
+  while (started.load() < background_threads) std::this_thread::yield();
+  background_priority_applied_ = refused.load() == 0;
 }
 
 TrackingPool::~TrackingPool() {
   std::deque<std::shared_ptr<Job>> dropped;
+  std::deque<std::shared_ptr<Job>> dropped_background;
   {
     std::lock_guard<std::mutex> lock(mutex_);
     stopping_ = true;
   }
-  ready_.notify_all();
+  lane_.ready.notify_all();
+  background_lane_.ready.notify_all();
   for (std::thread& worker : workers_) worker.join();
+  for (std::thread& worker : background_workers_) worker.join();
   {
     std::lock_guard<std::mutex> lock(mutex_);
-    dropped.swap(queue_);
+    dropped.swap(lane_.queue);
+    dropped_background.swap(background_lane_.queue);
   }
   // Released outside the lock: a job's destructor may wake another job.
 }
 
+TrackingPool::Lane& TrackingPool::LaneOf(const Job& job) {
+  return !background_workers_.empty() && job.background() ? background_lane_ : lane_;
+}
+
 void TrackingPool::Wake(const std::shared_ptr<Job>& job) {
+  Lane* lane = nullptr;
   {
     std::lock_guard<std::mutex> lock(mutex_);
     switch (job->state_) {
@@ -58,33 +101,41 @@ void TrackingPool::Wake(const std::shared_ptr<Job>& job) {
       case Job::State::kIdle:
         if (stopping_) return;
         job->state_ = Job::State::kQueued;
-        queue_.push_back(job);
+        lane = &LaneOf(*job);
+        lane->queue.push_back(job);
         break;
     }
   }
-  ready_.notify_one();
+  lane->ready.notify_one();
 }
 
 size_t TrackingPool::queued() const {
   std::lock_guard<std::mutex> lock(mutex_);
-  return queue_.size();
+  return lane_.queue.size() + background_lane_.queue.size();
 }
 
-void TrackingPool::WorkerLoop() {
+size_t TrackingPool::background_queued() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return background_lane_.queue.size();
+}
+
+void TrackingPool::WorkerLoop(Lane& own) {
   std::unique_lock<std::mutex> lock(mutex_);
   while (true) {
-    ready_.wait(lock, [this] { return stopping_ || !queue_.empty(); });
+    own.ready.wait(lock, [&] { return stopping_ || !own.queue.empty(); });
     if (stopping_) return;
-    std::shared_ptr<Job> job = std::move(queue_.front());
-    queue_.pop_front();
+    std::shared_ptr<Job> job = std::move(own.queue.front());
+    own.queue.pop_front();
     job->state_ = Job::State::kRunning;
     lock.unlock();
     const bool more = job->RunSlice();
     lock.lock();
     if ((more || job->state_ == Job::State::kRunningWoken) && !stopping_) {
       job->state_ = Job::State::kQueued;
-      queue_.push_back(std::move(job));
-      ready_.notify_one();
+      // Its lane now: a session that found the map leaves the background lane at once.
+      Lane& lane = LaneOf(*job);
+      lane.queue.push_back(std::move(job));
+      lane.ready.notify_one();
     } else {
       job->state_ = Job::State::kIdle;
     }
@@ -95,6 +146,27 @@ void TrackingPool::WorkerLoop() {
       lock.lock();
     }
   }
+}
+
+const char* SearchPriorityName(TrackingPool::BackgroundPriority priority) {
+  switch (priority) {
+    case TrackingPool::BackgroundPriority::kIdle:
+      return "idle";
+    case TrackingPool::BackgroundPriority::kLow:
+      return "low";
+    case TrackingPool::BackgroundPriority::kNormal:
+      return "normal";
+  }
+  return "normal";
+}
+
+TrackingPool::BackgroundPriority ParseSearchPriority(const std::string& name) {
+  for (const auto priority :
+       {TrackingPool::BackgroundPriority::kIdle, TrackingPool::BackgroundPriority::kLow,
+        TrackingPool::BackgroundPriority::kNormal}) {
+    if (name == SearchPriorityName(priority)) return priority;
+  }
+  throw InvalidArgumentError("--search-priority must be idle, low or normal, got '" + name + "'");
 }
 
 SharedTimer::SharedTimer()

@@ -4,6 +4,7 @@
 // grow with the number of streams.
 #pragma once
 
+#include <atomic>
 #include <chrono>
 #include <condition_variable>
 #include <cstdint>
@@ -12,6 +13,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <string>
 #include <thread>
 #include <vector>
 
@@ -22,6 +24,11 @@ namespace evloc::service {
 // slice ends. Runnable jobs take turns in FIFO order, one slice each (a slice is what the job
 // chooses to do per call: a session tracks one queued request), so a busy session cannot keep
 // the others waiting for more than one of its slices. Thread-safe.
+//
+// Background lane: with background workers, a job that says it is background work (a session
+// searching the map) is queued for them instead, each time it is queued, so its long slices never
+// hold a worker that tracking sessions wait for; the background workers run at the priority the
+// pool was given (idle: the kernel runs them only on CPU the other threads leave).
 class TrackingPool {
  public:
   // One serial job. Its RunSlice is never called by two workers at once.
@@ -31,6 +38,9 @@ class TrackingPool {
     // Runs one slice of the job's work; returns true when more work is ready now (the job goes
     // to the back of the queue), false when it waits to be woken.
     virtual bool RunSlice() = 0;
+    // True while the job's work is background work (asked whenever it is queued, from any
+    // thread: must be thread-safe).
+    virtual bool background() const { return false; }
 
    private:
     friend class TrackingPool;
@@ -39,8 +49,20 @@ class TrackingPool {
     State state_ = State::kIdle;
   };
 
-  // Starts `threads` workers (>= 1; 0 is taken as the number of cores).
-  explicit TrackingPool(int threads);
+  // The scheduling of the background workers.
+  enum class BackgroundPriority {
+    // SCHED_IDLE (else nice 19 where the policy cannot be set): only CPU nothing else wants.
+    kIdle,
+    // Nice 10: about a tenth of a core against each busy thread of normal priority.
+    kLow,
+    // The tracking workers' priority: only the queue is separate.
+    kNormal,
+  };
+
+  // Starts `threads` workers (>= 1; 0 is taken as the number of cores) and `background_threads`
+  // background workers (0: background jobs share the workers).
+  explicit TrackingPool(int threads, int background_threads = 0,
+                        BackgroundPriority background_priority = BackgroundPriority::kIdle);
   // Stops the workers after their current slice; jobs still queued are dropped (released).
   ~TrackingPool();
   TrackingPool(const TrackingPool&) = delete;
@@ -52,22 +74,44 @@ class TrackingPool {
 
   // The number of worker threads.
   int threads() const { return static_cast<int>(workers_.size()); }
-  // Jobs waiting for a worker now (for tests and metrics).
+  // The number of background worker threads.
+  int background_threads() const { return static_cast<int>(background_workers_.size()); }
+  // Jobs waiting for a worker now, background ones included (for tests and metrics).
   size_t queued() const;
+  // Background jobs waiting for a background worker now.
+  size_t background_queued() const;
+  // True when the background workers run at the priority asked (false when the kernel refused
+  // SCHED_IDLE or the nice value; vacuously true without background workers).
+  bool background_priority_applied() const { return background_priority_applied_; }
 
   // The worker count for `requested` threads: `requested` when positive, else the number of
   // cores (at least 1).
   static int ThreadsFor(int requested);
 
  private:
-  void WorkerLoop();
+  // One lane: its queue and the condition its workers wait on.
+  struct Lane {
+    std::condition_variable ready;
+    std::deque<std::shared_ptr<Job>> queue;
+  };
+  void WorkerLoop(Lane& lane);
+  // The lane `job` goes to now. Needs mutex_.
+  Lane& LaneOf(const Job& job);
 
   mutable std::mutex mutex_;
-  std::condition_variable ready_;
-  std::deque<std::shared_ptr<Job>> queue_;
+  Lane lane_;
+  Lane background_lane_;
   bool stopping_ = false;
+  std::atomic<bool> background_priority_applied_{true};
   std::vector<std::thread> workers_;
+  std::vector<std::thread> background_workers_;
 };
+
+// "idle", "low" or "normal".
+const char* SearchPriorityName(TrackingPool::BackgroundPriority priority);
+// The priority named "idle", "low" or "normal"; throws InvalidArgumentError naming
+// --search-priority otherwise.
+TrackingPool::BackgroundPriority ParseSearchPriority(const std::string& name);
 
 // One thread that runs callbacks at their deadlines (the watchdog of every stream). Callbacks run
 // on the timer thread one after another and must be short (no blocking). Thread-safe.

@@ -1,6 +1,8 @@
 #include "localizer/service/tracking_pool.h"
 
 #include <gtest/gtest.h>
+#include <pthread.h>
+#include <sched.h>
 
 #include <atomic>
 #include <chrono>
@@ -11,6 +13,8 @@
 #include <string>
 #include <thread>
 #include <vector>
+
+#include "core/common/error.h"
 
 namespace evloc::service {
 namespace {
@@ -131,6 +135,90 @@ TEST(TrackingPool, ManyJobsWokenFromManyThreadsProcessEveryItemOneSliceAtATime) 
   for (const auto& job : jobs) {
     EXPECT_EQ(job->processed(), kProducers * kItemsPerProducerAndJob);
   }
+}
+
+// A job that says whether it is background work, and records where its slices ran.
+class LaneJob : public TrackingPool::Job {
+ public:
+  explicit LaneJob(std::chrono::milliseconds first_slice) : first_slice_(first_slice) {}
+  bool background() const override { return background_.load(); }
+  bool RunSlice() override {
+    char name[16] = {};
+    pthread_getname_np(pthread_self(), name, sizeof(name));
+    std::lock_guard<std::mutex> lock(mutex_);
+    threads_.push_back(name);
+    policies_.push_back(sched_getscheduler(0));
+    inside_first_ = threads_.size() == 1;
+    if (threads_.size() == 1) {
+      mutex_.unlock();
+      std::this_thread::sleep_for(first_slice_);
+      mutex_.lock();
+    }
+    inside_first_ = false;
+    ++slices_;
+    return false;
+  }
+  std::atomic<bool> background_{false};
+  std::atomic<bool> inside_first_{false};
+  std::atomic<int> slices_{0};
+  std::vector<std::string> threads() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return threads_;
+  }
+  std::vector<int> policies() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return policies_;
+  }
+
+ private:
+  const std::chrono::milliseconds first_slice_;
+  std::mutex mutex_;
+  std::vector<std::string> threads_;
+  std::vector<int> policies_;
+};
+
+// How long a one-slice tracking job waits while a background job's long slice runs, in a pool of
+// one tracking worker with `background_threads` background workers.
+double TrackingJobWaitSeconds(int background_threads, TrackingPool::BackgroundPriority priority,
+                              std::shared_ptr<LaneJob>* searching) {
+  TrackingPool pool(1, background_threads, priority);
+  *searching = std::make_shared<LaneJob>(std::chrono::milliseconds(1500));
+  (*searching)->background_ = true;
+  pool.Wake(*searching);
+  while (!(*searching)->inside_first_) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  auto tracking = std::make_shared<CountingJob>(1);
+  auto done = tracking->done_.get_future();
+  const auto start = Clock::now();
+  pool.Wake(tracking);
+  done.wait();
+  const double waited = std::chrono::duration<double>(Clock::now() - start).count();
+  // The searching job found the map: its next slice runs on the tracking worker.
+  while ((*searching)->slices_ < 1) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  (*searching)->background_ = false;
+  pool.Wake(*searching);
+  while ((*searching)->slices_ < 2) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  return waited;
+}
+
+TEST(TrackingPool, BackgroundJobsRunOnTheirOwnWorkersAndNeverHoldATrackingWorker) {
+  std::shared_ptr<LaneJob> searching;
+  // With a background worker the tracking job does not wait for the 1.5 s slice.
+  EXPECT_LT(TrackingJobWaitSeconds(1, TrackingPool::BackgroundPriority::kIdle, &searching), 1.0);
+  ASSERT_EQ(searching->threads().size(), 2u);
+  EXPECT_EQ(searching->threads()[0], "evloc-bg-0");
+  EXPECT_EQ(searching->threads()[1], "evloc-track-0");
+  EXPECT_EQ(searching->policies()[0], SCHED_IDLE);
+  EXPECT_EQ(searching->policies()[1], SCHED_OTHER);
+  // Without one it waits for the slice to end (one worker for both).
+  EXPECT_GT(TrackingJobWaitSeconds(0, TrackingPool::BackgroundPriority::kIdle, &searching), 1.0);
+  EXPECT_EQ(searching->threads()[0], "evloc-track-0");
+
+  TrackingPool low(1, 1, TrackingPool::BackgroundPriority::kLow);
+  EXPECT_TRUE(low.background_priority_applied());
+  TrackingPool idle(1, 1, TrackingPool::BackgroundPriority::kIdle);
+  EXPECT_TRUE(idle.background_priority_applied());
+  EXPECT_EQ(ParseSearchPriority("low"), TrackingPool::BackgroundPriority::kLow);
+  EXPECT_THROW(ParseSearchPriority("high"), InvalidArgumentError);
 }
 
 TEST(TrackingPool, RunnableJobsTakeTurnsOneSliceEach) {

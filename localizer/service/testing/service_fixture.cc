@@ -91,6 +91,10 @@ LocalizerServerOptions TestServerOptions(const std::filesystem::path& maps_dir) 
   options.listen_address = "127.0.0.1:0";
   options.max_sessions = 4;
   options.idle_timeout_s = 5.0;
+  // Tests run beside other tests (ctest -j): at the default idle priority a searching session
+  // would get no CPU while they are busy, and its idle timeout would end it. The priority
+  // itself is tested by TrackingPool.BackgroundJobsRunOnTheirOwnWorkersAndNeverHoldATrackingWorker.
+  options.search_priority = TrackingPool::BackgroundPriority::kNormal;
   return options;
 }
 

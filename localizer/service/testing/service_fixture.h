@@ -62,7 +62,8 @@ void WriteTestMap(const std::filesystem::path& maps_dir, const std::string& name
 // scene over [kInitialTimeNs, duration_ns] and returns its path.
 std::filesystem::path WriteTestDataset(const std::filesystem::path& root, int64_t duration_ns);
 
-// Server options for tests: the given map folder, 127.0.0.1 port 0, short idle timeout.
+// Server options for tests: the given map folder, 127.0.0.1 port 0, short idle timeout, the
+// search workers at normal priority.
 LocalizerServerOptions TestServerOptions(const std::filesystem::path& maps_dir);
 
 // A stub connected to 127.0.0.1:port.
