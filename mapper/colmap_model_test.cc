@@ -141,6 +141,39 @@ TEST(ColmapRunner, MissingExecutableIsAnIoError) {
   EXPECT_NO_THROW(FindExecutable("sh"));
 }
 
+// A command that has done its work but does not exit (COLMAP 3.8's feature_extractor after its
+// last image, sometimes) is stopped once the grace has passed, with a line in its log; a command
+// that exits by itself is not disturbed by the watch.
+TEST(ColmapRunner, AWatchedCommandThatHangsAfterItsWorkIsStopped) {
+  const std::filesystem::path directory = testing::MakeTempDir("colmap_runner_watch");
+  const std::filesystem::path log = directory / "run.log";
+  CommandWatch watch;
+  watch.done = [&log] {
+    std::ifstream stream(log);
+    const std::string text((std::istreambuf_iterator<char>(stream)),
+                           std::istreambuf_iterator<char>());
+    return text.find("Processed file [2/2]") != std::string::npos;
+  };
+  watch.exit_grace = std::chrono::milliseconds(300);
+  const auto start = std::chrono::steady_clock::now();
+  EXPECT_THROW(RunLoggedCommand({"/bin/sh", "-c", "echo 'Processed file [2/2]'; exec sleep 60"},
+                                log, &watch),
+               CommandHungError);
+  EXPECT_LT(std::chrono::steady_clock::now() - start, std::chrono::seconds(20));
+  std::ifstream stream(log);
+  const std::string text((std::istreambuf_iterator<char>(stream)),
+                         std::istreambuf_iterator<char>());
+  EXPECT_NE(text.find("did not exit within 300 ms; it was stopped"), std::string::npos) << text;
+  // Done and exiting at once, or never done: ordinary runs.
+  EXPECT_NO_THROW(RunLoggedCommand({"/bin/sh", "-c", "echo 'Processed file [2/2]'"}, log, &watch));
+  CommandWatch never;
+  never.done = [] { return false; };
+  never.exit_grace = std::chrono::milliseconds(1);
+  EXPECT_NO_THROW(RunLoggedCommand({"/bin/sh", "-c", "sleep 1.5"}, log, &never));
+  EXPECT_THROW(RunLoggedCommand({"/bin/sh", "-c", "exit 3"}, log, &never), IoError);
+  std::filesystem::remove_all(directory);
+}
+
 TEST(ColmapRunner, FailedCommandQuotesItsLog) {
   const std::filesystem::path directory = testing::MakeTempDir("colmap_runner_log");
   const std::filesystem::path log = directory / "run.log";

@@ -13,7 +13,9 @@
 #include <cstring>
 #include <deque>
 #include <fstream>
+#include <optional>
 #include <sstream>
+#include <thread>
 
 #include "core/common/error.h"
 #include "core/common/file_util.h"
@@ -126,7 +128,7 @@ std::filesystem::path FindExecutable(const std::string& executable) {
 }
 
 void RunLoggedCommand(const std::vector<std::string>& arguments,
-                      const std::filesystem::path& log_path) {
+                      const std::filesystem::path& log_path, const CommandWatch* watch) {
   if (arguments.empty()) throw InvalidArgumentError("RunLoggedCommand: no program given");
   std::vector<char*> argv;
   for (const std::string& argument : arguments) argv.push_back(const_cast<char*>(argument.c_str()));
@@ -168,8 +170,35 @@ void RunLoggedCommand(const std::vector<std::string>& arguments,
     throw IoError("cannot start " + arguments[0] + ": " + std::strerror(fork_error));
   }
   int status = 0;
-  while (::waitpid(pid, &status, 0) < 0) {
-    if (errno != EINTR) throw IoError("waiting for " + arguments[0] + " failed");
+  if (watch == nullptr) {
+    while (::waitpid(pid, &status, 0) < 0) {
+      if (errno != EINTR) throw IoError("waiting for " + arguments[0] + " failed");
+    }
+  } else {
+    using Clock = std::chrono::steady_clock;
+    std::optional<Clock::time_point> done_at;
+    auto next_check = Clock::now();
+    while (true) {
+      const pid_t waited = ::waitpid(pid, &status, WNOHANG);
+      if (waited == pid) break;
+      if (waited < 0 && errno != EINTR) throw IoError("waiting for " + arguments[0] + " failed");
+      const auto now = Clock::now();
+      if (now >= next_check) {
+        next_check = now + std::chrono::seconds(1);
+        if (!done_at && watch->done()) done_at = now;
+      }
+      if (done_at && now - *done_at > watch->exit_grace) {
+        ::kill(pid, SIGKILL);
+        while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
+        }
+        const std::string message =
+            "`" + command_line + "` had done its work but did not exit within " +
+            std::to_string(watch->exit_grace.count()) + " ms; it was stopped";
+        std::ofstream(log_path, std::ios::app) << "evloc: " << message << "\n";
+        throw CommandHungError("command " + message + "; see " + log_path.string());
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
   }
   if (WIFEXITED(status) && WEXITSTATUS(status) == 0) return;
   const std::string how = WIFEXITED(status)
@@ -215,13 +244,13 @@ ColmapRunner::ColmapRunner(ColmapOptions options, std::filesystem::path workspac
   executable_ = FindExecutable(options_.executable);
 }
 
-void ColmapRunner::Run(const std::string& command,
-                       const std::vector<std::string>& arguments) const {
+void ColmapRunner::Run(const std::string& command, const std::vector<std::string>& arguments,
+                       const CommandWatch* watch) const {
   CreateDirectories(LogDir());
   std::vector<std::string> full = {executable_.string(), command};
   full.insert(full.end(), arguments.begin(), arguments.end());
   full.insert(full.end(), {"--random_seed", std::to_string(options_.random_seed)});
-  RunLoggedCommand(full, LogDir() / (command + ".log"));
+  RunLoggedCommand(full, LogDir() / (command + ".log"), watch);
 }
 
 void ColmapRunner::ExtractFeatures(const std::vector<std::string>& image_names) const {
@@ -252,7 +281,29 @@ void ColmapRunner::ExtractFeatures(const std::vector<std::string>& image_names) 
   } else {
     arguments.insert(arguments.end(), {"--ImageReader.camera_model", "SIMPLE_RADIAL"});
   }
-  Run("feature_extractor", arguments);
+  // COLMAP 3.8's feature_extractor sometimes hangs after its last image (seen in this project's
+  // test suite on 2026-11-28: every thread waiting, its feature writer on an empty queue, the log
+  // ending at "Processed file [N/N]"). Such a run is stopped 30 s after that line and run again:
+  // the database keeps what was committed, and COLMAP skips the images it already holds.
+  const std::filesystem::path log = LogDir() / "feature_extractor.log";
+  const std::string last = "Processed file [" + std::to_string(image_names.size()) + "/" +
+                           std::to_string(image_names.size()) + "]";
+  for (int attempt = 1;; ++attempt) {
+    std::error_code no_log;
+    const uint64_t start =
+        std::filesystem::exists(log, no_log) ? std::filesystem::file_size(log) : 0;
+    CommandWatch watch;
+    watch.done = [&log, &last, start] {
+      const std::string text = ReadFileToString(log);
+      return text.size() > start && text.find(last, start) != std::string::npos;
+    };
+    try {
+      Run("feature_extractor", arguments, &watch);
+      return;
+    } catch (const CommandHungError&) {
+      if (attempt == 3) throw;
+    }
+  }
 }
 
 MatcherType ColmapRunner::EffectiveMatcher(size_t num_images) const {

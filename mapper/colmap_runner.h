@@ -4,14 +4,17 @@
 // printed.
 #pragma once
 
+#include <chrono>
 #include <cstdint>
 #include <filesystem>
+#include <functional>
 #include <map>
 #include <optional>
 #include <string>
 #include <vector>
 
 #include "core/camera/camera.h"
+#include "core/common/error.h"
 #include "mapper/colmap_database.h"
 
 namespace evloc::mapper {
@@ -93,11 +96,27 @@ std::filesystem::path FindExecutable(const std::string& executable);
 // Stereo"), the version recorded in reports. Throws IoError when COLMAP cannot be run.
 std::string ColmapVersion(const ColmapOptions& options);
 
+// What RunLoggedCommand watches while a command runs: a command whose work is done (`done`,
+// asked about once a second, returns true) but that has not exited `exit_grace` later is taken
+// as hung, killed, and reported as CommandHungError. COLMAP 3.8's feature_extractor sometimes
+// never exits after its last image (its feature writer thread waits on an empty queue).
+struct CommandWatch {
+  std::function<bool()> done;
+  std::chrono::milliseconds exit_grace{30000};
+};
+
+// A command that RunLoggedCommand killed because it did not exit once its work was done.
+class CommandHungError : public IoError {
+ public:
+  using IoError::IoError;
+};
+
 // Runs `arguments` (arguments[0] is the program) with stdout and stderr appended to `log_path`
 // and waits for it. Throws IoError when the program cannot be started, or exits non-zero or by a
-// signal; the message names the command and the log file and quotes the log's last lines.
+// signal; the message names the command and the log file and quotes the log's last lines. With
+// `watch`, throws CommandHungError (after a line in the log) for a command that hung.
 void RunLoggedCommand(const std::vector<std::string>& arguments,
-                      const std::filesystem::path& log_path);
+                      const std::filesystem::path& log_path, const CommandWatch* watch = nullptr);
 
 // The COLMAP commands used by the mapper, on one workspace. Each writes into the workspace and
 // appends to `<workspace>/logs/<command>.log`.
@@ -139,7 +158,8 @@ class ColmapRunner {
 
  private:
   // Runs `colmap <command> <arguments...>` logging to LogDir()/<command>.log.
-  void Run(const std::string& command, const std::vector<std::string>& arguments) const;
+  void Run(const std::string& command, const std::vector<std::string>& arguments,
+           const CommandWatch* watch = nullptr) const;
 
   ColmapOptions options_;
   std::filesystem::path executable_;

@@ -12,6 +12,7 @@
 #include <mutex>
 #include <optional>
 #include <utility>
+#include <vector>
 
 namespace evloc::service {
 
@@ -55,6 +56,30 @@ class BoundedQueue {
     weight_ -= items_.front().second;
     items_.pop_front();
     return item;
+  }
+
+  // Drops items from the front while `droppable(item)` holds, at most `count`; returns how many
+  // and their weight. The dropped items are destroyed after the lock is released.
+  template <typename Droppable>
+  std::pair<size_t, uint64_t> DropFront(size_t count, const Droppable& droppable) {
+    std::vector<T> dropped;
+    uint64_t dropped_weight = 0;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      while (dropped.size() < count && !items_.empty() && droppable(items_.front().first)) {
+        dropped.push_back(std::move(items_.front().first));
+        dropped_weight += items_.front().second;
+        weight_ -= items_.front().second;
+        items_.pop_front();
+      }
+    }
+    return {dropped.size(), dropped_weight};
+  }
+
+  // True when the queue could not take an item of `weight` now (items or weight).
+  bool WouldBeFull(uint64_t weight) const {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return items_.size() >= capacity_ || (!items_.empty() && weight > max_weight_ - weight_);
   }
 
   // True when closed (or aborted) and nothing is left to pop.

@@ -174,6 +174,9 @@ std::string ServerCounters::PrometheusText() const {
          "handshake timeout, CPU budget, events or steps per packet).",
          limited);
   metric("evloc_events_total", "counter", "Events tracked (rate() gives events/s).", events);
+  metric("evloc_searching_packets_shed_total", "counter",
+         "Event packets dropped unread by sessions searching the map whose queue was full.",
+         packets_shed);
   metric("evloc_poses_total", "counter", "PoseUpdates sent (rate() gives poses/s).", poses);
   metric("evloc_lost_poses_total", "counter",
          "PoseUpdates without a trusted pose (LOST, INITIALIZING, RELOCALIZING).", lost_poses);
@@ -777,6 +780,10 @@ class TrackCall final : public TrackReactor,
     }
     item.reservation = std::move(*reservation);
     latest_end_t_ns_ = item.item.t_ns;
+    if (searching_ && item.item.kind == SessionItem::Kind::kEvents &&
+        inbound_.WouldBeFull(events)) {
+      ShedWhileSearching();
+    }
     const PushResult pushed = inbound_.TryPush(std::move(item), events);
     if (pushed == PushResult::kFull) {
       EndReading(
@@ -795,6 +802,27 @@ class TrackCall final : public TrackReactor,
     NoteQueueLevel();
     Wake();
     ReadNext();
+  }
+
+  // A session searching the map (it has no pose to keep) whose queue is full drops the older half
+  // of its queued event packets instead of overflowing: the search works on the newest events
+  // (one decay time), and the steps of the dropped packets run on the next ones with fewer
+  // events. Packets of other kinds (frames, hints, GNSS fixes) stop the dropping.
+  void ShedWhileSearching() {
+    const auto [packets, events] = inbound_.DropFront(
+        std::max<size_t>(1, inbound_.size() / 2),
+        [](const InboundItem& queued) { return queued.item.kind == SessionItem::Kind::kEvents; });
+    if (packets == 0) return;
+    if (packets_shed_ == 0) {
+      service_.Log(LogLevel::kInfo,
+                   "session " + std::to_string(id_) +
+                       ": searching and behind its stream: dropping the oldest queued event "
+                       "packets (SessionEnd.packets_shed counts them)",
+                   {{"event", "shedding"}}, id_);
+    }
+    packets_shed_ += packets;
+    events_shed_ += events;
+    service_.counters().packets_shed += static_cast<int64_t>(packets);
   }
 
   void OnWriteDone(bool ok) override {
@@ -977,6 +1005,9 @@ class TrackCall final : public TrackReactor,
     }
     admitted_ = true;
     start_ = request_.start();
+    // Without a pose the session searches from its first step (its queue may fill while the map
+    // opens).
+    searching_ = !start_.has_initial_world_from_cam();
     open_requested_ = true;
     Wake();
   }
@@ -1264,6 +1295,8 @@ class TrackCall final : public TrackReactor,
       totals->set_odometry_poses(odometry_poses_);
       totals->set_backpressure_notices(backpressure_notices_);
       totals->set_raw_time_adjustments(raw_time_adjustments_);
+      totals->set_packets_shed(packets_shed_.load());
+      totals->set_events_shed(events_shed_.load());
       totals->set_duration_s(std::chrono::duration<double>(Clock::now() - session_start_).count());
       totals->set_poses(poses_);
       totals->set_lost_poses(lost_poses_);
@@ -1462,6 +1495,10 @@ class TrackCall final : public TrackReactor,
   // The last step searched the map (INITIALIZING, RELOCALIZING): the pool runs the session on its
   // background workers (background()).
   std::atomic<bool> searching_{false};
+  // Event packets (and their events) dropped unread while searching (ShedWhileSearching; the
+  // stream's reader writes them).
+  std::atomic<uint64_t> packets_shed_{0};
+  std::atomic<uint64_t> events_shed_{0};
   std::atomic<uint64_t> id_{0};
   std::unique_ptr<SessionTracker> tracker_;
   // The session's slot on the viewer's board (null without --viewer; the worker's only).

@@ -31,6 +31,7 @@
 #include "localizer/service/testing/service_fixture.h"
 #include "localizer/tracking/testing/synthetic_scene.h"
 #include "localizer/wire/packed_events.h"
+#include "localizer/wire/status_name.h"
 #include "maps/site.h"
 #include "proto/convert/proto_convert.h"
 
@@ -900,6 +901,38 @@ TEST_F(LocalizerServerTest, OverflowingSessionIsToldThenStopped) {
   EXPECT_NE(outcome.status.error_message().find("overflowed"), std::string::npos);
   EXPECT_GE(outcome.Count(api::TrackResponse::kBackpressure), 1);
   // (The client's writes may all have been accepted by gRPC's buffers before the status came.)
+}
+
+// A session that searches the map (no pose) and falls behind its stream drops its oldest
+// queued event packets instead of overflowing: the overflow test above with the pose taken away
+// ended RESOURCE_EXHAUSTED while still searching.
+TEST_F(LocalizerServerTest, ASearchingSessionBehindItsStreamDropsOldPacketsInsteadOfOverflowing) {
+  StartServer([](LocalizerServerOptions& options) {
+    options.queue_packets = 4;
+    options.backpressure_fraction = 0.5;
+  });
+  testing::WriteTestMap(folder_.path(), "beside", testing::TestMapWithKeyframesBesideThePath());
+  std::vector<api::TrackRequest> requests{TestSessionStart()};
+  requests[0].mutable_start()->set_map_name("beside");
+  requests[0].mutable_start()->clear_initial_world_from_cam();
+  requests[0].mutable_start()->mutable_options()->set_step_rate_hz(2000);
+  const EventBuffer events = testing::TestEvents(300'000'000);
+  for (auto& packet : testing::PackedPackets(events, 50'000)) requests.push_back(packet);
+  const TrackOutcome outcome = RunTrack(*stub_, requests);
+  bool tracked = false;
+  for (const api::PoseUpdate& pose : outcome.Poses()) {
+    tracked = tracked || pose.status() == api::TRACKING;
+  }
+  // Not ended while searching: it ended normally, or it found the camera first (once TRACKING
+  // it keeps every packet, and at 2000 Hz it may overflow then, as the test above).
+  EXPECT_TRUE(outcome.status.ok() || tracked) << wire::StatusCodeName(outcome.status.error_code())
+                                              << ": " << outcome.status.error_message();
+  EXPECT_GT(server_->counters().packets_shed.load(), 0);
+  if (outcome.status.ok()) {
+    ASSERT_EQ(outcome.Count(api::TrackResponse::kEnd), 1);
+    EXPECT_GT(outcome.responses.back().end().packets_shed(), 0u);
+    EXPECT_GT(outcome.responses.back().end().events_shed(), 0u);
+  }
 }
 
 TEST_F(LocalizerServerTest, ServesHealthChecks) {
