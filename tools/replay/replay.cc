@@ -719,6 +719,7 @@ ReplayResult Replayer::Run() {
   result.tracking = shared_.tracking;
   result.lost_poses = shared_.lost;
   result.searching_updates = shared_.searching;
+  result.packets_shed = static_cast<int64_t>(shared_.end.packets_shed());
   if (shared_.first_tracking_t_ns) {
     result.first_tracking_s =
         static_cast<double>(*shared_.first_tracking_t_ns - initial_.t_ns) * 1e-9;
@@ -770,6 +771,11 @@ ReplayResult Replayer::Run() {
        << "evloc-replay: server totals" << (result.outages.empty() ? "" : " (last session)") << ": "
        << shared_.end.events() << " events, " << shared_.end.poses()
        << " poses; trajectory written to " << options_.output.string() << "\n";
+  if (result.packets_shed > 0) {
+    log_ << "evloc-replay: the server dropped " << result.packets_shed << " event packets ("
+         << shared_.end.events_shed()
+         << " events) unread while it searched and the session was behind its stream\n";
+  }
   return result;
 }
 
@@ -858,6 +864,7 @@ void WriteReplayReport(const std::filesystem::path& path, const ReplayResult& re
       {"poses", result.trajectory.size()},
       {"lost_poses", result.lost_poses},
       {"searching_updates", result.searching_updates},
+      {"packets_shed", result.packets_shed},
       {"first_tracking_s", result.first_tracking_s ? nlohmann::json(*result.first_tracking_s)
                                                    : nlohmann::json(nullptr)},
       {"backpressure_notices", result.backpressure_notices},

@@ -160,6 +160,9 @@ struct ReplayResult {
   int64_t lost_poses = 0;
   // Updates received without a pose (INITIALIZING or RELOCALIZING: the server was searching).
   int64_t searching_updates = 0;
+  // Event packets the server dropped unread while it searched and the session was behind its
+  // stream (SessionEnd.packets_shed of the last session; 0 when it kept up).
+  int64_t packets_shed = 0;
   // Session time from the session's start (the initial pose's time, or the first event with
   // --init-pose none) to the first TRACKING pose, seconds; unset when no pose
   // was TRACKING (with --init-pose none: the time the server took to find the camera).
