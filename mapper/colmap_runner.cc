@@ -295,7 +295,7 @@ void ColmapRunner::ExtractFeatures(const std::vector<std::string>& image_names) 
     CommandWatch watch;
     watch.done = [&log, &last, start] {
       const std::string text = ReadFileToString(log);
-      return text.size() > start && text.find(last, start) != std::string::npos;
+      return text.find(last, start) != std::string::npos;  // npos too when start > size
     };
     try {
       Run("feature_extractor", arguments, &watch);

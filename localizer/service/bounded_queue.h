@@ -41,8 +41,7 @@ class BoundedQueue {
   PushResult TryPush(T item, uint64_t weight = 0) {
     std::lock_guard<std::mutex> lock(mutex_);
     if (closed_) return PushResult::kClosed;
-    if (items_.size() >= capacity_) return PushResult::kFull;
-    if (!items_.empty() && weight > max_weight_ - weight_) return PushResult::kFull;
+    if (FullLocked(weight)) return PushResult::kFull;
     items_.emplace_back(std::move(item), weight);
     weight_ += weight;
     return PushResult::kQueued;
@@ -79,7 +78,7 @@ class BoundedQueue {
   // True when the queue could not take an item of `weight` now (items or weight).
   bool WouldBeFull(uint64_t weight) const {
     std::lock_guard<std::mutex> lock(mutex_);
-    return items_.size() >= capacity_ || (!items_.empty() && weight > max_weight_ - weight_);
+    return FullLocked(weight);
   }
 
   // True when closed (or aborted) and nothing is left to pop.
@@ -118,6 +117,12 @@ class BoundedQueue {
   uint64_t max_weight() const { return max_weight_; }
 
  private:
+  // The queue cannot take an item of `weight` (items or weight; an item heavier than the bound
+  // still enters an empty queue). Needs mutex_.
+  bool FullLocked(uint64_t weight) const {
+    return items_.size() >= capacity_ || (!items_.empty() && weight > max_weight_ - weight_);
+  }
+
   const size_t capacity_;
   const uint64_t max_weight_;
   mutable std::mutex mutex_;

@@ -45,6 +45,23 @@ auto WithTypedErrors(const std::string& name, const Read& read) -> decltype(read
   }
 }
 
+// A loaded map of `name` from `map`, with what describes it and its visibility index;
+// `file_bytes` and `file_time` are the file version it stands for.
+std::shared_ptr<const LoadedMap> MakeLoadedMap(const std::string& name, uint64_t file_bytes,
+                                               std::filesystem::file_time_type file_time, Map map) {
+  auto loaded = std::make_shared<LoadedMap>();
+  loaded->name = name;
+  loaded->file_bytes = file_bytes;
+  loaded->file_time = file_time;
+  loaded->map = std::move(map);
+  loaded->info = SummarizeMap(loaded->map);
+  loaded->content_crc32c = loaded->info.content_crc32c;
+  loaded->version = MapVersionString(loaded->content_crc32c);
+  loaded->visibility = std::make_unique<VisibilityIndex>(loaded->map);
+  loaded->memory_bytes = MapMemoryBytes(loaded->map);
+  return loaded;
+}
+
 // True when `load` finished with an error (the negative cache).
 bool Failed(const std::shared_future<std::shared_ptr<const LoadedMap>>& result) {
   if (result.wait_for(std::chrono::seconds(0)) != std::future_status::ready) return false;
@@ -148,12 +165,12 @@ std::optional<MapRegistry::FileStamp> MapRegistry::Stamp(const std::string& name
 
 std::shared_ptr<const LoadedMap> MapRegistry::LoadVersion(const std::string& name,
                                                           const FileStamp& stamp) {
-  return WithTypedErrors(name, [&] {
-    auto loaded = std::make_shared<LoadedMap>();
-    loaded->name = name;
-    loaded->file_bytes = stamp.bytes;
-    loaded->file_time = stamp.time;
+  return WithTypedErrors(name, [&]() -> std::shared_ptr<const LoadedMap> {
     if (stamp.site) {
+      auto loaded = std::make_shared<LoadedMap>();
+      loaded->name = name;
+      loaded->file_bytes = stamp.bytes;
+      loaded->file_time = stamp.time;
       loaded->site = OpenSite(options_.maps_dir / name);
       loaded->tiles = tiles_;
       loaded->info = SummarizeSite(loaded->site->manifest);
@@ -168,15 +185,15 @@ std::shared_ptr<const LoadedMap> MapRegistry::LoadVersion(const std::string& nam
     // bytes, parsed from memory so that the copy kept is exactly what was verified.
     ReadMapFileHeader(file);
     const std::string bytes = ReadFileToString(file);
-    loaded->map = LoadMapFromBytes(bytes, file.string());
-    loaded->info = SummarizeMap(loaded->map);
-    loaded->content_crc32c = loaded->info.content_crc32c;
-    loaded->version = MapVersionString(loaded->content_crc32c);
-    loaded->visibility = std::make_unique<VisibilityIndex>(loaded->map);
-    loaded->memory_bytes = MapMemoryBytes(loaded->map);
-    Keep(*loaded, bytes);
-    return std::shared_ptr<const LoadedMap>(std::move(loaded));
+    std::shared_ptr<const LoadedMap> map =
+        MakeLoadedMap(name, stamp.bytes, stamp.time, LoadMapFromBytes(bytes, file.string()));
+    Keep(*map, bytes);
+    return map;
   });
+}
+
+std::filesystem::path MapRegistry::KeptFile(const std::string& name) const {
+  return options_.keep_dir / (name + ".evmap");
 }
 
 void MapRegistry::Warn(const std::string& line) const {
@@ -190,7 +207,7 @@ void MapRegistry::Keep(const LoadedMap& map, const std::string& bytes) {
     if (entries_[map.name].kept_version == map.version) return;
   }
   try {
-    WriteFileAtomically(options_.keep_dir / (map.name + ".evmap"), bytes);
+    WriteFileAtomically(KeptFile(map.name), bytes);
   } catch (const Error& error) {
     // Serving goes on; only the fallback for a later bad file is missing.
     Warn("map '" + map.name + "' version " + map.version +
@@ -221,25 +238,14 @@ std::shared_ptr<const LoadedMap> MapRegistry::RestoreKept(const std::string& nam
     if (auto map = current()) return map;  // Restored by another request meanwhile.
     if (entries_[name].kept_failed_for == failed) return nullptr;
   }
-  const std::filesystem::path kept = options_.keep_dir / (name + ".evmap");
+  const std::filesystem::path kept = KeptFile(name);
   std::error_code exists_error;
   if (!std::filesystem::exists(kept, exists_error)) return nullptr;
   std::shared_ptr<const LoadedMap> map;
   try {
-    map = WithTypedErrors(name, [&] {
-      auto loaded = std::make_shared<LoadedMap>();
-      loaded->name = name;
-      // The failed file's version: the kept copy is what is served while that file stays.
-      loaded->file_bytes = failed.bytes;
-      loaded->file_time = failed.time;
-      loaded->map = LoadMap(kept);
-      loaded->info = SummarizeMap(loaded->map);
-      loaded->content_crc32c = loaded->info.content_crc32c;
-      loaded->version = MapVersionString(loaded->content_crc32c);
-      loaded->visibility = std::make_unique<VisibilityIndex>(loaded->map);
-      loaded->memory_bytes = MapMemoryBytes(loaded->map);
-      return std::shared_ptr<const LoadedMap>(std::move(loaded));
-    });
+    // The failed file's version: the kept copy is what is served while that file stays.
+    map = WithTypedErrors(
+        name, [&] { return MakeLoadedMap(name, failed.bytes, failed.time, LoadMap(kept)); });
   } catch (const Error& kept_error) {
     Warn("map '" + name + "': its file does not load (" + error +
          ") and neither does its kept copy: " + kept_error.what());

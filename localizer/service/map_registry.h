@@ -203,6 +203,8 @@ class MapRegistry {
   std::shared_ptr<const LoadedMap> RestoreKept(const std::string& name, const FileStamp& failed,
                                                const std::string& error);
   void Warn(const std::string& line) const;
+  // Where the kept copy of map `name` is (in keep_dir).
+  std::filesystem::path KeptFile(const std::string& name) const;
 
   MapRegistryOptions options_;
   std::shared_ptr<TileCache> tiles_;

@@ -5,7 +5,6 @@
 
 #include <algorithm>
 #include <atomic>
-#include <random>
 #include <thread>
 
 #include <grpcpp/grpcpp.h>
@@ -47,19 +46,6 @@ EventBuffer TestEvents(int64_t duration_ns) {
   return tracking::testing::SimulateEdgeEvents(
       TestMap(), TestCamera(), [](int64_t t) { return tracking::testing::SmoothMotion(t); }, 0,
       duration_ns);
-}
-
-TemporaryFolder::TemporaryFolder() {
-  static std::atomic<int> counter{0};
-  std::random_device random;
-  path_ = std::filesystem::temp_directory_path() /
-          ("evloc-service-test-" + std::to_string(random()) + "-" + std::to_string(++counter));
-  std::filesystem::create_directories(path_);
-}
-
-TemporaryFolder::~TemporaryFolder() {
-  std::error_code error;
-  std::filesystem::remove_all(path_, error);
 }
 
 void WriteTestMap(const std::filesystem::path& maps_dir, const std::string& name, const Map& map) {

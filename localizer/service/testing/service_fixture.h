@@ -13,6 +13,7 @@
 #include <opencv2/core.hpp>
 
 #include "core/camera/camera.h"
+#include "core/common/file_util.h"
 #include "core/events/event.h"
 #include "core/events/event_reader.h"
 #include "evloc/localizer.grpc.pb.h"
@@ -40,19 +41,11 @@ EventBuffer TestEvents(int64_t duration_ns);
 // The reader of in-memory events (core/events).
 using evloc::BufferEventReader;
 
-// A fresh temporary folder removed on destruction.
-class TemporaryFolder {
+// A fresh temporary folder (evloc-service-test-XXXXXX under the system temporary directory)
+// removed on destruction.
+class TemporaryFolder : public PrivateTempFolder {
  public:
-  // Creates a unique folder under the system temporary directory.
-  TemporaryFolder();
-  ~TemporaryFolder();
-  TemporaryFolder(const TemporaryFolder&) = delete;
-  TemporaryFolder& operator=(const TemporaryFolder&) = delete;
-  // The folder.
-  const std::filesystem::path& path() const { return path_; }
-
- private:
-  std::filesystem::path path_;
+  TemporaryFolder() : PrivateTempFolder("evloc-service-test", "a test") {}
 };
 
 // Writes `map` as maps_dir/name/map.evmap (and map.ply).
