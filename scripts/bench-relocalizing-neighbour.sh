@@ -4,6 +4,7 @@
 #
 #   scripts/bench-relocalizing-neighbour.sh --honest DIR --search DIR [--build DIR] [--out DIR]
 #        [--sessions N] [--seconds S] [--repeats R] [--rate HZ] [--server-arg FLAG=VALUE ...]
+#        [--server-cpus LIST --client-cpus LIST]
 #
 #   --honest DIR   dataset with gt_map/ whose events N sessions track from their ground-truth pose
 #                  at real time (evloc-load), against that map
@@ -14,6 +15,8 @@
 # the honest sessions' server latency and step time (p50 / p99) per run and the medians. The
 # server runs at --rate HZ (default 300) with every other option at its default, or as the
 # repeatable --server-arg sets it (one word each: --server-arg --search-priority --server-arg idle).
+# --server-cpus and --client-cpus (taskset lists, "0" and "1") keep the server and every client on
+# CPUs of their own: the nearest this one machine comes to clients on other machines.
 set -euo pipefail
 
 BUILD=build
@@ -25,7 +28,9 @@ RATE=300
 SERVER_ARGS=()
 HONEST=""
 SEARCH=""
-usage() { sed -n '2,16p' "$0" | sed 's/^# \{0,1\}//'; }
+SERVER_LAUNCH=()
+CLIENT_LAUNCH=()
+usage() { sed -n '2,20p' "$0" | sed 's/^# \{0,1\}//'; }
 while [[ $# -gt 0 ]]; do
   case "$1" in
     --build) BUILD="$2"; shift 2 ;;
@@ -38,6 +43,8 @@ while [[ $# -gt 0 ]]; do
     --rate) RATE="$2"; shift 2 ;;
     --server-arg) SERVER_ARGS+=("$2"); shift 2 ;;
     --server-arg=*) SERVER_ARGS+=("${1#--server-arg=}"); shift ;;
+    --server-cpus) SERVER_LAUNCH=(taskset -c "$2"); shift 2 ;;
+    --client-cpus) CLIENT_LAUNCH=(taskset -c "$2"); shift 2 ;;
     -h|--help) usage; exit 0 ;;
     *) echo "bench-relocalizing-neighbour: unknown argument '$1' (see --help)" >&2; exit 2 ;;
   esac
@@ -61,9 +68,10 @@ start_localizer "$OUT/server.log" "$SERVER_BIN" --maps "$OUT/maps" --max-session
 trap 'kill "$SERVER_PID" 2>/dev/null || true; wait "$SERVER_PID" 2>/dev/null || true' EXIT
 ADDRESS="127.0.0.1:$PORT"
 echo "bench-relocalizing-neighbour: $(date -u +%FT%TZ), $(nproc) cores, $SESSIONS honest sessions" \
-  "of $HONEST, $SECONDS_PER_RUN s per run, $RATE Hz; searching: $SEARCH"
+  "of $HONEST, $SECONDS_PER_RUN s per run, $RATE Hz; searching: $SEARCH;" \
+  "server on CPUs ${SERVER_LAUNCH[2]:-any}, clients on CPUs ${CLIENT_LAUNCH[2]:-any}"
 # Warm-up: the first session loads the map.
-"$LOAD_BIN" --server "$ADDRESS" --map honest --dataset "$HONEST" --sessions 1 --session-s 0.2 \
+${CLIENT_LAUNCH[@]+"${CLIENT_LAUNCH[@]}"} "$LOAD_BIN" --server "$ADDRESS" --map honest --dataset "$HONEST" --sessions 1 --session-s 0.2 \
   --speed max --rate "$RATE" >/dev/null
 
 for ((run = 1; run <= REPEATS; ++run)); do
@@ -72,14 +80,15 @@ for ((run = 1; run <= REPEATS; ++run)); do
     load=$(cut -d' ' -f1-3 /proc/loadavg)
     searcher=""
     if [[ $mode == neighbour ]]; then
-      "$REPLAY_BIN" --server "$ADDRESS" --map honest --dataset "$SEARCH" --init-pose none \
+      ${CLIENT_LAUNCH[@]+"${CLIENT_LAUNCH[@]}"} "$REPLAY_BIN" --server "$ADDRESS" --map honest --dataset "$SEARCH" --init-pose none \
         --speed 1 --rate "$RATE" --duration "$SECONDS_PER_RUN" --out "$OUT/$label.search.txt" \
         --report "$OUT/$label.search.json" >"$OUT/$label.search.log" 2>&1 &
       searcher=$!
       sleep 0.5  # the searching session is under way before the honest ones start
     fi
     status=0
-    "$LOAD_BIN" --server "$ADDRESS" --map honest --dataset "$HONEST" --sessions "$SESSIONS" \
+    ${CLIENT_LAUNCH[@]+"${CLIENT_LAUNCH[@]}"} "$LOAD_BIN" --server "$ADDRESS" --map honest \
+      --dataset "$HONEST" --sessions "$SESSIONS" \
       --session-s "$SECONDS_PER_RUN" --speed 1 --rate "$RATE" --report "$OUT/$label.json" \
       >"$OUT/$label.log" 2>&1 || status=$?
     search_status=""

@@ -3,10 +3,11 @@
 # start_localizer LOG BINARY ARGS...: starts `BINARY serve ARGS... --listen 127.0.0.1:0` in the
 # background with its output in LOG, waits until it logs its port (at most 30 s; text or JSON
 # logs), and sets SERVER_PID and PORT. Exits with the log on stderr when the server stops or does not start.
+# A caller may set the array SERVER_LAUNCH to a command that runs the binary (taskset -c 0).
 start_localizer() {
   local log=$1 binary=$2
   shift 2
-  "$binary" serve --listen 127.0.0.1:0 "$@" > "$log" 2>&1 &
+  ${SERVER_LAUNCH[@]+"${SERVER_LAUNCH[@]}"} "$binary" serve --listen 127.0.0.1:0 "$@" > "$log" 2>&1 &
   SERVER_PID=$!
   PORT=""
   for _ in $(seq 300); do
