@@ -34,7 +34,7 @@ PACKAGES=(
   # an independent writer of DSEC HDF5 files for the package's reader tests
   python3-h5py
   # the independent writer of the bag tests (core/events/testing/write_test_bags.py)
-  python3-rosbag python3-roslz4
+  python3-rosbag python3-roslz4 python3-pil
   # the independent writer of the AEDAT4 tests (core/events/testing/write_test_aedat4.py)
   python3-flatbuffers python3-lz4 python3-zstandard
   # the ROS 1 node (ros/, docs/ros.md): roscpp and tf2_ros, the message definitions and Debian's

@@ -1,9 +1,10 @@
 // A ROS1 bag and an AEDAT4 file work where a dataset works: evloc-sim renders a sequence (with
 // events.txt), write_test_bags.py --from-dataset writes it as a bag with Debian's python3-rosbag
-// (dvs_msgs/EventArray, sensor_msgs/CameraInfo, geometry_msgs/PoseStamped) and
+// (dvs_msgs/EventArray, sensor_msgs/Image, sensor_msgs/CameraInfo, geometry_msgs/PoseStamped) and
 // write_test_aedat4.py --from-dataset as an AEDAT4 file (python3-flatbuffers, LZ4), and
-// evloc-track tracks them (--dataset FILE) like the folder. Label "long": the render and the
-// Python writers take minutes on a loaded machine (docs/event-formats.md, 7.4 and 8.4).
+// evloc-track tracks them (--dataset FILE) like the folder, the bag's images in frames mode too.
+// Label "long": the render and the Python writers take minutes on a loaded machine
+// (docs/event-formats.md, 7.4 and 8.4).
 #include <sys/wait.h>
 
 #include <algorithm>
@@ -86,8 +87,8 @@ void Track(const fs::path& dataset, const fs::path& input, const std::string& fl
 
 TEST(BagEndToEnd, ABagOfASequenceTracksLikeItsFolder) {
   std::string output;
-  if (RunTool("/usr/bin/python3 -c 'import rosbag, genpy, roslz4, yaml'", &output) != 0) {
-    GTEST_SKIP() << "/usr/bin/python3 lacks rosbag, genpy, roslz4 or yaml: " << output;
+  if (RunTool("/usr/bin/python3 -c 'import rosbag, genpy, roslz4, yaml, PIL'", &output) != 0) {
+    GTEST_SKIP() << "/usr/bin/python3 lacks rosbag, genpy, roslz4, yaml or PIL: " << output;
   }
   const fs::path dataset = RenderedSequence(&output);
   ASSERT_FALSE(dataset.empty()) << output;
@@ -112,14 +113,28 @@ TEST(BagEndToEnd, ABagOfASequenceTracksLikeItsFolder) {
   const auto bag_stats = nlohmann::json::parse(std::ifstream(directory / "bag.json"));
   EXPECT_EQ(folder_stats["measurements"], bag_stats["measurements"]);
   EXPECT_EQ(bag_stats["lost_steps"].get<int>(), 0);
+  // Frames mode (Canny-VT) reads the bag's images as it reads the folder's: the same pixels
+  // (rgb8 messages of the rendered RGB PNGs, made grey by one conversion), the same poses.
+  Track(dataset, dataset, " --mode frames", directory, "folder_frames");
+  Track(dataset, bag, " --mode frames", directory, "bag_frames");
+  const auto folder_frames = ReadTum(directory / "folder_frames.txt");
+  const auto bag_frames = ReadTum(directory / "bag_frames.txt");
+  ASSERT_GT(folder_frames.size(), 30u);  // 1.5 s at 30 frames per second
+  ASSERT_EQ(folder_frames.size(), bag_frames.size());
+  for (size_t i = 0; i < folder_frames.size(); ++i) {
+    for (int k = 0; k < 8; ++k) EXPECT_EQ(folder_frames[i][k], bag_frames[i][k]) << "frame " << i;
+  }
+  const auto frames_stats = nlohmann::json::parse(std::ifstream(directory / "bag_frames.json"));
+  EXPECT_EQ(frames_stats["lost_steps"].get<int>(), 0);
   fs::remove_all(directory);
 }
 
 TEST(Aedat4EndToEnd, AnAedat4FileOfASequenceTracksLikeItsFolder) {
   std::string output;
-  if (RunTool("/usr/bin/python3 -c 'import flatbuffers, lz4.frame, zstandard, numpy, yaml'",
+  if (RunTool("/usr/bin/python3 -c 'import flatbuffers, lz4.frame, zstandard, numpy, yaml, PIL'",
               &output) != 0) {
-    GTEST_SKIP() << "/usr/bin/python3 lacks flatbuffers, lz4, zstandard, numpy or yaml: " << output;
+    GTEST_SKIP() << "/usr/bin/python3 lacks flatbuffers, lz4, zstandard, numpy, yaml or PIL: "
+                 << output;
   }
   const fs::path dataset = RenderedSequence(&output);
   ASSERT_FALSE(dataset.empty()) << output;
@@ -156,6 +171,24 @@ TEST(Aedat4EndToEnd, AnAedat4FileOfASequenceTracksLikeItsFolder) {
   const auto file_stats = nlohmann::json::parse(std::ifstream(directory / "aedat4.json"));
   EXPECT_EQ(folder_stats["measurements"], file_stats["measurements"]);
   EXPECT_EQ(file_stats["lost_steps"].get<int>(), 0);
+  // Frames mode on the file's frames stream (BGR frames of the rendered RGB PNGs): bit for bit
+  // like its converted folder, and within 1 µs and 1 mm of the original folder's frames.
+  Track(dataset, file, side_files + " --mode frames", directory, "aedat4_frames");
+  Track(dataset, directory / "converted", " --mode frames", directory, "converted_frames");
+  Track(dataset, dataset, " --mode frames", directory, "folder_frames");
+  const auto file_frames = ReadTum(directory / "aedat4_frames.txt");
+  const auto folder_frames = ReadTum(directory / "folder_frames.txt");
+  ASSERT_GT(file_frames.size(), 30u);  // 1.5 s at 30 frames per second
+  EXPECT_EQ(file_frames, ReadTum(directory / "converted_frames.txt"));
+  ASSERT_EQ(file_frames.size(), folder_frames.size());
+  for (size_t i = 0; i < file_frames.size(); ++i) {
+    EXPECT_NEAR(file_frames[i][0], folder_frames[i][0], 1e-6) << "frame " << i;
+    EXPECT_LT(
+        std::hypot(file_frames[i][1] - folder_frames[i][1], file_frames[i][2] - folder_frames[i][2],
+                   file_frames[i][3] - folder_frames[i][3]),
+        1e-3)
+        << "frame " << i;
+  }
   fs::remove_all(directory);
 }
 

@@ -74,6 +74,19 @@ cv::Mat Aedat4FrameImage(const Aedat4Frame& frame) {
   return image;
 }
 
+void ForEachAedat4Frame(const Dataset& dataset, const ImageSink& add) {
+  if (!dataset.aedat4 || !dataset.aedat4->has_frames) return;
+  Aedat4Reader file(dataset.root);
+  const Aedat4Stream* frames = file.FindStream(dataset.aedat4->options.frames);
+  if (frames == nullptr) return;
+  file.SetStreams({frames->id});
+  Aedat4Packet packet;
+  while (file.Next(&packet)) {
+    const Aedat4Frame frame = DecodeAedat4Frame(packet, file.source());
+    add(frame.t_ns, Aedat4FrameImage(frame));
+  }
+}
+
 RecordingConversionSummary ConvertAedat4ToDataset(const std::filesystem::path& path,
                                                   const std::filesystem::path& out_dir,
                                                   const DatasetReaderOptions& reader_options,

@@ -27,6 +27,11 @@ Dataset ReadAedat4Dataset(const std::filesystem::path& path, const DatasetReader
 // (BGRA), a copy.
 cv::Mat Aedat4FrameImage(const Aedat4Frame& frame);
 
+// Hands the frames of an AEDAT4 file read as a dataset (ReadAedat4Dataset) to `add` in file order,
+// as Aedat4FrameImage gives them; nothing when the file has no frames stream. Throws ParseError
+// for a malformed packet.
+void ForEachAedat4Frame(const Dataset& dataset, const ImageSink& add);
+
 // Converts an AEDAT4 file into a dataset folder (calib.yaml, events.evb, images/ with images.txt
 // from the frames stream when it exists, imu.txt from the IMU streams when there are any,
 // groundtruth.txt when given, info.json naming the source and streams, with the counts of

@@ -98,6 +98,40 @@ TEST(Aedat4Dataset, MissingOrMismatchedSideFilesAndStreamsAreErrorsListingTheStr
   std::filesystem::remove_all(folder);
 }
 
+TEST(Aedat4Dataset, TheFramesOfAFileComeOneAtATimeAsWrittenAndLikeItsConvertedFolders) {
+  EVLOC_REQUIRE_TEST_AEDAT4(dir);
+  const auto folder = testing::MakeTempDir("aedat4-frames");
+  const DatasetReaderOptions options = SideFiles(folder);
+  const Dataset file = ReadDataset(dir / "test_lz4.aedat4", options);
+  EXPECT_TRUE(DatasetHasImages(file));
+  std::vector<std::pair<int64_t, cv::Mat>> from_file;
+  ForEachDatasetImage(file, [&](int64_t t_ns, const cv::Mat& pixels) {
+    from_file.emplace_back(t_ns, pixels.clone());
+  });
+  const auto frames = testing::ReadExpectedLines(dir, "frames");
+  ASSERT_EQ(from_file.size(), frames.size());
+  bool colour = false;
+  for (size_t i = 0; i < frames.size(); ++i) {
+    EXPECT_EQ(from_file[i].first, std::stoll(frames[i][0]));
+    EXPECT_EQ(from_file[i].second.channels(), std::stoi(frames[i][3]));
+    const cv::Scalar sum = cv::sum(from_file[i].second);
+    EXPECT_EQ(static_cast<int64_t>(sum[0] + sum[1] + sum[2]), std::stoll(frames[i][4]));
+    colour = colour || from_file[i].second.channels() == 3;
+  }
+  EXPECT_TRUE(colour) << "the test file has a BGR frame";
+  // The converted folder gives the same grey pixels (ToGray8, the one conversion).
+  ConvertRecordingToDataset(dir / "test_lz4.aedat4", folder / "converted", options, {});
+  size_t index = 0;
+  ForEachDatasetImage(ReadDataset(folder / "converted"), [&](int64_t t_ns, const cv::Mat& pixels) {
+    ASSERT_LT(index, from_file.size());
+    EXPECT_EQ(t_ns, from_file[index].first);
+    EXPECT_EQ(cv::norm(ToGray8(pixels), ToGray8(from_file[index].second), cv::NORM_INF), 0.0);
+    ++index;
+  });
+  EXPECT_EQ(index, from_file.size());
+  std::filesystem::remove_all(folder);
+}
+
 TEST(Aedat4Dataset, ConvertsToADatasetFolderThatReadsBackEqual) {
   EVLOC_REQUIRE_TEST_AEDAT4(dir);
   const auto folder = testing::MakeTempDir("aedat4-convert");

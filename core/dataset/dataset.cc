@@ -518,6 +518,65 @@ cv::Mat ReadDepthPng(const fs::path& path, double units_per_metre) {
   return metres;
 }
 
+bool DatasetHasImages(const Dataset& dataset) {
+  if (dataset.bag) return dataset.bag->image_messages > 0;
+  if (dataset.aedat4) return dataset.aedat4->has_frames;
+  return !dataset.images.empty();
+}
+
+void ForEachDatasetImage(const Dataset& dataset, const ImageSink& add) {
+  if (dataset.bag) {
+    ForEachRosbagImage(dataset, add);
+    return;
+  }
+  if (dataset.aedat4) {
+    ForEachAedat4Frame(dataset, add);
+    return;
+  }
+  for (const TimedFile& image : dataset.images) {
+    const cv::Mat pixels = cv::imread(image.path.string(), cv::IMREAD_UNCHANGED);
+    if (pixels.empty()) {
+      throw IoError("dataset '" + dataset.root.string() + "': cannot read image '" +
+                    image.path.string() + "' (missing, or not an image OpenCV reads)");
+    }
+    add(image.t_ns, pixels);
+  }
+}
+
+cv::Mat ToGray8(const cv::Mat& pixels) {
+  cv::Mat eight = pixels;
+  if (pixels.depth() == CV_16U) {
+    pixels.convertTo(eight, CV_8U, 1.0 / 257.0);
+  } else if (pixels.depth() != CV_8U) {
+    throw InvalidArgumentError("an image of " + std::to_string(pixels.channels()) +
+                               " channels of OpenCV depth " + std::to_string(pixels.depth()) +
+                               ": frames must be 8 or 16 bits per channel");
+  }
+  const int channels = eight.channels();
+  if (channels == 1) return eight;
+  if (channels != 3 && channels != 4) {
+    throw InvalidArgumentError("an image of " + std::to_string(channels) +
+                               " channels: frames must be grey, BGR or BGRA");
+  }
+  // libpng's conversion, which cv::imread(IMREAD_GRAYSCALE) applies to a colour PNG: weights
+  // 0.299 and 0.587 in 15-bit fixed point (9797, 19234, and the rest 3737 for blue), truncated,
+  // grey pixels kept as they are. cv::cvtColor rounds instead and differs by one level in about
+  // half the pixels of a rendered frame, which is enough to change a Canny-VT run; this keeps
+  // the frames of a folder exactly what they were when the tools read them in grey.
+  cv::Mat gray(eight.rows, eight.cols, CV_8UC1);
+  for (int y = 0; y < eight.rows; ++y) {
+    const uint8_t* in = eight.ptr<uint8_t>(y);
+    uint8_t* out = gray.ptr<uint8_t>(y);
+    for (int x = 0; x < eight.cols; ++x, in += channels) {
+      const uint32_t blue = in[0], green = in[1], red = in[2];
+      out[x] = red == green && red == blue
+                   ? static_cast<uint8_t>(red)
+                   : static_cast<uint8_t>((9797u * red + 19234u * green + 3737u * blue) >> 15);
+    }
+  }
+  return gray;
+}
+
 cv::Mat ReadGrayImage(const fs::path& path) {
   const cv::Mat raw = cv::imread(path.string(), cv::IMREAD_UNCHANGED);
   if (raw.empty()) throw IoError("cannot read image '" + path.string() + "'.");

@@ -6,6 +6,7 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <string>
@@ -282,6 +283,29 @@ struct Dataset {
 // for malformed lists, InvalidArgumentError when the folder has neither calib.yaml nor calib.txt,
 // or is an unfinished OUT.partial.
 Dataset ReadDataset(const std::filesystem::path& root, const DatasetReaderOptions& options = {});
+
+// Receives the images of a dataset or recording in time order: (t_ns, CV_8UC1, CV_16UC1, CV_8UC3
+// BGR or CV_8UC4 BGRA pixels).
+using ImageSink = std::function<void(int64_t t_ns, const cv::Mat& pixels)>;
+
+// True when `dataset` has images: a folder's images.txt lists some, a bag has messages on its
+// image topic, an AEDAT4 file has its frames stream.
+bool DatasetHasImages(const Dataset& dataset);
+
+// Hands the images of `dataset` to `add` in time order, one at a time (a recording's images are
+// streamed, never all in memory): the files of a folder's images.txt as stored (8 or 16 bits,
+// grey or colour), the image topic of a bag (ForEachRosbagImage), the frames stream of an AEDAT4
+// file (ForEachAedat4Frame). Throws IoError naming the file for an image that cannot be read,
+// ParseError for a malformed message or packet.
+void ForEachDatasetImage(const Dataset& dataset, const ImageSink& add);
+
+// `pixels` (CV_8UC1, CV_16UC1, CV_8UC3 BGR or CV_8UC4 BGRA) as 8-bit grey: 16 bits scaled by
+// 1/257 (rounded, as the converters write them), colour as cv::imread(IMREAD_GRAYSCALE) makes a
+// colour PNG grey (libpng's truncating 0.299 R + 0.587 G + 0.114 B; alpha ignored). The one
+// conversion of every frame source, so that a recording and its converted folder give the same
+// pixels, and a folder's colour PNGs the pixels the tools always read. Throws
+// InvalidArgumentError for any other type.
+cv::Mat ToGray8(const cv::Mat& pixels);
 
 // Reads the depth camera of a dataset folder: depth_camchain.yaml (the calibration reader; two
 // cameras, cam0 of `event_camera`'s size, cam1 with T_cn_cnm1) and depth_camera.txt. Throws

@@ -222,6 +222,66 @@ TEST(Dataset, ListErrorsNameTheLine) {
   fs::remove_all(root);
 }
 
+TEST(Dataset, ToGray8MakesEveryFrameTypeEightBitGrey) {
+  cv::Mat grey(3, 4, CV_8UC1);
+  cv::randu(grey, 0, 256);
+  EXPECT_EQ(cv::norm(ToGray8(grey), grey, cv::NORM_INF), 0.0);
+  cv::Mat sixteen;
+  grey.convertTo(sixteen, CV_16U, 257.0);
+  EXPECT_EQ(cv::norm(ToGray8(sixteen), grey, cv::NORM_INF), 0.0);
+  // Colour: 0.299 R + 0.587 G + 0.114 B, truncated; BGR and BGRA alike.
+  const cv::Mat bgr(1, 1, CV_8UC3, cv::Scalar(200, 100, 50));  // B, G, R
+  EXPECT_EQ(ToGray8(bgr).type(), CV_8UC1);
+  EXPECT_EQ(ToGray8(bgr).at<uint8_t>(0, 0), 96);  // 0.114 * 200 + 0.587 * 100 + 0.299 * 50
+  EXPECT_EQ(ToGray8(cv::Mat(1, 1, CV_8UC4, cv::Scalar(200, 100, 50, 7))).at<uint8_t>(0, 0), 96);
+  // Exactly what cv::imread(IMREAD_GRAYSCALE) reads from a colour PNG (so a folder's frames are
+  // what the tools read before ToGray8).
+  cv::Mat colour(60, 80, CV_8UC3);
+  cv::randu(colour, 0, 256);
+  colour(cv::Rect(0, 0, 10, 10)).setTo(cv::Scalar(77, 77, 77));
+  const fs::path png = testing::MakeTempDir("to-gray8") / "colour.png";
+  ASSERT_TRUE(cv::imwrite(png.string(), colour));
+  EXPECT_EQ(cv::norm(ToGray8(colour), cv::imread(png.string(), cv::IMREAD_GRAYSCALE), cv::NORM_INF),
+            0.0);
+  fs::remove_all(png.parent_path());
+  EXPECT_THROW(ToGray8(cv::Mat(2, 2, CV_32FC1)), InvalidArgumentError);
+  EXPECT_THROW(ToGray8(cv::Mat(2, 2, CV_8UC2)), InvalidArgumentError);
+}
+
+TEST(Dataset, TheImagesOfAFolderComeAsStoredAndAMissingOneIsAnIoError) {
+  const fs::path root = testing::MakeTempDir("dataset-images");
+  {
+    DatasetWriter writer(root / "set", DatasetWriterOptions{});
+    Camera camera;
+    camera.width = 4;
+    camera.height = 3;
+    camera.fx = camera.fy = 2;
+    camera.cx = 1.5;
+    camera.cy = 1;
+    writer.WriteCamera(camera);
+    writer.AddImage(1'000'000, cv::Mat(3, 4, CV_8UC1, cv::Scalar(9)));
+    writer.AddImage(2'000'000, cv::Mat(3, 4, CV_8UC3, cv::Scalar(1, 2, 3)));
+    writer.Commit();
+  }
+  const Dataset dataset = ReadDataset(root / "set");
+  EXPECT_TRUE(DatasetHasImages(dataset));
+  std::vector<std::pair<int64_t, int>> seen;
+  ForEachDatasetImage(dataset, [&](int64_t t_ns, const cv::Mat& pixels) {
+    seen.emplace_back(t_ns, pixels.channels());
+  });
+  EXPECT_EQ(seen, (std::vector<std::pair<int64_t, int>>{{1'000'000, 1}, {2'000'000, 3}}));
+  fs::remove(dataset.images[1].path);
+  try {
+    ForEachDatasetImage(dataset, [](int64_t, const cv::Mat&) {});
+    ADD_FAILURE() << "no error for a missing image";
+  } catch (const IoError& error) {
+    EXPECT_NE(std::string(error.what()).find(dataset.images[1].path.filename().string()),
+              std::string::npos)
+        << error.what();
+  }
+  fs::remove_all(root);
+}
+
 TEST(ResolveInitialPose, GroundTruthStartElseFirstMeasurement) {
   Dataset dataset;
   dataset.root = "/data/seq";

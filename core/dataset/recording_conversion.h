@@ -39,10 +39,6 @@ struct RecordingConversionSummary {
   uint64_t triggers = 0;
 };
 
-// Hands every image of a recording to `add` in time order: (t_ns, CV_8UC1, CV_16UC1, CV_8UC3 BGR
-// or CV_8UC4 BGRA pixels).
-using ImageSink = std::function<void(int64_t t_ns, const cv::Mat& pixels)>;
-
 // Writes `dataset` (read from a recording) into OUT with DatasetWriter: calib.yaml, events.evb
 // (streamed through OpenDatasetEvents), the images `for_each_image` hands to its sink (16-bit
 // scaled to 8 bits, BGRA to BGR), groundtruth.txt when there is ground truth, whatever `extra`

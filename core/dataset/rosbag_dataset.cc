@@ -212,6 +212,17 @@ Dataset ReadRosbagDataset(const std::filesystem::path& path, const DatasetReader
   return dataset;
 }
 
+void ForEachRosbagImage(const Dataset& dataset, const ImageSink& add) {
+  if (!dataset.bag || dataset.bag->image_messages == 0) return;
+  RosbagReader bag(dataset.root);
+  bag.SetTopics({dataset.bag->topics.image});
+  RosbagMessage message;
+  while (bag.Next(&message)) {
+    const RosImage image = DecodeRosImage(message, bag.source());
+    add(image.t_ns, image.pixels);
+  }
+}
+
 RecordingConversionSummary ConvertRosbagToDataset(const std::filesystem::path& bag_path,
                                                   const std::filesystem::path& out_dir,
                                                   const DatasetReaderOptions& reader_options,
@@ -219,14 +230,7 @@ RecordingConversionSummary ConvertRosbagToDataset(const std::filesystem::path& b
   const Dataset dataset = ReadRosbagDataset(bag_path, reader_options);
   const RosbagTopics& topics = reader_options.bag_topics;
   const auto for_each_image = [&](const ImageSink& add_image) {
-    if (dataset.bag->image_messages == 0) return;
-    RosbagReader bag(bag_path);
-    bag.SetTopics({topics.image});
-    RosbagMessage message;
-    while (bag.Next(&message)) {
-      const RosImage image = DecodeRosImage(message, bag.source());
-      add_image(image.t_ns, image.pixels);
-    }
+    ForEachRosbagImage(dataset, add_image);
   };
   return WriteRecordingAsDataset(dataset, out_dir, options, for_each_image,
                                  {{"source", bag_path.filename().string()},

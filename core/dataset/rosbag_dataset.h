@@ -53,6 +53,10 @@ struct RosImage {
 // Throws ParseError for other encodings or a data size that does not match step × height.
 RosImage DecodeRosImage(const RosbagMessage& message, const std::string& source);
 
+// Hands the images of a bag read as a dataset (ReadRosbagDataset) to `add` in bag order, decoded
+// by DecodeRosImage; nothing when the image topic has no messages. Throws as DecodeRosImage.
+void ForEachRosbagImage(const Dataset& dataset, const ImageSink& add);
+
 // Converts a bag into a dataset folder (calib.yaml, events.evb, images/ with images.txt when the
 // image topic exists, groundtruth.txt when the ground-truth topic exists, info.json naming the
 // source and topics) with WriteRecordingAsDataset: OUT appears only when complete. Streams the bag

@@ -132,6 +132,41 @@ TEST(RosbagDataset, MissingOrMistypedTopicsAreErrorsListingTheTopicsPresent) {
   EXPECT_THROW(options.Check(), InvalidArgumentError);
 }
 
+TEST(RosbagDataset, TheImagesOfABagComeOneAtATimeAsWrittenAndLikeItsConvertedFolders) {
+  EVLOC_REQUIRE_TEST_BAGS(dir);
+  const Dataset bag = ReadDataset(dir / "test_lz4.bag");
+  EXPECT_TRUE(DatasetHasImages(bag));
+  std::vector<std::pair<int64_t, cv::Mat>> from_bag;
+  ForEachDatasetImage(bag, [&](int64_t t_ns, const cv::Mat& pixels) {
+    from_bag.emplace_back(t_ns, pixels.clone());
+  });
+  const auto images = testing::ReadExpectedLines(dir, "images");
+  ASSERT_EQ(from_bag.size(), images.size());
+  for (size_t i = 0; i < images.size(); ++i) {
+    EXPECT_EQ(from_bag[i].first, std::stoll(images[i][0]));
+    ASSERT_EQ(from_bag[i].second.type(), CV_8UC1);
+    EXPECT_EQ(static_cast<int64_t>(cv::sum(from_bag[i].second)[0]), std::stoll(images[i][4]));
+  }
+  // The converted folder hands over the same pixels.
+  const auto out = testing::MakeTempDir("bag-images") / "converted";
+  ConvertRosbagToDataset(dir / "test_lz4.bag", out, {}, {});
+  size_t index = 0;
+  ForEachDatasetImage(ReadDataset(out), [&](int64_t t_ns, const cv::Mat& pixels) {
+    ASSERT_LT(index, from_bag.size());
+    EXPECT_EQ(t_ns, from_bag[index].first);
+    EXPECT_EQ(cv::norm(pixels, from_bag[index].second, cv::NORM_INF), 0.0);
+    ++index;
+  });
+  EXPECT_EQ(index, from_bag.size());
+  std::filesystem::remove_all(out.parent_path());
+  // A bag whose image topic has no messages has no images.
+  DatasetReaderOptions options;
+  options.bag_topics.image = "/no/images";
+  const Dataset without = ReadDataset(dir / "test_lz4.bag", options);
+  EXPECT_FALSE(DatasetHasImages(without));
+  ForEachDatasetImage(without, [](int64_t, const cv::Mat&) { ADD_FAILURE() << "an image"; });
+}
+
 TEST(RosbagDataset, ConvertsABagToADatasetFolderThatReadsBackEqual) {
   EVLOC_REQUIRE_TEST_BAGS(dir);
   const auto out = testing::MakeTempDir("bag-dataset") / "converted";

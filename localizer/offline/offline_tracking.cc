@@ -16,6 +16,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "core/common/error.h"
+#include "core/trajectory/tum_io.h"
 
 namespace evloc::tracking {
 namespace {
@@ -262,12 +263,11 @@ OfflineTrackingResult TrackEventStream(EventReader& reader, const MapSource& sou
   return result;
 }
 
-OfflineTrackingResult TrackFrameSequence(const std::vector<FrameFile>& frames, const Map& map,
-                                         const VisibilityIndex* visibility, const Camera& camera,
-                                         const Rigid3d& initial_world_from_cam,
-                                         int64_t initial_t_ns,
-                                         const OfflineTrackingOptions& options,
-                                         const StepCallback& on_step) {
+OfflineTrackingResult TrackFrames(const FrameSource& for_each_frame, const std::string& source,
+                                  const Map& map, const VisibilityIndex* visibility,
+                                  const Camera& camera, const Rigid3d& initial_world_from_cam,
+                                  int64_t initial_t_ns, const OfflineTrackingOptions& options,
+                                  const StepCallback& on_step) {
   options.Check();
   if (options.tracker.input != TrackerInput::kFrames) {
     throw InvalidArgumentError("offline tracking: frame sequences need the frames input mode");
@@ -276,20 +276,50 @@ OfflineTrackingResult TrackFrameSequence(const std::vector<FrameFile>& frames, c
   Tracker tracker(map, visibility, camera, options.tracker);
   tracker.Reset(initial_world_from_cam, initial_t_ns);
   OfflineTrackingResult result;
-  for (const FrameFile& frame : frames) {
-    if (frame.t_ns <= initial_t_ns) continue;
-    cv::Mat image = cv::imread(frame.path.string(), cv::IMREAD_GRAYSCALE);
-    if (image.empty()) {
-      throw IoError("cannot read frame '" + frame.path.string() +
-                    "' (missing, or not an image OpenCV reads)");
+  std::optional<int64_t> last_t_ns;
+  for_each_frame([&](int64_t t_ns, const cv::Mat& pixels) {
+    const auto where = [&] {
+      return source + ": the frame at " + FormatNanosecondsAsSeconds(t_ns) + " s";
+    };
+    if (last_t_ns && t_ns <= *last_t_ns) {
+      throw InvalidArgumentError(where() + " does not come after the previous one (" +
+                                 FormatNanosecondsAsSeconds(*last_t_ns) +
+                                 " s): frames must be in time order");
+    }
+    last_t_ns = t_ns;
+    if (t_ns <= initial_t_ns) return;
+    if (pixels.cols != camera.width || pixels.rows != camera.height) {
+      throw InvalidArgumentError(
+          where() + " is " + std::to_string(pixels.cols) + "x" + std::to_string(pixels.rows) +
+          ", the camera " + std::to_string(camera.width) + "x" + std::to_string(camera.height));
     }
     ++result.measurements;
-    if (const auto step = tracker.AddFrame(frame.t_ns, image)) {
+    if (const auto step = tracker.AddFrame(t_ns, ToGray8(pixels))) {
       Record(*step, tracker, on_step, &result);
     }
-  }
+  });
   result.wall_s = SecondsSince(start);
   return result;
+}
+
+OfflineTrackingResult TrackFrameSequence(const std::vector<FrameFile>& frames, const Map& map,
+                                         const VisibilityIndex* visibility, const Camera& camera,
+                                         const Rigid3d& initial_world_from_cam,
+                                         int64_t initial_t_ns,
+                                         const OfflineTrackingOptions& options,
+                                         const StepCallback& on_step) {
+  const auto read_files = [&frames](const ImageSink& add) {
+    for (const FrameFile& frame : frames) {
+      const cv::Mat pixels = cv::imread(frame.path.string(), cv::IMREAD_UNCHANGED);
+      if (pixels.empty()) {
+        throw IoError("cannot read frame '" + frame.path.string() +
+                      "' (missing, or not an image OpenCV reads)");
+      }
+      add(frame.t_ns, pixels);
+    }
+  };
+  return TrackFrames(read_files, "frame files", map, visibility, camera, initial_world_from_cam,
+                     initial_t_ns, options, on_step);
 }
 
 }  // namespace evloc::tracking

@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "core/camera/camera.h"
+#include "core/dataset/dataset.h"
 #include "core/events/event_reader.h"
 #include "core/geometry/rigid3.h"
 #include "core/trajectory/trajectory.h"
@@ -162,9 +163,23 @@ struct FrameFile {
   std::filesystem::path path;
 };
 
-// Tracks a sequence of frames with the frame-based twin (Canny-VT), starting from
-// `initial_world_from_cam` at `initial_t_ns`; frames at or before initial_t_ns are skipped.
-// Throws IoError for an unreadable frame.
+// The frames of a run: hands each (capture time in ns, pixels: CV_8UC1, CV_16UC1, CV_8UC3 BGR or
+// CV_8UC4 BGRA) to its argument in time order, e.g. ForEachDatasetImage of a folder, bag or
+// AEDAT4 file.
+using FrameSource = std::function<void(const ImageSink&)>;
+
+// Tracks the frames of `for_each_frame` with the frame-based twin (Canny-VT), starting from
+// `initial_world_from_cam` at `initial_t_ns`; frames at or before initial_t_ns are skipped. Each
+// frame is made 8-bit grey by ToGray8 (core/dataset), whatever its source. `source` names the
+// frames in errors. Throws InvalidArgumentError (with `source` and the frame's time) for a frame
+// whose size is not the camera's or whose time does not increase, and whatever the source throws.
+OfflineTrackingResult TrackFrames(const FrameSource& for_each_frame, const std::string& source,
+                                  const Map& map, const VisibilityIndex* visibility,
+                                  const Camera& camera, const Rigid3d& initial_world_from_cam,
+                                  int64_t initial_t_ns, const OfflineTrackingOptions& options,
+                                  const StepCallback& on_step = {});
+
+// TrackFrames over image files. Throws IoError for an unreadable frame.
 OfflineTrackingResult TrackFrameSequence(const std::vector<FrameFile>& frames, const Map& map,
                                          const VisibilityIndex* visibility, const Camera& camera,
                                          const Rigid3d& initial_world_from_cam,

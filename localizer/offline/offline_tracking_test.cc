@@ -3,8 +3,12 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <functional>
+#include <utility>
+#include <vector>
 
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "core/common/error.h"
 #include "core/common/test_data.h"
@@ -135,6 +139,75 @@ TEST(TrackFrameSequence, FollowsRenderedFrames) {
   // the frame twin is held to 5 cm here; its accuracy is measured in docs/accuracy.md.
   EXPECT_LT(MaxTranslationError(result), 0.05);
   std::filesystem::remove_all(directory);
+}
+
+TEST(TrackFrames, SixteenBitAndColourFramesTrackLikeTheirGreyAndBadFramesAreNamedErrors) {
+  const auto rectangles = testing::DefaultRectangles();
+  const Map map = testing::MakeRectangleMap(rectangles, 0.01);
+  const Camera camera = TestCamera();
+  std::vector<std::pair<int64_t, cv::Mat>> grey;
+  for (int64_t t = 0; t <= kDurationNs / 2; t += 33'000'000) {
+    grey.emplace_back(t, testing::RenderRectangles(rectangles, camera, testing::SmoothMotion(t)));
+  }
+  OfflineTrackingOptions options;
+  options.tracker.input = TrackerInput::kFrames;
+  const auto run = [&](const std::function<cv::Mat(const cv::Mat&)>& as) {
+    return TrackFrames(
+        [&](const ImageSink& add) {
+          for (const auto& [t_ns, pixels] : grey) add(t_ns, as(pixels));
+        },
+        "test frames", map, nullptr, camera, testing::SmoothMotion(0), 0, options);
+  };
+  const OfflineTrackingResult reference = run([](const cv::Mat& pixels) { return pixels; });
+  ASSERT_EQ(reference.steps.size(), grey.size() - 1);
+  const auto same_poses = [&](const OfflineTrackingResult& result) {
+    ASSERT_EQ(result.steps.size(), reference.steps.size());
+    for (size_t i = 0; i < result.steps.size(); ++i) {
+      EXPECT_EQ(result.steps[i].world_from_cam.translation,
+                reference.steps[i].world_from_cam.translation);
+    }
+  };
+  // 16 bits: each 8-bit value v as 257 v; BGR and BGRA: three equal channels.
+  same_poses(run([](const cv::Mat& pixels) {
+    cv::Mat sixteen;
+    pixels.convertTo(sixteen, CV_16U, 257.0);
+    return sixteen;
+  }));
+  same_poses(run([](const cv::Mat& pixels) {
+    cv::Mat bgr;
+    cv::cvtColor(pixels, bgr, cv::COLOR_GRAY2BGR);
+    return bgr;
+  }));
+  same_poses(run([](const cv::Mat& pixels) {
+    cv::Mat bgra;
+    cv::cvtColor(pixels, bgra, cv::COLOR_GRAY2BGRA);
+    return bgra;
+  }));
+  // A frame of another size, a frame out of order, a float frame: errors naming the source.
+  const auto error_of = [&](const FrameSource& source) {
+    try {
+      TrackFrames(source, "test frames", map, nullptr, camera, testing::SmoothMotion(0), 0,
+                  options);
+    } catch (const InvalidArgumentError& error) {
+      return std::string(error.what());
+    }
+    return std::string("no error");
+  };
+  const std::string small = error_of([&](const ImageSink& add) {
+    add(10, cv::Mat(camera.height / 2, camera.width / 2, CV_8UC1, cv::Scalar(0)));
+  });
+  EXPECT_NE(small.find("test frames: the frame at 0.000000010 s is 160x120, the camera 320x240"),
+            std::string::npos)
+      << small;
+  const std::string back = error_of([&](const ImageSink& add) {
+    add(grey[2].first, grey[2].second);
+    add(grey[1].first, grey[1].second);
+  });
+  EXPECT_NE(back.find("does not come after the previous one"), std::string::npos) << back;
+  const std::string floats = error_of([&](const ImageSink& add) {
+    add(10, cv::Mat(camera.height, camera.width, CV_32FC1, cv::Scalar(0)));
+  });
+  EXPECT_NE(floats.find("8 or 16 bits"), std::string::npos) << floats;
 }
 
 TEST(TrackFrameSequence, UnreadableFrameIsAnIoError) {

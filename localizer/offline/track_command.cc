@@ -304,7 +304,8 @@ Options:
                          local features (maps with relocalization data; default on;
                          docs/relocalization.md)
   --mode events|frames|vo|devo
-                         events (Canny-EVT, default), frames (Canny-VT on images.txt), or the
+                         events (Canny-EVT, default), frames (Canny-VT on the images: a folder's
+                         images.txt, a bag's --image-topic, an AEDAT4 file's frames stream), or the
                          mapless odometry without --map: vo (Canny-VO on images and depth) or
                          devo (Canny-DEVO on events and depth) (docs/tracking.md)
   --handover             with a map and a dataset with depth: where the map is not seen, continue
@@ -636,14 +637,21 @@ OfflineTrackingResult RunTrackCommand(const TrackCommandOptions& options, std::o
     result = TrackEventStream(*reader, map, &visibility, dataset.camera, initial_world_from_cam,
                               initial_t_ns, tracking, on_step);
   } else {
-    if (dataset.images.empty()) {
-      throw InvalidArgumentError("dataset '" + options.dataset_path.string() +
-                                 "' has no images.txt: frames mode needs images");
+    if (!DatasetHasImages(dataset)) {
+      throw InvalidArgumentError(
+          "dataset '" + options.dataset_path.string() + "' has no images (" +
+          (dataset.bag
+               ? "no messages on the image topic '" + dataset.bag->topics.image +
+                     "'; --image-topic names another; the bag's topics: " + dataset.bag->topic_list
+           : dataset.aedat4 ? "no frames stream '" + dataset.aedat4->options.frames +
+                                  "'; --image-topic names another; the file's streams: " +
+                                  dataset.aedat4->stream_list
+                            : std::string("no images.txt")) +
+          "): frames mode needs images");
     }
-    std::vector<FrameFile> frames;
-    for (const auto& image : dataset.images) frames.push_back({image.t_ns, image.path});
-    result = TrackFrameSequence(frames, map, &visibility, dataset.camera, *initial_world_from_cam,
-                                initial_t_ns, tracking, on_step);
+    result = TrackFrames([&dataset](const ImageSink& add) { ForEachDatasetImage(dataset, add); },
+                         options.dataset_path.string(), map, &visibility, dataset.camera,
+                         *initial_world_from_cam, initial_t_ns, tracking, on_step);
   }
   WriteTrackOutputs(options, options.tracking.tracker.VariantName(),
                     events_mode ? "events" : "frames", result, log, map.geo_anchor);

@@ -17,7 +17,8 @@ Usage: write_test_aedat4.py OUT_DIR
        one after the other, repeated with shifted times until there are EVENTS)
        write_test_aedat4.py --from-dataset DIR OUT.aedat4   (an lz4 file of a dataset folder's
        events.txt, times rounded to microseconds, stream "events" in packets of 1 ms, sized by
-       its calib.yaml; for tests/recording_end_to_end_test.cc)
+       its calib.yaml, and the images of its images.txt as stream "frames", grey or BGR; for
+       tests/bag_end_to_end_test.cc)
 
 Writes, for each compression none / lz4 / lz4-high / zstd / zstd-high,
 OUT_DIR/test_<compression>.aedat4 with the streams
@@ -328,7 +329,8 @@ def write_bench_files(count, out_dir, events_txt):
 
 
 def write_from_dataset(folder, out_path):
-    """The events.txt (t_s x y p) of a dataset folder, sized by its calib.yaml."""
+    """The events.txt (t_s x y p) of a dataset folder, sized by its calib.yaml, and the images of
+    its images.txt as a frames stream (times rounded to microseconds)."""
     import yaml  # python3-yaml, only for this mode
 
     data = numpy.loadtxt(os.path.join(folder, "events.txt"), ndmin=2)
@@ -346,7 +348,29 @@ def write_from_dataset(folder, out_path):
         if end > begin:
             chunk = events[begin:end]
             packets.append((0, event_packet(chunk), len(chunk), int(chunk[0]["t"]), int(chunk[-1]["t"])))
-    write_file(out_path, "lz4", [(0, "events", "EVTS", (width, height))], packets)
+    streams = [(0, "events", "EVTS", (width, height))]
+    images_txt = os.path.join(folder, "images.txt")
+    if os.path.exists(images_txt):
+        # The images as the frames stream: grey, or BGR (format 16) from an RGB PNG.
+        from PIL import Image  # python3-pil, only for this mode
+        streams.append((1, "frames", "FRME", (width, height)))
+        with open(images_txt) as handle:
+            for line in handle:
+                if not line.strip() or line.startswith("#"):
+                    continue
+                t, path = line.split()[:2]
+                t_us = int(round(float(t) * 1e6))
+                picture = Image.open(os.path.join(folder, path))
+                pixels = numpy.asarray(picture)
+                if picture.mode == "RGB":
+                    pixels, fmt = pixels[:, :, ::-1], 16
+                else:
+                    fmt = 0
+                packets.append((1, frame_packet(t_us, picture.width, picture.height, fmt,
+                                                numpy.ascontiguousarray(pixels).tobytes()),
+                                1, t_us, t_us))
+        packets.sort(key=lambda packet: packet[3])
+    write_file(out_path, "lz4", streams, packets)
 
 
 def main(argv):

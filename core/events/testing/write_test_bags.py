@@ -10,7 +10,9 @@ Usage: write_test_bags.py OUT_DIR
        two messages per topic and no images: fuzzing seeds of 2-4 KB, test_<compression>.bag)
        write_test_bags.py --from-dataset DIR OUT.bag [OFFSET_S]   (an lz4 bag of a dataset folder
        with events.txt, calib.yaml (pinhole or radtan) and groundtruth.txt: /dvs/events in
-       messages of 1 ms, /dvs/camera_info, /optitrack/davis; for tests/end_to_end_test.cc; every
+       messages of 1 ms, /dvs/camera_info, /optitrack/davis, and the images of its images.txt
+       on /dvs/image_raw (mono8 or rgb8 as stored, read with python3-pil); for
+       tests/bag_end_to_end_test.cc; every
        time moved by the whole seconds OFFSET_S, default 0: ROS's C++ rosbag play refuses record
        times of 0, where a simulated sequence starts; ros/tests/ros_node_test.py)
 
@@ -29,6 +31,7 @@ and text files with what was written: expected_<topic name>.txt (`t_ns x y p` pe
 of its bytes, and the camera).
 """
 
+import os
 import random
 import struct
 import sys
@@ -151,6 +154,21 @@ def write_dataset_bag(folder, out, offset_ns=0):
                     position=pose["geometry_msgs/Point"](x=float(x), y=float(y), z=float(z)),
                     orientation=pose["geometry_msgs/Quaternion"](
                         x=float(qx), y=float(qy), z=float(qz), w=float(qw))))))
+    img = classes("sensor_msgs/Image")
+    images_txt = os.path.join(folder, "images.txt")
+    if os.path.exists(images_txt):
+        from PIL import Image
+        with open(images_txt) as handle:
+            for m, line in enumerate(l for l in handle if l.strip() and not l.startswith("#")):
+                t, path = line.split()[:2]
+                t_ns = seconds_to_ns(t)
+                picture = Image.open(os.path.join(folder, path))
+                encoding = {"L": "mono8", "RGB": "rgb8"}[picture.mode]
+                channels = 1 if encoding == "mono8" else 3
+                messages.append((t_ns, "/dvs/image_raw", img["sensor_msgs/Image"](
+                    header=header(img, m, t_ns), height=picture.height, width=picture.width,
+                    encoding=encoding, is_bigendian=0, step=picture.width * channels,
+                    data=picture.tobytes())))
     block, block_start = [], None
 
     def flush():
