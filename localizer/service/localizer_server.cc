@@ -62,6 +62,10 @@ void LocalizerServerOptions::Check() const {
   if (!(backpressure_fraction > 0 && backpressure_fraction <= 1)) {
     throw InvalidArgumentError("--backpressure-fraction must be in (0, 1]");
   }
+  if (!(searching_events_per_pixel_s >= 0 && searching_events_per_pixel_s <= 1e6)) {
+    throw InvalidArgumentError(
+        "--searching-event-rate must be 0 (no advice) .. 1e6 events per pixel and second");
+  }
   if (tls_cert_file.has_value() != tls_key_file.has_value()) {
     throw InvalidArgumentError("--tls-cert and --tls-key go together");
   }
@@ -241,6 +245,8 @@ std::string LocalizerServerOptions::Describe() const {
        << "idle-timeout: " << idle_timeout_s << " s\n"
        << "queue-packets: " << queue_packets << "\n"
        << "backpressure-fraction: " << backpressure_fraction << "\n"
+       << "searching-event-rate: " << searching_events_per_pixel_s
+       << " events per pixel and second\n"
        << "map-memory: " << max_map_memory_bytes << " bytes (maps; and the tiles of sites)\n"
        << "map-keep-dir: "
        << (!keep_maps     ? std::string("none")
@@ -1062,6 +1068,9 @@ class TrackCall final : public TrackReactor,
     started.mutable_started()->set_step_rate_hz(settings.tracker.step_rate_hz);
     started.mutable_started()->set_variant(settings.tracker.VariantName());
     started.mutable_started()->set_queue_capacity(static_cast<uint32_t>(inbound_.capacity()));
+    started.mutable_started()->set_searching_event_rate(static_cast<uint64_t>(std::llround(
+        options_.searching_events_per_pixel_s * static_cast<double>(settings.camera.width) *
+        static_cast<double>(settings.camera.height))));
     Send(std::move(started));
     if (ViewerBoard* board = service_.viewer_board()) {
       viewer_ = board->Open(id_, map->name, EscapeForLog(start_.client_name()));

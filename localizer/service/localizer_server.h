@@ -67,6 +67,11 @@ struct LocalizerServerOptions {
   // A Backpressure notice is sent when the queue holds at least this fraction of its capacity
   // (--backpressure-fraction).
   double backpressure_fraction = 0.5;
+  // Events per pixel and second a searching session's search needs at most, announced to its
+  // client as SessionStarted.searching_event_rate (times the camera's pixels) so that it may thin
+  // its stream while searching; 0: no advice (--searching-event-rate). 20: twice what the search
+  // was measured to need at 640x480 (docs/benchmarks.md, "A relocalizing neighbour").
+  double searching_events_per_pixel_s = 20.0;
   // File of bearer tokens, one per line: `TOKEN *` (every map) or `TOKEN map1,map2` (those maps
   // only); '#' starts a comment (format: TokenTable in auth.h). Read again when it changes.
   // Unset: no token authentication (--auth-tokens).

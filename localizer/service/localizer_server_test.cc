@@ -157,6 +157,10 @@ TEST_F(LocalizerServerTest, PosesEqualOfflineTrackingOfTheSameEvents) {
   ASSERT_TRUE(outcome.status.ok()) << outcome.status.error_message();
   ASSERT_GE(outcome.responses.size(), 2u);
   EXPECT_TRUE(outcome.responses.front().has_started());
+  // The searching rate announced: 20 events per pixel and second (the default) of the camera.
+  const api::SessionStart& start = requests.front().start();
+  EXPECT_EQ(outcome.responses.front().started().searching_event_rate(),
+            20u * start.camera().width() * start.camera().height());
   ASSERT_TRUE(outcome.responses.back().has_end());
   const api::SessionEnd& end = outcome.responses.back().end();
   EXPECT_EQ(end.events(), events.size());

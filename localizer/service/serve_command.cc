@@ -33,6 +33,10 @@ Options:
   --idle-timeout SECONDS     cancel a session that sends nothing this long (default 30)
   --queue-packets N          packets a session may have waiting (default 256)
   --backpressure-fraction F  queue fill that triggers a Backpressure notice (default 0.5)
+  --searching-event-rate R   events per pixel and second a searching session needs at most,
+                             announced to clients so they may thin their streams while the
+                             session searches (SessionStarted.searching_event_rate; default 20,
+                             0: no advice)
   --map-memory SIZE          memory budget of the loaded maps and, separately, of the loaded
                              tiles of sites, bytes with a K/M/G/T suffix (e.g. 2G); least
                              recently used maps beyond it are unloaded (sessions keep theirs),
@@ -150,6 +154,8 @@ ServeCommand ParseServeCommandLine(const std::vector<std::string>& arguments) {
       server.queue_packets = static_cast<int>(ParseIntegerFlag(flag, value));
     } else if (flag == "--backpressure-fraction") {
       server.backpressure_fraction = ParseDoubleFlag(flag, value);
+    } else if (flag == "--searching-event-rate") {
+      server.searching_events_per_pixel_s = ParseDoubleFlag(flag, value);
     } else if (flag == "--max-map-memory") {
       const int64_t mib = ParseIntegerFlag(flag, value);
       if (mib < 1 || mib > (int64_t{1} << 40)) {

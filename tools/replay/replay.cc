@@ -233,6 +233,9 @@ struct SharedState {
   // Updates without a pose (the server searching), the session time of the newest update, and
   // that of the first TRACKING pose.
   int64_t searching = 0;
+  // Whether the newest update had no pose (the server searching); at the start, whether the
+  // session started without one.
+  bool searching_now = false;
   int64_t last_update_t_ns = 0;
   std::optional<int64_t> first_tracking_t_ns;
   // The last pose received (the initial pose before the first), and when it arrived.
@@ -467,7 +470,10 @@ grpc::Status Replayer::RunSession(const TimedPose& start, bool resumed, SessionO
     shared_.sent.clear();
     shared_.unconfirmed_window_ends.clear();
     shared_.ended = false;
+    shared_.searching_now = !session_start->has_initial_world_from_cam();
   }
+  const uint64_t searching_event_rate =
+      options_.thin_while_searching ? response.started().searching_event_rate() : 0;
   std::thread response_reader([&] {
     api::TrackResponse message;
     while (stream->Read(&message)) {
@@ -486,6 +492,7 @@ grpc::Status Replayer::RunSession(const TimedPose& start, bool resumed, SessionO
         shared_.server_overhead_us.push_back(pose.latency_us() - pose.step_ms() * 1e3);
         shared_.step_ms.push_back(pose.step_ms());
         shared_.last_update_t_ns = pose.t_ns();
+        shared_.searching_now = !pose.has_world_from_cam();
         if (!pose.has_world_from_cam()) {
           // INITIALIZING / RELOCALIZING: the server is searching and has no pose to give.
           ++shared_.searching;
@@ -536,6 +543,7 @@ grpc::Status Replayer::RunSession(const TimedPose& start, bool resumed, SessionO
   EventBuffer sensor_events;
   bool stream_open = true;
   EventBuffer merged;
+  EventBuffer thinned;
   while (stream_open) {
     const bool resend = next < history_.size();
     if (!resend && !ProduceWindow()) break;
@@ -557,6 +565,22 @@ grpc::Status Replayer::RunSession(const TimedPose& start, bool resumed, SessionO
     }
     const int64_t packet_start_ns = history_[next].start_ns;
     const int64_t packet_end_ns = history_[last].end_ns;
+    // While the server searches, only what its search needs (SessionStarted.searching_event_rate).
+    bool searching_now = false;
+    if (searching_event_rate > 0) {
+      std::lock_guard<std::mutex> lock(shared_.mutex);
+      searching_now = shared_.searching_now;
+    }
+    const size_t stride =
+        searching_now
+            ? ThinningStride(events->size(), packet_end_ns - packet_start_ns, searching_event_rate)
+            : 1;
+    if (stride > 1) {
+      thinned.clear();
+      for (size_t i = 0; i < events->size(); i += stride) thinned.push_back((*events)[i]);
+      result_.events_thinned += static_cast<int64_t>(events->size() - thinned.size());
+      events = &thinned;
+    }
     api::TrackRequest request;
     api::EventPacket* packet = request.mutable_events();
     packet->set_end_t_ns(packet_end_ns);
@@ -776,10 +800,23 @@ ReplayResult Replayer::Run() {
          << shared_.end.events_shed()
          << " events) unread while it searched and the session was behind its stream\n";
   }
+  if (result_.events_thinned > 0) {
+    log_ << "evloc-replay: " << result_.events_thinned
+         << " events left out while the server searched (at most its "
+            "SessionStarted.searching_event_rate; --thin-while-searching off sends them all)\n";
+  }
   return result;
 }
 
 }  // namespace
+
+size_t ThinningStride(size_t events, int64_t span_ns, uint64_t rate) {
+  if (rate == 0 || span_ns <= 0 || events == 0) return 1;
+  const double allowed = static_cast<double>(rate) * static_cast<double>(span_ns) * 1e-9;
+  if (static_cast<double>(events) <= allowed) return 1;
+  if (allowed < 1.0) return events;  // one event of the packet
+  return static_cast<size_t>(std::ceil(static_cast<double>(events) / allowed));
+}
 
 void ReplayOptions::Check() const {
   CheckServerOptions(*this);
@@ -865,6 +902,7 @@ void WriteReplayReport(const std::filesystem::path& path, const ReplayResult& re
       {"lost_poses", result.lost_poses},
       {"searching_updates", result.searching_updates},
       {"packets_shed", result.packets_shed},
+      {"events_thinned", result.events_thinned},
       {"first_tracking_s", result.first_tracking_s ? nlohmann::json(*result.first_tracking_s)
                                                    : nlohmann::json(nullptr)},
       {"backpressure_notices", result.backpressure_notices},
@@ -993,6 +1031,12 @@ std::unique_ptr<CommandLine> DeclareReplayCommandLine(ReplayCommand* command) {
            })
       .Add("--rate", "HZ", "tracking steps per second (default: the server's)",
            &options->step_rate_hz)
+      .Add("--thin-while-searching", "on|off",
+           "while the server searches the map, send at most the events per second it announced "
+           "(SessionStarted.searching_event_rate; default on)",
+           [options](const std::string& flag, const std::string& value) {
+             options->thin_while_searching = ParseSwitchFlag(flag, value);
+           })
       .Add("--max-lead-ms", "MS",
            "with --speed max: session time sent ahead of the last pose (default 50)",
            &options->max_lead_ms)

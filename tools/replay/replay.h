@@ -70,6 +70,11 @@ struct ReplayOptions {
   bool start_without_pose = false;
   // Tracking steps per second asked of the server; nullopt: the server's default (--rate).
   std::optional<double> step_rate_hz;
+  // While the session searches (no pose in its updates; from the start with --init-pose none),
+  // send only every k-th event of a packet whose rate exceeds the server's
+  // SessionStarted.searching_event_rate (ThinningStride); the rest of the stream goes out whole
+  // (--thin-while-searching on|off).
+  bool thin_while_searching = true;
   // With --speed max: the most session time sent ahead of the last pose received, ms
   // (--max-lead-ms); keeps the server's queue from overflowing.
   double max_lead_ms = 50.0;
@@ -160,6 +165,8 @@ struct ReplayResult {
   int64_t lost_poses = 0;
   // Updates received without a pose (INITIALIZING or RELOCALIZING: the server was searching).
   int64_t searching_updates = 0;
+  // Events left out of packets while the session searched (thin_while_searching).
+  int64_t events_thinned = 0;
   // Event packets the server dropped unread while it searched and the session was behind its
   // stream (SessionEnd.packets_shed of the last session; 0 when it kept up).
   int64_t packets_shed = 0;
@@ -193,6 +200,11 @@ struct ReplayResult {
 // go to `log`. Throws InvalidArgumentError / IoError / ParseError for bad options or dataset,
 // and Error with the gRPC status for a failed session.
 ReplayResult RunReplay(const ReplayOptions& options, std::ostream& log);
+
+// The stride k of the events kept (every k-th) so that `events` over `span_ns` of session time
+// stay within `rate` events per second: ceil(events / (rate * span)); 1 (all of them) when they
+// already do, when `rate` is 0 (no advice) or the span is not positive.
+size_t ThinningStride(size_t events, int64_t span_ns, uint64_t rate);
 
 // Writes the figures of `result` as JSON (the --report file), atomically. Throws IoError.
 void WriteReplayReport(const std::filesystem::path& path, const ReplayResult& result);

@@ -178,6 +178,59 @@ TEST(ReplayWithoutPose, TheServerFindsTheCameraAndTheReplayReportsWhen) {
   EXPECT_NE(report.find("\"first_tracking_s\""), std::string::npos) << report;
 }
 
+// While the server searches, the replay sends at most the events per second the server announced
+// (SessionStarted.searching_event_rate), and all of them again once a pose is verified.
+TEST(ReplayWithoutPose, ThinsItsStreamToTheAnnouncedRateOnlyWhileTheServerSearches) {
+  fixture::TemporaryFolder folder;
+  fixture::WriteTestMap(folder.path() / "maps", "beside",
+                        fixture::TestMapWithKeyframesBesideThePath());
+  const std::filesystem::path dataset = fixture::WriteTestDataset(folder.path(), 600'000'000);
+  service::LocalizerServerOptions server_options =
+      fixture::TestServerOptions(folder.path() / "maps");
+  server_options.searching_events_per_pixel_s = 0.5;  // 38,400 events/s: under the stream's 89,000
+  service::LocalizerServer server(server_options);
+  const auto run = [&](bool thin, const std::string& name) {
+    ReplayOptions options;
+    options.server = "127.0.0.1:" + std::to_string(server.port());
+    options.map_name = "beside";
+    options.dataset = dataset;
+    options.output = folder.path() / (name + ".txt");
+    options.report = folder.path() / (name + ".json");
+    options.speed = std::nullopt;
+    options.step_rate_hz = 200;
+    options.start_without_pose = true;
+    options.thin_while_searching = thin;
+    std::ostringstream log;
+    ReplayResult result = RunReplay(options, log);
+    return std::make_pair(result, log.str());
+  };
+  const auto [whole, whole_log] = run(false, "whole");
+  EXPECT_EQ(whole.events_thinned, 0);
+  const auto [thinned, thinned_log] = run(true, "thinned");
+  EXPECT_GT(thinned.events_thinned, 0) << thinned_log;
+  EXPECT_EQ(thinned.events_sent + thinned.events_thinned, whole.events_sent);
+  EXPECT_NE(thinned_log.find("events left out while the server searched"), std::string::npos)
+      << thinned_log;
+  EXPECT_NE(ReadFileToString(folder.path() / "thinned.json").find("\"events_thinned\""),
+            std::string::npos);
+  // Only the searching part is thinned: once TRACKING, every event goes out (a thinned
+  // TRACKING stretch at 0.5 events per pixel and second would leave out most of the stream).
+  if (thinned.first_tracking_s) {
+    EXPECT_LT(thinned.events_thinned, whole.events_sent * 3 / 4) << thinned_log;
+  }
+}
+
+TEST(ReplayThinning, TheStrideKeepsAPacketWithinTheRate) {
+  EXPECT_EQ(ThinningStride(1000, 1'000'000, 0), 1u);          // no advice
+  EXPECT_EQ(ThinningStride(1000, 1'000'000, 1'000'000), 1u);  // 1000 in 1 ms: within
+  EXPECT_EQ(ThinningStride(1001, 1'000'000, 1'000'000), 2u);
+  EXPECT_EQ(ThinningStride(11'700, 1'000'000, 6'144'000), 2u);  // 640x480 at 20 per pixel
+  EXPECT_EQ(ThinningStride(11'700, 1'000'000, 2'900'000), 5u);
+  EXPECT_EQ(ThinningStride(50, 1'000, 1'000'000), 50u);  // under one event allowed: one kept
+  EXPECT_EQ(ThinningStride(0, 1'000'000, 1), 1u);
+  EXPECT_EQ(ThinningStride(10, 0, 1), 1u);
+}
+
 TEST(ReplayTls, ReplaysOverTls) {
   if (std::system("openssl version > /dev/null 2>&1") != 0) {
     GTEST_SKIP() << "the openssl command is not installed: cannot make a test certificate";
@@ -284,6 +337,10 @@ TEST(ReplayCommandLine, FlagsMapToOptions) {
   no_pose.insert(no_pose.end(), {"--init-pose", "none"});
   EXPECT_TRUE(ParseReplayCommandLine(no_pose).options.start_without_pose);
   EXPECT_FALSE(ParseReplayCommandLine(required).options.start_without_pose);
+  EXPECT_TRUE(ParseReplayCommandLine(required).options.thin_while_searching);
+  std::vector<std::string> whole = required;
+  whole.insert(whole.end(), {"--thin-while-searching", "off"});
+  EXPECT_FALSE(ParseReplayCommandLine(whole).options.thin_while_searching);
   no_pose.insert(no_pose.end(), {"--init-pose", "0 0 0 0 0 0 1"});
   EXPECT_THROW(ParseReplayCommandLine(no_pose), InvalidArgumentError);
   EXPECT_THROW(ParseReplayCommandLine({"--server", "x", "--map", "m", "--dataset", "d", "--out",
