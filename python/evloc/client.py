@@ -14,6 +14,7 @@ The gRPC stubs (evloc.localizer_pb2, evloc.localizer_pb2_grpc) are generated fro
 the package is built."""
 
 import collections
+import math
 import queue
 import random
 import threading
@@ -74,6 +75,20 @@ class ServiceError(Exception):
         super().__init__(f"{what}: {code.name if code else 'no status'}: {details}")
         self.code = code
         self.details = details
+
+
+def thinning_stride(events, span_ns, rate):
+    """The stride k of the events kept (every k-th) so that `events` over `span_ns` stay within
+    `rate` events per second (evloc-replay's ThinningStride): 1 when they do, when rate is 0 or the
+    span is not positive."""
+    if rate <= 0 or span_ns <= 0 or events <= 0:
+        return 1
+    allowed = rate * span_ns * 1e-9
+    if events <= allowed:
+        return 1
+    if allowed < 1.0:
+        return int(events)
+    return int(math.ceil(events / allowed))
 
 
 def encode_packed(t_ns, x, y, p, time_base_ns):
@@ -276,12 +291,16 @@ class Session:
     of evloc-replay: reconnect (attempts per outage, default 0: fail at once), backoff_ms (100),
     backoff_max_ms (2000), reconnect_max_s (60), stable_s (10), resume_prime_ms (100),
     resume_velocity_ms (100: a resumed session starts with the velocity of the last TRACKING poses
-    within it, as evloc-replay --resume-velocity-ms; 0: at rest), seed."""
+    within it, as evloc-replay --resume-velocity-ms; 0: at rest), seed; thin_while_searching
+    (default True: while the server searches the map, send at most the events per second it
+    announced in SessionStarted.searching_event_rate, as evloc-replay does; events_thinned counts
+    the events left out)."""
 
     def __init__(self, client, map_name, camera, initial_pose, initial_t_ns, *, step_rate_hz=None,
                  variant=None, max_points=None, packet_ms=1.0, client_name="evloc-python",
                  reconnect=0, backoff_ms=100.0, backoff_max_ms=2000.0, reconnect_max_s=60.0,
-                 stable_s=10.0, resume_prime_ms=100.0, resume_velocity_ms=100.0, seed=None):
+                 stable_s=10.0, resume_prime_ms=100.0, resume_velocity_ms=100.0, seed=None,
+                 thin_while_searching=True):
         api, _ = _stubs()
         self._client = client
         self._map_name = map_name
@@ -333,6 +352,9 @@ class Session:
         self.started = None              # SessionStarted of the current session
         self.end = None                  # SessionEnd, when the server sent one
         self.reconnects = 0              # sessions resumed after a failure
+        self._thin = bool(thin_while_searching)
+        self._searching = False          # the newest update had no pose (the server searching)
+        self.events_thinned = 0          # events left out while the server searched
 
     @staticmethod
     def _pose_values(pose):
@@ -409,6 +431,7 @@ class Session:
             self._requests = requests
             self._call = call
             self.started = first.started
+            self._searching = pose is None
             self._max_in_flight = max(1, min(first.started.queue_capacity // 2, 5))
             self._unconfirmed.clear()
             api, _ = _stubs()
@@ -449,6 +472,7 @@ class Session:
                     if message.HasField("pose"):
                         update = Pose(message.pose, self._sessions)
                         with self._lock:
+                            self._searching = update.pose is None
                             if update.pose is not None:
                                 self._last_pose = (update.t_ns, update.pose)
                             if update.pose is not None and update.status == Status.TRACKING:
@@ -594,14 +618,18 @@ class Session:
         bounds = np.flatnonzero(np.diff(window)) + 1
         starts = np.concatenate(([0], bounds)) if len(t) else np.array([], dtype=np.int64)
         stops = np.concatenate((bounds, [len(t)])) if len(t) else np.array([], dtype=np.int64)
+        with self._lock:
+            rate = self.started.searching_event_rate if self._thin and self._searching else 0
         packets = []
         for begin, stop in zip(starts, stops):
             base = origin + int(window[begin]) * self._packet_ns
             end = min(base + self._packet_ns, end_t_ns)
+            stride = thinning_stride(stop - begin, end - base, rate)
+            kept = slice(begin, stop, stride)
+            self.events_thinned += (stop - begin) - len(range(begin, stop, stride))
             packet = api.EventPacket(encoding=api.EVENT_ENCODING_PACKED, time_base_ns=base,
                                      end_t_ns=end,
-                                     data=encode_packed(t[begin:stop], x[begin:stop],
-                                                        y[begin:stop], p[begin:stop], base))
+                                     data=encode_packed(t[kept], x[kept], y[kept], p[kept], base))
             packets.append(packet)
         if not packets or packets[-1].end_t_ns < end_t_ns:
             packets.append(api.EventPacket(encoding=api.EVENT_ENCODING_PACKED,

@@ -356,6 +356,48 @@ def test_client_errors(server, simulated):
                 pass
 
 
+def test_client_thins_its_stream_only_while_the_server_searches(maps_folder, simulated,
+                                                                 tmp_path):
+    dataset = evloc.read_dataset(simulated)
+    events = dataset.events().read_all()
+    # 2 events per pixel and second: 614,400 events/s at 640x480, under the render's ~3 M.
+    running = Server(maps_folder, tmp_path / "server.log", extra=("--searching-event-rate", "2"))
+    try:
+        counts = {}
+        for thin in (False, True):
+            with evloc.Client(running.address) as client:
+                with client.session("room", dataset.camera, initial_pose=None,
+                                    initial_t_ns=int(events["t"][0]) - 1,
+                                    thin_while_searching=thin) as s:
+                    assert s.started.searching_event_rate == 2 * 640 * 480
+                    stream(s, events)
+                    s.close(end_t_ns=int(events["t"][-1]) + 1_000_000)
+                    updates = list(s.poses())
+                assert s.end is not None
+                counts[thin] = (s.events_thinned, s.end.events, updates)
+        assert counts[False][0] == 0 and counts[False][1] == len(events)
+        thinned, received, updates = counts[True]
+        assert thinned > 0
+        assert received + thinned == len(events)
+        # Only while searching: after the first update with a pose nothing more is left out,
+        # so a session found early keeps most of its events.
+        if any(u.pose is not None for u in updates):
+            assert thinned < len(events)
+    finally:
+        running.stop()
+
+
+def test_thinning_stride_matches_evloc_replays():
+    from evloc.client import thinning_stride  # pylint: disable=import-outside-toplevel
+    assert thinning_stride(1000, 1_000_000, 0) == 1
+    assert thinning_stride(1000, 1_000_000, 1_000_000) == 1
+    assert thinning_stride(1001, 1_000_000, 1_000_000) == 2
+    assert thinning_stride(11_700, 1_000_000, 6_144_000) == 2
+    assert thinning_stride(11_700, 1_000_000, 2_900_000) == 5
+    assert thinning_stride(50, 1_000, 1_000_000) == 50
+    assert thinning_stride(0, 1_000_000, 1) == 1
+
+
 def test_packed_encoding_layout():
     data = evloc.encode_packed(np.array([100, 105]), np.array([3, 640]), np.array([4, 479]),
                                np.array([1, -1]), 100)
