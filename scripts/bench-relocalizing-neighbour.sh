@@ -107,7 +107,9 @@ search = f"{out}/{label}.search.json"
 if os.path.exists(search):
     s = json.load(open(search))
     line += (f"; searching session (exit {search_status}): {s['searching_updates']} updates, "
-             f"TRACKING {s['first_tracking_s']}, its step p50 {s['step_p50_ms']:.1f} ms")
+             f"TRACKING {s['first_tracking_s']}, its step p50 {s['step_p50_ms']:.1f} ms, "
+             f"sent {s['events_sent']} events, thinned {s.get('events_thinned', 0)}, "
+             f"packets shed by the server {s.get('packets_shed', 0)}")
 elif search_status:
     line += f"; searching session failed (exit {search_status}, see {label}.search.log)"
 print(line + f" (load {load})")
