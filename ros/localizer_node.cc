@@ -58,6 +58,8 @@ void ReadNodeParameters(const ros::NodeHandle& private_node, NodeCoreOptions* co
   core->map_name = StringParam(private_node, "map_name", core->map_name);
   core->token_file = StringParam(private_node, "token_file", core->token_file);
   core->tls_ca = StringParam(private_node, "tls_ca", core->tls_ca);
+  core->thin_while_searching =
+      BoolParam(private_node, "thin_while_searching", core->thin_while_searching);
   ros_options->map_frame = StringParam(private_node, "map_frame", ros_options->map_frame);
   ros_options->camera_frame = StringParam(private_node, "camera_frame", ros_options->camera_frame);
   if (ros_options->map_frame.empty() || ros_options->camera_frame.empty() ||

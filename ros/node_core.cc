@@ -192,6 +192,13 @@ struct NodeCore::State {
   size_t queue_capacity = 256;
   EventBuffer unsent;
   int64_t unsent_end_t_ns = 0;
+  // Thinning while the server searches (docs/api.md): its announced rate (0: none, or
+  // ~thin_while_searching off), whether the newest update had no pose (guarded by `mutex`), the
+  // end of the last packet sent, and the buffer of a thinned packet.
+  uint64_t searching_event_rate = 0;
+  bool searching = false;
+  std::optional<int64_t> last_sent_end_t_ns;
+  EventBuffer thinned;
 };
 
 NodeCore::NodeCore(const NodeCoreOptions& options, StepCallback on_step, StreamEndCallback on_end)
@@ -321,6 +328,13 @@ void NodeCore::OpenStream(int64_t initial_t_ns) {
   if (response.started().queue_capacity() > 0) {
     s.queue_capacity = response.started().queue_capacity();
   }
+  s.searching_event_rate =
+      s.options.thin_while_searching ? response.started().searching_event_rate() : 0;
+  {
+    std::lock_guard<std::mutex> lock(s.mutex);
+    s.searching = !s.initial_world_from_cam.has_value();
+  }
+  s.last_sent_end_t_ns.reset();
   s.reader = std::thread([&s] {
     api::TrackResponse message;
     std::string error;
@@ -331,6 +345,7 @@ void NodeCore::OpenStream(int64_t initial_t_ns) {
         while (!s.in_flight_ends.empty() && s.in_flight_ends.front() <= message.pose().t_ns()) {
           s.in_flight_ends.pop_front();
         }
+        s.searching = !message.pose().has_world_from_cam();
       }
       if (!s.on_step) continue;
       try {
@@ -402,9 +417,29 @@ void NodeCore::FlushEvents() {
     api::EventPacket* packet = request.mutable_events();
     packet->set_encoding(api::EVENT_ENCODING_PACKED);
     packet->set_time_base_ns(base);
-    packet->set_data(wire::EncodePackedEvents(events, begin, end, base));
     const int64_t packet_end_t_ns = end == events.size() ? end_t_ns : events.t_ns[end - 1];
+    bool searching = false;
+    if (s.searching_event_rate > 0) {
+      std::lock_guard<std::mutex> lock(s.mutex);
+      searching = s.searching;
+    }
+    // While the server searches, what its search needs: the packet's events over the time since
+    // the last packet's end (or its first event).
+    const size_t stride =
+        searching ? wire::ThinningStride(end - begin,
+                                         packet_end_t_ns - s.last_sent_end_t_ns.value_or(base),
+                                         s.searching_event_rate)
+                  : 1;
+    if (stride > 1) {
+      s.thinned.clear();
+      for (size_t i = begin; i < end; i += stride) s.thinned.push_back(events[i]);
+      counters_.thinned_events += (end - begin) - s.thinned.size();
+      packet->set_data(wire::EncodePackedEvents(s.thinned, 0, s.thinned.size(), base));
+    } else {
+      packet->set_data(wire::EncodePackedEvents(events, begin, end, base));
+    }
     packet->set_end_t_ns(packet_end_t_ns);
+    s.last_sent_end_t_ns = packet_end_t_ns;
     {
       std::lock_guard<std::mutex> lock(s.mutex);
       s.in_flight_ends.push_back(packet_end_t_ns);

@@ -68,6 +68,10 @@ struct NodeCoreOptions {
   std::string token_file;
   // ~tls_ca: PEM root certificates to verify a TLS server with; empty: plaintext.
   std::string tls_ca;
+  // ~thin_while_searching: with ~server, while the session searches the map (its updates carry
+  // no pose), send at most the events per second the server announced
+  // (SessionStarted.searching_event_rate), every k-th event of a packet (docs/api.md).
+  bool thin_while_searching = true;
 };
 
 // An events message's events, as columns.
@@ -131,6 +135,8 @@ struct NodeCounters {
   uint64_t steps = 0;
   // Restarts after a jump forward longer than max_gap_s (and starts moved to the first event).
   uint64_t restarts = 0;
+  // Service mode: events left out while the server searched (~thin_while_searching).
+  uint64_t thinned_events = 0;
 };
 
 // Called with each step a localizer server sent (service mode), on the stream's reader thread.

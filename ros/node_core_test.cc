@@ -4,6 +4,7 @@
 
 #include <cstdio>
 #include <filesystem>
+#include <mutex>
 #include <string>
 
 #include <gtest/gtest.h>
@@ -12,6 +13,8 @@
 #include "core/common/test_data.h"
 #include "core/dataset/pose_text.h"
 #include "localizer/offline/offline_tracking.h"
+#include "localizer/service/localizer_server.h"
+#include "localizer/service/testing/service_fixture.h"
 #include "localizer/tracking/testing/synthetic_scene.h"
 #include "maps/map.h"
 #include "maps/visibility.h"
@@ -115,6 +118,55 @@ TEST(NodeCore, MessagesGiveEvlocTracksSteps) {
   }
   EXPECT_EQ(core.counters().events, scene.events.size());
   EXPECT_EQ(core.counters().steps, steps.size());
+}
+
+// Streaming to a server from no pose: while the server searches, the node sends at most the
+// events per second the server announced (here 0.5 per pixel and second: 38,400 events/s, under
+// the scene's rate), and with ~thin_while_searching off every event.
+TEST(NodeCore, StreamingWhileTheServerSearchesThinsToTheAnnouncedRate) {
+  const Scene& scene = TestScene();
+  service::testing::TemporaryFolder folder;
+  service::testing::WriteTestMap(folder.path() / "maps", "beside",
+                                 service::testing::TestMapWithKeyframesBesideThePath());
+  service::LocalizerServerOptions server_options =
+      service::testing::TestServerOptions(folder.path() / "maps");
+  server_options.searching_events_per_pixel_s = 0.5;
+  service::LocalizerServer server(server_options);
+  uint64_t thinned[2] = {0, 0};
+  for (const bool thin : {false, true}) {
+    NodeCoreOptions options;
+    options.server = "127.0.0.1:" + std::to_string(server.port());
+    options.map_name = "beside";
+    options.init_pose = "none";
+    options.step_rate_hz = 200;
+    options.thin_while_searching = thin;
+    std::mutex mutex;
+    std::string end_error = "no end";
+    {
+      NodeCore core(
+          options, [](const StepOutput&) {},
+          [&](const std::string& error) {
+            std::lock_guard<std::mutex> lock(mutex);
+            end_error = error;
+          });
+      std::vector<StepOutput> steps;
+      ASSERT_TRUE(core.SetCameraInfo(PinholeInfo(), &steps));
+      size_t begin = 0;
+      while (begin < scene.events.size()) {
+        size_t end = begin;
+        const int64_t message_end = (scene.events.t_ns[begin] / 1'000'000 + 1) * 1'000'000;
+        while (end < scene.events.size() && scene.events.t_ns[end] < message_end) ++end;
+        core.AddEventArray(320, 240, Slice(scene.events, begin, end));
+        core.Poll();
+        begin = end;
+      }
+      thinned[thin] = core.counters().thinned_events;
+    }  // The destructor ends the session and waits for the server's end.
+    std::lock_guard<std::mutex> lock(mutex);
+    EXPECT_EQ(end_error, "") << (thin ? "thinning" : "not thinning");
+  }
+  EXPECT_EQ(thinned[false], 0u);
+  EXPECT_GT(thinned[true], 0u);
 }
 
 TEST(NodeCore, WaitsForTheCameraAndAPoseHintKeepingRecentEvents) {

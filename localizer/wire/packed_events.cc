@@ -1,5 +1,7 @@
 #include "localizer/wire/packed_events.h"
 
+#include <cmath>
+
 #include <limits>
 
 #include "core/common/error.h"
@@ -80,6 +82,14 @@ std::vector<api::EventPacket> PackEventWindows(const EventBuffer& events, int64_
     begin = end;
   }
   return packets;
+}
+
+size_t ThinningStride(size_t events, int64_t span_ns, uint64_t rate) {
+  if (rate == 0 || span_ns <= 0 || events == 0) return 1;
+  const double allowed = static_cast<double>(rate) * static_cast<double>(span_ns) * 1e-9;
+  if (static_cast<double>(events) <= allowed) return 1;
+  if (allowed < 1.0) return events;  // one event of the packet
+  return static_cast<size_t>(std::ceil(static_cast<double>(events) / allowed));
 }
 
 }  // namespace evloc::wire

@@ -40,4 +40,11 @@ void DecodePackedEvents(std::string_view data, int64_t time_base_ns, EventBuffer
 std::vector<api::EventPacket> PackEventWindows(const EventBuffer& events, int64_t origin_ns,
                                                int64_t window_ns);
 
+// A client's thinning while its session searches (SessionStarted.searching_event_rate,
+// docs/api.md "Thinning while searching"): the stride k of the events kept (every k-th) so that
+// `events` over `span_ns` of session time stay within `rate` events per second,
+// ceil(events / (rate * span)); one event when not even one fits; 1 (all of them) when they
+// already fit, when `rate` is 0 (no advice) or the span is not positive.
+size_t ThinningStride(size_t events, int64_t span_ns, uint64_t rate);
+
 }  // namespace evloc::wire

@@ -95,5 +95,16 @@ TEST(PackEventWindows, RejectsBadWindowsAndOrigins) {
   EXPECT_EQ(PackEventWindows(events, 999, kMaxPackedOffsetNs).size(), 1u);
 }
 
+TEST(ThinningStride, KeepsAPacketWithinTheRate) {
+  EXPECT_EQ(ThinningStride(1000, 1'000'000, 0), 1u);          // no advice
+  EXPECT_EQ(ThinningStride(1000, 1'000'000, 1'000'000), 1u);  // 1000 in 1 ms: within
+  EXPECT_EQ(ThinningStride(1001, 1'000'000, 1'000'000), 2u);
+  EXPECT_EQ(ThinningStride(11'700, 1'000'000, 6'144'000), 2u);  // 640x480 at 20 per pixel
+  EXPECT_EQ(ThinningStride(11'700, 1'000'000, 2'900'000), 5u);
+  EXPECT_EQ(ThinningStride(50, 1'000, 1'000'000), 50u);  // under one event allowed: one kept
+  EXPECT_EQ(ThinningStride(0, 1'000'000, 1), 1u);
+  EXPECT_EQ(ThinningStride(10, 0, 1), 1u);
+}
+
 }  // namespace
 }  // namespace evloc::wire

@@ -572,9 +572,9 @@ grpc::Status Replayer::RunSession(const TimedPose& start, bool resumed, SessionO
       searching_now = shared_.searching_now;
     }
     const size_t stride =
-        searching_now
-            ? ThinningStride(events->size(), packet_end_ns - packet_start_ns, searching_event_rate)
-            : 1;
+        searching_now ? wire::ThinningStride(events->size(), packet_end_ns - packet_start_ns,
+                                             searching_event_rate)
+                      : 1;
     if (stride > 1) {
       thinned.clear();
       for (size_t i = 0; i < events->size(); i += stride) thinned.push_back((*events)[i]);
@@ -809,14 +809,6 @@ ReplayResult Replayer::Run() {
 }
 
 }  // namespace
-
-size_t ThinningStride(size_t events, int64_t span_ns, uint64_t rate) {
-  if (rate == 0 || span_ns <= 0 || events == 0) return 1;
-  const double allowed = static_cast<double>(rate) * static_cast<double>(span_ns) * 1e-9;
-  if (static_cast<double>(events) <= allowed) return 1;
-  if (allowed < 1.0) return events;  // one event of the packet
-  return static_cast<size_t>(std::ceil(static_cast<double>(events) / allowed));
-}
 
 void ReplayOptions::Check() const {
   CheckServerOptions(*this);

@@ -72,7 +72,8 @@ struct ReplayOptions {
   std::optional<double> step_rate_hz;
   // While the session searches (no pose in its updates; from the start with --init-pose none),
   // send only every k-th event of a packet whose rate exceeds the server's
-  // SessionStarted.searching_event_rate (ThinningStride); the rest of the stream goes out whole
+  // SessionStarted.searching_event_rate (wire::ThinningStride); the rest of the stream goes out
+  // whole
   // (--thin-while-searching on|off).
   bool thin_while_searching = true;
   // With --speed max: the most session time sent ahead of the last pose received, ms
@@ -200,11 +201,6 @@ struct ReplayResult {
 // go to `log`. Throws InvalidArgumentError / IoError / ParseError for bad options or dataset,
 // and Error with the gRPC status for a failed session.
 ReplayResult RunReplay(const ReplayOptions& options, std::ostream& log);
-
-// The stride k of the events kept (every k-th) so that `events` over `span_ns` of session time
-// stay within `rate` events per second: ceil(events / (rate * span)); 1 (all of them) when they
-// already do, when `rate` is 0 (no advice) or the span is not positive.
-size_t ThinningStride(size_t events, int64_t span_ns, uint64_t rate);
 
 // Writes the figures of `result` as JSON (the --report file), atomically. Throws IoError.
 void WriteReplayReport(const std::filesystem::path& path, const ReplayResult& result);
