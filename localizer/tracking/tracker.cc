@@ -114,6 +114,14 @@ std::vector<PoseEstimate> Tracker::AddEvents(const EventBuffer& events) {
     }
   }
   if (count > 0 && !first_event_t_ns_) first_event_t_ns_ = t_ns[0];
+  if (count > 0) {
+    const int64_t silence_ns = static_cast<int64_t>(options_.decay_time_s * 1e9 *
+                                                    std::log(1.0 / options_.empty_threshold));
+    if (!last_event_t_ns_ || t_ns[0] - *last_event_t_ns_ > silence_ns) events_since_t_ns_ = t_ns[0];
+    for (size_t i = 1; i < count; ++i) {
+      if (t_ns[i] - t_ns[i - 1] > silence_ns) events_since_t_ns_ = t_ns[i];
+    }
+  }
   // The noise filters (event_filter.h) choose the events that reach the surfaces.
   std::vector<PoseEstimate> estimates = Ingest(filter_.Process(events));
   if (count > 0) last_event_t_ns_ = t_ns[count - 1];

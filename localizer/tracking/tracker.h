@@ -453,6 +453,11 @@ class Tracker {
   std::optional<int64_t> last_event_t_ns_;
   // The first event ever given (the surfaces are full one decay time after it).
   std::optional<int64_t> first_event_t_ns_;
+  // The first event after the last silence longer than the surfaces keep an event (decay time ×
+  // ln(1 / empty threshold)), or the first event ever: a search round needs one decay time of
+  // events since it, so that a stream that went dark (a blackout, a covered lens) is searched on
+  // full surfaces again, not on the first milliseconds of its return.
+  std::optional<int64_t> events_since_t_ns_;
   // Every later event must be after this time (set by AdvanceTo).
   std::optional<int64_t> complete_until_t_ns_;
   int64_t last_step_t_ns_ = 0;

@@ -603,9 +603,10 @@ void Tracker::SearchStep(int64_t t_ns, PoseEstimate* estimate) {
 
 void Tracker::SearchWork(int64_t t_ns) {
   SearchProgress& progress = search_progress_;
-  // A round needs one decay time of events since the first event, and enough active pixels.
+  // A round needs one decay time of events since the first event, or since the stream came back
+  // from a silence (events_since_t_ns_), and enough active pixels.
   const bool surfaces_full =
-      first_event_t_ns_ && t_ns - *first_event_t_ns_ >= options_.decay_time_s * 1e9;
+      events_since_t_ns_ && t_ns - *events_since_t_ns_ >= options_.decay_time_s * 1e9;
   if (search_phase_ == SearchPhase::kStart && surfaces_full) {
     ChooseSearchDecay(t_ns);
     const double active = BuildChamferFields(t_ns);
