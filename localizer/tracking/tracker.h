@@ -6,7 +6,6 @@
 #pragma once
 
 #include <cstdint>
-#include <future>
 #include <memory>
 #include <optional>
 #include <utility>
@@ -337,12 +336,10 @@ class Tracker {
   RegistrationResult RegisterSelection(PotentialField* field, const Rigid3d& start_world_from_cam);
   // True when two poses are farther apart than relocalization_distinct_m / _deg.
   bool Distinct(const Rigid3d& a, const Rigid3d& b) const;
-  // At a round's start: asks the image source for hypotheses when one is due (enough events
-  // integrated, relocalization_image_interval_s since the last request, none in flight).
-  void RequestImageHypotheses(int64_t t_ns);
-  // The image hypotheses that are ready (a request without a CPU share runs now), distinct from
-  // each other; charges a threaded request's CPU time to the share.
-  std::vector<Rigid3d> TakeImageHypotheses();
+  // At a round's start: the image source's hypotheses for this step's image of the events,
+  // distinct from each other, when a request is due (enough events integrated,
+  // relocalization_image_interval_s since the last request); none otherwise.
+  std::vector<Rigid3d> ImageHypotheses(int64_t t_ns);
   // Keeps the best distinct refinements of the round (relocalization_rivals) for the next one.
   void KeepRivals();
   // Judges the refinements of a finished round: true (and `accepted`) when the best is good and
@@ -424,15 +421,10 @@ class Tracker {
   std::vector<Refinement> refinements_;
   // The previous round's best distinct refinements, refined again first in the next round.
   std::vector<Hypothesis> rivals_;
-  // Image hypotheses: the source (not owned), the image of the events, a request in flight
-  // (poses and the CPU time it used) and the event time of the last request.
-  struct ImageRequest {
-    std::vector<Rigid3d> poses;
-    int64_t cpu_ns = 0;
-  };
+  // Image hypotheses: the source (not owned), the image of the events and the event time of the
+  // last request.
   const ImageHypothesisSource* image_source_ = nullptr;
   std::unique_ptr<EventImage> event_image_;
-  std::future<ImageRequest> image_request_;
   std::optional<int64_t> last_image_request_t_ns_;
   cv::Mat chamfer_distance_px_;
   DenseField chamfer_coarse_;

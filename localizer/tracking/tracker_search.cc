@@ -76,8 +76,6 @@ void Tracker::SetImageHypothesisSource(const ImageHypothesisSource* source) {
     throw InvalidArgumentError(
         "Tracker::SetImageHypothesisSource: image hypotheses are for the event search.");
   }
-  if (image_request_.valid()) image_request_.wait();  // Its result is dropped.
-  image_request_ = {};
   image_source_ = source;
   event_image_ = source == nullptr
                      ? nullptr
@@ -109,42 +107,23 @@ void Tracker::BeginSearch(TrackingStatus status, int64_t t_ns) {
   last_image_request_t_ns_.reset();
 }
 
-void Tracker::RequestImageHypotheses(int64_t t_ns) {
-  if (image_source_ == nullptr || image_request_.valid()) return;
+std::vector<Rigid3d> Tracker::ImageHypotheses(int64_t t_ns) {
+  if (image_source_ == nullptr) return {};
   if (static_cast<double>(event_image_->covered_ns()) <
       options_.relocalization_image_min_events_s * 1e9) {
-    return;
+    return {};
   }
   if (last_image_request_t_ns_ && static_cast<double>(t_ns - *last_image_request_t_ns_) <
                                       options_.relocalization_image_interval_s * 1e9) {
-    return;
-  }
-  last_image_request_t_ns_ = t_ns;
-  const ImageHypothesisSource* source = image_source_;
-  auto work = [source, image = event_image_->Render(t_ns), t_ns]() {
-    ImageRequest request;
-    const int64_t start_ns = ThreadCpuTimeNs();
-    request.poses = source->Hypotheses(image, t_ns);
-    request.cpu_ns = ThreadCpuTimeNs() - start_ns;
-    return request;
-  };
-  // With a CPU share the request must not hold up the session's steps: a thread of its own.
-  // Without one it runs when its result is taken, in the step (reproducible).
-  image_request_ =
-      std::async(options_.relocalization_cpu_share > 0 ? std::launch::async : std::launch::deferred,
-                 std::move(work));
-}
-
-std::vector<Rigid3d> Tracker::TakeImageHypotheses() {
-  if (!image_request_.valid()) return {};
-  const bool threaded = options_.relocalization_cpu_share > 0;
-  if (threaded && image_request_.wait_for(std::chrono::seconds(0)) != std::future_status::ready) {
     return {};
   }
-  const ImageRequest request = image_request_.get();
-  if (threaded) search_credit_ns_ -= static_cast<double>(request.cpu_ns);
+  last_image_request_t_ns_ = t_ns;
+  // In the step that asks, so that the poses are of this step's instant: computed on a thread of
+  // their own and taken at a later round (as before 2026-11-28, with a CPU share), they were as
+  // old as the round took, and a moving camera was never found from them. With a CPU share the
+  // request's cost is charged like the rest of the step's search work.
   std::vector<Rigid3d> poses;
-  for (const Rigid3d& pose : request.poses) {
+  for (const Rigid3d& pose : image_source_->Hypotheses(event_image_->Render(t_ns), t_ns)) {
     bool is_new = true;
     for (const Rigid3d& kept : poses) is_new = is_new && Distinct(kept, pose);
     if (is_new) poses.push_back(pose);
@@ -615,9 +594,8 @@ void Tracker::SearchWork(int64_t t_ns) {
       next_refinement_ = 0;
       refinements_.clear();
       ++progress.round;
-      RequestImageHypotheses(t_ns);
       // Image hypotheses are refined at once, on this step's fields: a pose of this instant.
-      for (const Rigid3d& pose : TakeImageHypotheses()) {
+      for (const Rigid3d& pose : ImageHypotheses(t_ns)) {
         refinements_.push_back(Refine(pose, t_ns));
         ++progress.refined;
       }
