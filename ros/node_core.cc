@@ -564,9 +564,7 @@ std::vector<StepOutput> NodeCore::HandleEvents(EventColumns columns) {
     // Restart at the new events from the last good pose instead of stepping through the jump.
     s.held.clear();
     tracking::Tracker& tracker = s.stream->mutable_tracker();
-    const tracking::TrackingStatus status = tracker.status();
-    if (status == tracking::TrackingStatus::kInitializing ||
-        status == tracking::TrackingStatus::kRelocalizing) {
+    if (tracking::IsSearching(tracker.status())) {
       tracker.StartWithoutPose(events.t_ns.front());
     } else {
       tracker.Reset(tracker.last_good_world_from_cam(), events.t_ns.front());

@@ -25,10 +25,6 @@ double SecondsSince(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
 
-bool Searching(TrackingStatus status) {
-  return status == TrackingStatus::kInitializing || status == TrackingStatus::kRelocalizing;
-}
-
 // Follows the search episodes through the steps: opens one at a searching step, closes it at the
 // first TRACKING step ("found") or at a step that gave up ("not_found").
 void RecordEpisode(const PoseEstimate& step, std::vector<RelocalizationEpisode>* episodes,
@@ -39,7 +35,7 @@ void RecordEpisode(const PoseEstimate& step, std::vector<RelocalizationEpisode>*
     *open = false;
     return;
   }
-  if (!Searching(step.status)) return;
+  if (!IsSearching(step.status)) return;
   if (!*open) {
     episodes->push_back({step.t_ns, step.t_ns, "ended", 0, 0, 0, 0});
     *open = true;
@@ -58,7 +54,8 @@ void RecordEpisode(const PoseEstimate& step, std::vector<RelocalizationEpisode>*
 
 void Record(const PoseEstimate& step, const Tracker& tracker, const StepCallback& on_step,
             OfflineTrackingResult* result) {
-  if (!Searching(step.status)) result->trajectory.Append(TimedPose{step.t_ns, step.world_from_cam});
+  if (!IsSearching(step.status))
+    result->trajectory.Append(TimedPose{step.t_ns, step.world_from_cam});
   if (step.status == TrackingStatus::kLost) ++result->lost_steps;
   // An episode is open while its outcome is still "ended" (what it is when the run stops).
   bool open = !result->relocalizations.empty() && result->relocalizations.back().outcome == "ended";

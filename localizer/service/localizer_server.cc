@@ -1243,11 +1243,7 @@ class TrackCall final : public TrackReactor,
       Send(std::move(response), true, item.received, dequeued, no_estimate);
     }
     if (viewer_ && !estimates.empty()) PublishToViewer(estimates.back());
-    if (!estimates.empty()) {
-      const tracking::TrackingStatus status = estimates.back().status;
-      searching_ = status == tracking::TrackingStatus::kInitializing ||
-                   status == tracking::TrackingStatus::kRelocalizing;
-    }
+    if (!estimates.empty()) searching_ = tracking::IsSearching(estimates.back().status);
     if (tracker_->stopped()) {
       if (cpu_exceeded_) {
         ++counters.limited;

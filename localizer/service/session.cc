@@ -121,8 +121,7 @@ api::PoseUpdate PoseUpdateFromEstimate(const tracking::PoseEstimate& estimate,
   }
   // A searching step has no pose to report: no invented one goes out (docs/api.md). A LOST step
   // carries the last good pose with the no-information covariance, as before.
-  const bool searching = estimate.status == tracking::TrackingStatus::kInitializing ||
-                         estimate.status == tracking::TrackingStatus::kRelocalizing;
+  const bool searching = tracking::IsSearching(estimate.status);
   if (!searching) {
     *update.mutable_world_from_cam() = RigidToProto(estimate.world_from_cam);
     for (int row = 0; row < 6; ++row) {

@@ -53,6 +53,11 @@ const char* TrackingStatusName(TrackingStatus status);
 // pose is the last good one (identity before any) with a covariance of 1e6 * I.
 inline bool HasNoEstimate(TrackingStatus status) { return status != TrackingStatus::kTracking; }
 
+// True for the statuses of the global search (INITIALIZING, RELOCALIZING): no pose is reported.
+inline bool IsSearching(TrackingStatus status) {
+  return status == TrackingStatus::kInitializing || status == TrackingStatus::kRelocalizing;
+}
+
 // What the global search (INITIALIZING / RELOCALIZING) did in a step.
 struct SearchProgress {
   // Search episodes started so far (0: never searched); an episode runs from the step that left
@@ -249,9 +254,7 @@ class Tracker {
           const TrackerOptions& options);
 
   // True while the global search runs (INITIALIZING or RELOCALIZING).
-  bool searching() const {
-    return status_ == TrackingStatus::kInitializing || status_ == TrackingStatus::kRelocalizing;
-  }
+  bool searching() const { return IsSearching(status_); }
   // Runs the events that passed the noise filters into the surfaces and the steps they complete.
   std::vector<PoseEstimate> Ingest(const EventBuffer& events);
   // Events [begin, end) into the time surface and, while searching with an image source, into
