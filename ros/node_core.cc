@@ -426,13 +426,11 @@ void NodeCore::FlushEvents() {
     // While the server searches, what its search needs: the packet's events over the time since
     // the last packet's end (or its first event).
     const size_t stride =
-        searching ? wire::ThinningStride(end - begin,
-                                         packet_end_t_ns - s.last_sent_end_t_ns.value_or(base),
-                                         s.searching_event_rate)
+        searching ? wire::ThinEvents(events, begin, end,
+                                     packet_end_t_ns - s.last_sent_end_t_ns.value_or(base),
+                                     s.searching_event_rate, &s.thinned)
                   : 1;
     if (stride > 1) {
-      s.thinned.clear();
-      for (size_t i = begin; i < end; i += stride) s.thinned.push_back(events[i]);
       counters_.thinned_events += (end - begin) - s.thinned.size();
       packet->set_data(wire::EncodePackedEvents(s.thinned, 0, s.thinned.size(), base));
     } else {

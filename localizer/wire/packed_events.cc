@@ -92,4 +92,14 @@ size_t ThinningStride(size_t events, int64_t span_ns, uint64_t rate) {
   return static_cast<size_t>(std::ceil(static_cast<double>(events) / allowed));
 }
 
+size_t ThinEvents(const EventBuffer& events, size_t begin, size_t end, int64_t span_ns,
+                  uint64_t rate, EventBuffer* kept) {
+  const size_t stride = ThinningStride(end - begin, span_ns, rate);
+  if (stride > 1) {
+    kept->clear();
+    for (size_t i = begin; i < end; i += stride) kept->push_back(events[i]);
+  }
+  return stride;
+}
+
 }  // namespace evloc::wire

@@ -47,4 +47,10 @@ std::vector<api::EventPacket> PackEventWindows(const EventBuffer& events, int64_
 // already fit, when `rate` is 0 (no advice) or the span is not positive.
 size_t ThinningStride(size_t events, int64_t span_ns, uint64_t rate);
 
+// Thins events [begin, end) of `events`, spanning `span_ns`, to `rate` events per second: the
+// stride k = ThinningStride(end - begin, span_ns, rate), and when k > 1 every k-th event from
+// `begin` in `kept` (cleared first; untouched when k is 1). Returns k.
+size_t ThinEvents(const EventBuffer& events, size_t begin, size_t end, int64_t span_ns,
+                  uint64_t rate, EventBuffer* kept);
+
 }  // namespace evloc::wire

@@ -571,13 +571,11 @@ grpc::Status Replayer::RunSession(const TimedPose& start, bool resumed, SessionO
       std::lock_guard<std::mutex> lock(shared_.mutex);
       searching_now = shared_.searching_now;
     }
-    const size_t stride =
-        searching_now ? wire::ThinningStride(events->size(), packet_end_ns - packet_start_ns,
-                                             searching_event_rate)
-                      : 1;
+    const size_t stride = searching_now ? wire::ThinEvents(*events, 0, events->size(),
+                                                           packet_end_ns - packet_start_ns,
+                                                           searching_event_rate, &thinned)
+                                        : 1;
     if (stride > 1) {
-      thinned.clear();
-      for (size_t i = 0; i < events->size(); i += stride) thinned.push_back((*events)[i]);
       result_.events_thinned += static_cast<int64_t>(events->size() - thinned.size());
       events = &thinned;
     }
