@@ -533,14 +533,16 @@ void ForEachDatasetImage(const Dataset& dataset, const ImageSink& add) {
     ForEachAedat4Frame(dataset, add);
     return;
   }
-  for (const TimedFile& image : dataset.images) {
-    const cv::Mat pixels = cv::imread(image.path.string(), cv::IMREAD_UNCHANGED);
-    if (pixels.empty()) {
-      throw IoError("dataset '" + dataset.root.string() + "': cannot read image '" +
-                    image.path.string() + "' (missing, or not an image OpenCV reads)");
-    }
-    add(image.t_ns, pixels);
+  for (const TimedFile& image : dataset.images) add(image.t_ns, ReadImageFile(image.path));
+}
+
+cv::Mat ReadImageFile(const fs::path& path) {
+  cv::Mat pixels = cv::imread(path.string(), cv::IMREAD_UNCHANGED);
+  if (pixels.empty()) {
+    throw IoError("cannot read image '" + path.string() +
+                  "' (missing, or not an image OpenCV reads)");
   }
+  return pixels;
 }
 
 cv::Mat ToGray8(const cv::Mat& pixels) {
@@ -578,8 +580,7 @@ cv::Mat ToGray8(const cv::Mat& pixels) {
 }
 
 cv::Mat ReadGrayImage(const fs::path& path) {
-  const cv::Mat raw = cv::imread(path.string(), cv::IMREAD_UNCHANGED);
-  if (raw.empty()) throw IoError("cannot read image '" + path.string() + "'.");
+  const cv::Mat raw = ReadImageFile(path);
   const double scale = raw.depth() == CV_16U ? 1.0 / 65535.0 : 1.0 / 255.0;
   cv::Mat gray;
   if (raw.channels() == 1) {

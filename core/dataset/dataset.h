@@ -299,6 +299,10 @@ bool DatasetHasImages(const Dataset& dataset);
 // ParseError for a malformed message or packet.
 void ForEachDatasetImage(const Dataset& dataset, const ImageSink& add);
 
+// An image file's pixels as stored (cv::IMREAD_UNCHANGED). Throws IoError naming the file when it
+// is missing or not an image OpenCV reads.
+cv::Mat ReadImageFile(const std::filesystem::path& path);
+
 // `pixels` (CV_8UC1, CV_16UC1, CV_8UC3 BGR or CV_8UC4 BGRA) as 8-bit grey: 16 bits scaled by
 // 1/257 (rounded, as the converters write them), colour as cv::imread(IMREAD_GRAYSCALE) makes a
 // colour PNG grey (libpng's truncating 0.299 R + 0.587 G + 0.114 B; alpha ignored). The one

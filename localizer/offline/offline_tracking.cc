@@ -12,7 +12,6 @@
 #include <utility>
 #include <vector>
 
-#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "core/common/error.h"
@@ -306,14 +305,7 @@ OfflineTrackingResult TrackFrameSequence(const std::vector<FrameFile>& frames, c
                                          const OfflineTrackingOptions& options,
                                          const StepCallback& on_step) {
   const auto read_files = [&frames](const ImageSink& add) {
-    for (const FrameFile& frame : frames) {
-      const cv::Mat pixels = cv::imread(frame.path.string(), cv::IMREAD_UNCHANGED);
-      if (pixels.empty()) {
-        throw IoError("cannot read frame '" + frame.path.string() +
-                      "' (missing, or not an image OpenCV reads)");
-      }
-      add(frame.t_ns, pixels);
-    }
+    for (const FrameFile& frame : frames) add(frame.t_ns, ReadImageFile(frame.path));
   };
   return TrackFrames(read_files, "frame files", map, visibility, camera, initial_world_from_cam,
                      initial_t_ns, options, on_step);
