@@ -1,5 +1,6 @@
 #include "localizer/service/tracking_pool.h"
 
+#include <atomic>
 #include <string>
 #include <utility>
 

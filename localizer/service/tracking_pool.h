@@ -4,7 +4,6 @@
 // grow with the number of streams.
 #pragma once
 
-#include <atomic>
 #include <chrono>
 #include <condition_variable>
 #include <cstdint>
@@ -102,7 +101,8 @@ class TrackingPool {
   Lane lane_;
   Lane background_lane_;
   bool stopping_ = false;
-  std::atomic<bool> background_priority_applied_{true};
+  // Set by the constructor once the background workers have started.
+  bool background_priority_applied_ = true;
   std::vector<std::thread> workers_;
   std::vector<std::thread> background_workers_;
 };
