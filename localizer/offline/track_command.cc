@@ -51,6 +51,8 @@ nlohmann::json StepsToJson(const OfflineTrackingResult& result) {
                      {"search_prescored", step.search.prescored},
                      {"search_refined", step.search.refined},
                      {"search_deferred", step.search.deferred},
+                     {"search_refilling", step.search.refilling},
+                     {"search_followed", step.search.followed},
                      {"search_image_hypotheses", step.search.image_hypotheses},
                      {"search_verified_steps", step.search.verified_steps},
                      {"search_best_alignment", step.search.best_alignment},

@@ -115,8 +115,7 @@ std::vector<PoseEstimate> Tracker::AddEvents(const EventBuffer& events) {
   }
   if (count > 0 && !first_event_t_ns_) first_event_t_ns_ = t_ns[0];
   if (count > 0) {
-    const int64_t silence_ns = static_cast<int64_t>(options_.decay_time_s * 1e9 *
-                                                    std::log(1.0 / options_.empty_threshold));
+    const int64_t silence_ns = SilenceNs();
     if (!last_event_t_ns_ || t_ns[0] - *last_event_t_ns_ > silence_ns) events_since_t_ns_ = t_ns[0];
     for (size_t i = 1; i < count; ++i) {
       if (t_ns[i] - t_ns[i - 1] > silence_ns) events_since_t_ns_ = t_ns[i];
@@ -167,6 +166,7 @@ std::vector<PoseEstimate> Tracker::Ingest(const EventBuffer& events) {
 
 void Tracker::InsertEvents(const EventBuffer& events, size_t begin, size_t end) {
   surface_.Insert(events, begin, end);
+  if (end > begin) last_inserted_t_ns_ = events.t_ns[end - 1];
   if (event_image_ && searching()) {
     event_image_->Insert(events, begin, end);
   }

@@ -79,6 +79,12 @@ struct SearchProgress {
   // True when this step did no search work because the search had used its CPU share
   // (TrackerOptions::relocalization_cpu_share).
   bool deferred = false;
+  // True when this step waited for the surfaces to hold one decay time of events (after the
+  // first event or a silence in the stream) before a round's start, a refinement or a
+  // verification step.
+  bool refilling = false;
+  // True when this step tracked the round's best refinement to it (FollowBestRefinement).
+  bool followed = false;
   // Image hypotheses (ImageHypothesisSource) refined in this step (counted in `refined` too).
   int image_hypotheses = 0;
   // Alignment of the best refined hypothesis of the last judged round (0 before one).
@@ -294,6 +300,8 @@ class Tracker {
     double alignment = 0;
     int points_used = 0;
     bool good = false;
+    // Its poses since it was refined (FollowBestRefinement): the velocity that predicts the next.
+    ConstantVelocityModel motion;
   };
   enum class SearchPhase { kStart, kPrescore, kCoarse, kRefine, kVerify };
   // Starts a search episode in `status` (kInitializing or kRelocalizing) at t_ns.
@@ -303,6 +311,18 @@ class Tracker {
   // The work of a searching step outside verification: a round's start, pre-scores, alignments
   // or refinements, within the per-step counts of the options.
   void SearchWork(int64_t t_ns);
+  // Tracks the best good refinement of the round in progress to t_ns (its motion model's
+  // prediction, then Solve and Assess on this step's surfaces), so that the pose the round
+  // accepts is of the step that judges it, not of the step that refined it: a round spans tens
+  // of steps (hundreds of milliseconds of events in a live session with a CPU share), and a
+  // pose 50 ms old no longer registers. A step that fails leaves it as it was (the first
+  // verification step aligns it again). Nothing in a silence (SurfacesFull).
+  void FollowBestRefinement(int64_t t_ns);
+  // Adds a refinement to the round's, or when one of the same instant is the same place
+  // (not Distinct) keeps the better of the two: the followed best refinement and a new one of
+  // the same place are one candidate, not the ambiguity the judgement looks for (compared
+  // later, after the camera moved on, they would look distinct).
+  void AddRefinement(Refinement refinement);
   // The status and progress of a searching step, and the give-up of a long episode.
   void FinishSearchStep(int64_t t_ns, PoseEstimate* estimate);
   // Sets the decay time of the search's steps from the events themselves: the one that leaves
@@ -312,6 +332,15 @@ class Tracker {
   // Builds the chamfer fields (distance to the nearest active pixel) of this step; returns the
   // fraction of active pixels.
   double BuildChamferFields(int64_t t_ns);
+  // Whether the surfaces hold one decay time of events at t_ns: since the first event, or since
+  // the stream came back from a silence (events_since_t_ns_). The search work that reads the
+  // live surfaces (a round's start, a refinement, a verification step) waits for it.
+  bool SurfacesFull(int64_t t_ns) const;
+  // The shortest gap between two events that empties the shortest-lived surfaces
+  // (min_decay_time_s × ln(1 / empty threshold)): a search chooses its decay time from the
+  // events (ChooseSearchDecay) and a verification step takes the tracking's, so a gap of 20 ms
+  // can empty a step's surfaces.
+  int64_t SilenceNs() const;
   // Starts the hypotheses of a new round: the source's viewpoints (and the last good pose when
   // relocalizing) once per episode, and the grid of offsets around them.
   void GenerateHypotheses();
@@ -448,11 +477,15 @@ class Tracker {
   std::optional<int64_t> last_event_t_ns_;
   // The first event ever given (the surfaces are full one decay time after it).
   std::optional<int64_t> first_event_t_ns_;
-  // The first event after the last silence longer than the surfaces keep an event (decay time ×
-  // ln(1 / empty threshold)), or the first event ever: a search round needs one decay time of
-  // events since it, so that a stream that went dark (a blackout, a covered lens) is searched on
-  // full surfaces again, not on the first milliseconds of its return.
+  // The first event after the last silence longer than the shortest-lived surfaces keep an
+  // event (min_decay_time_s × ln(1 / empty threshold)), or the first event ever: a search round
+  // needs one decay time of events since it, so that a stream that went dark (a blackout, a covered
+  // lens) is searched on full surfaces again, not on the first milliseconds of its return.
   std::optional<int64_t> events_since_t_ns_;
+  // The newest event in the surfaces. A step can run inside a silence before the events after
+  // it arrive (AdvanceTo: the stream says nothing came until then), when events_since_t_ns_
+  // does not know of it yet.
+  std::optional<int64_t> last_inserted_t_ns_;
   // Every later event must be after this time (set by AdvanceTo).
   std::optional<int64_t> complete_until_t_ns_;
   int64_t last_step_t_ns_ = 0;

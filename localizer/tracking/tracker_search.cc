@@ -417,7 +417,50 @@ Tracker::Refinement Tracker::Refine(const Rigid3d& start_world_from_cam, int64_t
   refinement.alignment = attempt.quality.alignment;
   refinement.points_used = attempt.quality.points_used;
   refinement.good = attempt.good;
+  refinement.motion = ConstantVelocityModel(std::llround(options_.velocity_window_s * 1e9));
+  refinement.motion.Reset(refinement.world_from_cam, t_ns);
   return refinement;
+}
+
+void Tracker::AddRefinement(Refinement refinement) {
+  for (Refinement& kept : refinements_) {
+    if (kept.t_ns == refinement.t_ns && !Distinct(kept.world_from_cam, refinement.world_from_cam)) {
+      if (refinement.alignment > kept.alignment) kept = std::move(refinement);
+      return;
+    }
+  }
+  refinements_.push_back(std::move(refinement));
+}
+
+void Tracker::FollowBestRefinement(int64_t t_ns) {
+  if (!SurfacesFull(t_ns)) return;  // a step inside a silence would lose it
+  Refinement* best = nullptr;
+  for (Refinement& refinement : refinements_) {
+    if (refinement.good && (best == nullptr || refinement.alignment > best->alignment)) {
+      best = &refinement;
+    }
+  }
+  if (best == nullptr || best->t_ns >= t_ns) return;
+  const Rigid3d predicted = best->motion.Predict(t_ns);
+  SelectPoints(predicted);
+  const Attempt attempt = Solve(predicted, nullptr);
+  search_progress_.followed = attempt.good;
+  if (!attempt.good) return;
+  best->alignment = attempt.quality.alignment;
+  best->points_used = attempt.quality.points_used;
+  best->world_from_cam = attempt.registration.cam_from_world.Inverse();
+  best->t_ns = t_ns;
+  best->motion.Update(best->world_from_cam, t_ns);
+}
+
+bool Tracker::SurfacesFull(int64_t t_ns) const {
+  return events_since_t_ns_ && t_ns - *events_since_t_ns_ >= options_.decay_time_s * 1e9 &&
+         last_inserted_t_ns_ && t_ns - *last_inserted_t_ns_ <= SilenceNs();
+}
+
+int64_t Tracker::SilenceNs() const {
+  return static_cast<int64_t>(options_.min_decay_time_s * 1e9 *
+                              std::log(1.0 / options_.empty_threshold));
 }
 
 bool Tracker::Distinct(const Rigid3d& a, const Rigid3d& b) const {
@@ -482,6 +525,8 @@ void Tracker::SearchStep(int64_t t_ns, PoseEstimate* estimate) {
   progress.refined = 0;
   progress.gave_up = false;
   progress.deferred = false;
+  progress.refilling = false;
+  progress.followed = false;
   progress.image_hypotheses = 0;
   estimate->world_from_cam = last_good_reported_world_from_cam_;
   estimate->covariance = Matrix6d::Identity() * kUnconstrainedVariance;
@@ -489,10 +534,22 @@ void Tracker::SearchStep(int64_t t_ns, PoseEstimate* estimate) {
 
   if (search_phase_ == SearchPhase::kVerify) {
     // Track the accepted hypothesis normally (unsigned surface, constant velocity) and require
-    // every step of the window to be good. The accepted pose is that of the step it was refined
-    // at, one or more steps ago (an image hypothesis: the round's first step), and the camera
-    // has moved since: the first step aligns it on chamfer fields of its own events first, as a
-    // refinement does.
+    // every step of the window to be good. The accepted pose is that of the step it was last
+    // followed to (FollowBestRefinement: usually the judging step; older when following
+    // failed), and the camera has moved since: the first step aligns it on chamfer fields of
+    // its own events first, as a refinement does.
+    //
+    // A silence in the stream (a blackout, or a live session's queue that dropped packets while
+    // it searched) leaves the surfaces with only the events since: a step on them is not a test
+    // of the hypothesis. The window waits for one decay time of events, then starts again with
+    // the chamfer alignment, from the motion model's prediction across the gap.
+    if (!SurfacesFull(t_ns)) {
+      progress.verified_steps = 0;
+      progress.refilling = true;
+      estimate->status = status_;
+      estimate->search = progress;
+      return;
+    }
     Rigid3d start = motion_.Predict(t_ns);
     std::optional<Rigid3d> aligned;
     if (progress.verified_steps == 0) {
@@ -555,6 +612,15 @@ void Tracker::SearchStep(int64_t t_ns, PoseEstimate* estimate) {
                                          static_cast<double>(t_ns - search_credit_t_ns_),
                  std::max(options_.relocalization_cpu_burst_s * 1e9, last_round_cpu_ns_));
     search_credit_t_ns_ = t_ns;
+  }
+  // The round's best refinement follows the camera on every step, deferred or not: a pose left
+  // behind for a few steps would no longer register. It is one tracking step, as a session
+  // that tracks pays, and not charged to the share: charged, a share below one step's cost
+  // (5 % of a core on this room) would spend every step's credit on it and the round would
+  // never end.
+  const bool was_in_round = in_round();
+  if (was_in_round) FollowBestRefinement(t_ns);
+  if (bounded) {
     const bool saving_up =
         search_phase_ == SearchPhase::kStart && search_credit_ns_ < last_round_cpu_ns_;
     if (search_credit_ns_ <= 0 || saving_up) {
@@ -564,7 +630,6 @@ void Tracker::SearchStep(int64_t t_ns, PoseEstimate* estimate) {
     }
     cpu_start_ns = ThreadCpuTimeNs();
   }
-  const bool was_in_round = in_round();
   SearchWork(t_ns);
   if (bounded) {
     const double used = static_cast<double>(ThreadCpuTimeNs() - cpu_start_ns);
@@ -582,10 +647,11 @@ void Tracker::SearchStep(int64_t t_ns, PoseEstimate* estimate) {
 
 void Tracker::SearchWork(int64_t t_ns) {
   SearchProgress& progress = search_progress_;
-  // A round needs one decay time of events since the first event, or since the stream came back
-  // from a silence (events_since_t_ns_), and enough active pixels.
-  const bool surfaces_full =
-      events_since_t_ns_ && t_ns - *events_since_t_ns_ >= options_.decay_time_s * 1e9;
+  // A round needs full surfaces and enough active pixels; so does a refinement, whose
+  // registration ends on this step's surfaces.
+  const bool surfaces_full = SurfacesFull(t_ns);
+  progress.refilling = !surfaces_full && (search_phase_ == SearchPhase::kStart ||
+                                          search_phase_ == SearchPhase::kRefine);
   if (search_phase_ == SearchPhase::kStart && surfaces_full) {
     ChooseSearchDecay(t_ns);
     const double active = BuildChamferFields(t_ns);
@@ -596,7 +662,7 @@ void Tracker::SearchWork(int64_t t_ns) {
       ++progress.round;
       // Image hypotheses are refined at once, on this step's fields: a pose of this instant.
       for (const Rigid3d& pose : ImageHypotheses(t_ns)) {
-        refinements_.push_back(Refine(pose, t_ns));
+        AddRefinement(Refine(pose, t_ns));
         ++progress.refined;
       }
       if (!viewpoints_.empty()) search_phase_ = SearchPhase::kPrescore;
@@ -646,11 +712,11 @@ void Tracker::SearchWork(int64_t t_ns) {
       hypotheses_ = std::move(distinct);
       search_phase_ = SearchPhase::kRefine;
     }
-  } else if (search_phase_ == SearchPhase::kRefine) {
+  } else if (search_phase_ == SearchPhase::kRefine && surfaces_full) {
     for (int i = 0;
          i < options_.relocalization_refinements_per_step && next_refinement_ < hypotheses_.size();
          ++i) {
-      refinements_.push_back(Refine(hypotheses_[next_refinement_++].world_from_cam, t_ns));
+      AddRefinement(Refine(hypotheses_[next_refinement_++].world_from_cam, t_ns));
       ++progress.refined;
     }
     if (next_refinement_ == hypotheses_.size()) {

@@ -453,6 +453,109 @@ TEST(TrackerSearch, WithACpuShareImageHypothesesAreRefinedAtTheirOwnInstant) {
   EXPECT_GT(ImageHypothesesRefined(estimates), 0);
 }
 
+// A round that spans hundreds of milliseconds of events (here: one coarse alignment per step,
+// 0.3 s; in a live session, a CPU share and packets thinned while it is behind) must not accept
+// its best refinement as it was when refined: the camera has moved on, and the verification
+// would start from a pose that no longer registers. The best refinement follows the camera on
+// every step of the round (FollowBestRefinement), so the round that located the image is the
+// one that verifies it.
+TEST(TrackerSearch, TheBestRefinementFollowsTheCameraThroughALongRound) {
+  const EventBuffer events = SceneEvents(1'500'000'000);
+  TrackerOptions options;
+  options.relocalization_coarse_per_step = 1;
+  const TruthImageSource source((Vector6d() << 0.02, 0.0, -0.01, 0.0, 0.0, kDegree).finished());
+  Tracker tracker(FarMap(), nullptr, kCamera, options);
+  tracker.SetImageHypothesisSource(&source);
+  tracker.StartWithoutPose(0);
+  const std::vector<PoseEstimate> estimates = tracker.AddEvents(events);
+  const int64_t first_tracking_ns = CheckEstimates(estimates, options);
+  ASSERT_GE(first_tracking_ns, 0) << "never TRACKING";
+  int first_image_round = -1;
+  int64_t first_image_ns = -1;
+  int tracking_round = -1;
+  int followed = 0;
+  for (const PoseEstimate& estimate : estimates) {
+    if (first_image_round < 0 && estimate.search.image_hypotheses > 0) {
+      first_image_round = estimate.search.round;
+      first_image_ns = estimate.t_ns;
+    }
+    if (tracking_round < 0 && estimate.status == TrackingStatus::kTracking) {
+      tracking_round = estimate.search.round;
+    }
+    followed += estimate.search.followed ? 1 : 0;
+  }
+  std::cout << "long round: image located at " << first_image_ns * 1e-9 << " s in round "
+            << first_image_round << ", TRACKING at " << first_tracking_ns * 1e-9 << " s in round "
+            << tracking_round << ", " << followed << " steps followed\n";
+  ASSERT_GE(first_image_round, 1);
+  EXPECT_EQ(tracking_round, first_image_round);
+  // The round lasted more than 0.2 s after the image's step.
+  EXPECT_GT(first_tracking_ns - first_image_ns, 200'000'000);
+  EXPECT_GT(followed, 50);
+}
+
+// A silence in the middle of the verification (a live session's queue dropped packets, a
+// blackout): the steps in it and the first decay time of returning events do not count, and the
+// window starts again, aligned afresh, once the surfaces are full. Before, the steps in the
+// silence counted although they saw no new event (the same old events again), and with a
+// silence longer than the surfaces keep an event they ran on empty surfaces, failed, and the
+// search began a new round (the 640x480 service run, docs/relocalization.md).
+TEST(TrackerSearch, ASilenceInTheVerificationIsWaitedOut) {
+  const EventBuffer events = SceneEvents(900'000'000);
+  TrackerOptions options;
+  Tracker tracker(SceneMap(), nullptr, kCamera, options);
+  tracker.StartWithoutPose(0);
+  const int64_t period_ns = std::llround(1e9 / options.step_rate_hz);
+  constexpr int64_t kSilenceNs = 40'000'000;
+  std::vector<PoseEstimate> estimates;
+  int64_t silence_begin_ns = -1;
+  size_t begin = 0;
+  for (int64_t end_ns = period_ns; begin < events.size(); end_ns += period_ns) {
+    size_t end = begin;
+    while (end < events.size() && events.t_ns[end] < end_ns) ++end;
+    if (silence_begin_ns >= 0 && end_ns <= silence_begin_ns + kSilenceNs) {
+      begin = end;  // the silence: these events never arrive
+      continue;
+    }
+    EventBuffer window;
+    window.Append(events, begin, end - begin);
+    for (PoseEstimate& estimate : tracker.AddEvents(window)) {
+      if (silence_begin_ns < 0 && estimate.search.verified_steps >= 3) {
+        silence_begin_ns = end_ns;
+      }
+      estimates.push_back(estimate);
+    }
+    begin = end;
+  }
+  ASSERT_GE(silence_begin_ns, 0) << "no verification";
+  const int64_t first_tracking_ns = CheckEstimates(estimates, options);
+  ASSERT_GE(first_tracking_ns, 0) << "never TRACKING";
+  int round_before = -1;
+  int waited = 0;
+  for (const PoseEstimate& estimate : estimates) {
+    if (estimate.t_ns <= silence_begin_ns) round_before = estimate.search.round;
+    // In the silence and one decay time after it no verification step counts.
+    const bool in_silence = estimate.t_ns > silence_begin_ns + 15'000'000 &&
+                            estimate.t_ns < silence_begin_ns + kSilenceNs +
+                                                static_cast<int64_t>(options.decay_time_s * 1e9);
+    if (in_silence && estimate.status != TrackingStatus::kTracking) {
+      EXPECT_TRUE(estimate.search.refilling) << estimate.t_ns;
+      EXPECT_EQ(estimate.search.verified_steps, 0) << estimate.t_ns;
+      ++waited;
+    }
+  }
+  std::cout << "silence in the verification at " << silence_begin_ns * 1e-9 << " s: " << waited
+            << " steps waited, TRACKING at " << first_tracking_ns * 1e-9 << " s\n";
+  EXPECT_GT(waited, 10);
+  // Found by the same round, without a new one.
+  for (const PoseEstimate& estimate : estimates) {
+    if (estimate.status == TrackingStatus::kTracking) {
+      EXPECT_EQ(estimate.search.round, round_before);
+      break;
+    }
+  }
+}
+
 TEST(TrackerSearch, RejectsABadPriorAndFrameTrackers) {
   Tracker tracker(SceneMap(), nullptr, kCamera, TrackerOptions());
   EXPECT_THROW(tracker.SetSearchPrior(Eigen::Vector3d::Zero(), 0.0), InvalidArgumentError);
