@@ -75,6 +75,61 @@ class BoundedQueue {
     return {dropped.size(), dropped_weight};
   }
 
+  // Merges into the last queued item instead of queuing a new one: when the queue holds an item
+  // for which `can_append(last)` holds and `added_weight` more fits the weight bound,
+  // `append(last)` changes it and its weight grows by `added_weight`; returns whether it did.
+  // `append` runs under the lock: keep it short (a searching session appends one packet's
+  // thinned events).
+  template <typename CanAppend, typename Append>
+  bool TryAppendToBack(uint64_t added_weight, const CanAppend& can_append, const Append& append) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (closed_ || items_.empty() || !can_append(items_.back().first) ||
+        added_weight > max_weight_ - weight_) {
+      return false;
+    }
+    append(items_.back().first);
+    items_.back().second += added_weight;
+    weight_ += added_weight;
+    return true;
+  }
+
+  // Folds adjacent pairs of items, front to back: where `foldable(a, b)` holds for an item `a`
+  // and the next `b`, `fold(a, b)` merges b into a and returns a's new weight, and b goes.
+  // Returns how many items went and the weight freed. The work is done outside the lock on the
+  // items taken out (a consumer meanwhile finds the queue empty, as if it were drained a moment
+  // early); items pushed meanwhile stay behind them, and an Abort meanwhile drops them all.
+  template <typename Foldable, typename Fold>
+  std::pair<size_t, uint64_t> FoldPairs(const Foldable& foldable, const Fold& fold) {
+    std::deque<std::pair<T, uint64_t>> items;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      items.swap(items_);
+      weight_ = 0;
+    }
+    std::deque<std::pair<T, uint64_t>> folded;
+    size_t gone = 0;
+    uint64_t before = 0;
+    uint64_t after = 0;
+    for (const auto& entry : items) before += entry.second;
+    for (size_t i = 0; i < items.size(); ++i) {
+      if (i + 1 < items.size() && foldable(items[i].first, items[i + 1].first)) {
+        items[i].second = fold(items[i].first, std::move(items[i + 1].first));
+        ++gone;
+        folded.push_back(std::move(items[i++]));
+      } else {
+        folded.push_back(std::move(items[i]));
+      }
+      after += folded.back().second;
+    }
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (aborted_) return {gone, before - std::min(before, after)};
+    for (auto& entry : items_) folded.push_back(std::move(entry));
+    items_.swap(folded);
+    weight_ = 0;
+    for (const auto& entry : items_) weight_ += entry.second;
+    return {gone, before - std::min(before, after)};
+  }
+
   // True when the queue could not take an item of `weight` now (items or weight).
   bool WouldBeFull(uint64_t weight) const {
     std::lock_guard<std::mutex> lock(mutex_);
@@ -97,6 +152,7 @@ class BoundedQueue {
   void Abort() {
     std::lock_guard<std::mutex> lock(mutex_);
     closed_ = true;
+    aborted_ = true;
     items_.clear();
     weight_ = 0;
   }
@@ -129,6 +185,7 @@ class BoundedQueue {
   std::deque<std::pair<T, uint64_t>> items_;
   uint64_t weight_ = 0;
   bool closed_ = false;
+  bool aborted_ = false;
 };
 
 // A budget of bytes shared by threads (the server's decoded, queued data): reservations that

@@ -179,7 +179,8 @@ std::string ServerCounters::PrometheusText() const {
          limited);
   metric("evloc_events_total", "counter", "Events tracked (rate() gives events/s).", events);
   metric("evloc_searching_packets_shed_total", "counter",
-         "Event packets dropped unread by sessions searching the map whose queue was full.",
+         "Event packets folded into their neighbours or dropped unread by sessions searching "
+         "the map whose queue was full.",
          packets_shed);
   metric("evloc_poses_total", "counter", "PoseUpdates sent (rate() gives poses/s).", poses);
   metric("evloc_lost_poses_total", "counter",
@@ -786,9 +787,19 @@ class TrackCall final : public TrackReactor,
     }
     item.reservation = std::move(*reservation);
     latest_end_t_ns_ = item.item.t_ns;
-    if (searching_ && item.item.kind == SessionItem::Kind::kEvents &&
+    if (catching_up_ && inbound_.size() * 4 <= inbound_.capacity()) catching_up_ = false;
+    if ((searching_ || catching_up_) && item.item.kind == SessionItem::Kind::kEvents &&
         inbound_.WouldBeFull(events)) {
-      ShedWhileSearching();
+      if (ThinIntoQueue(item.item, &item.reservation)) {
+        service_.UpdateHealth();
+        NoteQueueLevel();
+        Wake();
+        ReadNext();
+        return;
+      }
+      // Dropping is for a search only: a gap in a tracked stream can give wrong poses (a 640x480
+      // run tracked 12.7 cm off after one); a session catching up overflows as any other.
+      if (searching_) DropWhileSearching();
     }
     const PushResult pushed = inbound_.TryPush(std::move(item), events);
     if (pushed == PushResult::kFull) {
@@ -810,20 +821,71 @@ class TrackCall final : public TrackReactor,
     ReadNext();
   }
 
-  // A session searching the map (it has no pose to keep) whose queue is full drops the older half
-  // of its queued event packets instead of overflowing: the search works on the newest events
-  // (one decay time), and the steps of the dropped packets run on the next ones with fewer
-  // events. Packets of other kinds (frames, hints, GNSS fixes) stop the dropping.
-  void ShedWhileSearching() {
+  // A session searching the map (it has no pose to keep) whose queue is full sheds events
+  // instead of overflowing. First it thins: the new packet's every kSearchThinning-th event goes
+  // into the queue's last event packet, which keeps the events continuous in time (a search
+  // follows its best candidate pose from step to step and verifies on consecutive steps, and a
+  // gap of 100 ms loses both; it found the camera on as few as a quarter of the events,
+  // docs/relocalization.md). That costs the reader a quarter of the packet's copy, at normal
+  // priority; thinning the whole queue there cost the sessions beside it 1.5x their p99
+  // latency. Only when the session is more than kMaxSearchLagNs behind, or the queue's events
+  // are at their bound, does it drop the older half of its queued event packets: the steps of
+  // the dropped packets run on the next ones with fewer events. Frames, hints and GNSS fixes
+  // are never thinned, and one at the front stops the dropping.
+  static constexpr size_t kSearchThinning = 4;
+  static constexpr int64_t kMaxSearchLagNs = 1'000'000'000;
+  // Returns true when `incoming` went, thinned, into the queue's last packet (and its share of
+  // the memory budget with it).
+  bool ThinIntoQueue(const SessionItem& incoming, MemoryBudget::Reservation* reservation) {
+    // A search may fall behind by kMaxSearchLagNs before it drops; a session catching up
+    // overflows instead, when not even this is left.
+    if (searching_ && latest_end_t_ns_ - tracked_end_t_ns_.load() > kMaxSearchLagNs) return false;
+    const size_t events = incoming.events.size();
+    const size_t kept = (events + kSearchThinning - 1) / kSearchThinning;
+    const bool appended = inbound_.TryAppendToBack(
+        kept, [](const InboundItem& last) { return last.item.kind == SessionItem::Kind::kEvents; },
+        [&](InboundItem& last) {
+          AppendThinnedEvents(&last.item, incoming, kSearchThinning);
+          last.appended_reservations.push_back(std::move(*reservation));
+          last.thinning = kSearchThinning;  // partly; not folded further
+        });
+    if (appended) CountShed(1, events - kept);
+    return appended;
+  }
+  // The worker's side, at the search's idle priority (or while catching up): before each
+  // packet, a queue more than half full is thinned as a whole, each pair of consecutive event
+  // packets of equal thinning folded into one with every other event of the two, down to one
+  // in kSearchThinning. That keeps room for the reader, so that it thins or drops only while
+  // the worker is held up (an image request of 0.3-0.5 s).
+  void FoldQueue() {
+    const auto [packets, events] = inbound_.FoldPairs(
+        [](const InboundItem& a, const InboundItem& b) {
+          return a.item.kind == SessionItem::Kind::kEvents &&
+                 b.item.kind == SessionItem::Kind::kEvents && a.thinning == b.thinning &&
+                 a.thinning < static_cast<int>(kSearchThinning);
+        },
+        [](InboundItem& a, InboundItem&& b) -> uint64_t {
+          FoldEventPackets(&a.item, b.item);
+          a.thinning *= 2;
+          // b's share of the memory budget goes with it; a's covers the folded pair.
+          return a.item.events.size();
+        });
+    CountShed(packets, events);
+  }
+  void DropWhileSearching() {
     const auto [packets, events] = inbound_.DropFront(
         std::max<size_t>(1, inbound_.size() / 2),
         [](const InboundItem& queued) { return queued.item.kind == SessionItem::Kind::kEvents; });
+    CountShed(packets, events);
+  }
+  void CountShed(uint64_t packets, uint64_t events) {
     if (packets == 0) return;
     if (packets_shed_ == 0) {
       service_.Log(LogLevel::kInfo,
                    "session " + std::to_string(id_) +
-                       ": searching and behind its stream: dropping the oldest queued event "
-                       "packets (SessionEnd.packets_shed counts them)",
+                       ": searching and behind its stream: thinning its newest event packets "
+                       "and, when that is not enough, dropping the oldest (SessionEnd.packets_shed "
+                       "and events_shed count them)",
                    {{"event", "shedding"}}, id_);
     }
     packets_shed_ += packets;
@@ -917,6 +979,10 @@ class TrackCall final : public TrackReactor,
     Clock::time_point received;
     // Its share of the server's memory budget (released once tracked, or when dropped).
     MemoryBudget::Reservation reservation;
+    // The shares of packets thinned into this one (ThinIntoQueue), released with it.
+    std::vector<MemoryBudget::Reservation> appended_reservations;
+    // Events of it kept one in `thinning` (FoldQueue, ThinIntoQueue; 1: as received).
+    int thinning = 1;
   };
 
   // A response waiting to be written.
@@ -1202,6 +1268,10 @@ class TrackCall final : public TrackReactor,
     const auto dequeued = Clock::now();
     std::vector<tracking::PoseEstimate> estimates;
     std::vector<odometry::PoseSource> sources;
+    if ((searching_ || catching_up_) && (inbound_.size() * 2 > inbound_.capacity() ||
+                                         inbound_.weight() * 2 > inbound_.max_weight())) {
+      FoldQueue();
+    }
     item_cpu_start_s_ = ThreadCpuSeconds();
     if (item.item.kind == SessionItem::Kind::kGnssFix && !tracker_->geo()) {
       FailFromWorker({grpc::StatusCode::FAILED_PRECONDITION,
@@ -1243,7 +1313,11 @@ class TrackCall final : public TrackReactor,
       Send(std::move(response), true, item.received, dequeued, no_estimate);
     }
     if (viewer_ && !estimates.empty()) PublishToViewer(estimates.back());
-    if (!estimates.empty()) searching_ = tracking::IsSearching(estimates.back().status);
+    if (!estimates.empty()) {
+      const bool searching = tracking::IsSearching(estimates.back().status);
+      if (searching_ && !searching) catching_up_ = true;
+      searching_ = searching;
+    }
     if (tracker_->stopped()) {
       if (cpu_exceeded_) {
         ++counters.limited;
@@ -1500,8 +1574,11 @@ class TrackCall final : public TrackReactor,
   // The last step searched the map (INITIALIZING, RELOCALIZING): the pool runs the session on its
   // background workers (background()).
   std::atomic<bool> searching_{false};
-  // Event packets (and their events) dropped unread while searching (ShedWhileSearching; the
-  // stream's reader writes them).
+  // The session found its pose with the backlog its search left in the queue: until the queue
+  // is down to a quarter, the reader still sheds rather than overflow (ThinIntoQueue).
+  std::atomic<bool> catching_up_{false};
+  // Event packets thinned into the one before them or dropped, and the events left out, while
+  // searching (ThinIntoQueue, DropWhileSearching; the stream's reader writes them).
   std::atomic<uint64_t> packets_shed_{0};
   std::atomic<uint64_t> events_shed_{0};
   std::atomic<uint64_t> id_{0};

@@ -213,7 +213,8 @@ struct ServerCounters {
   // Requests refused by a server limit (sessions, per peer or token, memory, handshake, CPU,
   // packet events, steps) (RESOURCE_EXHAUSTED, or CANCELLED for a missed handshake).
   std::atomic<int64_t> limited{0};
-  // Event packets dropped unread by searching sessions whose queue was full.
+  // Event packets shed by searching sessions whose
+  // queue was full (thinned into the packet before them, or dropped).
   std::atomic<int64_t> packets_shed{0};
   // Upper bounds of the latency histogram buckets, microseconds (the last bucket is +Inf).
   static constexpr std::array<double, 8> kLatencyBucketsUs = {100,  250,  500,   1000,

@@ -907,10 +907,10 @@ TEST_F(LocalizerServerTest, OverflowingSessionIsToldThenStopped) {
   // (The client's writes may all have been accepted by gRPC's buffers before the status came.)
 }
 
-// A session that searches the map (no pose) and falls behind its stream drops its oldest
-// queued event packets instead of overflowing: the overflow test above with the pose taken away
-// ended RESOURCE_EXHAUSTED while still searching.
-TEST_F(LocalizerServerTest, ASearchingSessionBehindItsStreamDropsOldPacketsInsteadOfOverflowing) {
+// A session that searches the map (no pose) and falls behind its stream thins its queued event
+// packets (and when that is not enough drops the oldest) instead of overflowing: the overflow
+// test above with the pose taken away ended RESOURCE_EXHAUSTED while still searching.
+TEST_F(LocalizerServerTest, ASearchingSessionBehindItsStreamShedsEventsInsteadOfOverflowing) {
   StartServer([](LocalizerServerOptions& options) {
     options.queue_packets = 4;
     options.backpressure_fraction = 0.5;

@@ -226,6 +226,19 @@ struct SessionItem {
   int64_t t_ns = 0;
 };
 
+// Folds the event packet `later` into `earlier`, the packet just before it: every other event
+// of the two, in order (the first of `earlier` kept), and the end time of `later`. A searching
+// session behind its stream thins its queue so (docs/api.md, "Flow control and backpressure"):
+// fewer events, but no gap in time. Both must be kEvents items.
+void FoldEventPackets(SessionItem* earlier, const SessionItem& later);
+
+// Appends every `stride`-th event of the event packet `later` (its first event first) to
+// `earlier`, the packet just before it, and gives `earlier` the end time of `later`. A searching
+// session behind its stream thins its newest packets into its queue so (docs/api.md, "Flow
+// control and backpressure"): fewer events, but no gap in time. Both must be kEvents items;
+// stride >= 1.
+void AppendThinnedEvents(SessionItem* earlier, const SessionItem& later, size_t stride);
+
 // Validates the requests that follow the SessionStart, in order (the stream reader's side of a
 // session): decodes EventPackets (PacketDecoder), checks Frames and PoseHints, and refuses what
 // docs/api.md refuses. Not thread-safe.

@@ -241,6 +241,48 @@ void ExpectSessionGivesOfflinePoses(
 
 // The session path (RequestValidator, SessionTracker) gives the offline tracker's poses, and
 // every packet runs the steps up to its end at once.
+TEST(FoldEventPackets, KeepsEveryOtherEventOfBothInOrderAndTheLaterEnd) {
+  SessionItem earlier;
+  SessionItem later;
+  for (int i = 0; i < 5; ++i) earlier.events.push_back({1000 + i, uint16_t(i), 0, 1});
+  for (int i = 0; i < 4; ++i) later.events.push_back({2000 + i, uint16_t(10 + i), 1, -1});
+  earlier.t_ns = 1999;
+  later.t_ns = 2999;
+  FoldEventPackets(&earlier, later);
+  // Events 0, 2, 4 of the first five, then 1 and 3 of the next four (6 and 8 of the nine).
+  const std::vector<int64_t> times(earlier.events.t_ns.begin(), earlier.events.t_ns.end());
+  EXPECT_EQ(times, (std::vector<int64_t>{1000, 1002, 1004, 2001, 2003}));
+  EXPECT_EQ(earlier.events.x[3], 11);
+  EXPECT_EQ(earlier.events.polarity[3], -1);
+  EXPECT_TRUE(earlier.events.IsConsistent());
+  EXPECT_EQ(earlier.t_ns, 2999);
+}
+
+TEST(AppendThinnedEvents, AppendsEveryKthEventAndTakesTheLaterEnd) {
+  SessionItem earlier;
+  SessionItem later;
+  for (int i = 0; i < 3; ++i) earlier.events.push_back({1000 + i, uint16_t(i), 0, 1});
+  for (int i = 0; i < 9; ++i) later.events.push_back({2000 + i, uint16_t(10 + i), 1, -1});
+  earlier.t_ns = 1999;
+  later.t_ns = 2999;
+  AppendThinnedEvents(&earlier, later, 4);
+  // The first three as they were, then events 0, 4 and 8 of the next nine.
+  const std::vector<int64_t> times(earlier.events.t_ns.begin(), earlier.events.t_ns.end());
+  EXPECT_EQ(times, (std::vector<int64_t>{1000, 1001, 1002, 2000, 2004, 2008}));
+  EXPECT_EQ(earlier.events.x[4], 14);
+  EXPECT_EQ(earlier.events.polarity[4], -1);
+  EXPECT_TRUE(earlier.events.IsConsistent());
+  EXPECT_EQ(earlier.t_ns, 2999);
+  // An empty packet still gives its end time; stride 1 appends everything.
+  SessionItem empty;
+  empty.t_ns = 3999;
+  AppendThinnedEvents(&earlier, empty, 4);
+  EXPECT_EQ(earlier.events.size(), 6u);
+  EXPECT_EQ(earlier.t_ns, 3999);
+  AppendThinnedEvents(&earlier, later, 1);
+  EXPECT_EQ(earlier.events.size(), 15u);
+}
+
 TEST(SessionTracker, PacketsGiveTheOfflinePosesWithoutWaitingForTheNextPacket) {
   ExpectSessionGivesOfflinePoses(
       testing::TestEvents(120'000'000), 1'000'000, 15,

@@ -794,9 +794,9 @@ ReplayResult Replayer::Run() {
        << shared_.end.events() << " events, " << shared_.end.poses()
        << " poses; trajectory written to " << options_.output.string() << "\n";
   if (result.packets_shed > 0) {
-    log_ << "evloc-replay: the server dropped " << result.packets_shed << " event packets ("
-         << shared_.end.events_shed()
-         << " events) unread while it searched and the session was behind its stream\n";
+    log_ << "evloc-replay: the server shed " << result.packets_shed
+         << " event packets (folded into their neighbours or dropped; " << shared_.end.events_shed()
+         << " events left out) while it searched and the session was behind its stream\n";
   }
   if (result_.events_thinned > 0) {
     log_ << "evloc-replay: " << result_.events_thinned

@@ -168,8 +168,8 @@ struct ReplayResult {
   int64_t searching_updates = 0;
   // Events left out of packets while the session searched (thin_while_searching).
   int64_t events_thinned = 0;
-  // Event packets the server dropped unread while it searched and the session was behind its
-  // stream (SessionEnd.packets_shed of the last session; 0 when it kept up).
+  // Event packets the server folded into their neighbours or dropped while it searched and the
+  // session was behind its stream (SessionEnd.packets_shed of the last session; 0 when it kept up).
   int64_t packets_shed = 0;
   // Session time from the session's start (the initial pose's time, or the first event with
   // --init-pose none) to the first TRACKING pose, seconds; unset when no pose
