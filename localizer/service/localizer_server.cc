@@ -179,8 +179,8 @@ std::string ServerCounters::PrometheusText() const {
          limited);
   metric("evloc_events_total", "counter", "Events tracked (rate() gives events/s).", events);
   metric("evloc_searching_packets_shed_total", "counter",
-         "Event packets folded into their neighbours or dropped unread by sessions searching "
-         "the map whose queue was full.",
+         "Event packets thinned into another or dropped unread by sessions searching the map "
+         "whose queue was full.",
          packets_shed);
   metric("evloc_poses_total", "counter", "PoseUpdates sent (rate() gives poses/s).", poses);
   metric("evloc_lost_poses_total", "counter",
@@ -1577,8 +1577,9 @@ class TrackCall final : public TrackReactor,
   // The session found its pose with the backlog its search left in the queue: until the queue
   // is down to a quarter, the reader still sheds rather than overflow (ThinIntoQueue).
   std::atomic<bool> catching_up_{false};
-  // Event packets thinned into the one before them or dropped, and the events left out, while
-  // searching (ThinIntoQueue, DropWhileSearching; the stream's reader writes them).
+  // Event packets thinned into another or dropped, and the events left out, while searching or
+  // catching up (ThinIntoQueue and DropWhileSearching on the stream's reader, FoldQueue on the
+  // worker).
   std::atomic<uint64_t> packets_shed_{0};
   std::atomic<uint64_t> events_shed_{0};
   std::atomic<uint64_t> id_{0};
