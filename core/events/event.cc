@@ -45,6 +45,11 @@ void EventBuffer::Append(const int64_t* t_ns_values, const uint16_t* x_values,
   polarity.insert(polarity.end(), polarity_values, polarity_values + count);
 }
 
+void EventBuffer::AppendEvery(const EventBuffer& other, size_t begin, size_t end, size_t stride) {
+  reserve(size() + (end > begin ? (end - begin + stride - 1) / stride : 0));
+  for (size_t i = begin; i < end; i += stride) push_back(other[i]);
+}
+
 bool EventBuffer::IsConsistent() const {
   return x.size() == t_ns.size() && y.size() == t_ns.size() && polarity.size() == t_ns.size();
 }

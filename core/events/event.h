@@ -75,6 +75,9 @@ class EventBuffer {
   void Append(const EventBuffer& other);
   // Appends events [begin, begin + count) of `other` (unchecked).
   void Append(const EventBuffer& other, size_t begin, size_t count);
+  // Appends every `stride`-th event of [begin, end) of `other`, from `begin` (unchecked range;
+  // stride >= 1).
+  void AppendEvery(const EventBuffer& other, size_t begin, size_t end, size_t stride);
   // Appends `count` events given as parallel arrays.
   void Append(const int64_t* t_ns_values, const uint16_t* x_values, const uint16_t* y_values,
               const int8_t* polarity_values, size_t count);

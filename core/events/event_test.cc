@@ -23,6 +23,22 @@ TEST(EventBuffer, PushBackIndexAndAppendKeepArraysParallel) {
   EXPECT_TRUE(buffer.empty());
 }
 
+TEST(EventBuffer, AppendEveryTakesEveryKthEventOfARange) {
+  EventBuffer source;
+  for (int i = 0; i < 10; ++i) source.push_back({100 + i, static_cast<uint16_t>(i), 0, 1});
+  EventBuffer buffer;
+  buffer.push_back({1, 0, 0, -1});
+  buffer.AppendEvery(source, 2, 9, 3);  // events 2, 5, 8
+  ASSERT_EQ(buffer.size(), 4u);
+  EXPECT_TRUE(buffer.IsConsistent());
+  EXPECT_EQ(buffer[0], (Event{1, 0, 0, -1}));
+  EXPECT_EQ(buffer.x, (std::vector<uint16_t>{0, 2, 5, 8}));
+  buffer.AppendEvery(source, 9, 10, 4);  // one
+  buffer.AppendEvery(source, 1, 1, 2);   // an empty range
+  buffer.AppendEvery(source, 3, 2, 2);   // a start past the end
+  EXPECT_EQ(buffer.x, (std::vector<uint16_t>{0, 2, 5, 8, 9}));
+}
+
 TEST(SensorSize, ContainsAndCheck) {
   const SensorSize size{640, 480};
   EXPECT_TRUE(size.Contains(639, 479));

@@ -809,20 +809,16 @@ void SessionTracker::TrackInPeriods(const EventBuffer& events, int64_t end_t_ns,
 void FoldEventPackets(SessionItem* earlier, const SessionItem& later) {
   const EventBuffer& first = earlier->events;
   const EventBuffer& second = later.events;
-  const size_t total = first.size() + second.size();
+  // Every other event of the two in a row: the second packet continues the first's parity.
   EventBuffer both;
-  both.reserve((total + 1) / 2);
-  for (size_t i = 0; i < total; i += 2) {
-    both.push_back(i < first.size() ? first[i] : second[i - first.size()]);
-  }
+  both.AppendEvery(first, 0, first.size(), 2);
+  both.AppendEvery(second, first.size() % 2, second.size(), 2);
   earlier->events = std::move(both);
   earlier->t_ns = later.t_ns;
 }
 
 void AppendThinnedEvents(SessionItem* earlier, const SessionItem& later, size_t stride) {
-  const EventBuffer& events = later.events;
-  earlier->events.reserve(earlier->events.size() + (events.size() + stride - 1) / stride);
-  for (size_t i = 0; i < events.size(); i += stride) earlier->events.push_back(events[i]);
+  earlier->events.AppendEvery(later.events, 0, later.events.size(), stride);
   earlier->t_ns = later.t_ns;
 }
 

@@ -97,7 +97,7 @@ size_t ThinEvents(const EventBuffer& events, size_t begin, size_t end, int64_t s
   const size_t stride = ThinningStride(end - begin, span_ns, rate);
   if (stride > 1) {
     kept->clear();
-    for (size_t i = begin; i < end; i += stride) kept->push_back(events[i]);
+    kept->AppendEvery(events, begin, end, stride);
   }
   return stride;
 }
