@@ -605,14 +605,6 @@ void Tracker::SearchStep(int64_t t_ns, PoseEstimate* estimate) {
     return search_phase_ == SearchPhase::kPrescore || search_phase_ == SearchPhase::kCoarse ||
            search_phase_ == SearchPhase::kRefine;
   };
-  int64_t cpu_start_ns = 0;
-  if (bounded) {
-    search_credit_ns_ =
-        std::min(search_credit_ns_ + options_.relocalization_cpu_share *
-                                         static_cast<double>(t_ns - search_credit_t_ns_),
-                 std::max(options_.relocalization_cpu_burst_s * 1e9, last_round_cpu_ns_));
-    search_credit_t_ns_ = t_ns;
-  }
   // The round's best refinement follows the camera on every step, deferred or not: a pose left
   // behind for a few steps would no longer register. It is one tracking step, as a session
   // that tracks pays, and not charged to the share: charged, a share below one step's cost
@@ -620,7 +612,13 @@ void Tracker::SearchStep(int64_t t_ns, PoseEstimate* estimate) {
   // never end.
   const bool was_in_round = in_round();
   if (was_in_round) FollowBestRefinement(t_ns);
+  int64_t cpu_start_ns = 0;
   if (bounded) {
+    search_credit_ns_ =
+        std::min(search_credit_ns_ + options_.relocalization_cpu_share *
+                                         static_cast<double>(t_ns - search_credit_t_ns_),
+                 std::max(options_.relocalization_cpu_burst_s * 1e9, last_round_cpu_ns_));
+    search_credit_t_ns_ = t_ns;
     const bool saving_up =
         search_phase_ == SearchPhase::kStart && search_credit_ns_ < last_round_cpu_ns_;
     if (search_credit_ns_ <= 0 || saving_up) {

@@ -795,7 +795,7 @@ ReplayResult Replayer::Run() {
        << " poses; trajectory written to " << options_.output.string() << "\n";
   if (result.packets_shed > 0) {
     log_ << "evloc-replay: the server shed " << result.packets_shed
-         << " event packets (folded into their neighbours or dropped; " << shared_.end.events_shed()
+         << " event packets (thinned into another or dropped; " << shared_.end.events_shed()
          << " events left out) while it searched and the session was behind its stream\n";
   }
   if (result_.events_thinned > 0) {
