@@ -53,6 +53,7 @@ nlohmann::json StepsToJson(const OfflineTrackingResult& result) {
                      {"search_deferred", step.search.deferred},
                      {"search_refilling", step.search.refilling},
                      {"search_followed", step.search.followed},
+                     {"search_probe_replaced", step.search.probe_replaced},
                      {"search_image_hypotheses", step.search.image_hypotheses},
                      {"search_verified_steps", step.search.verified_steps},
                      {"search_best_alignment", step.search.best_alignment},
@@ -305,6 +306,10 @@ Options:
   --search-images on|off the search also locates images made from the events with the map's
                          local features (maps with relocalization data; default on;
                          docs/relocalization.md)
+  --search-probe F       probe each round's winner from starts shifted by F of the median
+                         depth it sees (default 0.03; 0: none; docs/relocalization.md)
+  --search-image-blur PX the Gaussian blur of that image before it is located, pixels
+                         (default 0.7; 0: none)
   --mode events|frames|vo|devo
                          events (Canny-EVT, default), frames (Canny-VT on the images: a folder's
                          images.txt, a bag's --image-topic, an AEDAT4 file's frames stream), or the
@@ -423,6 +428,10 @@ TrackCommandOptions ParseTrackCommandLine(const std::vector<std::string>& argume
       tracker.relocalization_cpu_share = ParseDoubleFlag(flag, value);
     } else if (flag == "--search-images") {
       options.search_images = ParseSwitchFlag(flag, value);
+    } else if (flag == "--search-probe") {
+      tracker.relocalization_probe_depth_fraction = ParseDoubleFlag(flag, value);
+    } else if (flag == "--search-image-blur") {
+      tracker.relocalization_image_blur_px = ParseDoubleFlag(flag, value);
     } else if (flag == "--search-active-fraction") {
       tracker.relocalization_active_fraction = ParseDoubleFlag(flag, value);
     } else if (flag == "--search-grid") {

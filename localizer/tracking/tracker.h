@@ -87,6 +87,10 @@ struct SearchProgress {
   bool followed = false;
   // Image hypotheses (ImageHypothesisSource) refined in this step (counted in `refined` too).
   int image_hypotheses = 0;
+  // True when this step judged a round whose winner a probe replaced: refined from a start
+  // around it, it ended elsewhere better aligned (TrackerOptions::
+  // relocalization_probe_depth_fraction).
+  bool probe_replaced = false;
   // Alignment of the best refined hypothesis of the last judged round (0 before one).
   double best_alignment = 0;
   // Alignment of the best refined hypothesis distinct from it (0 when there was none).
@@ -300,10 +304,12 @@ class Tracker {
     double alignment = 0;
     int points_used = 0;
     bool good = false;
+    // Refined from a start around the round's winner (kProbe).
+    bool probe = false;
     // Its poses since it was refined (FollowBestRefinement): the velocity that predicts the next.
     ConstantVelocityModel motion;
   };
-  enum class SearchPhase { kStart, kPrescore, kCoarse, kRefine, kVerify };
+  enum class SearchPhase { kStart, kPrescore, kCoarse, kRefine, kProbe, kVerify };
   // Starts a search episode in `status` (kInitializing or kRelocalizing) at t_ns.
   void BeginSearch(TrackingStatus status, int64_t t_ns);
   // One searching step at t_ns (the surfaces are up to date): fills `estimate`.
@@ -323,6 +329,15 @@ class Tracker {
   // the same place are one candidate, not the ambiguity the judgement looks for (compared
   // later, after the camera moved on, they would look distinct).
   void AddRefinement(Refinement refinement);
+  // The probes of a round's winner (relocalization_probe_depth_fraction): offsets in its camera
+  // frame, at the median depth of the map points it sees, along which a pose may fit the events
+  // nearly as well (a shift sideways turned back onto the scene, a shift along the optical
+  // axis); empty when it sees too few points.
+  std::vector<Rigid3d> ProbeOffsets(const Rigid3d& world_from_cam);
+  // After the probes: a probe that ended distinct from the winner and better aligned replaces
+  // it (the winner was a poorer optimum of the same neighbourhood), then the round is judged
+  // again.
+  bool JudgeProbedRound(Refinement* accepted);
   // The status and progress of a searching step, and the give-up of a long episode.
   void FinishSearchStep(int64_t t_ns, PoseEstimate* estimate);
   // Sets the decay time of the search's steps from the events themselves: the one that leaves
@@ -451,6 +466,9 @@ class Tracker {
   std::vector<Hypothesis> hypotheses_;
   size_t next_refinement_ = 0;
   std::vector<Refinement> refinements_;
+  // The winner's probes (kProbe): start offsets in its camera frame, the next one to refine.
+  std::vector<Rigid3d> probe_offsets_;
+  size_t next_probe_ = 0;
   // The previous round's best distinct refinements, refined again first in the next round.
   std::vector<Hypothesis> rivals_;
   // Image hypotheses: the source (not owned), the image of the events and the event time of the

@@ -150,6 +150,13 @@ void TrackerOptions::Check() const {
   Require(std::isfinite(relocalization_image_interval_s) && relocalization_image_interval_s >= 0 &&
               relocalization_image_interval_s <= 3600,
           "relocalization_image_interval_s must be in [0, 3600].");
+  Require(std::isfinite(relocalization_probe_depth_fraction) &&
+              relocalization_probe_depth_fraction >= 0 &&
+              relocalization_probe_depth_fraction <= 0.5,
+          "relocalization_probe_depth_fraction must be in [0, 0.5].");
+  Require(std::isfinite(relocalization_image_blur_px) && relocalization_image_blur_px >= 0 &&
+              relocalization_image_blur_px <= 10,
+          "relocalization_image_blur_px must be in [0, 10].");
   Require(std::isfinite(relocalization_min_active_fraction) &&
               relocalization_min_active_fraction >= 0 && relocalization_min_active_fraction < 1,
           "relocalization_min_active_fraction must be in [0, 1).");

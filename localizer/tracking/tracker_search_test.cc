@@ -580,6 +580,16 @@ TEST(TrackerSearch, RejectsABadPriorAndFrameTrackers) {
   TrackerOptions bad_interval;
   bad_interval.relocalization_image_interval_s = -1;
   EXPECT_THROW(bad_interval.Check(), InvalidArgumentError);
+  for (const double value : {-0.5, 11.0, std::nan("")}) {
+    TrackerOptions bad_blur;
+    bad_blur.relocalization_image_blur_px = value;
+    EXPECT_THROW(bad_blur.Check(), InvalidArgumentError) << value;
+  }
+  for (const double value : {-0.01, 0.6, std::nan("")}) {
+    TrackerOptions bad_probe;
+    bad_probe.relocalization_probe_depth_fraction = value;
+    EXPECT_THROW(bad_probe.Check(), InvalidArgumentError) << value;
+  }
 }
 
 TEST(StaticMapSource, GivesKeyframesAndViewpointsBetweenThemWithinThePrior) {
