@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/core.hpp>
+#include <opencv2/features2d.hpp>
 
 #include "core/common/error.h"
 #include "core/common/test_data.h"
@@ -172,6 +173,43 @@ TEST(RelocFeatures, MatchingIsMutualAndRespectsTheRatio) {
   std::sort(used_b.begin(), used_b.end());
   EXPECT_EQ(std::adjacent_find(used_b.begin(), used_b.end()), used_b.end());
   EXPECT_TRUE(MatchFeatures(a, Features(), MatchOptions()).empty());
+}
+
+// The matrix-product matcher gives exactly OpenCV's brute-force matches (the same ratio test,
+// mutual check and distances), on real features of two views and with and without the mutual
+// check.
+TEST(RelocFeatures, MatchingEqualsOpenCvsBruteForceMatcher) {
+  const cv::Mat image = SyntheticTexture(640, 480, 7);
+  const Features a = ExtractFeatures(image, FeatureOptions());
+  const Features b = ExtractFeatures(
+      Warp(image, SmallHomography(image.size(), 8, 1.05, -6, 4), 2.0, 3), FeatureOptions());
+  ASSERT_GT(a.size(), 500);
+  ASSERT_GT(b.size(), 500);
+  const cv::Mat rows_a = a.DescriptorsAsFloat();
+  const cv::Mat rows_b = b.DescriptorsAsFloat();
+  cv::BFMatcher reference(cv::NORM_L2, false);
+  std::vector<std::vector<cv::DMatch>> a_to_b;
+  std::vector<std::vector<cv::DMatch>> b_to_a;
+  reference.knnMatch(rows_a, rows_b, a_to_b, 2);
+  reference.knnMatch(rows_b, rows_a, b_to_a, 1);
+  for (const bool mutual : {true, false}) {
+    MatchOptions options;
+    options.mutual = mutual;
+    std::vector<FeatureMatch> expected;
+    for (const auto& candidates : a_to_b) {
+      const cv::DMatch& best = candidates[0];
+      if (!(best.distance < options.max_ratio * candidates[1].distance)) continue;
+      if (mutual && b_to_a[best.trainIdx][0].trainIdx != best.queryIdx) continue;
+      expected.push_back({best.queryIdx, best.trainIdx, best.distance});
+    }
+    const std::vector<FeatureMatch> matches = MatchFeatures(a, b, options);
+    ASSERT_EQ(matches.size(), expected.size()) << "mutual " << mutual;
+    for (size_t i = 0; i < matches.size(); ++i) {
+      EXPECT_EQ(matches[i].index_a, expected[i].index_a);
+      EXPECT_EQ(matches[i].index_b, expected[i].index_b);
+      EXPECT_NEAR(matches[i].distance, expected[i].distance, 1e-3f * expected[i].distance);
+    }
+  }
 }
 
 TEST(RelocFeatures, ThrowsOnProgrammerErrors) {
