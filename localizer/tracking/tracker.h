@@ -336,7 +336,7 @@ class Tracker {
   std::vector<Rigid3d> ProbeOffsets(const Rigid3d& world_from_cam);
   // After the probes: a probe that ended distinct from the winner and better aligned replaces
   // it (the winner was a poorer optimum of the same neighbourhood), then the round is judged
-  // again.
+  // again, the other probes among its refinements.
   bool JudgeProbedRound(Refinement* accepted);
   // The status and progress of a searching step, and the give-up of a long episode.
   void FinishSearchStep(int64_t t_ns, PoseEstimate* estimate);

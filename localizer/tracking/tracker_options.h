@@ -255,7 +255,8 @@ struct TrackerOptions {
   // matching turn changes the image of a scene at one depth little: on the 640x480 room a
   // winner 8-11 cm and 2 degrees from the truth verified (alignment 0.49-0.60; the truth 0.69-
   // 0.73) and was tracked 8 cm off for 0.3 s. A probe that ends distinct and better aligned
-  // replaces the winner (docs/relocalization.md). 0: no probes.
+  // replaces the winner, and the other probes are judged as any refinement (a neighbourhood of
+  // similar fits fails the margin); docs/relocalization.md. 0: no probes.
   double relocalization_probe_depth_fraction = 0.03;
   // Two refined poses farther apart than this are distinct hypotheses, metres.
   double relocalization_distinct_m = 0.05;
