@@ -2,17 +2,10 @@
 
 #include <algorithm>
 #include <cmath>
-#include <limits>
 
 #include "core/common/error.h"
 
 namespace evloc::tracking {
-namespace {
-
-constexpr int64_t kNever = std::numeric_limits<int64_t>::min();
-
-}  // namespace
-
 EventImage::EventImage(int width, int height, double tau_s)
     : width_(width), height_(height), tau_ns_(tau_s * 1e9) {
   if (width <= 0 || height <= 0 || !(tau_s > 0) || !std::isfinite(tau_s)) {
@@ -26,10 +19,17 @@ EventImage::EventImage(int width, int height, double tau_s)
 void EventImage::Clear() {
   const size_t pixels = static_cast<size_t>(width_) * height_;
   value_.assign(pixels, 0.0f);
-  last_t_ns_per_pixel_.assign(pixels, kNever);
   any_ = false;
   first_t_ns_ = 0;
   last_t_ns_ = 0;
+  anchor_t_ns_ = 0;
+}
+
+void EventImage::Reanchor(int64_t t_ns) {
+  const float factor =
+      static_cast<float>(std::exp(-static_cast<double>(t_ns - anchor_t_ns_) / tau_ns_));
+  for (float& value : value_) value *= factor;
+  anchor_t_ns_ = t_ns;
 }
 
 void EventImage::Insert(const EventBuffer& events, size_t begin, size_t end) {
@@ -37,27 +37,32 @@ void EventImage::Insert(const EventBuffer& events, size_t begin, size_t end) {
   if (!any_) {
     any_ = true;
     first_t_ns_ = events.t_ns[begin];
+    anchor_t_ns_ = first_t_ns_;
   }
   const double inverse_tau = 1.0 / tau_ns_;
+  // Weights up to exp(kAnchorSpan) before the values are brought to a later anchor: e^20, far
+  // from a float's range, once every 20 time constants (1 s at 50 ms).
+  constexpr double kAnchorSpan = 20.0;
+  int64_t weight_t_ns = events.t_ns[begin] - 1;
+  float weight = 0;
   for (size_t i = begin; i < end; ++i) {
     if (events.x[i] >= width_ || events.y[i] >= height_) continue;
-    const size_t pixel = static_cast<size_t>(events.y[i]) * width_ + events.x[i];
     const int64_t t = events.t_ns[i];
-    const int64_t last = last_t_ns_per_pixel_[pixel];
-    float& value = value_[pixel];
-    if (last != kNever)
-      value *= static_cast<float>(std::exp(-static_cast<double>(t - last) * inverse_tau));
-    value += static_cast<float>(events.polarity[i]);
-    last_t_ns_per_pixel_[pixel] = t;
+    if (t != weight_t_ns) {
+      if (static_cast<double>(t - anchor_t_ns_) * inverse_tau > kAnchorSpan) Reanchor(t);
+      // Events come in runs of one timestamp at high rates: one exp per run.
+      weight = static_cast<float>(std::exp(static_cast<double>(t - anchor_t_ns_) * inverse_tau));
+      weight_t_ns = t;
+    }
+    value_[static_cast<size_t>(events.y[i]) * width_ + events.x[i]] +=
+        weight * static_cast<float>(events.polarity[i]);
   }
   last_t_ns_ = events.t_ns[end - 1];
 }
 
 float EventImage::Decayed(size_t pixel, int64_t t_ns) const {
-  if (last_t_ns_per_pixel_[pixel] == kNever) return 0.0f;
   return value_[pixel] *
-         static_cast<float>(
-             std::exp(-static_cast<double>(t_ns - last_t_ns_per_pixel_[pixel]) * (1.0 / tau_ns_)));
+         static_cast<float>(std::exp(-static_cast<double>(t_ns - anchor_t_ns_) / tau_ns_));
 }
 
 double EventImage::Value(int x, int y, int64_t t_ns) const {
@@ -70,7 +75,9 @@ cv::Mat EventImage::Render(int64_t t_ns) const {
   if (!any_) return image;
   const size_t pixels = value_.size();
   std::vector<float> decayed(pixels);
-  for (size_t i = 0; i < pixels; ++i) decayed[i] = Decayed(i, t_ns);
+  const float factor =
+      static_cast<float>(std::exp(-static_cast<double>(t_ns - anchor_t_ns_) / tau_ns_));
+  for (size_t i = 0; i < pixels; ++i) decayed[i] = value_[i] * factor;
   // The percentiles are over every pixel (those that never fired are at the integrator's rest
   // value, 0), as measured in docs/relocalization.md.
   std::vector<float> seen = decayed;

@@ -5,7 +5,8 @@
 // with time constant tau: with the camera moving, the low-pass part is the scene blurred along
 // the motion and v keeps its texture, enough for the map's local features to match. Written here
 // rather than taken from a library: OpenCV's contrib has no event integrator, and the integrator
-// is four lines on the tracker's own event buffers.
+// is a few lines on the tracker's own event buffers. It is kept as each pixel's value at an
+// anchor time (below), so that an event costs one addition, not a decay of its pixel first.
 #pragma once
 
 #include <cstddef>
@@ -47,15 +48,21 @@ class EventImage {
  private:
   // The value of `pixel` (row-major index) decayed to t_ns.
   float Decayed(size_t pixel, int64_t t_ns) const;
+  // Brings every value to the anchor t_ns (scaled by exp(-(t_ns - anchor) / tau)).
+  void Reanchor(int64_t t_ns);
 
   int width_;
   int height_;
   double tau_ns_;
+  // Per pixel, the sum of its polarities weighted by exp((t - anchor_t_ns_) / tau): the
+  // integrator's value at the anchor time, so that an event adds to one number and the image
+  // decays all pixels by one factor. The anchor moves forward (every value scaled down) before
+  // the weights outgrow a float's precision.
   std::vector<float> value_;
-  std::vector<int64_t> last_t_ns_per_pixel_;
   bool any_ = false;
   int64_t first_t_ns_ = 0;
   int64_t last_t_ns_ = 0;
+  int64_t anchor_t_ns_ = 0;
 };
 
 }  // namespace evloc::tracking

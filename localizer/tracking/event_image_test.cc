@@ -45,7 +45,33 @@ TEST(EventImage, SkipsEventsOutsideTheImage) {
   EventImage image(4, 3, 0.05);
   const EventBuffer events = Events({{10, 4, 0, 1}, {20, 0, 3, 1}, {30, 2, 1, 1}});
   image.Insert(events, 0, events.size());
-  EXPECT_NEAR(image.Value(2, 1, 30), 1.0, 1e-9);
+  // 1 from the one event inside (float rounding of its weight and decay: 1e-6, as above); the
+  // two outside would make it 2 or 3 wherever they landed.
+  EXPECT_NEAR(image.Value(2, 1, 30), 1.0, 1e-6);
+}
+
+// Over many time constants (the values are brought to a later anchor every 20 of them) the value
+// stays the leaky sum of the polarities, sum p_i exp(-(t - t_i) / tau).
+TEST(EventImage, StaysTheLeakySumOverManyTimeConstants) {
+  EventImage image(4, 3, 0.05);
+  EventBuffer events;
+  for (int64_t t_ns = 0; t_ns < 3'000'000'000; t_ns += 7'000'000) {
+    events.push_back({t_ns, 1, 1, static_cast<int8_t>((t_ns / 7'000'000) % 3 == 0 ? -1 : 1)});
+    events.push_back({t_ns, 2, 2, 1});  // two events of one timestamp share a weight
+  }
+  for (size_t begin = 0; begin < events.size(); begin += 100) {
+    image.Insert(events, begin, std::min(events.size(), begin + 100));
+  }
+  const int64_t t = events.t_ns.back() + 3'000'000;
+  double expected_1 = 0;
+  double expected_2 = 0;
+  for (size_t i = 0; i < events.size(); ++i) {
+    const double decay = std::exp(-static_cast<double>(t - events.t_ns[i]) / kTau);
+    (events.x[i] == 1 ? expected_1 : expected_2) += events.polarity[i] * decay;
+  }
+  EXPECT_NEAR(image.Value(1, 1, t), expected_1, 1e-5 * std::abs(expected_1));
+  EXPECT_NEAR(image.Value(2, 2, t), expected_2, 1e-5 * expected_2);
+  EXPECT_GT(expected_2, 5.0);  // about 1 / (1 - exp(-7 / 50)) events' worth
 }
 
 TEST(EventImage, RendersOnPixelsBrightOffPixelsDarkAndTheRestBetween) {
