@@ -239,15 +239,22 @@ void ExpectSessionGivesOfflinePoses(
   }
 }
 
-// The session path (RequestValidator, SessionTracker) gives the offline tracker's poses, and
-// every packet runs the steps up to its end at once.
+// Two consecutive event packets: `earlier` with `earlier_count` ON events at 1000 + i ns, pixel
+// (i, 0), ending at 1999 ns; `later` with `later_count` OFF events at 2000 + i ns, pixel
+// (10 + i, 1), ending at 2999 ns.
+void TwoEventPackets(int earlier_count, int later_count, SessionItem* earlier, SessionItem* later) {
+  for (int i = 0; i < earlier_count; ++i) earlier->events.push_back({1000 + i, uint16_t(i), 0, 1});
+  for (int i = 0; i < later_count; ++i) {
+    later->events.push_back({2000 + i, uint16_t(10 + i), 1, -1});
+  }
+  earlier->t_ns = 1999;
+  later->t_ns = 2999;
+}
+
 TEST(FoldEventPackets, KeepsEveryOtherEventOfBothInOrderAndTheLaterEnd) {
   SessionItem earlier;
   SessionItem later;
-  for (int i = 0; i < 5; ++i) earlier.events.push_back({1000 + i, uint16_t(i), 0, 1});
-  for (int i = 0; i < 4; ++i) later.events.push_back({2000 + i, uint16_t(10 + i), 1, -1});
-  earlier.t_ns = 1999;
-  later.t_ns = 2999;
+  TwoEventPackets(5, 4, &earlier, &later);
   FoldEventPackets(&earlier, later);
   // Events 0, 2, 4 of the first five, then 1 and 3 of the next four (6 and 8 of the nine).
   const std::vector<int64_t> times(earlier.events.t_ns.begin(), earlier.events.t_ns.end());
@@ -261,10 +268,7 @@ TEST(FoldEventPackets, KeepsEveryOtherEventOfBothInOrderAndTheLaterEnd) {
 TEST(AppendThinnedEvents, AppendsEveryKthEventAndTakesTheLaterEnd) {
   SessionItem earlier;
   SessionItem later;
-  for (int i = 0; i < 3; ++i) earlier.events.push_back({1000 + i, uint16_t(i), 0, 1});
-  for (int i = 0; i < 9; ++i) later.events.push_back({2000 + i, uint16_t(10 + i), 1, -1});
-  earlier.t_ns = 1999;
-  later.t_ns = 2999;
+  TwoEventPackets(3, 9, &earlier, &later);
   AppendThinnedEvents(&earlier, later, 4);
   // The first three as they were, then events 0, 4 and 8 of the next nine.
   const std::vector<int64_t> times(earlier.events.t_ns.begin(), earlier.events.t_ns.end());
@@ -283,6 +287,8 @@ TEST(AppendThinnedEvents, AppendsEveryKthEventAndTakesTheLaterEnd) {
   EXPECT_EQ(earlier.events.size(), 15u);
 }
 
+// The session path (RequestValidator, SessionTracker) gives the offline tracker's poses, and
+// every packet runs the steps up to its end at once.
 TEST(SessionTracker, PacketsGiveTheOfflinePosesWithoutWaitingForTheNextPacket) {
   ExpectSessionGivesOfflinePoses(
       testing::TestEvents(120'000'000), 1'000'000, 15,

@@ -366,6 +366,8 @@ class Tracker {
   // Samples the pre-score points of a base viewpoint (once per episode): up to
   // relocalization_prescore_points of the points visible from it.
   void SampleViewpointPoints(size_t viewpoint);
+  // Median depth in the camera of the map points `indices` (not empty), metres.
+  double MedianDepth(const std::vector<uint32_t>& indices, const Rigid3d& cam_from_world) const;
   // The chamfer pre-score of a hypothesis: mean truncated distance of its viewpoint's sample
   // points to the nearest active pixel, 0..1, lower is better.
   double Prescore(const Hypothesis& hypothesis) const;
@@ -383,6 +385,9 @@ class Tracker {
   RegistrationResult RegisterSelection(PotentialField* field, const Rigid3d& start_world_from_cam);
   // True when two poses are farther apart than relocalization_distinct_m / _deg.
   bool Distinct(const Rigid3d& a, const Rigid3d& b) const;
+  // The round's good refinement with the highest alignment (among the non-probes only when
+  // `with_probes` is false); null when none is good.
+  Refinement* BestRefinement(bool with_probes = true);
   // At a round's start: the image source's hypotheses for this step's image of the events,
   // distinct from each other, when a request is due (enough events integrated,
   // relocalization_image_interval_s since the last request); none otherwise.

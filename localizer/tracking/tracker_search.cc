@@ -268,6 +268,19 @@ int Tracker::PrescoreViewpoint(size_t viewpoint) {
   return scored;
 }
 
+double Tracker::MedianDepth(const std::vector<uint32_t>& indices,
+                            const Rigid3d& cam_from_world) const {
+  const Eigen::Matrix3d rotation = cam_from_world.RotationMatrix();
+  std::vector<double> depths;
+  depths.reserve(indices.size());
+  for (const uint32_t index : indices) {
+    depths.push_back(
+        (rotation * points_.positions[index].cast<double>() + cam_from_world.translation).z());
+  }
+  std::nth_element(depths.begin(), depths.begin() + depths.size() / 2, depths.end());
+  return depths[depths.size() / 2];
+}
+
 void Tracker::SampleViewpointPoints(size_t viewpoint) {
   if (viewpoint_sampled_[viewpoint]) return;
   viewpoint_sampled_[viewpoint] = 1;
@@ -297,14 +310,7 @@ void Tracker::SampleViewpointPoints(size_t viewpoint) {
   sample.clear();
   const size_t wanted = static_cast<size_t>(options_.relocalization_prescore_points);
   if (inside.size() < static_cast<size_t>(options_.min_points)) return;
-  std::vector<double> depths;
-  depths.reserve(inside.size());
-  for (const uint32_t index : inside) {
-    depths.push_back(
-        (rotation * points_.positions[index].cast<double>() + cam_from_world.translation).z());
-  }
-  std::nth_element(depths.begin(), depths.begin() + depths.size() / 2, depths.end());
-  viewpoint_depth_m_[viewpoint] = depths[depths.size() / 2];
+  viewpoint_depth_m_[viewpoint] = MedianDepth(inside, cam_from_world);
   const double stride = std::max(1.0, static_cast<double>(inside.size()) / wanted);
   for (double k = 0; k < static_cast<double>(inside.size()) && sample.size() < wanted;
        k += stride) {
@@ -442,12 +448,7 @@ void Tracker::AddRefinement(Refinement refinement) {
 
 void Tracker::FollowBestRefinement(int64_t t_ns) {
   if (!SurfacesFull(t_ns)) return;  // a step inside a silence would lose it
-  Refinement* best = nullptr;
-  for (Refinement& refinement : refinements_) {
-    if (refinement.good && (best == nullptr || refinement.alignment > best->alignment)) {
-      best = &refinement;
-    }
-  }
+  Refinement* best = BestRefinement();
   if (best == nullptr || best->t_ns >= t_ns) return;
   const Rigid3d predicted = best->motion.Predict(t_ns);
   SelectPoints(predicted);
@@ -469,6 +470,17 @@ bool Tracker::SurfacesFull(int64_t t_ns) const {
 int64_t Tracker::SilenceNs() const {
   return static_cast<int64_t>(options_.min_decay_time_s * 1e9 *
                               std::log(1.0 / options_.empty_threshold));
+}
+
+Tracker::Refinement* Tracker::BestRefinement(bool with_probes) {
+  Refinement* best = nullptr;
+  for (Refinement& refinement : refinements_) {
+    if (refinement.good && (with_probes || !refinement.probe) &&
+        (best == nullptr || refinement.alignment > best->alignment)) {
+      best = &refinement;
+    }
+  }
+  return best;
 }
 
 bool Tracker::Distinct(const Rigid3d& a, const Rigid3d& b) const {
@@ -499,12 +511,7 @@ void Tracker::KeepRivals() {
 bool Tracker::JudgeRound(Refinement* accepted) {
   // The best good refinement, against the best distinct one that registered enough points
   // (good or not: an ambiguity need not pass every threshold to make the best one doubtful).
-  const Refinement* best = nullptr;
-  for (const Refinement& refinement : refinements_) {
-    if (refinement.good && (best == nullptr || refinement.alignment > best->alignment)) {
-      best = &refinement;
-    }
-  }
+  const Refinement* best = BestRefinement();
   search_progress_.best_alignment = 0;
   search_progress_.second_alignment = 0;
   if (best == nullptr) {
@@ -740,12 +747,7 @@ void Tracker::SearchWork(int64_t t_ns) {
   } else if (search_phase_ == SearchPhase::kProbe && surfaces_full) {
     // The winner is followed to this step (FollowBestRefinement) while it is the best; the
     // probes start around where it is now.
-    const Refinement* best = nullptr;
-    for (const Refinement& refinement : refinements_) {
-      if (refinement.good && (best == nullptr || refinement.alignment > best->alignment)) {
-        best = &refinement;
-      }
-    }
+    const Refinement* best = BestRefinement();
     const Rigid3d around = best ? best->world_from_cam : Rigid3d();
     // The round's fields are of its first step; the probes start from a pose of this one.
     if (best) BuildChamferFields(t_ns);
@@ -775,15 +777,7 @@ std::vector<Rigid3d> Tracker::ProbeOffsets(const Rigid3d& world_from_cam) {
   if (options_.relocalization_probe_depth_fraction <= 0) return offsets;
   SelectPoints(world_from_cam);
   if (selected_.size() < static_cast<size_t>(options_.min_points)) return offsets;
-  const Rigid3d cam_from_world = world_from_cam.Inverse();
-  std::vector<double> depths;
-  depths.reserve(selected_.size());
-  for (const uint32_t index : selected_) {
-    depths.push_back((cam_from_world * points_.positions[index].cast<double>()).z());
-  }
-  const auto middle = depths.begin() + static_cast<std::ptrdiff_t>(depths.size() / 2);
-  std::nth_element(depths.begin(), middle, depths.end());
-  const double depth = *middle;
+  const double depth = MedianDepth(selected_, world_from_cam.Inverse());
   if (!(depth > 0)) return offsets;
   const double shift = options_.relocalization_probe_depth_fraction * depth;
   const Eigen::Vector3d axis = Eigen::Vector3d::UnitZ();
@@ -800,16 +794,11 @@ std::vector<Rigid3d> Tracker::ProbeOffsets(const Rigid3d& world_from_cam) {
 }
 
 bool Tracker::JudgeProbedRound(Refinement* accepted) {
-  const auto is_better = [](const Refinement& a, const Refinement* b) {
-    return a.good && (b == nullptr || a.alignment > b->alignment);
-  };
-  const Refinement* winner = nullptr;
-  for (const Refinement& refinement : refinements_) {
-    if (!refinement.probe && is_better(refinement, winner)) winner = &refinement;
-  }
+  const Refinement* winner = BestRefinement(/*with_probes=*/false);
   bool superseded = false;
   for (const Refinement& refinement : refinements_) {
-    superseded = superseded || (winner && refinement.probe && is_better(refinement, winner) &&
+    superseded = superseded || (winner && refinement.probe && refinement.good &&
+                                refinement.alignment > winner->alignment &&
                                 Distinct(refinement.world_from_cam, winner->world_from_cam));
   }
   // The other probes stay: fits around the winner nearly as good as it are an ambiguity the

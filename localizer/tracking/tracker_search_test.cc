@@ -5,6 +5,7 @@
 #include <atomic>
 #include <cmath>
 #include <iostream>
+#include <memory>
 #include <random>
 
 #include <gtest/gtest.h>
@@ -380,6 +381,16 @@ class TruthImageSource final : public ImageHypothesisSource {
   Vector6d offset_;
 };
 
+// A tracker on the far map that asks `source` (which must outlive it) for image hypotheses,
+// started without a pose.
+std::unique_ptr<Tracker> FarMapTracker(const TrackerOptions& options,
+                                       const ImageHypothesisSource& source) {
+  auto tracker = std::make_unique<Tracker>(FarMap(), nullptr, kCamera, options);
+  tracker->SetImageHypothesisSource(&source);
+  tracker->StartWithoutPose(0);
+  return tracker;
+}
+
 int ImageHypothesesRefined(const std::vector<PoseEstimate>& estimates) {
   int total = 0;
   for (const PoseEstimate& estimate : estimates) total += estimate.search.image_hypotheses;
@@ -396,10 +407,8 @@ TEST(TrackerSearch, ImageHypothesesReachWhereTheMapsViewpointsDoNot) {
   // ...with images located 2 cm and 1 degree off the truth, it is found, and every TRACKING pose
   // is right.
   const TruthImageSource source((Vector6d() << 0.02, 0.0, -0.01, 0.0, 0.0, kDegree).finished());
-  Tracker tracker(FarMap(), nullptr, kCamera, options);
-  tracker.SetImageHypothesisSource(&source);
-  tracker.StartWithoutPose(0);
-  const std::vector<PoseEstimate> estimates = tracker.AddEvents(events);
+  const std::unique_ptr<Tracker> tracker = FarMapTracker(options, source);
+  const std::vector<PoseEstimate> estimates = tracker->AddEvents(events);
   const int64_t first_tracking_ns = CheckEstimates(estimates, options);
   ASSERT_GE(first_tracking_ns, 0) << "never TRACKING";
   std::cout << "far map with image hypotheses: TRACKING at " << first_tracking_ns * 1e-9 << " s, "
@@ -409,7 +418,7 @@ TEST(TrackerSearch, ImageHypothesesReachWhereTheMapsViewpointsDoNot) {
   EXPECT_LT(first_tracking_ns, 400'000'000);
   EXPECT_GT(ImageHypothesesRefined(estimates), 0);
   EXPECT_EQ(source.bad_images, 0);
-  EXPECT_EQ(tracker.status(), TrackingStatus::kTracking);
+  EXPECT_EQ(tracker->status(), TrackingStatus::kTracking);
 }
 
 TEST(TrackerSearch, WrongImageHypothesesNeverGiveAWrongTrackingPose) {
@@ -417,10 +426,8 @@ TEST(TrackerSearch, WrongImageHypothesesNeverGiveAWrongTrackingPose) {
   const TrackerOptions options;
   // 25 cm and 10 degrees off: refined, judged, and never a TRACKING pose beyond 5 cm / 3 degrees.
   const TruthImageSource source((Vector6d() << 0.25, -0.1, 0.1, 0.0, 10 * kDegree, 0).finished());
-  Tracker tracker(FarMap(), nullptr, kCamera, options);
-  tracker.SetImageHypothesisSource(&source);
-  tracker.StartWithoutPose(0);
-  const std::vector<PoseEstimate> estimates = tracker.AddEvents(events);
+  const std::unique_ptr<Tracker> tracker = FarMapTracker(options, source);
+  const std::vector<PoseEstimate> estimates = tracker->AddEvents(events);
   CheckEstimates(estimates, options);
   EXPECT_GT(ImageHypothesesRefined(estimates), 0);
 }
@@ -433,9 +440,7 @@ TEST(TrackerSearch, WithACpuShareImageHypothesesAreRefinedAtTheirOwnInstant) {
   TrackerOptions options;
   options.relocalization_cpu_share = 0.5;
   const TruthImageSource source((Vector6d() << 0.02, 0.0, -0.01, 0.0, 0.0, kDegree).finished());
-  Tracker tracker(FarMap(), nullptr, kCamera, options);
-  tracker.SetImageHypothesisSource(&source);
-  tracker.StartWithoutPose(0);
+  const std::unique_ptr<Tracker> tracker = FarMapTracker(options, source);
   // One step's events at a time, as a live session gets them.
   const int64_t period_ns = std::llround(1e9 / options.step_rate_hz);
   std::vector<PoseEstimate> estimates;
@@ -445,7 +450,7 @@ TEST(TrackerSearch, WithACpuShareImageHypothesesAreRefinedAtTheirOwnInstant) {
     while (end < events.size() && events.t_ns[end] < end_ns) ++end;
     EventBuffer window;
     window.Append(events, begin, end - begin);
-    for (PoseEstimate& estimate : tracker.AddEvents(window)) estimates.push_back(estimate);
+    for (PoseEstimate& estimate : tracker->AddEvents(window)) estimates.push_back(estimate);
     begin = end;
   }
   EXPECT_GE(CheckEstimates(estimates, options), 0) << "never TRACKING";
@@ -464,10 +469,8 @@ TEST(TrackerSearch, TheBestRefinementFollowsTheCameraThroughALongRound) {
   TrackerOptions options;
   options.relocalization_coarse_per_step = 1;
   const TruthImageSource source((Vector6d() << 0.02, 0.0, -0.01, 0.0, 0.0, kDegree).finished());
-  Tracker tracker(FarMap(), nullptr, kCamera, options);
-  tracker.SetImageHypothesisSource(&source);
-  tracker.StartWithoutPose(0);
-  const std::vector<PoseEstimate> estimates = tracker.AddEvents(events);
+  const std::unique_ptr<Tracker> tracker = FarMapTracker(options, source);
+  const std::vector<PoseEstimate> estimates = tracker->AddEvents(events);
   const int64_t first_tracking_ns = CheckEstimates(estimates, options);
   ASSERT_GE(first_tracking_ns, 0) << "never TRACKING";
   int first_image_round = -1;
