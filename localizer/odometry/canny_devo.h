@@ -29,7 +29,9 @@ namespace evloc::odometry {
 // Options of Canny-DEVO.
 struct CannyDevoOptions {
   // The event tracker's options. The reference points carry no intensity gradient (their region
-  // comes from events), so the polarity-aware registration is off by default (variant EVT-OH).
+  // comes from events), so the polarity-aware registration is off by default; so is the
+  // occlusion culling, because the local map holds each edge once per reference frame that saw
+  // it, and the culling lets only one point claim an edge pixel (variant EVT--).
   tracking::TrackerOptions tracker = DefaultTrackerOptions();
   // The reference map's depth assignment.
   ReferenceMapOptions reference;
@@ -53,6 +55,17 @@ struct CannyDevoOptions {
   double reference_max_rotation_deg = 10.0;
   // The tracker needs this many reference points to start or switch.
   int min_reference_points = 100;
+  // The local map the tracker registers to is the union of the kept reference frames nearest
+  // the camera (at most this many), each at the pose it was taken from. One reference frame holds
+  // only the edges that fired around its instant (an edge parallel to the motion then is
+  // missing); the union holds the edges of several motions. Nearness is the larger of the
+  // baseline over reference_max_baseline_fraction of the frame's median depth and the rotation
+  // over reference_max_rotation_deg; a new reference frame is taken only when no kept frame is
+  // within 1 of the camera, so a camera that comes back registers to the frames it took before
+  // instead of adding drift with new ones.
+  int local_map_frames = 4;
+  // Reference frames kept at most (the oldest is dropped).
+  int max_kept_frames = 100;
 
   // The tracker's defaults with polarity off.
   static tracking::TrackerOptions DefaultTrackerOptions();
@@ -131,9 +144,10 @@ class CannyDevo {
   // Starts again (or for the first time) at t_ns at `world_from_cam`, moving with `velocity`
   // (body-frame twist per second), from a depth frame taken earlier, when the event camera was at
   // `world_from_cam_at_depth` (the depth is warped into the camera at t_ns through both poses and
-  // the extrinsic); the semi-dense region is the time surface's at t_ns with `decay_time_s`.
-  // Every event up to t_ns must have been given. Returns false (and stays stopped) when the
-  // reference map has fewer than min_reference_points points. Used by the hand-over from a map.
+  // the extrinsic); the semi-dense region is the time surface's at t_ns with `decay_time_s`. The
+  // kept reference frames are forgotten. Every event up to t_ns must have been given. Returns
+  // false (and stays stopped) when the reference map has fewer than min_reference_points points.
+  // Used by the hand-over from a map.
   bool Restart(const Rigid3d& world_from_cam, int64_t t_ns, const Vector6d& velocity,
                const cv::Mat& depth_m, const Rigid3d& world_from_cam_at_depth, double decay_time_s);
   // Stops tracking: later events only prime the time surfaces again (until Start or Restart).
@@ -147,8 +161,10 @@ class CannyDevo {
   const std::vector<ReferenceFrameInfo>& reference_frames() const { return references_; }
   // The tracker (for inspection).
   const tracking::Tracker& tracker() const { return *tracker_; }
-  // The current reference map's points, in the event camera frame at the reference time.
+  // The newest reference frame's points, in the event camera frame at its time.
   const std::vector<ReferencePoint>& reference_points() const { return reference_points_; }
+  // The local map the tracker registers to (the nearest kept frames' points, in the world).
+  const tracking::MapSource& local_map() const { return source_; }
 
  private:
   // Builds the reference map of the depth frame at t_ns with the camera at world_from_cam;
@@ -171,6 +187,24 @@ class CannyDevo {
   bool has_step_ = false;
   std::vector<ReferencePoint> reference_points_;
   std::vector<ReferenceFrameInfo> references_;
+  // A reference frame kept for the local map: its pose, median depth and world points.
+  struct KeptFrame {
+    uint64_t id = 0;
+    Rigid3d world_from_cam;
+    double median_depth_m = 0;
+    std::vector<Eigen::Vector3f> positions;
+    std::vector<Eigen::Vector3f> gradients;
+  };
+  // How far the camera at world_from_cam is from a kept frame (<= 1: the frame covers it).
+  double Nearness(const KeptFrame& frame, const Rigid3d& world_from_cam) const;
+  // Makes the local map the union of the local_map_frames kept frames nearest world_from_cam
+  // (a new generation only when that set changed).
+  void UpdateLocalMap(const Rigid3d& world_from_cam);
+
+  std::vector<KeptFrame> kept_frames_;
+  uint64_t next_frame_id_ = 0;
+  // The ids of the frames in the local map, sorted.
+  std::vector<uint64_t> local_map_ids_;
 };
 
 }  // namespace evloc::odometry
