@@ -6,6 +6,7 @@
 #include <string>
 
 #include <Eigen/Dense>
+#include <opencv2/imgproc.hpp>
 
 #include "core/common/error.h"
 
@@ -50,14 +51,21 @@ std::vector<ReferencePoint> BuildReferenceMap(const Camera& event_camera, const 
   ReferenceMapStats local_stats;
   const int width = event_camera.width;
   const int height = event_camera.height;
-  // Warp every depth pixel into the event image; bucket the points by their nearest pixel.
+  // Warp every depth pixel into the event image; bucket the points by their nearest pixel. Only
+  // the points whose pixel lies within `reach` cells of a semi-dense pixel can be anyone's
+  // neighbour: the others are not kept (most of a VGA depth frame).
+  const int reach = static_cast<int>(std::ceil(options.neighbour_radius_px));
+  cv::Mat near_semi_dense;
+  cv::dilate(semi_dense, near_semi_dense,
+             cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * reach + 1, 2 * reach + 1)));
   struct Warped {
     float u;
     float v;
     float z;
+    int32_t cell;
   };
   std::vector<Warped> warped;
-  warped.reserve(static_cast<size_t>(depth_m.rows) * depth_m.cols);
+  warped.reserve(static_cast<size_t>(cv::countNonZero(near_semi_dense)) * 2);
   std::vector<int32_t> cell_count(static_cast<size_t>(width) * height + 1, 0);
   const Eigen::Matrix3d rotation = event_from_depth.RotationMatrix();
   const bool identity_intrinsics = depth_camera.model == CameraModel::kPinhole &&
@@ -77,12 +85,16 @@ std::vector<ReferencePoint> BuildReferenceMap(const Camera& event_camera, const 
       if (!(point.z() > options.min_depth_m)) continue;
       const double u = event_camera.fx * point.x() / point.z() + event_camera.cx;
       const double v = event_camera.fy * point.y() / point.z() + event_camera.cy;
-      const int cx = static_cast<int>(std::lround(u));
-      const int cy = static_cast<int>(std::lround(v));
-      if (cx < 0 || cy < 0 || cx >= width || cy >= height) continue;
+      // The nearest pixel (std::lround's, without its call): u + 0.5 > 0 here, so truncation
+      // rounds it down.
+      if (!(u > -0.5 && v > -0.5 && u < width - 0.5 && v < height - 0.5)) continue;
+      const int cx = static_cast<int>(u + 0.5);
+      const int cy = static_cast<int>(v + 0.5);
+      if (cx >= width || cy >= height || near_semi_dense.at<uint8_t>(cy, cx) == 0) continue;
+      const int32_t cell = cy * width + cx;
       warped.push_back(
-          {static_cast<float>(u), static_cast<float>(v), static_cast<float>(point.z())});
-      ++cell_count[static_cast<size_t>(cy) * width + cx + 1];
+          {static_cast<float>(u), static_cast<float>(v), static_cast<float>(point.z()), cell});
+      ++cell_count[static_cast<size_t>(cell) + 1];
     }
   }
   local_stats.warped_points = static_cast<int>(warped.size());
@@ -91,11 +103,8 @@ std::vector<ReferencePoint> BuildReferenceMap(const Camera& event_camera, const 
   std::vector<int32_t> cell_start(cell_count.begin(), cell_count.end());
   std::vector<int32_t> order(warped.size());
   for (size_t i = 0; i < warped.size(); ++i) {
-    const int cx = static_cast<int>(std::lround(warped[i].u));
-    const int cy = static_cast<int>(std::lround(warped[i].v));
-    order[cell_start[static_cast<size_t>(cy) * width + cx]++] = static_cast<int32_t>(i);
+    order[cell_start[static_cast<size_t>(warped[i].cell)]++] = static_cast<int32_t>(i);
   }
-  const int reach = static_cast<int>(std::ceil(options.neighbour_radius_px));
   const double radius_squared = options.neighbour_radius_px * options.neighbour_radius_px;
   const double tolerance = options.surround_tolerance_px;
   std::vector<ReferencePoint> points;

@@ -56,7 +56,8 @@ struct ReferencePoint {
 struct ReferenceMapStats {
   // Semi-dense pixels considered.
   int semi_dense_pixels = 0;
-  // Depth pixels warped into the event image.
+  // Depth pixels warped into the event image near the semi-dense region (within the neighbour
+  // radius of one of its pixels: the only ones that can give depth).
   int warped_points = 0;
   // Pixels without enough foreground neighbours (holes, disocclusions).
   int without_depth = 0;

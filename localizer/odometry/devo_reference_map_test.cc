@@ -83,7 +83,9 @@ TEST(BuildReferenceMap, OccludedDepthNeverLeaksAcrossThePanelsEdges) {
       BuildReferenceMap(scene.event_camera, semi_dense, scene.depth_camera, depth,
                         scene.event_from_depth, ReferenceMapOptions(), &stats);
   ASSERT_GT(points.size(), 500u);
-  EXPECT_EQ(stats.warped_points > 15000, true);
+  // Only the depth points that land near the semi-dense region are kept.
+  EXPECT_GT(stats.warped_points, static_cast<int>(points.size()));
+  EXPECT_LT(stats.warped_points, depth.rows * depth.cols);
   int panel = 0;
   int wall = 0;
   for (const ReferencePoint& point : points) {
@@ -140,6 +142,31 @@ TEST(BuildReferenceMap, InterpolatesASlantedPlaneExactlyThroughTheRay) {
   for (const ReferencePoint& point : points) {
     EXPECT_NEAR(point.position.z(), 2 + 0.5 * point.position.x(), 2e-5);
   }
+}
+
+TEST(BuildReferenceMap, APixelsDepthDependsOnlyOnTheDepthAroundIt) {
+  // Depth points far from every semi-dense pixel are dropped before the pixels gather their
+  // neighbours: a pixel alone in its mask must get exactly the depth it gets among all others.
+  const OcclusionScene scene;
+  const cv::Mat depth = scene.RenderDepth();
+  const cv::Mat semi_dense = scene.SemiDense();
+  const std::vector<ReferencePoint> all =
+      BuildReferenceMap(scene.event_camera, semi_dense, scene.depth_camera, depth,
+                        scene.event_from_depth, ReferenceMapOptions());
+  ASSERT_GT(all.size(), 500u);
+  int compared = 0;
+  for (size_t i = 0; i < all.size(); i += all.size() / 60) {
+    cv::Mat alone = cv::Mat::zeros(semi_dense.size(), CV_8UC1);
+    alone.at<uint8_t>(all[i].pixel.y(), all[i].pixel.x()) = 255;
+    const std::vector<ReferencePoint> one =
+        BuildReferenceMap(scene.event_camera, alone, scene.depth_camera, depth,
+                          scene.event_from_depth, ReferenceMapOptions());
+    ASSERT_EQ(one.size(), 1u) << "pixel " << all[i].pixel.transpose();
+    EXPECT_EQ(one[0].position, all[i].position) << "pixel " << all[i].pixel.transpose();
+    EXPECT_EQ(one[0].support, all[i].support);
+    ++compared;
+  }
+  EXPECT_GE(compared, 60);
 }
 
 TEST(BuildReferenceMap, RefusesBadInput) {
