@@ -1,10 +1,11 @@
 // Canny-DEVO (Zuo et al. 2022; docs/tracking.md, "Mapless odometry"): events tracked against a
-// local reference map built from one depth frame (devo_reference_map.h), on the semi-dense region
-// of the time surface at the depth frame's time. The events go to the map tracker of
-// localizer/tracking unchanged, through its public API; the reference map reaches it through the
-// MapSource seam (a new generation per reference frame). A new reference frame is taken from the
-// next depth frame once the baseline to the current one exceeds a fraction of its median depth,
-// or the rotation an angle.
+// local map of reference frames, each built from one depth frame (devo_reference_map.h) on the
+// semi-dense region of the time surface at the depth frame's time. The events go to the map
+// tracker of localizer/tracking unchanged, through its public API; the local map (the union of
+// the kept reference frames nearest the camera) reaches it through the MapSource seam (a new
+// generation whenever that set changes). A new reference frame is taken from the next depth frame
+// once no kept frame is near: every kept frame's baseline exceeds a fraction of its median depth,
+// or its rotation an angle.
 #pragma once
 
 #include <cstdint>
@@ -67,7 +68,7 @@ struct CannyDevoOptions {
   // Reference frames kept at most (the oldest is dropped).
   int max_kept_frames = 100;
 
-  // The tracker's defaults with polarity off.
+  // The tracker's defaults with polarity and occlusion culling off.
   static tracking::TrackerOptions DefaultTrackerOptions();
   // Throws InvalidArgumentError on a bad value.
   void Check() const;
@@ -133,12 +134,11 @@ class CannyDevo {
   void Start(const Rigid3d& world_from_cam, int64_t t_ns, const cv::Mat& depth_m);
 
   // A depth frame taken at t_ns (every event up to t_ns given, after Start): runs the steps due
-  // up to t_ns and returns them, then takes the frame as the new reference when the motion since
-  // the current one demands it and the tracker is TRACKING.
+  // up to t_ns and returns them, then, when the tracker is TRACKING, takes the frame as a new
+  // reference frame if no kept one is near, and makes the local map the nearest kept frames.
   std::vector<tracking::PoseEstimate> AddDepthFrame(int64_t t_ns, const cv::Mat& depth_m);
-  // The same without running steps: takes the frame as the new reference when the motion since
-  // the current one demands it and the tracker is TRACKING (the pose at t_ns: the last step's
-  // moved by the velocity). Every event up to t_ns must have been given.
+  // The same without running steps (the pose at t_ns: the last step's moved by the velocity).
+  // Every event up to t_ns must have been given.
   void ConsiderDepthFrame(int64_t t_ns, const cv::Mat& depth_m);
 
   // Starts again (or for the first time) at t_ns at `world_from_cam`, moving with `velocity`
