@@ -75,6 +75,52 @@ TEST_F(SimulatedOdometry, CannyVoTracksOneSecondWithinACentimetre) {
             << scores.ate_rotation_deg.rmse << " deg, coverage " << scores.coverage << "\n";
 }
 
+TEST(SimulatedOdometryWithADepthCamera, CannyVoRegistersTheDepthCamerasFramesToItsFrames) {
+  // The same second rendered with the depth-camera model (its own VGA intrinsics, 5 cm and 1
+  // degree off the frame camera, noise, holes, millimetres): VO reads that camera's frames,
+  // registered to the frames, instead of the exact depth.txt.
+  const std::filesystem::path folder =
+      std::filesystem::temp_directory_path() /
+      ("evloc_odometry_depth_camera_" + std::to_string(std::random_device{}()));
+  sim::RenderCommandOptions render;
+  render.out_dir = folder / "dataset";
+  render.camera_preset = "davis240";
+  render.motion = sim::MotionProfile::kMid;
+  render.duration_s = 1.0;
+  render.depth_camera = sim::DepthSensorOptions();
+  sim::RunRenderCommand(render);
+  const Dataset dataset = ReadDataset(folder / "dataset");
+  ASSERT_TRUE(dataset.depth_camera.has_value());
+  ASSERT_TRUE(dataset.ground_truth.has_value());
+  auto score = [&](bool use_depth_camera, odometry::VoRunResult* run) {
+    odometry::VoRunOptions options;
+    options.use_depth_camera = use_depth_camera;
+    *run = odometry::RunCannyVo(dataset, std::nullopt, dataset.ground_truth->start_ns(), options);
+    const std::filesystem::path out =
+        folder / (use_depth_camera ? "vo_depth_camera.txt" : "vo_depth_txt.txt");
+    WriteTumTrajectory(out, run->trajectory);
+    EvaluationOptions evaluation;
+    evaluation.alignment = Alignment::kNone;
+    return EvaluateTrajectory(*dataset.ground_truth, ReadTumTrajectory(out), evaluation);
+  };
+  odometry::VoRunResult with_camera;
+  odometry::VoRunResult with_exact;
+  const EvaluationResult camera_scores = score(true, &with_camera);
+  const EvaluationResult exact_scores = score(false, &with_exact);
+  std::filesystem::remove_all(folder);
+  std::cout << "Canny-VO with the depth camera: ATE " << camera_scores.ate_translation_cm.rmse
+            << " cm, " << camera_scores.ate_rotation_deg.rmse << " deg; with depth.txt "
+            << exact_scores.ate_translation_cm.rmse << " cm\n";
+  EXPECT_EQ(with_camera.untracked_frames, 0);
+  EXPECT_EQ(with_camera.steps.size(), 30u);
+  // The depth camera's frames were used: noise and holes change the poses.
+  ASSERT_EQ(with_camera.trajectory.size(), with_exact.trajectory.size());
+  EXPECT_NE(with_camera.trajectory.poses().back().world_from_cam.translation,
+            with_exact.trajectory.poses().back().world_from_cam.translation);
+  EXPECT_LT(camera_scores.ate_translation_cm.rmse, 1.0);
+  EXPECT_LT(camera_scores.ate_rotation_deg.rmse, 0.4);
+}
+
 TEST_F(SimulatedOdometry, CannyVoReadsTheSameSequenceInTheTumRgbdLayout) {
   // The rendered sequence rewritten as a TUM RGB-D folder: rgb.txt, depth in 1/5000 m listed
   // 7 ms after its frame (the association pairs them), the benchmark's header comments.

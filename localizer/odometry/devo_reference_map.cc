@@ -13,6 +13,60 @@
 
 namespace evloc::odometry {
 
+namespace {
+
+// Throws InvalidArgumentError, naming `who`, unless `depth_m` is CV_32FC1 of the depth camera's
+// size.
+void CheckDepthFrame(const char* who, const Camera& depth_camera, const cv::Mat& depth_m) {
+  if (depth_m.type() != CV_32FC1 || depth_m.cols != depth_camera.width ||
+      depth_m.rows != depth_camera.height) {
+    throw InvalidArgumentError(std::string(who) + ": the depth must be CV_32FC1 metres of " +
+                               std::to_string(depth_camera.width) + "x" +
+                               std::to_string(depth_camera.height));
+  }
+}
+
+// Warps every depth pixel of `depth_m` (CV_32FC1 metres of `depth_camera`, within the options'
+// depth range) into another camera: `project(point, &pixel)` maps a point of that camera's frame
+// (p = target_from_depth * p_depth) to its pixel, false when it has none. Calls
+// `visit(u, v, z, cx, cy)` for each point that lands on the width x height image, with its
+// nearest pixel (std::lround's, without its call).
+template <typename Project, typename Visit>
+void ForEachWarpedDepthPixel(const Camera& depth_camera, const cv::Mat& depth_m,
+                             const Rigid3d& target_from_depth, const ReferenceMapOptions& options,
+                             const Project& project, int width, int height, const Visit& visit) {
+  const Eigen::Matrix3d rotation = target_from_depth.RotationMatrix();
+  const bool pinhole = depth_camera.model == CameraModel::kPinhole;
+  for (int y = 0; y < depth_m.rows; ++y) {
+    const float* row = depth_m.ptr<float>(y);
+    for (int x = 0; x < depth_m.cols; ++x) {
+      const float z = row[x];
+      if (!(z >= options.min_depth_m && z <= options.max_depth_m)) continue;
+      Eigen::Vector3d ray;
+      if (pinhole) {
+        ray << (x - depth_camera.cx) / depth_camera.fx, (y - depth_camera.cy) / depth_camera.fy, 1;
+      } else if (!depth_camera.Unproject(Eigen::Vector2d(x, y), &ray)) {
+        continue;
+      }
+      const Eigen::Vector3d point =
+          rotation * (ray * (z / ray.z())) + target_from_depth.translation;
+      if (!(point.z() > options.min_depth_m)) continue;
+      Eigen::Vector2d pixel;
+      if (!project(point, &pixel)) continue;
+      const double u = pixel.x();
+      const double v = pixel.y();
+      // u + 0.5 > 0 here, so truncation rounds it down.
+      if (!(u > -0.5 && v > -0.5 && u < width - 0.5 && v < height - 0.5)) continue;
+      const int cx = static_cast<int>(u + 0.5);
+      const int cy = static_cast<int>(v + 0.5);
+      if (cx >= width || cy >= height) continue;
+      visit(u, v, point.z(), cx, cy);
+    }
+  }
+}
+
+}  // namespace
+
 void ReferenceMapOptions::Check() const {
   if (!(neighbour_radius_px >= 0.75) || !(neighbour_radius_px <= 5)) {
     throw InvalidArgumentError("ReferenceMapOptions: neighbour_radius_px must be in [0.75, 5]");
@@ -43,12 +97,7 @@ std::vector<ReferencePoint> BuildReferenceMap(const Camera& event_camera, const 
                                std::to_string(event_camera.width) + "x" +
                                std::to_string(event_camera.height));
   }
-  if (depth_m.type() != CV_32FC1 || depth_m.cols != depth_camera.width ||
-      depth_m.rows != depth_camera.height) {
-    throw InvalidArgumentError("BuildReferenceMap: the depth must be CV_32FC1 metres of " +
-                               std::to_string(depth_camera.width) + "x" +
-                               std::to_string(depth_camera.height));
-  }
+  CheckDepthFrame("BuildReferenceMap", depth_camera, depth_m);
   ReferenceMapStats local_stats;
   const int width = event_camera.width;
   const int height = event_camera.height;
@@ -68,36 +117,21 @@ std::vector<ReferencePoint> BuildReferenceMap(const Camera& event_camera, const 
   std::vector<Warped> warped;
   warped.reserve(static_cast<size_t>(cv::countNonZero(near_semi_dense)) * 2);
   std::vector<int32_t> cell_count(static_cast<size_t>(width) * height + 1, 0);
-  const Eigen::Matrix3d rotation = event_from_depth.RotationMatrix();
-  const bool identity_intrinsics = depth_camera.model == CameraModel::kPinhole &&
-                                   depth_camera.width == width && depth_camera.height == height;
-  for (int y = 0; y < depth_m.rows; ++y) {
-    const float* row = depth_m.ptr<float>(y);
-    for (int x = 0; x < depth_m.cols; ++x) {
-      const float z = row[x];
-      if (!(z >= options.min_depth_m && z <= options.max_depth_m)) continue;
-      Eigen::Vector3d ray;
-      if (identity_intrinsics) {
-        ray << (x - depth_camera.cx) / depth_camera.fx, (y - depth_camera.cy) / depth_camera.fy, 1;
-      } else if (!depth_camera.Unproject(Eigen::Vector2d(x, y), &ray)) {
-        continue;
-      }
-      const Eigen::Vector3d point = rotation * (ray * (z / ray.z())) + event_from_depth.translation;
-      if (!(point.z() > options.min_depth_m)) continue;
-      const double u = event_camera.fx * point.x() / point.z() + event_camera.cx;
-      const double v = event_camera.fy * point.y() / point.z() + event_camera.cy;
-      // The nearest pixel (std::lround's, without its call): u + 0.5 > 0 here, so truncation
-      // rounds it down.
-      if (!(u > -0.5 && v > -0.5 && u < width - 0.5 && v < height - 0.5)) continue;
-      const int cx = static_cast<int>(u + 0.5);
-      const int cy = static_cast<int>(v + 0.5);
-      if (cx >= width || cy >= height || near_semi_dense.at<uint8_t>(cy, cx) == 0) continue;
-      const int32_t cell = cy * width + cx;
-      warped.push_back(
-          {static_cast<float>(u), static_cast<float>(v), static_cast<float>(point.z()), cell});
-      ++cell_count[static_cast<size_t>(cell) + 1];
-    }
-  }
+  ForEachWarpedDepthPixel(
+      depth_camera, depth_m, event_from_depth, options,
+      [&](const Eigen::Vector3d& point, Eigen::Vector2d* pixel) {
+        *pixel = Eigen::Vector2d(event_camera.fx * point.x() / point.z() + event_camera.cx,
+                                 event_camera.fy * point.y() / point.z() + event_camera.cy);
+        return true;
+      },
+      width, height,
+      [&](double u, double v, double z, int cx, int cy) {
+        if (near_semi_dense.at<uint8_t>(cy, cx) == 0) return;
+        const int32_t cell = cy * width + cx;
+        warped.push_back(
+            {static_cast<float>(u), static_cast<float>(v), static_cast<float>(z), cell});
+        ++cell_count[static_cast<size_t>(cell) + 1];
+      });
   local_stats.warped_points = static_cast<int>(warped.size());
   // Counting sort of the points by cell.
   for (size_t i = 1; i < cell_count.size(); ++i) cell_count[i] += cell_count[i - 1];
@@ -196,6 +230,24 @@ std::vector<ReferencePoint> BuildReferenceMap(const Camera& event_camera, const 
   }
   if (stats != nullptr) *stats = local_stats;
   return points;
+}
+
+cv::Mat RegisterDepth(const Camera& camera, const Camera& depth_camera, const cv::Mat& depth_m,
+                      const Rigid3d& camera_from_depth, const ReferenceMapOptions& options) {
+  options.Check();
+  CheckDepthFrame("RegisterDepth", depth_camera, depth_m);
+  cv::Mat registered(camera.height, camera.width, CV_32FC1, cv::Scalar(0));
+  ForEachWarpedDepthPixel(
+      depth_camera, depth_m, camera_from_depth, options,
+      [&](const Eigen::Vector3d& point, Eigen::Vector2d* pixel) {
+        return camera.Project(point, pixel);
+      },
+      camera.width, camera.height,
+      [&](double, double, double z, int cx, int cy) {
+        float& depth = registered.at<float>(cy, cx);
+        if (depth == 0 || z < depth) depth = static_cast<float>(z);
+      });
+  return registered;
 }
 
 }  // namespace evloc::odometry

@@ -74,4 +74,12 @@ std::vector<ReferencePoint> BuildReferenceMap(const Camera& event_camera, const 
                                               const ReferenceMapOptions& options,
                                               ReferenceMapStats* stats = nullptr);
 
+// The depth frame `depth_m` (CV_32FC1 metres of `depth_camera`, 0 = none) seen from `camera`:
+// every depth pixel within the options' depth range warped through `camera_from_depth` and
+// projected with `camera`'s model; each pixel of the result (CV_32FC1 metres, camera's size) keeps
+// the nearest depth that lands on it (a z-buffer), 0 where none does. Canny-VO's depth when the
+// depth camera is not the frame camera. Throws InvalidArgumentError for a mismatched depth frame.
+cv::Mat RegisterDepth(const Camera& camera, const Camera& depth_camera, const cv::Mat& depth_m,
+                      const Rigid3d& camera_from_depth, const ReferenceMapOptions& options);
+
 }  // namespace evloc::odometry

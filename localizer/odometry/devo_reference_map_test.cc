@@ -169,6 +169,40 @@ TEST(BuildReferenceMap, APixelsDepthDependsOnlyOnTheDepthAroundIt) {
   EXPECT_GE(compared, 60);
 }
 
+TEST(RegisterDepth, KeepsTheNearestSurfaceAndNeverTheOneBehindIt) {
+  // The depth camera's frame seen from the event camera, 8 cm to the side: every pixel that
+  // receives depth gets its own surface's (panel or wall), except a thin seam beside the panel's
+  // outline where a panel point rounds onto a wall pixel; never the wall behind the panel.
+  const OcclusionScene scene;
+  const cv::Mat registered =
+      RegisterDepth(scene.event_camera, scene.depth_camera, scene.RenderDepth(),
+                    scene.event_from_depth, ReferenceMapOptions());
+  ASSERT_EQ(registered.type(), CV_32FC1);
+  ASSERT_EQ(registered.cols, scene.event_camera.width);
+  ASSERT_EQ(registered.rows, scene.event_camera.height);
+  int covered = 0;
+  int exact = 0;
+  int panel_pixels = 0;
+  for (int y = 0; y < registered.rows; ++y) {
+    for (int x = 0; x < registered.cols; ++x) {
+      bool on_panel;
+      const double truth = scene.TrueDepth(x, y, &on_panel);
+      const float depth = registered.at<float>(y, x);
+      if (on_panel) ++panel_pixels;
+      if (depth == 0) continue;
+      ++covered;
+      EXPECT_LE(depth, truth * (1 + 1e-3)) << "pixel " << x << ", " << y << " sees behind";
+      if (std::abs(depth - truth) <= 1e-3 * truth) ++exact;
+    }
+  }
+  const int pixels = registered.rows * registered.cols;
+  // Holes: the strip of wall the depth camera cannot see beside the panel, and the image border
+  // the depth camera does not cover.
+  EXPECT_GT(covered, pixels * 85 / 100);
+  EXPECT_GT(exact, covered * 98 / 100);
+  EXPECT_GT(panel_pixels, 1000);
+}
+
 TEST(BuildReferenceMap, RefusesBadInput) {
   const Camera camera = Camera::Pinhole(16, 12, 20, 20, 7.5, 5.5);
   const cv::Mat depth(12, 16, CV_32FC1, cv::Scalar(1));

@@ -8,6 +8,7 @@
 #include "core/common/error.h"
 #include "core/dataset/tum_rgbd.h"
 #include "core/events/event_reader.h"
+#include "localizer/odometry/devo_reference_map.h"
 
 namespace evloc::odometry {
 
@@ -45,13 +46,20 @@ VoRunResult RunCannyVo(const Dataset& dataset, const std::optional<Rigid3d>& ini
                        const std::function<void(const VoEstimate&)>& on_step) {
   options.Check();
   const auto start = std::chrono::steady_clock::now();
-  if (dataset.images.empty() || dataset.depth.empty()) {
+  // A depth camera of its own is preferred to depth.txt (a simulator's depth registered to the
+  // frames: exact); its frames are registered to the frame camera, which is the dataset's camera.
+  const bool own_depth_camera = options.use_depth_camera && dataset.depth_camera.has_value() &&
+                                !dataset.depth_camera->frames.empty();
+  const std::vector<TimedFile>& depth_files =
+      own_depth_camera ? dataset.depth_camera->frames : dataset.depth;
+  if (dataset.images.empty() || depth_files.empty()) {
     throw InvalidArgumentError("dataset '" + dataset.root.string() +
                                "' needs images and depth maps for Canny-VO (images.txt and "
-                               "depth.txt, or rgb.txt and depth.txt in the TUM RGB-D layout)");
+                               "depth.txt or a depth camera, or rgb.txt and depth.txt in the TUM "
+                               "RGB-D layout)");
   }
   const std::vector<TimeAssociation> pairs =
-      AssociateByTime(dataset.images, dataset.depth, options.association_tolerance_ns);
+      AssociateByTime(dataset.images, depth_files, options.association_tolerance_ns);
   CannyVo vo(dataset.camera, options.vo);
   VoRunResult result;
   bool started = false;
@@ -65,7 +73,12 @@ VoRunResult RunCannyVo(const Dataset& dataset, const std::optional<Rigid3d>& ini
     cv::Mat gray;
     ReadGrayImage(image.path).convertTo(gray, CV_8UC1, 255.0);
     const cv::Mat depth =
-        ReadDepthPng(dataset.depth[pair.second].path, dataset.depth_units_per_metre);
+        own_depth_camera
+            ? RegisterDepth(dataset.camera, dataset.depth_camera->camera,
+                            ReadDepthPng(depth_files[pair.second].path,
+                                         dataset.depth_camera->units_per_metre),
+                            dataset.depth_camera->event_from_depth, ReferenceMapOptions())
+            : ReadDepthPng(depth_files[pair.second].path, dataset.depth_units_per_metre);
     if (gray.cols != dataset.camera.width || gray.rows != dataset.camera.height ||
         depth.cols != dataset.camera.width || depth.rows != dataset.camera.height) {
       throw InvalidArgumentError("dataset '" + dataset.root.string() + "': image '" +

@@ -34,6 +34,10 @@ struct VoRunOptions {
   // Colour and depth frames further apart than this are not paired, nanoseconds (TUM RGB-D; in
   // the evloc layout depth is at the frame times).
   int64_t association_tolerance_ns = kTumAssociationToleranceNs;
+  // With a depth camera of its own (depth_camchain.yaml, depth_camera.txt) the dataset's depth is
+  // that camera's frames, registered to the frame camera (RegisterDepth; the frames are the
+  // dataset camera's, as a DAVIS's), paired with the frames by time; false: depth.txt.
+  bool use_depth_camera = true;
 
   // Throws InvalidArgumentError on a bad value.
   void Check() const;
