@@ -144,20 +144,10 @@ ReferenceFrameInfo CannyDevo::BuildReference(const Rigid3d& world_from_cam, int6
   tracking::SurfaceDecay decay;
   decay.decay_time_ns = decay_time_s * 1e9;
   decay.empty_threshold = options_.mapping_empty_threshold;
-  cv::Mat semi_dense = mapping_surface_.ActiveMask(tracking::SurfaceChannel::kAll, t_ns, decay);
-  // The surface's values, computed only for the pixels young enough to be active (the others are
-  // 0 without a logarithm and an exponential each: the same values in a fraction of the time).
-  cv::Mat values(semi_dense.size(), CV_32FC1, cv::Scalar(0));
-  const int64_t* last_t_ns = mapping_surface_.LastTimestamps(tracking::SurfaceChannel::kAll);
-  const int64_t max_active_age_ns = decay.MaxActiveAgeNs();
-  for (int y = 0; y < values.rows; ++y) {
-    float* row = values.ptr<float>(y);
-    const int64_t* last_row = last_t_ns + static_cast<size_t>(y) * values.cols;
-    for (int x = 0; x < values.cols; ++x) {
-      if (last_row[x] == tracking::kNeverFired || t_ns - last_row[x] > max_active_age_ns) continue;
-      row[x] = static_cast<float>(decay.Value(last_row[x], t_ns));
-    }
-  }
+  // The surface's values, and its active pixels (T > delta) as the semi-dense region.
+  const cv::Mat values = mapping_surface_.Values(tracking::SurfaceChannel::kAll, t_ns, decay);
+  cv::Mat semi_dense;
+  cv::compare(values, 0.0, semi_dense, cv::CMP_GT);
   cv::Mat gradient_x;
   cv::Mat gradient_y;
   cv::Sobel(values, gradient_x, CV_32F, 1, 0, 3);

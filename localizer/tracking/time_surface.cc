@@ -99,21 +99,28 @@ void TimeSurface::Insert(const EventBuffer& events, size_t begin, size_t end) {
   num_stored_ += static_cast<int64_t>(end - begin) - dropped;
 }
 
-cv::Mat TimeSurface::ActiveMask(SurfaceChannel channel, int64_t t_ns,
-                                const SurfaceDecay& decay) const {
-  cv::Mat mask(height_, width_, CV_8UC1);
+cv::Mat TimeSurface::Values(SurfaceChannel channel, int64_t t_ns, const SurfaceDecay& decay) const {
+  cv::Mat values(height_, width_, CV_32FC1, cv::Scalar(0));
   const int64_t* last = last_t_ns_[static_cast<int>(channel)].data();
-  // A pixel is active when T > delta; the age test rejects most pixels without an exp.
+  // The age test rejects most pixels without a logarithm and an exp each (Value's own bound).
   const int64_t max_age_ns = decay.MaxActiveAgeNs();
   for (int y = 0; y < height_; ++y) {
-    uint8_t* row = mask.ptr<uint8_t>(y);
+    float* row = values.ptr<float>(y);
     const int64_t* last_row = last + static_cast<size_t>(y) * width_;
     for (int x = 0; x < width_; ++x) {
       const int64_t last_t = last_row[x];
-      const bool maybe_active = last_t != kNeverFired && t_ns - last_t <= max_age_ns;
-      row[x] = (maybe_active && decay.Value(last_t, t_ns) > 0) ? 255 : 0;
+      if (last_t == kNeverFired || t_ns - last_t > max_age_ns) continue;
+      row[x] = static_cast<float>(decay.Value(last_t, t_ns));
     }
   }
+  return values;
+}
+
+cv::Mat TimeSurface::ActiveMask(SurfaceChannel channel, int64_t t_ns,
+                                const SurfaceDecay& decay) const {
+  // Value is 0 or above the threshold (> 0), so a stored value is positive exactly when active.
+  cv::Mat mask;
+  cv::compare(Values(channel, t_ns, decay), 0.0, mask, cv::CMP_GT);
   return mask;
 }
 

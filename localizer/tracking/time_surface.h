@@ -120,7 +120,10 @@ class TimeSurface {
   // Number of inserted events that were stored.
   int64_t num_stored() const { return num_stored_; }
 
-  // The binary mask (CV_8UC1, 255 = active) of pixels of `channel` with T(x, t_ns) > threshold.
+  // T(x, t_ns) of every ideal pixel of `channel` (CV_32FC1, SurfaceDecay::Value: 0 when empty).
+  cv::Mat Values(SurfaceChannel channel, int64_t t_ns, const SurfaceDecay& decay) const;
+  // The binary mask (CV_8UC1, 255 = active) of pixels of `channel` with T(x, t_ns) > threshold:
+  // Values > 0.
   cv::Mat ActiveMask(SurfaceChannel channel, int64_t t_ns, const SurfaceDecay& decay) const;
 
  private:
