@@ -91,6 +91,18 @@ TEST(TimeSurface, FieldIsOneMinusExponentialDecayWithEmptyThreshold) {
   EXPECT_EQ(mask.at<uint8_t>(2, 4), 255);
   EXPECT_EQ(mask.at<uint8_t>(2, 8), 255);
   EXPECT_EQ(cv::countNonZero(mask), 3);
+  // The values behind it: each pixel's SurfaceDecay::Value, 0 where empty or never fired.
+  const cv::Mat values = surface.Values(SurfaceChannel::kAll, t_ns, decay);
+  ASSERT_EQ(values.type(), CV_32FC1);
+  for (int y = 0; y < values.rows; ++y) {
+    for (int x = 0; x < values.cols; ++x) {
+      EXPECT_EQ(
+          values.at<float>(y, x),
+          static_cast<float>(decay.Value(surface.LastTimestamp(SurfaceChannel::kAll, x, y), t_ns)))
+          << x << ", " << y;
+      EXPECT_EQ(values.at<float>(y, x) > 0, mask.at<uint8_t>(y, x) == 255) << x << ", " << y;
+    }
+  }
 }
 
 // The table-and-polynomial exponential of the lazy field agrees with std::exp to 1e-10 relative
