@@ -271,6 +271,16 @@ void SiteManifest::Check() const {
   }
 }
 
+std::optional<GeoAnchor> SiteGeoAnchor(const SiteManifest& manifest) {
+  if (manifest.geo_anchor.empty()) return std::nullopt;
+  const std::string what = "site '" + manifest.name + "': the manifest's geo anchor";
+  pb::GeoAnchor anchor;
+  if (!anchor.ParseFromString(manifest.geo_anchor)) {
+    throw InvalidArgumentError(what + " is not a valid GeoAnchor message");
+  }
+  return GeoAnchorFromProto(anchor, what);
+}
+
 MapInfo SummarizeSite(const SiteManifest& manifest) {
   MapInfo info;
   info.format_version = manifest.format_version;
@@ -283,6 +293,7 @@ MapInfo SummarizeSite(const SiteManifest& manifest) {
     info.bounding_box_max = t == 0 ? tile.box_max : info.bounding_box_max.cwiseMax(tile.box_max);
   }
   info.provenance = manifest.provenance;
+  info.geo_anchor = SiteGeoAnchor(manifest);
   return info;
 }
 

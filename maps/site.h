@@ -126,10 +126,15 @@ struct SiteManifest {
   void Check() const;
 };
 
+// The site's geo anchor (the manifest's serialized GeoAnchor, decoded and checked), or nullopt
+// when it has none. Throws InvalidArgumentError naming the site when the stored anchor is not a
+// valid GeoAnchor.
+std::optional<GeoAnchor> SiteGeoAnchor(const SiteManifest& manifest);
+
 // What describes a site as a map (the service's ListMaps): its unique points (the tiles' core
 // points), keyframes (each once: by camera centre), the union of the tiles' bounding boxes, the
 // site version's number as the content checksum, has_relocalization false (not summarised per
-// tile); format_version is the manifest's.
+// tile), the geo anchor (SiteGeoAnchor: throws like it); format_version is the manifest's.
 MapInfo SummarizeSite(const SiteManifest& manifest);
 
 // The version of a site with these tiles: CRC32C over each tile's ix, iy (i32) and content

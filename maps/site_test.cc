@@ -197,6 +197,30 @@ TEST_F(SiteTest, TheMapsGeoAnchorGoesIntoTheManifestAndEveryTile) {
     ASSERT_TRUE(tile.geo_anchor.has_value()) << "tile " << t;
     EXPECT_EQ(tile.geo_anchor->origin.altitude_m, 372.5);
   }
+  // SiteGeoAnchor decodes it for the site's users (the service, evloc-track --geo).
+  const std::optional<GeoAnchor> decoded = SiteGeoAnchor(ReadSiteManifest(root_ / "anchored"));
+  ASSERT_TRUE(decoded.has_value());
+  EXPECT_EQ(decoded->origin.latitude_deg, 46.5191);
+  EXPECT_EQ(decoded->origin.longitude_deg, 6.5668);
+  EXPECT_EQ(decoded->horizontal_sigma_m, 0.02);
+  EXPECT_FALSE(SiteGeoAnchor(manifest_).has_value());
+}
+
+// A stored anchor that does not decode, or decodes outside GeoAnchor's domain, is a named error.
+TEST_F(SiteTest, SiteGeoAnchorRefusesAnInvalidStoredAnchor) {
+  SiteManifest manifest = manifest_;
+  manifest.geo_anchor = "\xff\xff not a message";
+  try {
+    SiteGeoAnchor(manifest);
+    ADD_FAILURE() << "an undecodable anchor was accepted";
+  } catch (const InvalidArgumentError& error) {
+    EXPECT_NE(std::string(error.what()).find("the manifest's geo anchor"), std::string::npos)
+        << error.what();
+  }
+  map_format::GeoAnchor out_of_range;
+  out_of_range.set_latitude_deg(123.0);
+  manifest.geo_anchor = out_of_range.SerializeAsString();
+  EXPECT_THROW(SiteGeoAnchor(manifest), InvalidArgumentError);
 }
 
 TEST_F(SiteTest, DamagedManifestsAreRefusedWithTheirPosition) {

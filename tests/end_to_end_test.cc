@@ -178,49 +178,68 @@ TEST(GeoEndToEnd, PosesInWgs84AreWithinATenthOfAMetreOfTheTruth) {
     return Eigen::Vector3d(v.x() * std::cos(h) + v.y() * std::sin(h),
                            -v.x() * std::sin(h) + v.y() * std::cos(h), v.z());
   };
-  std::ifstream geo(directory / "geo.txt");
-  std::string line;
-  int poses = 0;
-  double sum_squared = 0.0, worst = 0.0, worst_heading = 0.0;
-  while (std::getline(geo, line)) {
-    if (line.empty() || line[0] == '#') continue;
-    std::istringstream fields(line);
-    double t_s, latitude, longitude, altitude, heading, pitch, east, north, up;
-    ASSERT_TRUE(fields >> t_s >> latitude >> longitude >> altitude >> heading >> pitch >> east >>
-                north >> up)
-        << line;
-    const auto world_from_cam = truth.Lookup(std::llround(t_s * 1e9));
-    ASSERT_TRUE(world_from_cam.has_value()) << line;
-    const Eigen::Vector3d centre = to_enu(world_from_cam->translation);
-    double true_latitude, true_longitude, true_altitude;
-    enu.Reverse(centre.x(), centre.y(), centre.z(), true_latitude, true_longitude, true_altitude);
-    double horizontal = 0.0;
-    GeographicLib::Geodesic::WGS84().Inverse(true_latitude, true_longitude, latitude, longitude,
-                                             horizontal);
-    const double error = std::hypot(horizontal, altitude - true_altitude);
-    sum_squared += error * error;
-    worst = std::max(worst, error);
-    // The heading of the true optical axis (the local north differs from the anchor's by 1e-7
-    // degrees over the room's metres).
-    const Eigen::Vector3d axis = to_enu(world_from_cam->rotation * Eigen::Vector3d::UnitZ());
-    double true_heading = std::atan2(axis.x(), axis.y()) * 180.0 / M_PI;
-    if (true_heading < 0) true_heading += 360.0;
-    double heading_error = std::abs(heading - true_heading);
-    heading_error = std::min(heading_error, 360.0 - heading_error);
-    worst_heading = std::max(worst_heading, heading_error);
-    ++poses;
-  }
-  ASSERT_GT(poses, 250);
-  const double rms = std::sqrt(sum_squared / poses);
-  std::printf(
-      "geo end to end: %d poses, WGS84 position error RMS %.4f m, max %.4f m; heading "
-      "error max %.3f deg\n",
-      poses, rms, worst, worst_heading);
-  RecordProperty("poses", poses);
-  RecordProperty("rms_m", std::to_string(rms));
-  RecordProperty("max_m", std::to_string(worst));
-  EXPECT_LT(worst, 0.1);
-  EXPECT_LT(worst_heading, 1.0);
+  // Scores one --geo file against the truth.
+  const auto score = [&](const fs::path& path, const char* what) {
+    std::ifstream geo(path);
+    std::string line;
+    int poses = 0;
+    double sum_squared = 0.0, worst = 0.0, worst_heading = 0.0;
+    while (std::getline(geo, line)) {
+      if (line.empty() || line[0] == '#') continue;
+      std::istringstream fields(line);
+      double t_s, latitude, longitude, altitude, heading, pitch, east, north, up;
+      ASSERT_TRUE(fields >> t_s >> latitude >> longitude >> altitude >> heading >> pitch >> east >>
+                  north >> up)
+          << line;
+      const auto world_from_cam = truth.Lookup(std::llround(t_s * 1e9));
+      ASSERT_TRUE(world_from_cam.has_value()) << line;
+      const Eigen::Vector3d centre = to_enu(world_from_cam->translation);
+      double true_latitude, true_longitude, true_altitude;
+      enu.Reverse(centre.x(), centre.y(), centre.z(), true_latitude, true_longitude, true_altitude);
+      double horizontal = 0.0;
+      GeographicLib::Geodesic::WGS84().Inverse(true_latitude, true_longitude, latitude, longitude,
+                                               horizontal);
+      const double error = std::hypot(horizontal, altitude - true_altitude);
+      sum_squared += error * error;
+      worst = std::max(worst, error);
+      // The heading of the true optical axis (the local north differs from the anchor's by 1e-7
+      // degrees over the room's metres).
+      const Eigen::Vector3d axis = to_enu(world_from_cam->rotation * Eigen::Vector3d::UnitZ());
+      double true_heading = std::atan2(axis.x(), axis.y()) * 180.0 / M_PI;
+      if (true_heading < 0) true_heading += 360.0;
+      double heading_error = std::abs(heading - true_heading);
+      heading_error = std::min(heading_error, 360.0 - heading_error);
+      worst_heading = std::max(worst_heading, heading_error);
+      ++poses;
+    }
+    ASSERT_GT(poses, 250) << what;
+    const double rms = std::sqrt(sum_squared / poses);
+    std::printf(
+        "geo end to end (%s): %d poses, WGS84 position error RMS %.4f m, max %.4f m; heading "
+        "error max %.3f deg\n",
+        what, poses, rms, worst, worst_heading);
+    RecordProperty(std::string(what) + "_poses", poses);
+    RecordProperty(std::string(what) + "_rms_m", std::to_string(rms));
+    RecordProperty(std::string(what) + "_max_m", std::to_string(worst));
+    EXPECT_LT(worst, 0.1) << what;
+    EXPECT_LT(worst_heading, 1.0) << what;
+  };
+  score(directory / "geo.txt", "map");
+
+  // The same map served as a site of tiles: the manifest carries the anchor, so --geo works on
+  // the site too (0.5 m tiles, composed 1.5 m around the camera and 2 m ahead on its axis: the
+  // room's walls are 2 m away).
+  const fs::path site = directory / "site";
+  run = RunCommand(std::string(EVLOC_MAPPER_BINARY) + " tile --map " + map.string() + " --out " +
+                   site.string() + " --tile-size 0.5 --overlap 0.2");
+  ASSERT_EQ(run.exit_code, 0) << run.output;
+  run =
+      RunCommand(std::string(EVLOC_TRACK_BINARY) + " --map " + site.string() + " --dataset " +
+                 dataset.string() + " --quiet --out " + (directory / "site_estimate.txt").string() +
+                 " --geo " + (directory / "site_geo.txt").string() +
+                 " --tile-radius 1.5 --tile-view-distance 2");
+  ASSERT_EQ(run.exit_code, 0) << run.output;
+  score(directory / "site_geo.txt", "site");
   fs::remove_all(directory);
 }
 

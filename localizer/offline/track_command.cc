@@ -194,6 +194,10 @@ OfflineTrackingResult RunSiteTrack(const TrackCommandOptions& options, const Dat
   TileSelectionOptions selection = options.tiles;
   selection.synchronous = true;
   TiledMapSource source(OpenSite(options.map_path), cache, selection);
+  const std::optional<GeoAnchor> anchor = SiteGeoAnchor(source.site().manifest);
+  if (options.geo_path && !anchor) {
+    throw InvalidArgumentError(MissingGeoAnchorMessage(options.map_path.string()));
+  }
   source.LoadNow(*initial_world_from_cam);
   if (!options.quiet) {
     log << "evloc-track: site " << source.site().manifest.name << " version "
@@ -207,7 +211,7 @@ OfflineTrackingResult RunSiteTrack(const TrackCommandOptions& options, const Dat
   OfflineTrackingResult result = TrackEventStream(
       *reader, source, dataset.camera, initial_world_from_cam, initial_t_ns, tracking, {},
       [&](const Tracker& tracker) { compositions += source.Follow(tracker) ? 1 : 0; });
-  WriteTrackOutputs(options, tracking.tracker.VariantName(), "events", result, log);
+  WriteTrackOutputs(options, tracking.tracker.VariantName(), "events", result, log, anchor);
   if (!options.quiet) {
     const TileCacheStats stats = cache->stats();
     log << "evloc-track: tiles: " << stats.loads << " loaded, " << stats.evictions << " evicted, "

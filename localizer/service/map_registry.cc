@@ -174,6 +174,8 @@ std::shared_ptr<const LoadedMap> MapRegistry::LoadVersion(const std::string& nam
       loaded->site = OpenSite(options_.maps_dir / name);
       loaded->tiles = tiles_;
       loaded->info = SummarizeSite(loaded->site->manifest);
+      // Its sessions report geodetic poses and take GNSS fixes through the site's anchor.
+      loaded->map.geo_anchor = loaded->info.geo_anchor;
       loaded->content_crc32c = loaded->info.content_crc32c;
       loaded->version = loaded->site->manifest.version;
       // The manifest; the tiles count against the tile cache's budget.

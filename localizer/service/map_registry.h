@@ -70,7 +70,7 @@ struct LoadedMap {
   // Visibility index built on `map` (null for a site).
   std::unique_ptr<VisibilityIndex> visibility;
   // For a site: the site (its manifest) and the tile cache its sessions take tiles from; `map`
-  // is then empty and `file_bytes`, `file_time` are the manifest's.
+  // is then empty but for the site's geo anchor and `file_bytes`, `file_time` are the manifest's.
   std::shared_ptr<const Site> site;
   std::shared_ptr<TileCache> tiles;
   // Estimated memory of the map and its index, bytes (what counts against the cache budget).
