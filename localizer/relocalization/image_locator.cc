@@ -1,8 +1,15 @@
 #include "localizer/relocalization/image_locator.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <cstdint>
+#include <cstdlib>
+#include <functional>
+#include <map>
+#include <set>
 #include <sstream>
+#include <tuple>
 #include <unordered_map>
 #include <vector>
 
@@ -11,14 +18,6 @@
 
 namespace evloc::relocalization {
 namespace {
-
-// The keyframe's landmark features as a features::Features (keypoints and descriptors only).
-features::Features KeyframeAsFeatures(const KeyframeFeatures& keyframe) {
-  features::Features result;
-  result.keypoints = keyframe.keypoints;
-  result.descriptors = keyframe.descriptors;
-  return result;
-}
 
 // Throws InvalidArgumentError unless the relocalization data fits the map and the descriptors.
 void CheckRelocalizationData(const Map& map, const RelocalizationData& data) {
@@ -83,6 +82,9 @@ void LocateOptions::Check() const {
   pose.Check();
   verification.Check();
   if (top_k < 1) throw InvalidArgumentError("LocateOptions: top_k must be at least 1");
+  if (max_site_tiles < 1) {
+    throw InvalidArgumentError("LocateOptions: max_site_tiles must be at least 1");
+  }
   if (search_center && (!search_center->allFinite() || !(search_radius_m > 0.0) ||
                         !std::isfinite(search_radius_m))) {
     throw InvalidArgumentError(
@@ -110,14 +112,10 @@ LocateResult LocateImage(const Map& map, const Camera& query_camera, const cv::M
   return LocateImage(map, visibility, query_camera, gray, options);
 }
 
-LocateResult LocateImage(const Map& map, const VisibilityIndex& visibility,
-                         const Camera& query_camera, const cv::Mat& gray,
-                         const LocateOptions& options) {
-  options.Check();
-  query_camera.Check();
-  if (!map.relocalization) throw InvalidArgumentError(kNoRelocalizationDataMessage);
-  const RelocalizationData& data = *map.relocalization;
-  CheckRelocalizationData(map, data);
+namespace {
+
+// Throws InvalidArgumentError unless `gray` is an 8-bit grey image of the camera's size.
+void CheckQueryImage(const Camera& query_camera, const cv::Mat& gray) {
   if (gray.type() != CV_8UC1 || gray.cols != query_camera.width ||
       gray.rows != query_camera.height) {
     std::ostringstream message;
@@ -126,54 +124,95 @@ LocateResult LocateImage(const Map& map, const VisibilityIndex& visibility,
             << gray.channels() << " channel(s) of type " << gray.depth();
     throw InvalidArgumentError(message.str());
   }
+}
 
-  LocateResult result;
-  if (map.keyframes.empty()) {
-    result.reason = "the map has no keyframes";
-    return result;
+// The vocabulary of relocalization data (CheckRelocalizationData checked its size).
+features::Vocabulary VocabularyOf(const RelocalizationData& data) {
+  const int dimension = static_cast<int>(kRelocalizationDescriptorBytes);
+  return features::Vocabulary::FromVector(static_cast<int>(data.vocabulary.size()) / dimension,
+                                          dimension, data.vocabulary);
+}
+
+// A keyframe retrieval may return: its global descriptor, and its landmark features from every
+// copy searched (a whole map holds one; each tile of a site keeps the features of the keyframe
+// that see the tile's landmarks).
+struct SearchedKeyframe {
+  const std::vector<float>* global_descriptor = nullptr;
+  // Per copy: the features and the landmark positions their indices refer to.
+  std::vector<std::pair<const KeyframeFeatures*, const std::vector<Eigen::Vector3f>*>> copies;
+  // What LocateResult reports of it: its index among its map's (or owning tile's) keyframes, and
+  // the tile's position in the site manifest (-1 for a whole map).
+  int keyframe = 0;
+  int tile = -1;
+};
+
+// One frame-tracker step from a PnP pose against the map's edges.
+using VerificationStep =
+    std::function<std::optional<tracking::PoseEstimate>(const Rigid3d& world_from_cam)>;
+
+// The keyframe's features pooled over its copies, each (keypoint, landmark) once in the order
+// met, and the position of the landmark each one sees.
+void PoolCopies(const SearchedKeyframe& keyframe, features::Features* pooled,
+                std::vector<Eigen::Vector3f>* landmarks) {
+  std::set<std::array<float, 5>> seen;
+  for (const auto& [features, positions] : keyframe.copies) {
+    for (size_t f = 0; f < features->keypoints.size(); ++f) {
+      const Eigen::Vector2f& keypoint = features->keypoints[f];
+      const Eigen::Vector3f& landmark = (*positions)[features->landmarks[f]];
+      if (keyframe.copies.size() > 1 &&
+          !seen.insert({keypoint.x(), keypoint.y(), landmark.x(), landmark.y(), landmark.z()})
+               .second) {
+        continue;
+      }
+      pooled->keypoints.push_back(keypoint);
+      pooled->descriptors.insert(
+          pooled->descriptors.end(),
+          features->descriptors.begin() +
+              static_cast<std::ptrdiff_t>(f * kRelocalizationDescriptorBytes),
+          features->descriptors.begin() +
+              static_cast<std::ptrdiff_t>((f + 1) * kRelocalizationDescriptorBytes));
+      landmarks->push_back(landmark);
+    }
   }
+}
+
+// Retrieval among `keyframes` (not empty), matching, absolute pose and verification by `verify`.
+LocateResult LocateAmong(const std::vector<SearchedKeyframe>& keyframes,
+                         const features::Vocabulary& vocabulary, const Camera& query_camera,
+                         const cv::Mat& gray, const LocateOptions& options,
+                         const VerificationStep& verify) {
+  LocateResult result;
   // Retrieval.
   const features::Features query = features::ExtractFeatures(gray, options.features);
-  const int dimension = static_cast<int>(kRelocalizationDescriptorBytes);
-  const features::Vocabulary vocabulary = features::Vocabulary::FromVector(
-      static_cast<int>(data.vocabulary.size()) / dimension, dimension, data.vocabulary);
-  // The keyframes retrieval may return: all, or those within the search prior's radius.
   std::vector<std::vector<float>> database;
-  std::vector<int> database_keyframes;
-  database.reserve(data.keyframes.size());
-  for (size_t k = 0; k < data.keyframes.size(); ++k) {
-    if (options.search_center &&
-        (map.keyframes[k].cam_from_world.Inverse().translation - *options.search_center).norm() >
-            options.search_radius_m) {
-      continue;
-    }
-    database.push_back(data.keyframes[k].global_descriptor);
-    database_keyframes.push_back(static_cast<int>(k));
+  database.reserve(keyframes.size());
+  for (const SearchedKeyframe& keyframe : keyframes) {
+    database.push_back(*keyframe.global_descriptor);
   }
-  if (database.empty()) {
-    result.reason = "no keyframe of the map lies within " +
-                    std::to_string(options.search_radius_m) + " m of the search prior";
-    result.keyframe = -1;
-    return result;
-  }
-  std::vector<features::RetrievalHit> hits =
+  const std::vector<features::RetrievalHit> hits =
       features::Retrieve(vocabulary.EncodeVlad(query), database, options.top_k);
-  for (features::RetrievalHit& hit : hits) hit.index = database_keyframes[hit.index];
-  result.keyframe = hits.front().index;
+  const auto report = [&](int searched) {
+    result.keyframe = keyframes[static_cast<size_t>(searched)].keyframe;
+    result.tile = keyframes[static_cast<size_t>(searched)].tile;
+  };
+  report(hits.front().index);
   result.retrieval_similarity = hits.front().similarity;
 
   // Matching: one landmark per query keypoint, from the match with the smallest distance.
   struct Correspondence {
-    uint32_t landmark = 0;
+    Eigen::Vector3f landmark;
     float distance = 0;
-    int keyframe = 0;
+    int keyframe = 0;  // Position in `keyframes`.
   };
   std::unordered_map<int, Correspondence> by_keypoint;
   for (const features::RetrievalHit& hit : hits) {
-    const KeyframeFeatures& keyframe = data.keyframes[hit.index];
+    features::Features pooled;
+    std::vector<Eigen::Vector3f> landmarks;
+    PoolCopies(keyframes[static_cast<size_t>(hit.index)], &pooled, &landmarks);
     for (const features::FeatureMatch& match :
-         features::MatchFeatures(query, KeyframeAsFeatures(keyframe), options.matching)) {
-      const Correspondence candidate{keyframe.landmarks[match.index_b], match.distance, hit.index};
+         features::MatchFeatures(query, pooled, options.matching)) {
+      const Correspondence candidate{landmarks[static_cast<size_t>(match.index_b)], match.distance,
+                                     hit.index};
       const auto [it, inserted] = by_keypoint.emplace(match.index_a, candidate);
       if (!inserted && candidate.distance < it->second.distance) it->second = candidate;
     }
@@ -187,7 +226,7 @@ LocateResult LocateImage(const Map& map, const VisibilityIndex& visibility,
   for (const int keypoint : keypoints) {
     const Correspondence& correspondence = by_keypoint.at(keypoint);
     pixels.push_back(query.keypoints[keypoint].cast<double>());
-    points.push_back(data.landmarks[correspondence.landmark].cast<double>());
+    points.push_back(correspondence.landmark.cast<double>());
     source_keyframe.push_back(correspondence.keyframe);
   }
   result.correspondences = static_cast<int>(pixels.size());
@@ -209,7 +248,7 @@ LocateResult LocateImage(const Map& map, const VisibilityIndex& visibility,
   for (const features::RetrievalHit& hit : hits) {
     if (inliers_per_keyframe[hit.index] > most) {
       most = inliers_per_keyframe[hit.index];
-      result.keyframe = hit.index;
+      report(hit.index);
     }
   }
   std::ostringstream account;
@@ -224,9 +263,7 @@ LocateResult LocateImage(const Map& map, const VisibilityIndex& visibility,
   }
 
   // Verification: one Canny-VT step from the PnP pose against the map's edges.
-  tracking::Tracker tracker(map, &visibility, query_camera, options.verification);
-  tracker.Reset(pose.world_from_cam, 0);
-  const std::optional<tracking::PoseEstimate> step = tracker.AddFrame(1, gray);
+  const std::optional<tracking::PoseEstimate> step = verify(pose.world_from_cam);
   if (!step) throw InvalidArgumentError("locate: the verification tracker ran no step");
   const tracking::TrackingQuality& quality = step->quality;
   result.score = quality.alignment;
@@ -250,6 +287,171 @@ LocateResult LocateImage(const Map& map, const VisibilityIndex& visibility,
   result.status = LocateStatus::kFound;
   result.world_from_cam = pose.world_from_cam;
   result.covariance = pose.covariance;
+  return result;
+}
+
+// True when the camera centre `centre` lies outside the options' search region.
+bool OutsideSearch(const LocateOptions& options, const Eigen::Vector3d& centre) {
+  return options.search_center &&
+         (centre - *options.search_center).norm() > options.search_radius_m;
+}
+
+std::string NothingWithinSearchMessage(const LocateOptions& options, const std::string& what) {
+  return "no keyframe of the " + what + " lies within " + std::to_string(options.search_radius_m) +
+         " m of the search prior";
+}
+
+}  // namespace
+
+LocateResult LocateImage(const Map& map, const VisibilityIndex& visibility,
+                         const Camera& query_camera, const cv::Mat& gray,
+                         const LocateOptions& options) {
+  options.Check();
+  query_camera.Check();
+  if (!map.relocalization) throw InvalidArgumentError(kNoRelocalizationDataMessage);
+  const RelocalizationData& data = *map.relocalization;
+  CheckRelocalizationData(map, data);
+  CheckQueryImage(query_camera, gray);
+
+  LocateResult result;
+  if (map.keyframes.empty()) {
+    result.reason = "the map has no keyframes";
+    return result;
+  }
+  // The keyframes retrieval may return: all, or those within the search prior's radius.
+  std::vector<SearchedKeyframe> searched;
+  for (size_t k = 0; k < data.keyframes.size(); ++k) {
+    if (OutsideSearch(options, map.keyframes[k].cam_from_world.Inverse().translation)) continue;
+    searched.push_back({&data.keyframes[k].global_descriptor,
+                        {{&data.keyframes[k], &data.landmarks}},
+                        static_cast<int>(k)});
+  }
+  if (searched.empty()) {
+    result.reason = NothingWithinSearchMessage(options, "map");
+    return result;
+  }
+  return LocateAmong(searched, VocabularyOf(data), query_camera, gray, options,
+                     [&](const Rigid3d& world_from_cam) {
+                       tracking::Tracker tracker(map, &visibility, query_camera,
+                                                 options.verification);
+                       tracker.Reset(world_from_cam, 0);
+                       return tracker.AddFrame(1, gray);
+                     });
+}
+
+LocateResult LocateImageInSite(const std::shared_ptr<const Site>& site,
+                               const std::shared_ptr<TileCache>& cache, const Camera& query_camera,
+                               const cv::Mat& gray, const LocateOptions& options,
+                               const tracking::TileSelectionOptions& verification_tiles) {
+  options.Check();
+  verification_tiles.Check();
+  query_camera.Check();
+  CheckQueryImage(query_camera, gray);
+  const SiteManifest& manifest = site->manifest;
+  const std::string where = "locate in site '" + manifest.name + "': ";
+
+  // The tiles searched: those keeping keyframes, within the search region when there is one, and
+  // their neighbours, which hold what those keyframes see beyond the overlap.
+  std::vector<TileIndex> seeds;
+  for (const SiteTile& tile : manifest.tiles) {
+    if (tile.num_keyframes == 0) continue;
+    if (options.search_center &&
+        tile.core.DistanceTo(options.search_center->x(), options.search_center->y()) >
+            options.search_radius_m) {
+      continue;
+    }
+    seeds.push_back(tile.index);
+  }
+  LocateResult result;
+  if (seeds.empty()) {
+    result.reason = options.search_center ? NothingWithinSearchMessage(options, "site")
+                                          : "the site has no keyframes";
+    return result;
+  }
+  std::vector<size_t> chosen;
+  for (size_t t = 0; t < manifest.tiles.size(); ++t) {
+    const TileIndex index = manifest.tiles[t].index;
+    if (std::any_of(seeds.begin(), seeds.end(), [&](const TileIndex& seed) {
+          return std::abs(int64_t{seed.ix} - index.ix) <= 1 &&
+                 std::abs(int64_t{seed.iy} - index.iy) <= 1;
+        })) {
+      chosen.push_back(t);
+    }
+  }
+  if (chosen.size() > options.max_site_tiles) {
+    throw InvalidArgumentError(
+        where + "the " + std::to_string(seeds.size()) + " tiles keeping keyframes" +
+        (options.search_center ? " within the search radius" : "") + " and their neighbours are " +
+        std::to_string(chosen.size()) + " tiles, more than the " +
+        std::to_string(options.max_site_tiles) +
+        " one locate may load (LocateOptions::max_site_tiles): give a search prior (a GNSS fix) "
+        "that narrows it");
+  }
+  std::vector<std::shared_ptr<const LoadedTile>> tiles;
+  for (const size_t t : chosen) {
+    std::shared_ptr<const LoadedTile> tile = cache->Find(*site, t);
+    tiles.push_back(tile ? std::move(tile) : cache->Load(site, t));
+  }
+
+  // Every keyframe within the search region once, whichever tiles keep it (a tile keeps the
+  // keyframes that see its points, with the features that see its landmarks): its copies are
+  // pooled, and it is reported in the tile owning its camera centre when that one is loaded.
+  std::vector<SearchedKeyframe> searched;
+  std::map<std::tuple<int64_t, std::string, double, double, double>, size_t> by_identity;
+  const RelocalizationData* first = nullptr;
+  for (const std::shared_ptr<const LoadedTile>& loaded : tiles) {
+    const Map& map = loaded->map;
+    const std::string tile_name = "tile " + loaded->entry.file_name + ": ";
+    if (!map.relocalization) {
+      throw InvalidArgumentError(where + tile_name + kNoRelocalizationDataMessage);
+    }
+    const RelocalizationData& data = *map.relocalization;
+    CheckRelocalizationData(map, data);
+    if (first == nullptr) first = &data;
+    if (data.vocabulary != first->vocabulary) {
+      throw InvalidArgumentError(where + tile_name +
+                                 "its vocabulary differs from the other tiles' (a site's tiles "
+                                 "share one: tile the map again with evloc-mapper tile)");
+    }
+    for (size_t k = 0; k < map.keyframes.size(); ++k) {
+      const Keyframe& keyframe = map.keyframes[k];
+      const Eigen::Vector3d centre = keyframe.cam_from_world.Inverse().translation;
+      if (OutsideSearch(options, centre)) continue;
+      const SearchedKeyframe copy{&data.keyframes[k].global_descriptor,
+                                  {{&data.keyframes[k], &data.landmarks}},
+                                  static_cast<int>(k),
+                                  static_cast<int>(loaded->tile)};
+      const auto [found, inserted] = by_identity.emplace(
+          std::make_tuple(keyframe.t_ns, keyframe.image_name, centre.x(), centre.y(), centre.z()),
+          searched.size());
+      if (inserted) {
+        searched.push_back(copy);
+        continue;
+      }
+      SearchedKeyframe& kept = searched[found->second];
+      kept.copies.push_back(copy.copies.front());
+      if (manifest.grid.IndexOf(centre.x(), centre.y()) == loaded->entry.index) {
+        kept.keyframe = copy.keyframe;
+        kept.tile = copy.tile;
+      }
+    }
+  }
+  if (searched.empty()) {
+    result.reason = NothingWithinSearchMessage(options, "site");
+    return result;
+  }
+  result = LocateAmong(searched, VocabularyOf(*first), query_camera, gray, options,
+                       [&](const Rigid3d& world_from_cam) {
+                         // Against the tiles a session at the pose would track against.
+                         tracking::TileSelectionOptions selection = verification_tiles;
+                         selection.synchronous = true;
+                         tracking::TiledMapSource source(site, cache, selection);
+                         source.LoadNow(world_from_cam);
+                         tracking::Tracker tracker(source, query_camera, options.verification);
+                         tracker.Reset(world_from_cam, 0);
+                         return tracker.AddFrame(1, gray);
+                       });
+  result.reason += " (" + std::to_string(tiles.size()) + " tiles searched)";
   return result;
 }
 

@@ -6,6 +6,8 @@
 // it. Expected failures are NOT_FOUND results with a reason, never exceptions.
 #pragma once
 
+#include <cstddef>
+#include <memory>
 #include <optional>
 #include <string>
 
@@ -15,9 +17,11 @@
 #include "core/features/features.h"
 #include "core/geometry/rigid3.h"
 #include "localizer/relocalization/absolute_pose.h"
+#include "localizer/tracking/tiled_map_source.h"
 #include "localizer/tracking/tracker.h"
 #include "localizer/tracking/tracker_options.h"
 #include "maps/map.h"
+#include "maps/tile_cache.h"
 #include "maps/visibility.h"
 
 namespace evloc::relocalization {
@@ -35,6 +39,10 @@ struct LocateOptions {
   std::optional<Eigen::Vector3d> search_center;
   // Radius around search_center, metres (> 0 when it is set).
   double search_radius_m = 0.0;
+  // A site locate loads the tiles that keep keyframes (those whose core square is within
+  // search_radius_m of search_center when it is set) and their neighbours; more than this many
+  // is an InvalidArgumentError asking for a search prior.
+  size_t max_site_tiles = 64;
   // The absolute pose solver; its min_inliers and min_inlier_ratio are the acceptance thresholds
   // of the PnP stage (below: the measured defaults of docs/relocalization.md).
   AbsolutePoseOptions pose = DefaultPoseOptions();
@@ -83,8 +91,13 @@ struct LocateResult {
   // 2D-3D correspondences pooled from the retrieved keyframes.
   int correspondences = 0;
   // Index into Map::keyframes of the retrieved keyframe that gave the most PnP inliers (the most
-  // similar one when no pose was found); -1 when the map has no keyframe.
+  // similar one when no pose was found); -1 when the map has no keyframe. In a site: among the
+  // keyframes of `tile`.
   int keyframe = -1;
+  // In a site: the position in the manifest of the tile `keyframe` indexes into (the tile owning
+  // the keyframe's camera centre when it was loaded, else the first loaded tile keeping it); -1
+  // otherwise.
+  int tile = -1;
   // Chance-corrected edge alignment of the verification step (TrackingQuality::alignment, 0..1);
   // 0 when the verification did not run.
   double score = 0;
@@ -107,6 +120,19 @@ LocateResult LocateImage(const Map& map, const Camera& query_camera, const cv::M
 LocateResult LocateImage(const Map& map, const VisibilityIndex& visibility,
                          const Camera& query_camera, const cv::Mat& gray,
                          const LocateOptions& options);
+
+// Locates `gray` in a site of tiles (docs/relocalization.md, "Sites"): the tiles that keep
+// keyframes (near the search prior when LocateOptions has one) and their neighbours (at most
+// max_site_tiles in all) are loaded through `cache`, their keyframes are retrieved together
+// (each once, its features pooled from every loaded tile that keeps some), and the PnP pose is
+// verified against the tiles a session at that pose would track against (`verification_tiles`,
+// loaded synchronously). Deterministic. Throws like LocateImage, InvalidArgumentError when too many
+// tiles would be searched or the tiles' vocabularies differ, and the tile's IoError or ParseError
+// when a tile cannot be loaded.
+LocateResult LocateImageInSite(const std::shared_ptr<const Site>& site,
+                               const std::shared_ptr<TileCache>& cache, const Camera& query_camera,
+                               const cv::Mat& gray, const LocateOptions& options,
+                               const tracking::TileSelectionOptions& verification_tiles = {});
 
 // The InvalidArgumentError message of a map without relocalization data.
 inline constexpr const char* kNoRelocalizationDataMessage =

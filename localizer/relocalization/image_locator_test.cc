@@ -11,8 +11,11 @@
 #include <gtest/gtest.h>
 
 #include "core/common/error.h"
+#include "core/common/file_util.h"
 #include "core/common/test_data.h"
 #include "localizer/relocalization/testing/temple_map.h"
+#include "maps/site.h"
+#include "maps/tile_cache.h"
 
 namespace evloc::relocalization {
 namespace {
@@ -192,6 +195,163 @@ TEST(LocateImage, ASearchPriorRestrictsRetrievalToNearbyKeyframes) {
   bad.search_radius_m = 0.0;
   EXPECT_THROW(LocateImage(fixture.map, fixture.temple.camera, fixture.temple.images[query], bad),
                InvalidArgumentError);
+}
+
+// `map` and a copy of it `offset` away (points, keyframes, landmarks and features): two temples.
+Map TwoTemples(const Map& map, const Eigen::Vector3f& offset) {
+  Map both = map;
+  const auto points = static_cast<uint32_t>(map.size());
+  const auto keyframes = static_cast<uint32_t>(map.keyframes.size());
+  for (size_t i = 0; i < map.size(); ++i) {
+    both.AddPoint(
+        map.positions[i] + offset, map.gradients[i], map.inverse_depth_sigma[i],
+        map.gradient_magnitude[i],
+        map.source_keyframe[i] == kNoKeyframe ? kNoKeyframe : map.source_keyframe[i] + keyframes);
+  }
+  const Rigid3d shift(Eigen::Quaterniond::Identity(), -offset.cast<double>());
+  for (Keyframe keyframe : map.keyframes) {
+    keyframe.cam_from_world = keyframe.cam_from_world * shift;
+    for (uint32_t& point : keyframe.visible_points) point += points;
+    both.keyframes.push_back(std::move(keyframe));
+  }
+  const auto landmarks = static_cast<uint32_t>(map.relocalization->landmarks.size());
+  for (const Eigen::Vector3f& landmark : map.relocalization->landmarks) {
+    both.relocalization->landmarks.push_back(landmark + offset);
+  }
+  for (KeyframeFeatures features : map.relocalization->keyframes) {
+    for (uint32_t& landmark : features.landmarks) landmark += landmarks;
+    both.relocalization->keyframes.push_back(std::move(features));
+  }
+  both.Check();
+  return both;
+}
+
+// The temple map served as a site of 0.4 m tiles (the model's points and landmarks spread over a
+// few tiles, which keep the keyframes that see them; the cameras, 0.55 m away, stand over empty
+// squares):
+// the held-out views are found in the site as in the whole map, at the same poses, and the
+// result names the tile of the keyframe.
+TEST(LocateImageInSite, HeldOutTempleViewsAreFoundAsInTheWholeMap) {
+  REQUIRE_TEMPLE();
+  const TempleFixture& fixture = *Temple();
+  const PrivateTempFolder folder("evloc-locate-site", "a tiled temple map");
+  const TilingOptions tiling = testing::TempleTiling();
+  const Map map = testing::ZUpTempleMap(fixture.map);
+  const SiteManifest manifest = TileMap(map, folder.path() / "site", tiling);
+  int keeping = 0;
+  for (const SiteTile& tile : manifest.tiles) keeping += tile.num_keyframes > 0 ? 1 : 0;
+  ASSERT_GE(keeping, 3);
+  const std::shared_ptr<const Site> site = OpenSite(folder.path() / "site");
+  const auto cache = std::make_shared<TileCache>();
+  tracking::TileSelectionOptions verification;
+  verification.radius_m = 1.0;  // The model is 0.55 m from the cameras.
+  int found_whole = 0, found_site = 0;
+  for (int query = 1; query < 16; query += 2) {
+    const cv::Mat& image = fixture.temple.images[query];
+    const LocateResult whole = LocateImage(map, fixture.temple.camera, image, LocateOptions());
+    const LocateResult tiled =
+        LocateImageInSite(site, cache, fixture.temple.camera, image, LocateOptions(), verification);
+    const Rigid3d truth =
+        testing::kZUpFromTemple * fixture.temple.views[query].cam_from_world.Inverse();
+    std::cout << fixture.temple.views[query].name << ": whole " << LocateStatusName(whole.status)
+              << " (" << whole.inliers << " inliers), site " << LocateStatusName(tiled.status)
+              << " (" << tiled.inliers << " inliers, tile " << tiled.tile << " keyframe "
+              << tiled.keyframe << ", error "
+              << (tiled.pnp_world_from_cam.translation - truth.translation).norm() * 1000
+              << " mm): " << tiled.reason << "\n";
+    found_whole += whole.status == LocateStatus::kFound ? 1 : 0;
+    if (tiled.status != LocateStatus::kFound) continue;
+    ++found_site;
+    EXPECT_LT((tiled.world_from_cam.translation - truth.translation).norm(), 0.02);
+    EXPECT_LT(AngleBetween(tiled.world_from_cam.rotation, truth.rotation) * 180 / M_PI, 1.0);
+    ASSERT_GE(tiled.tile, 0);
+    ASSERT_LT(static_cast<size_t>(tiled.tile), manifest.tiles.size());
+    const Map tile = LoadTile(folder.path() / "site", manifest, static_cast<size_t>(tiled.tile));
+    ASSERT_GE(tiled.keyframe, 0);
+    ASSERT_LT(static_cast<size_t>(tiled.keyframe), tile.keyframes.size());
+    // The tile owning the keyframe's centre when there is one (the cameras stand over empty
+    // squares here, which no tile owns).
+    const Eigen::Vector3d centre =
+        tile.keyframes[static_cast<size_t>(tiled.keyframe)].cam_from_world.Inverse().translation;
+    const TileIndex owner = manifest.grid.IndexOf(centre.x(), centre.y());
+    if (manifest.Find(owner)) {
+      EXPECT_EQ(owner, manifest.tiles[tiled.tile].index);
+    }
+    if (whole.status == LocateStatus::kFound) {
+      // The same correspondences up to the pooled order: the same pose within a millimetre.
+      EXPECT_LT((tiled.world_from_cam.translation - whole.world_from_cam.translation).norm(), 1e-3);
+    }
+  }
+  EXPECT_GE(found_site, found_whole);
+  EXPECT_GE(found_whole, 6);
+}
+
+// Two identical temples 5 m apart: a search prior around the query's true position loads only
+// the tiles of its temple (the reason counts them) and finds the pose there; too many tiles is
+// an error that asks for a prior, a site without relocalization data says how to get it, and a
+// bad image is refused.
+TEST(LocateImageInSite, APriorNarrowsTheTilesAndBadRequestsAreNamedErrors) {
+  REQUIRE_TEMPLE();
+  const TempleFixture& fixture = *Temple();
+  const PrivateTempFolder folder("evloc-locate-site", "a tiled temple map");
+  const TilingOptions tiling = testing::TempleTiling();
+  const Map map = TwoTemples(testing::ZUpTempleMap(fixture.map), Eigen::Vector3f(5, 0, 0));
+  TileMap(map, folder.path() / "site", tiling);
+  const std::shared_ptr<const Site> site = OpenSite(folder.path() / "site");
+  const auto cache = std::make_shared<TileCache>();
+  const int query = 5;
+  const cv::Mat& image = fixture.temple.images[query];
+  const Rigid3d truth =
+      testing::kZUpFromTemple * fixture.temple.views[query].cam_from_world.Inverse();
+  const auto tiles_searched = [](const LocateResult& result) {
+    const size_t at = result.reason.rfind(" (");
+    return at == std::string::npos ? -1 : std::atoi(result.reason.c_str() + at + 2);
+  };
+  tracking::TileSelectionOptions verification;
+  verification.radius_m = 1.0;
+  const LocateResult everywhere =
+      LocateImageInSite(site, cache, fixture.temple.camera, image, LocateOptions(), verification);
+  LocateOptions near;
+  near.search_center = truth.translation;
+  near.search_radius_m = 0.6;
+  const LocateResult narrowed =
+      LocateImageInSite(site, cache, fixture.temple.camera, image, near, verification);
+  std::cout << "everywhere: " << everywhere.reason << "\nnear: " << narrowed.reason << "\n";
+  EXPECT_LT(tiles_searched(narrowed), tiles_searched(everywhere));
+  EXPECT_GT(tiles_searched(narrowed), 0);
+  ASSERT_EQ(narrowed.status, LocateStatus::kFound) << narrowed.reason;
+  EXPECT_LT((narrowed.world_from_cam.translation - truth.translation).norm(), 0.02);
+  LocateOptions far = near;
+  far.search_center = truth.translation + Eigen::Vector3d(10, 0, 0);
+  const LocateResult nothing = LocateImageInSite(site, cache, fixture.temple.camera, image, far);
+  EXPECT_EQ(nothing.status, LocateStatus::kNotFound);
+  EXPECT_NE(nothing.reason.find("no keyframe of the site lies within"), std::string::npos)
+      << nothing.reason;
+
+  LocateOptions few;
+  few.max_site_tiles = 2;
+  try {
+    LocateImageInSite(site, cache, fixture.temple.camera, image, few);
+    ADD_FAILURE() << "a locate over more tiles than allowed ran";
+  } catch (const InvalidArgumentError& error) {
+    EXPECT_NE(std::string(error.what()).find("give a search prior"), std::string::npos)
+        << error.what();
+  }
+  EXPECT_THROW(LocateImageInSite(site, cache, fixture.temple.camera, cv::Mat(3, 3, CV_8UC1),
+                                 LocateOptions()),
+               InvalidArgumentError);
+
+  Map plain = map;
+  plain.relocalization.reset();
+  TileMap(plain, folder.path() / "plain", tiling);
+  try {
+    LocateImageInSite(OpenSite(folder.path() / "plain"), cache, fixture.temple.camera, image,
+                      LocateOptions());
+    ADD_FAILURE() << "a site without relocalization data was searched";
+  } catch (const InvalidArgumentError& error) {
+    EXPECT_NE(std::string(error.what()).find("evloc-mapper upgrade"), std::string::npos)
+        << error.what();
+  }
 }
 
 }  // namespace

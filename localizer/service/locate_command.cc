@@ -1,8 +1,10 @@
 #include "localizer/service/locate_command.h"
 
 #include <cmath>
+#include <functional>
 #include <iomanip>
 #include <iostream>
+#include <memory>
 
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -10,6 +12,10 @@
 #include "core/camera/calibration_file.h"
 #include "core/common/cli.h"
 #include "core/common/error.h"
+#include "core/geo/geo_trajectory.h"
+#include "core/geo/geodetic.h"
+#include "maps/site.h"
+#include "maps/tile_cache.h"
 
 namespace evloc::service {
 
@@ -18,23 +24,57 @@ std::string LocateUsage() {
 
 Locates one image in a map from nothing (docs/relocalization.md): retrieval of the map's most
 similar keyframes, 2D-3D matches, PnP + RANSAC and refinement, then verification against the
-map's edges. The map needs relocalization data (map format v2).
+map's edges. The map needs relocalization data (map format v2). In a site of tiles, the tiles
+that keep keyframes (near the --gnss fix, when given) are searched together.
 
 Options:
-  --map MAP       the map: a .evmap file or a folder holding map.evmap (required)
+  --map MAP       the map: a .evmap file, a folder holding map.evmap, or a site folder
+                  (site.manifest) (required)
   --image IMAGE   the query image, any format OpenCV reads (converted to grey) (required)
   --calib CALIB   the camera file, its format detected from the content (docs/camera.md): evloc
                   YAML, Kalibr camchain (CALIB#cam1 picks a camera), ROS camera_info, OpenCV
                   YAML/XML, COLMAP cameras.txt (CALIB#ID), ECD calib.txt; a size the file
                   states must be the image's (required)
   --size WxH      the image size of a file without one (calib.txt; default: the image's size)
+  --gnss LAT,LON,ALT,SIGMA[,SIGMA_V]
+                  a GNSS fix where the image was taken (WGS84 degrees, metres; one-sigma
+                  accuracy, horizontal and optionally vertical): only the keyframes within 3
+                  sigma are searched (docs/geo.md); the map or site needs a geo anchor
   --json          print one JSON object: status, world_from_cam [tx ty tz qx qy qz qw] and
-                  covariance (36, row-major) when FOUND, inliers, keyframe, score, reason
+                  covariance (36, row-major) when FOUND, inliers, keyframe, tile (a site's tile
+                  file), score, reason
   --help          print this help
 
 Exit codes: 0 FOUND, 3 NOT_FOUND, 2 bad command line, 1 any other error.
 )";
 }
+
+namespace {
+
+// LAT,LON,ALT,SIGMA[,SIGMA_V], checked as the service checks a GnssFix.
+GnssPrior ParseGnssFlag(const std::string& flag, const std::string& text) {
+  std::vector<double> values;
+  size_t start = 0;
+  while (true) {
+    const size_t comma = text.find(',', start);
+    values.push_back(ParseDoubleFlag(flag, text.substr(start, comma - start)));
+    if (comma == std::string::npos) break;
+    start = comma + 1;
+  }
+  if (values.size() != 4 && values.size() != 5) {
+    throw InvalidArgumentError(flag + " '" + text +
+                               "': give LAT,LON,ALT,SIGMA or LAT,LON,ALT,SIGMA,SIGMA_V");
+  }
+  api::GnssFix fix;
+  fix.set_latitude_deg(values[0]);
+  fix.set_longitude_deg(values[1]);
+  fix.set_altitude_m(values[2]);
+  fix.set_horizontal_accuracy_m(values[3]);
+  fix.set_vertical_accuracy_m(values.size() == 5 ? values[4] : values[3]);
+  return GnssPriorFromProto(fix, flag);
+}
+
+}  // namespace
 
 LocateCommand ParseLocateCommandLine(const std::vector<std::string>& arguments) {
   LocateCommand command;
@@ -55,6 +95,8 @@ LocateCommand ParseLocateCommandLine(const std::vector<std::string>& arguments) 
       command.calib = TakeFlagValue(arguments, &i);
     } else if (flag == "--size") {
       ParseSizeFlag(flag, TakeFlagValue(arguments, &i), &command.width, &command.height);
+    } else if (flag == "--gnss") {
+      command.gnss = ParseGnssFlag(flag, TakeFlagValue(arguments, &i));
     } else {
       throw InvalidArgumentError("unknown flag '" + flag + "' (see --help)");
     }
@@ -87,7 +129,7 @@ Camera ReadLocateCalibration(const LocateCommand& command, int image_width, int 
   return camera;
 }
 
-std::string LocateResultJson(const relocalization::LocateResult& result) {
+std::string LocateResultJson(const relocalization::LocateResult& result, const std::string& tile) {
   nlohmann::ordered_json json;
   json["status"] = relocalization::LocateStatusName(result.status);
   if (result.status == relocalization::LocateStatus::kFound) {
@@ -102,23 +144,42 @@ std::string LocateResultJson(const relocalization::LocateResult& result) {
   }
   json["inliers"] = result.inliers;
   json["keyframe"] = result.keyframe;
+  if (!tile.empty()) json["tile"] = tile;
   json["score"] = result.score;
   json["reason"] = result.reason;
   return json.dump();
 }
 
-int RunLocate(const LocateCommand& command, const Map& map, std::ostream& out) {
+namespace {
+
+// Locates the command's image in a map or site: given the camera, the image and the options
+// (with the --gnss prior), returns the result and sets the tile file name for a site.
+using Locator = std::function<relocalization::LocateResult(
+    const Camera&, const cv::Mat&, const relocalization::LocateOptions&, std::string* tile)>;
+
+// Reads the image and the camera, turns --gnss into a search prior through `anchor`, locates with
+// `locate` and prints the result; the exit code.
+int LocateAndReport(const LocateCommand& command, const std::optional<GeoAnchor>& anchor,
+                    const Locator& locate, std::ostream& out) {
   const cv::Mat gray = cv::imread(command.image.string(), cv::IMREAD_GRAYSCALE);
   if (gray.empty()) {
     throw IoError("cannot read the image '" + command.image.string() +
                   "' (missing, or not an image OpenCV reads)");
   }
   const Camera camera = ReadLocateCalibration(command, gray.cols, gray.rows);
-  const relocalization::LocateResult result =
-      relocalization::LocateImage(map, camera, gray, relocalization::LocateOptions());
+  relocalization::LocateOptions options;
+  if (command.gnss) {
+    if (!anchor) {
+      throw InvalidArgumentError("--gnss: " + MissingGeoAnchorMessage(command.map.string()));
+    }
+    options.search_center = GeoReference(*anchor).MapFromGeodetic(command.gnss->position);
+    options.search_radius_m = GnssSearchRadiusM(*command.gnss, *anchor);
+  }
+  std::string tile;
+  const relocalization::LocateResult result = locate(camera, gray, options, &tile);
   const bool found = result.status == relocalization::LocateStatus::kFound;
   if (command.json) {
-    out << LocateResultJson(result) << "\n";
+    out << LocateResultJson(result, tile) << "\n";
   } else {
     out << relocalization::LocateStatusName(result.status) << "\n";
     if (found) {
@@ -131,16 +192,42 @@ int RunLocate(const LocateCommand& command, const Map& map, std::ostream& out) {
           << std::sqrt(result.covariance.topLeftCorner<3, 3>().trace()) * 1000 << " mm\n";
     }
     out << std::setprecision(6) << "inliers: " << result.inliers
-        << ", keyframe: " << result.keyframe << ", score: " << result.score << "\n"
+        << ", keyframe: " << result.keyframe << (tile.empty() ? "" : " of tile " + tile)
+        << ", score: " << result.score << "\n"
         << "reason: " << result.reason << "\n";
   }
   return found ? kExitSuccess : kExitNotFound;
 }
 
+}  // namespace
+
+int RunLocate(const LocateCommand& command, const Map& map, std::ostream& out) {
+  return LocateAndReport(
+      command, map.geo_anchor,
+      [&](const Camera& camera, const cv::Mat& gray, const relocalization::LocateOptions& options,
+          std::string*) { return relocalization::LocateImage(map, camera, gray, options); },
+      out);
+}
+
 int RunLocate(const LocateCommand& command, std::ostream& out) {
-  const std::filesystem::path path =
-      std::filesystem::is_directory(command.map) ? command.map / "map.evmap" : command.map;
-  return RunLocate(command, LoadMap(path), out);
+  if (!IsSiteDirectory(command.map)) {
+    const std::filesystem::path path =
+        std::filesystem::is_directory(command.map) ? command.map / "map.evmap" : command.map;
+    return RunLocate(command, LoadMap(path), out);
+  }
+  const std::shared_ptr<const Site> site = OpenSite(command.map);
+  return LocateAndReport(
+      command, SiteGeoAnchor(site->manifest),
+      [&](const Camera& camera, const cv::Mat& gray, const relocalization::LocateOptions& options,
+          std::string* tile) {
+        const relocalization::LocateResult result = relocalization::LocateImageInSite(
+            site, std::make_shared<TileCache>(), camera, gray, options);
+        if (result.tile >= 0) {
+          *tile = site->manifest.tiles[static_cast<size_t>(result.tile)].file_name;
+        }
+        return result;
+      },
+      out);
 }
 
 int RunLocateTool(int argc, const char* const* argv) {

@@ -5,6 +5,7 @@
 #pragma once
 
 #include <filesystem>
+#include <optional>
 #include <ostream>
 #include <string>
 #include <vector>
@@ -13,6 +14,7 @@
 
 #include "core/camera/camera.h"
 #include "localizer/relocalization/image_locator.h"
+#include "localizer/service/session.h"
 #include "maps/map.h"
 
 namespace evloc::service {
@@ -36,6 +38,9 @@ struct LocateCommand {
   int height = 0;
   // Print one JSON object instead of the summary.
   bool json = false;
+  // A GNSS fix where the image was taken (--gnss): only keyframes (and in a site, tiles) near it
+  // are searched. Needs a map or site with a geo anchor.
+  std::optional<GnssPrior> gnss;
 };
 
 // The usage text of `evloc-localizer locate`.
@@ -52,15 +57,18 @@ LocateCommand ParseLocateCommandLine(const std::vector<std::string>& arguments);
 Camera ReadLocateCalibration(const LocateCommand& command, int image_width, int image_height);
 
 // The result as the one JSON object of docs/api.md (world_from_cam and covariance only when
-// FOUND), without a trailing newline.
-std::string LocateResultJson(const relocalization::LocateResult& result);
+// FOUND; tile, a site's tile file name, only when not empty), without a trailing newline.
+std::string LocateResultJson(const relocalization::LocateResult& result,
+                             const std::string& tile = "");
 
-// Locates the command's image in `map` and prints the result on `out`; returns kExitSuccess when
-// FOUND and kExitNotFound when not. Throws like LocateImage, and IoError when the image cannot
-// be read.
+// Locates the command's image in `map` (near the --gnss fix, through the map's anchor) and
+// prints the result on `out`; returns kExitSuccess when FOUND and kExitNotFound when not. Throws
+// like LocateImage, IoError when the image cannot be read, and InvalidArgumentError for --gnss on
+// a map without a geo anchor.
 int RunLocate(const LocateCommand& command, const Map& map, std::ostream& out);
 
-// Loads the command's map, then RunLocate.
+// Loads the command's map, then RunLocate; or, when --map is a site folder, locates in the site
+// (LocateImageInSite, its tiles loaded by this call).
 int RunLocate(const LocateCommand& command, std::ostream& out);
 
 // The main() of `evloc-localizer locate ...` (argv[1] is "locate"): RunCommandTool over the

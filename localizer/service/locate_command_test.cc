@@ -13,7 +13,9 @@
 #include "core/common/cli.h"
 #include "core/common/error.h"
 #include "core/common/test_data.h"
+#include "core/geo/geodetic.h"
 #include "localizer/relocalization/testing/temple_map.h"
+#include "maps/site.h"
 
 namespace evloc::service {
 namespace {
@@ -171,6 +173,77 @@ TEST(LocateCommand, SavedMapIsLocatedOrSaysHowToUpgrade) {
                 std::string::npos);
     }
   }
+  fs::remove_all(directory);
+}
+
+// `locate --map SITE`: the z-up temple, anchored and tiled into 0.4 m squares. A held-out view is
+// FOUND with a GNSS fix at its position (the JSON names the tile), NOT_FOUND with a fix 20 m away
+// (exit 3); --gnss on a site without an anchor and a malformed --gnss are errors.
+TEST(LocateCommand, ASiteIsSearchedNearTheGnssFix) {
+  REQUIRE_TEMPLE();
+  const auto& fixture = *SharedTemple();
+  const fs::path directory = evloc::testing::MakeTempDir("locate_command_site");
+  WriteCameraYaml(directory / "camera.yaml", fixture.temple.camera);
+  Map map = relocalization::testing::ZUpTempleMap(fixture.map);
+  const TilingOptions tiling = relocalization::testing::TempleTiling();
+  TileMap(map, directory / "plain", tiling);
+  GeoAnchor anchor;
+  anchor.origin = {46.5191, 6.5668, 372.0};
+  map.geo_anchor = anchor;
+  TileMap(map, directory / "site", tiling);
+  const GeoReference reference(anchor);
+  const Rigid3d truth =
+      relocalization::testing::kZUpFromTemple * fixture.temple.views[7].cam_from_world.Inverse();
+  const auto parameters =
+      evloc::testing::SharedDataFile(relocalization::testing::kTempleParameters);
+  const auto arguments = [&](const std::string& site, const Eigen::Vector3d& at) {
+    const GeodeticPoint fix = reference.GeodeticFromMap(at);
+    std::ostringstream gnss;
+    gnss.precision(12);
+    gnss << fix.latitude_deg << "," << fix.longitude_deg << "," << fix.altitude_m << ",0.2";
+    return std::vector<std::string>{
+        "locate",
+        "--map",
+        (directory / site).string(),
+        "--image",
+        (parameters->parent_path() / fixture.temple.views[7].name).string(),
+        "--calib",
+        (directory / "camera.yaml").string(),
+        "--gnss",
+        gnss.str(),
+        "--json"};
+  };
+  std::ostringstream out;
+  ASSERT_EQ(RunLocate(ParseLocateCommandLine(arguments("site", truth.translation)), out),
+            kExitSuccess)
+      << out.str();
+  const nlohmann::json found = nlohmann::json::parse(out.str());
+  EXPECT_EQ(found["status"], "FOUND");
+  ASSERT_TRUE(found.contains("tile")) << out.str();
+  EXPECT_NE(found["tile"].get<std::string>().find(".evmap"), std::string::npos);
+  const Eigen::Vector3d position(found["world_from_cam"][0], found["world_from_cam"][1],
+                                 found["world_from_cam"][2]);
+  EXPECT_LT((position - truth.translation).norm(), 0.02);
+  std::ostringstream far;
+  EXPECT_EQ(RunLocate(ParseLocateCommandLine(
+                          arguments("site", truth.translation + Eigen::Vector3d(20, 0, 0))),
+                      far),
+            kExitNotFound)
+      << far.str();
+  EXPECT_EQ(RunTool(arguments("plain", truth.translation)), kExitFailure);
+  try {
+    std::ostringstream ignored;
+    RunLocate(ParseLocateCommandLine(arguments("plain", truth.translation)), ignored);
+    ADD_FAILURE() << "--gnss on a site without an anchor was accepted";
+  } catch (const InvalidArgumentError& error) {
+    EXPECT_NE(std::string(error.what()).find("has no geo anchor"), std::string::npos)
+        << error.what();
+  }
+  std::vector<std::string> bad = arguments("site", truth.translation);
+  bad[8] = "46.5,6.5";
+  EXPECT_EQ(RunTool(bad), kExitUsage);
+  bad[8] = "46.5,6.5,372,-1";
+  EXPECT_EQ(RunTool(bad), kExitUsage);
   fs::remove_all(directory);
 }
 

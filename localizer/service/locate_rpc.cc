@@ -166,13 +166,7 @@ grpc::Status LocateInLoadedMap(const api::LocateRequest& request, const LoadedMa
   try {
     const Camera camera = CheckedLocateCamera(request, max_camera_pixels);
     const cv::Mat gray = LocateImageFromProto(request, camera);
-    if (map.site) {
-      return {grpc::StatusCode::FAILED_PRECONDITION,
-              "map '" + map.name +
-                  "' is a site of tiles: Locate does not search sites yet; locate in the whole "
-                  "map it was tiled from"};
-    }
-    if (!map.map.relocalization) {
+    if (!map.site && !map.map.relocalization) {
       return {grpc::StatusCode::FAILED_PRECONDITION,
               "map '" + map.name + "': " + relocalization::kNoRelocalizationDataMessage};
     }
@@ -188,8 +182,19 @@ grpc::Status LocateInLoadedMap(const api::LocateRequest& request, const LoadedMa
       located.search_center = reference.MapFromGeodetic(prior.position);
       located.search_radius_m = GnssSearchRadiusM(prior, *map.map.geo_anchor);
     }
-    *response = LocateResponseFromResult(
-        relocalization::LocateImage(map.map, *map.visibility, camera, gray, located));
+    if (map.site) {
+      // The tiles near the fix (every tile without one), verified against the tiles a session
+      // at the pose would track against (docs/relocalization.md, "Sites").
+      const relocalization::LocateResult result =
+          relocalization::LocateImageInSite(map.site, map.tiles, camera, gray, located);
+      *response = LocateResponseFromResult(result);
+      if (result.tile >= 0) {
+        response->set_tile(map.site->manifest.tiles[static_cast<size_t>(result.tile)].file_name);
+      }
+    } else {
+      *response = LocateResponseFromResult(
+          relocalization::LocateImage(map.map, *map.visibility, camera, gray, located));
+    }
     *response->mutable_map() = DescribeMap(map);
   } catch (const Error&) {
     return StatusOfCurrentException(map.name);

@@ -6,11 +6,14 @@
 #include <gtest/gtest.h>
 #include <opencv2/imgcodecs.hpp>
 
+#include "core/common/file_util.h"
 #include "core/common/test_data.h"
 #include "localizer/relocalization/testing/temple_map.h"
 #include "localizer/service/localizer_server.h"
 #include "localizer/service/session.h"
 #include "localizer/service/testing/service_fixture.h"
+#include "maps/site.h"
+#include "maps/tile_cache.h"
 #include "proto/convert/proto_convert.h"
 
 namespace evloc::service {
@@ -237,6 +240,65 @@ TEST(LocateRpc, AGnssFixRestrictsRetrievalOnAnAnchoredMap) {
   EXPECT_NE(status.error_message().find("LocateRequest.gnss_fix.horizontal_accuracy_m"),
             std::string::npos)
       << status.error_message();
+}
+
+// Locate on a site (docs/relocalization.md, "Sites"): the z-up temple, anchored, tiled into
+// 0.4 m squares and held as the registry holds a site. The view is found with and without a GNSS
+// fix, the response names the tile of the keyframe, and a fix 20 m away finds nothing.
+TEST(LocateRpc, FindsAViewInASiteOfTilesWithAndWithoutAGnssFix) {
+  REQUIRE_TEMPLE();
+  const auto& fixture = *SharedTemple();
+  const PrivateTempFolder folder("evloc-locate-rpc-site", "a tiled temple map");
+  Map map = relocalization::testing::ZUpTempleMap(fixture.map);
+  GeoAnchor anchor;
+  anchor.origin = {46.5191, 6.5668, 372.0};
+  map.geo_anchor = anchor;
+  const TilingOptions tiling = relocalization::testing::TempleTiling();
+  TileMap(map, folder.path() / "temple_site", tiling);
+  LoadedMap site;
+  site.name = "temple_site";
+  site.site = OpenSite(folder.path() / "temple_site");
+  site.tiles = std::make_shared<TileCache>();
+  site.info = SummarizeSite(site.site->manifest);
+  site.version = site.site->manifest.version;
+  site.map.geo_anchor = site.info.geo_anchor;
+  ASSERT_TRUE(site.map.geo_anchor.has_value());
+  const GeoReference reference(anchor);
+  const Rigid3d truth =
+      relocalization::testing::kZUpFromTemple * fixture.temple.views[7].cam_from_world.Inverse();
+  const auto locate = [&](std::optional<Eigen::Vector3d> at, api::LocateResponse* response) {
+    api::LocateRequest request = Request(fixture.temple.images[7], true);
+    request.set_map_name("temple_site");
+    if (at) {
+      const GeodeticPoint position = reference.GeodeticFromMap(*at);
+      request.mutable_gnss_fix()->set_latitude_deg(position.latitude_deg);
+      request.mutable_gnss_fix()->set_longitude_deg(position.longitude_deg);
+      request.mutable_gnss_fix()->set_altitude_m(position.altitude_m);
+      request.mutable_gnss_fix()->set_horizontal_accuracy_m(0.2);
+      request.mutable_gnss_fix()->set_vertical_accuracy_m(0.2);
+    }
+    return LocateInLoadedMap(request, site, kMaxPixels, relocalization::LocateOptions(), response);
+  };
+  for (const bool with_fix : {false, true}) {
+    api::LocateResponse response;
+    const grpc::Status status =
+        locate(with_fix ? std::optional(truth.translation) : std::nullopt, &response);
+    ASSERT_TRUE(status.ok()) << status.error_message();
+    ASSERT_EQ(response.status(), api::FOUND) << response.reason();
+    EXPECT_LT(
+        (RigidFromProto(response.world_from_cam(), "pose").translation - truth.translation).norm(),
+        0.02);
+    EXPECT_NE(response.tile(), "");
+    EXPECT_NE(response.tile().find(".evmap"), std::string::npos) << response.tile();
+    EXPECT_EQ(response.map().version(), site.site->manifest.version);
+    EXPECT_TRUE(response.map().has_geo_anchor());
+  }
+  api::LocateResponse response;
+  ASSERT_TRUE(locate(truth.translation + Eigen::Vector3d(20, 0, 0), &response).ok());
+  EXPECT_EQ(response.status(), api::NOT_FOUND);
+  EXPECT_EQ(response.tile(), "");
+  EXPECT_NE(response.reason().find("no keyframe of the site"), std::string::npos)
+      << response.reason();
 }
 
 }  // namespace

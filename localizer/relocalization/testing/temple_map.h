@@ -21,6 +21,7 @@
 #include "core/features/vocabulary.h"
 #include "maps/edge_lifting.h"
 #include "maps/map.h"
+#include "maps/site.h"
 
 namespace evloc::relocalization::testing {
 
@@ -199,6 +200,33 @@ inline const TempleFixture* SharedTemple() {
     return result;
   }();
   return fixture;
+}
+
+// A site's grid lies in the x-y plane of a z-up frame; the Middlebury frame has the ring of
+// views in its x-z plane. The same map and poses in the frame turned 90 degrees about x (y -> z).
+inline const Rigid3d kZUpFromTemple(Eigen::Quaterniond(Eigen::AngleAxisd(M_PI / 2,
+                                                                         Eigen::Vector3d::UnitX())),
+                                    Eigen::Vector3d::Zero());
+
+inline Map ZUpTempleMap(const Map& map) {
+  Map turned = map;
+  const Eigen::Matrix3f rotation = kZUpFromTemple.rotation.toRotationMatrix().cast<float>();
+  for (Eigen::Vector3f& p : turned.positions) p = rotation * p;
+  for (Eigen::Vector3f& g : turned.gradients) g = rotation * g;
+  for (Keyframe& keyframe : turned.keyframes) {
+    keyframe.cam_from_world = keyframe.cam_from_world * kZUpFromTemple.Inverse();
+  }
+  for (Eigen::Vector3f& landmark : turned.relocalization->landmarks) landmark = rotation * landmark;
+  return turned;
+}
+
+// The tiling of the z-up temple in the site tests: 0.4 m squares with 0.1 m of overlap (the
+// model's points over a few tiles, the cameras 0.55 m away over empty squares).
+inline TilingOptions TempleTiling() {
+  TilingOptions tiling;
+  tiling.tile_size_m = 0.4;
+  tiling.overlap_m = 0.1;
+  return tiling;
 }
 
 }  // namespace evloc::relocalization::testing
