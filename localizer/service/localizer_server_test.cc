@@ -1294,15 +1294,22 @@ TEST_F(LocalizerServerTest, ServesASiteOfTilesLikeItsWholeMap) {
   EXPECT_EQ(MetricValue(response, "evloc_tile_budget_bytes"), 1 << 30);
 }
 
-TEST_F(LocalizerServerTest, ASiteSessionNeedsAnInitialPoseAndIntactTiles) {
-  StartServer();
+// A session without a pose on a site searches only the tiles near its GnssFix: without one (and
+// this site has no anchor to take one) it stays INITIALIZING and loads no tile. A site's tiles
+// must be intact.
+TEST_F(LocalizerServerTest, ASiteSessionWithoutAPoseWaitsForAFixAndTilesMustBeIntact) {
+  StartServer([](LocalizerServerOptions& options) { options.metrics_address = "127.0.0.1:0"; });
   const SiteManifest manifest = WriteTestSite(folder_.path());
   std::vector<api::TrackRequest> requests = ShortSession();
   requests[0].mutable_start()->set_map_name(kTestSiteName);
   requests[0].mutable_start()->clear_initial_world_from_cam();
   TrackOutcome outcome = RunTrack(*stub_, requests);
-  EXPECT_EQ(outcome.status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
-  EXPECT_NE(outcome.status.error_message().find("site"), std::string::npos);
+  ASSERT_TRUE(outcome.status.ok()) << outcome.status.error_message();
+  ASSERT_FALSE(outcome.Poses().empty());
+  for (const api::PoseUpdate& pose : outcome.Poses()) {
+    EXPECT_EQ(pose.status(), api::INITIALIZING);
+  }
+  EXPECT_EQ(MetricValue(HttpGet(server_->metrics_port(), "/metrics"), "evloc_tile_loads_total"), 0);
   // A damaged tile needed at the start: the session cannot open, and says which map.
   for (const SiteTile& tile : manifest.tiles) {
     std::filesystem::resize_file(folder_.path() / kTestSiteName / tile.file_name, 100);

@@ -588,18 +588,14 @@ void RequestValidator::CheckSteps(int64_t end_t_ns) const {
 
 namespace {
 
-// The source a session tracks against: its map with its visibility index, or a site's tiles.
+// The source a session tracks against: its map with its visibility index, or a site's tiles:
+// those around the initial pose, loaded now; without one, none until a GnssFix says where to
+// search (docs/api.md, "Sites").
 std::unique_ptr<tracking::MapSource> SessionMapSource(const LoadedMap& map,
                                                       const SessionSettings& settings) {
   if (!map.site) return std::make_unique<tracking::StaticMapSource>(map.map, map.visibility.get());
-  if (!settings.initial_world_from_cam) {
-    throw InvalidArgumentError("map '" + map.name +
-                               "' is a site of tiles: a session on it needs "
-                               "SessionStart.initial_world_from_cam (find one with Locate on a "
-                               "whole map)");
-  }
   auto tiled = std::make_unique<tracking::TiledMapSource>(map.site, map.tiles);
-  tiled->LoadNow(*settings.initial_world_from_cam);
+  if (settings.initial_world_from_cam) tiled->LoadNow(*settings.initial_world_from_cam);
   return tiled;
 }
 
@@ -694,6 +690,7 @@ std::vector<tracking::PoseEstimate> SessionTracker::ProcessItem(const SessionIte
   if (stopped_) return {};
   if (gnss_prior_t_ns_ && item.t_ns - *gnss_prior_t_ns_ > kGnssPriorLifetimeNs) {
     tracker_.ClearSearchPrior();  // the fix is too old to narrow a search
+    if (tiled_ != nullptr) tiled_->ClearSearchRegion();
     gnss_prior_t_ns_.reset();
   }
   switch (item.kind) {
@@ -724,8 +721,11 @@ std::vector<tracking::PoseEstimate> SessionTracker::ProcessItem(const SessionIte
       return {};
     case SessionItem::Kind::kGnssFix: {
       if (!geo_) throw InvalidArgumentError("GnssFix for a map without a geo anchor");
-      tracker_.SetSearchPrior(geo_->MapFromGeodetic(item.gnss.position),
-                              GnssSearchRadiusM(item.gnss, geo_->anchor()));
+      const Eigen::Vector3d center = geo_->MapFromGeodetic(item.gnss.position);
+      const double radius_m = GnssSearchRadiusM(item.gnss, geo_->anchor());
+      tracker_.SetSearchPrior(center, radius_m);
+      // On a site, a searching session's tiles are those near the fix (loaded in the background).
+      if (tiled_ != nullptr) tiled_->SetSearchRegion(center, radius_m);
       gnss_prior_t_ns_ = item.t_ns;
       return {};
     }

@@ -7,6 +7,7 @@
 #include <iterator>
 
 #include "core/common/error.h"
+#include "core/common/file_util.h"
 #include "core/common/test_data.h"
 #include "core/events/prophesee_decoder.h"
 #include "core/events/prophesee_raw.h"
@@ -15,6 +16,8 @@
 #include "localizer/tracking/testing/synthetic_scene.h"
 #include "localizer/wire/packed_events.h"
 #include "localizer/wire/twist.h"
+#include "maps/site.h"
+#include "maps/tile_cache.h"
 #include "proto/convert/proto_convert.h"
 
 namespace evloc::service {
@@ -720,6 +723,50 @@ TEST(SessionTracker, AGnssFixNarrowsTheSearchAndPosesCarryTheirWgs84Position) {
   SessionTracker tracker(
       plain, SessionSettingsFromProto(testing::TestSessionStart().start(), SessionLimits()));
   EXPECT_EQ(tracker.geo(), nullptr);
+}
+
+// A session without a pose on a site (docs/api.md, "Sites"): the anchored test map tiled into
+// 0.4 m squares. Without a fix no tile is loaded and the session never tracks; a GNSS fix at the
+// true start composes the tiles near it (on the cache's loader threads) and the search finds the
+// camera there, its poses as accurate as on the whole map.
+TEST(SessionTracker, OnASiteAGnssFixChoosesTheTilesASessionWithoutAPoseSearches) {
+  const auto whole = AnchoredTestMap(true);
+  const PrivateTempFolder folder("evloc-session-site", "a tiled test map");
+  TilingOptions tiling;
+  tiling.tile_size_m = 0.4;
+  tiling.overlap_m = 0.1;
+  TileMap(whole->map, folder.path() / "site", tiling);
+  auto site = std::make_shared<LoadedMap>();
+  site->name = "site";
+  site->site = OpenSite(folder.path() / "site");
+  site->tiles = std::make_shared<TileCache>();
+  site->info = SummarizeSite(site->site->manifest);
+  site->map.geo_anchor = site->info.geo_anchor;
+  ASSERT_TRUE(site->map.geo_anchor.has_value());
+  const GeoReference reference(*site->map.geo_anchor);
+  const Eigen::Vector3d start =
+      tracking::testing::SmoothMotion(testing::kInitialTimeNs).translation;
+  const SearchRun without = RunWithoutAPose(site, std::nullopt);
+  EXPECT_EQ(without.tracking_poses, 0);
+  EXPECT_EQ(without.prescored, 0);  // No tile, no viewpoint.
+  EXPECT_EQ(site->tiles->stats().loads, 0);
+  const SearchRun with = RunWithoutAPose(
+      site, GnssFixRequest(reference.GeodeticFromMap(start), 0.03, testing::kInitialTimeNs));
+  const SearchRun on_map = RunWithoutAPose(
+      whole, GnssFixRequest(reference.GeodeticFromMap(start), 0.03, testing::kInitialTimeNs));
+  std::printf(
+      "site without a pose: no fix, %d tracking poses; with a fix, tracking after %d steps "
+      "(whole map: %d), %d tracking poses, worst WGS84 error %.4f m (whole map %.4f m); %llu "
+      "tiles loaded of %zu\n",
+      without.tracking_poses, with.steps_until_tracking, on_map.steps_until_tracking,
+      with.tracking_poses, with.worst_geodetic_error_m, on_map.worst_geodetic_error_m,
+      static_cast<unsigned long long>(site->tiles->stats().loads),
+      site->site->manifest.tiles.size());
+  ASSERT_GT(with.steps_until_tracking, 0);
+  EXPECT_GT(with.tracking_poses, 30);
+  EXPECT_EQ(with.geodetic_poses, with.tracking_poses);
+  EXPECT_LT(with.worst_geodetic_error_m, 0.05);
+  EXPECT_LT(site->tiles->stats().loads, site->site->manifest.tiles.size());
 }
 
 }  // namespace

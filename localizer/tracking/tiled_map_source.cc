@@ -92,11 +92,12 @@ std::vector<size_t> TiledMapSource::NeededTiles(const Rigid3d& world_from_cam,
 }
 
 std::vector<size_t> TiledMapSource::Wanted(const Rigid3d& world_from_cam,
-                                           const Eigen::Vector3d& velocity_world) const {
-  std::vector<size_t> wanted = NeededTiles(world_from_cam, velocity_world);
+                                           const Eigen::Vector3d& velocity_world,
+                                           double extra_m) const {
+  std::vector<size_t> wanted = NeededTiles(world_from_cam, velocity_world, extra_m);
   const double margin = options_.release_margin_m > 0 ? options_.release_margin_m
                                                       : 0.5 * site_->manifest.grid.tile_size_m;
-  for (const size_t id : NeededTiles(world_from_cam, velocity_world, margin)) {
+  for (const size_t id : NeededTiles(world_from_cam, velocity_world, extra_m + margin)) {
     if (std::binary_search(current_->tile_ids.begin(), current_->tile_ids.end(), id)) {
       wanted.push_back(id);
     }
@@ -142,7 +143,12 @@ void TiledMapSource::Install(std::shared_ptr<const Composition> composition) {
 }
 
 bool TiledMapSource::Update(const Rigid3d& world_from_cam, const Eigen::Vector3d& velocity_world) {
-  const std::vector<size_t> needed = Wanted(world_from_cam, velocity_world);
+  return UpdateWithin(world_from_cam, velocity_world, 0);
+}
+
+bool TiledMapSource::UpdateWithin(const Rigid3d& world_from_cam,
+                                  const Eigen::Vector3d& velocity_world, double extra_m) {
+  const std::vector<size_t> needed = Wanted(world_from_cam, velocity_world, extra_m);
   if (options_.synchronous) {
     std::vector<std::shared_ptr<const LoadedTile>> tiles = Gather(needed, true);
     if (IdsOf(tiles) == current_->tile_ids) return false;
@@ -191,7 +197,30 @@ bool TiledMapSource::Update(const Rigid3d& world_from_cam, const Eigen::Vector3d
   return changed;
 }
 
+void TiledMapSource::SetSearchRegion(const Eigen::Vector3d& center, double radius_m) {
+  if (!center.allFinite() || !std::isfinite(radius_m) || radius_m <= 0) {
+    throw InvalidArgumentError(
+        "TiledMapSource::SetSearchRegion: the centre must be finite and the radius positive");
+  }
+  search_center_ = center;
+  search_radius_m_ = radius_m;
+}
+
+void TiledMapSource::ClearSearchRegion() {
+  search_center_.reset();
+  search_radius_m_ = 0;
+}
+
 bool TiledMapSource::Follow(const Tracker& tracker) {
+  if (search_center_ && IsSearching(tracker.status())) {
+    // The centre as a camera looking straight down (z up): the point ahead on its axis, if any,
+    // stays over the centre.
+    const Rigid3d over_center(Eigen::Quaterniond(Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitX())),
+                              *search_center_);
+    return UpdateWithin(over_center, Eigen::Vector3d::Zero(), search_radius_m_);
+  }
+  // A tracker that never had a pose has nothing to follow: no tile until a search region.
+  if (!tracker.has_pose()) return false;
   const Rigid3d& world_from_cam = tracker.last_good_world_from_cam();
   const Eigen::Vector3d velocity_world = world_from_cam.rotation * tracker.velocity().head<3>();
   return Update(world_from_cam, velocity_world);

@@ -16,6 +16,7 @@
 #include <cstdint>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <vector>
 
 #include "localizer/tracking/map_source.h"
@@ -66,8 +67,18 @@ class TiledMapSource final : public MapSource {
   // serving what is loaded (the cache remembers the failure and counts it).
   bool Update(const Rigid3d& world_from_cam, const Eigen::Vector3d& velocity_world);
 
-  // Update from the tracker's last good pose and its velocity (rotated into the world frame).
+  // Update from the tracker's last good pose and its velocity (rotated into the world frame);
+  // while the tracker searches and a search region is set, from the region instead; nothing for
+  // a tracker that never had a pose and no region.
   bool Follow(const Tracker& tracker);
+  // Where a tracker without a pose searches (a GNSS fix and its radius, world frame): while it
+  // searches, Follow composes the tiles within radius_m (plus the selection radius) of `center`
+  // in the x-y plane, so that a session that starts without a pose on a site has the tiles near
+  // its fix to search. Throws InvalidArgumentError for a non-finite centre or a radius that is
+  // not positive.
+  void SetSearchRegion(const Eigen::Vector3d& center, double radius_m);
+  // Removes the search region: a searching tracker's tiles follow its last good pose again.
+  void ClearSearchRegion();
 
   // Waits until the composition of every tile needed at `world_from_cam` is in place (loading
   // them on the calling thread), for session start-up. Throws like a synchronous Update.
@@ -104,9 +115,13 @@ class TiledMapSource final : public MapSource {
   // Composition work handed to a loader thread and its result.
   struct Pending;
 
-  // The needed tiles, and the composed ones within the release margin.
-  std::vector<size_t> Wanted(const Rigid3d& world_from_cam,
-                             const Eigen::Vector3d& velocity_world) const;
+  // The needed tiles (NeededTiles with `extra_m`), and the composed ones within the release
+  // margin.
+  std::vector<size_t> Wanted(const Rigid3d& world_from_cam, const Eigen::Vector3d& velocity_world,
+                             double extra_m) const;
+  // Update with the needed tiles reaching `extra_m` further.
+  bool UpdateWithin(const Rigid3d& world_from_cam, const Eigen::Vector3d& velocity_world,
+                    double extra_m);
   // Requests/loads the needed tiles; returns the resident ones.
   std::vector<std::shared_ptr<const LoadedTile>> Gather(const std::vector<size_t>& needed,
                                                         bool load_here);
@@ -119,6 +134,9 @@ class TiledMapSource final : public MapSource {
   std::shared_ptr<const Composition> current_;
   std::shared_ptr<Pending> pending_;
   uint64_t generation_ = 0;
+  // The search region (SetSearchRegion), if any.
+  std::optional<Eigen::Vector3d> search_center_;
+  double search_radius_m_ = 0;
 };
 
 // The composed arrays of a TiledMapSource generation.

@@ -488,9 +488,11 @@ PoseEstimate Tracker::Step(int64_t t_ns) {
   estimate.t_ns = t_ns;
   step_t_ns_ = t_ns;
   if (source_->generation() != source_generation_) {
-    // A new point set: the selected indices (which the adaptive decay reads too) are stale.
+    // A new point set: the selected indices (which the adaptive decay reads too) are stale, and
+    // so are the search's.
     ReadSourcePoints();
     has_selection_ = false;
+    if (searching()) RestartSearchRound();
   }
 
   UpdateSurfaces(t_ns);

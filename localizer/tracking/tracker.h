@@ -235,6 +235,9 @@ class Tracker {
   TrackingStatus status() const { return status_; }
   // The last good pose (identity before any).
   const Rigid3d& last_good_world_from_cam() const { return last_good_world_from_cam_; }
+  // True once the tracker has had a pose (Reset, or a search that found one); false after
+  // StartWithoutPose until the search finds the camera.
+  bool has_pose() const { return has_pose_; }
   // The options in use.
   const TrackerOptions& options() const { return options_; }
   // The ideal pinhole camera the fields live in.
@@ -359,6 +362,10 @@ class Tracker {
   // Starts the hypotheses of a new round: the source's viewpoints (and the last good pose when
   // relocalizing) once per episode, and the grid of offsets around them.
   void GenerateHypotheses();
+  // Drops the round in progress and the episode's viewpoints (their pre-score points are indices
+  // into the source's points): the next search step starts a round on the source's new point
+  // set, asking it for viewpoints again (a site's tiles composed near a GNSS fix, say).
+  void RestartSearchRound();
   // Pre-scores every hypothesis of one base viewpoint (its grid positions looking at its target,
   // each turned) and keeps the best relocalization_candidates of the round; returns how many
   // were scored.

@@ -191,6 +191,15 @@ double Tracker::BuildChamferFields(int64_t t_ns) {
   return static_cast<double>(active) / (static_cast<double>(width) * height);
 }
 
+void Tracker::RestartSearchRound() {
+  search_phase_ = SearchPhase::kStart;
+  viewpoints_.clear();
+  viewpoint_points_.clear();
+  hypotheses_.clear();
+  refinements_.clear();
+  rivals_.clear();
+}
+
 void Tracker::GenerateHypotheses() {
   if (viewpoints_.empty()) {
     ViewpointQuery query;

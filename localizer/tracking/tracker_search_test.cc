@@ -614,5 +614,52 @@ TEST(StaticMapSource, GivesKeyframesAndViewpointsBetweenThemWithinThePrior) {
   EXPECT_EQ(viewpoints.size(), 1u);
 }
 
+// A search whose source changes while a round runs drops the round (its pre-score points index
+// the old points) and asks the source for viewpoints again: swapped mid-round to the scene moved
+// 5 m along x, it finds the camera 5 m along x. (Keeping the episode's viewpoints, it searched
+// the old place in the new points and never found it.)
+TEST(TrackerSearch, ASourceChangedMidRoundIsSearchedAfresh) {
+  const EventBuffer events = SceneEvents(800'000'000);
+  const Eigen::Vector3f shift(5, 0, 0);
+  Map moved = SceneMap();
+  for (Eigen::Vector3f& position : moved.positions) position += shift;
+  for (Keyframe& keyframe : moved.keyframes) {
+    keyframe.cam_from_world =
+        keyframe.cam_from_world * Rigid3d(Eigen::Quaterniond::Identity(), -shift.cast<double>());
+  }
+  testing::SwappingMapSource source(&SceneMap());
+  TrackerOptions options;
+  Tracker tracker(source, kCamera, options);
+  tracker.StartWithoutPose(0);
+  const int64_t period_ns = std::llround(1e9 / options.step_rate_hz);
+  bool swapped = false;
+  int64_t swap_ns = -1;
+  int tracking = 0;
+  for (int64_t t_ns = 0; t_ns < 800'000'000; t_ns += period_ns) {
+    for (const PoseEstimate& estimate :
+         tracker.AddEvents(testing::EventsBetween(events, t_ns - period_ns, t_ns))) {
+      if (!swapped) {
+        ASSERT_NE(estimate.status, TrackingStatus::kTracking) << "found before the swap";
+        if (estimate.search.prescored > 0) {
+          source.Swap(&moved);
+          swapped = true;
+          swap_ns = estimate.t_ns;
+        }
+        continue;
+      }
+      if (estimate.status != TrackingStatus::kTracking) continue;
+      ++tracking;
+      Rigid3d truth = testing::SmoothMotion(estimate.t_ns);
+      truth.translation += shift.cast<double>();
+      EXPECT_LT((estimate.world_from_cam.translation - truth.translation).norm(), 0.05)
+          << estimate.t_ns;
+    }
+  }
+  ASSERT_TRUE(swapped);
+  std::cout << "swapped at " << swap_ns * 1e-9 << " s; " << tracking
+            << " TRACKING steps in the moved scene\n";
+  EXPECT_GT(tracking, 50);
+}
+
 }  // namespace
 }  // namespace evloc::tracking

@@ -392,39 +392,6 @@ TEST(Tracker, AdaptiveDecayFollowsTheImageSpeed) {
   }
 }
 
-// A MapSource whose point set is swapped for another map between calls into the tracker, each
-// swap a new generation: a local map that grows, or a tile replaced mid-session.
-class SwappingMapSource final : public MapSource {
- public:
-  explicit SwappingMapSource(const Map* map) : map_(map) {}
-
-  void Swap(const Map* map) {
-    map_ = map;
-    ++generation_;
-  }
-
-  uint64_t generation() const override { return generation_; }
-  MapPoints points() const override { return {map_->positions, map_->gradients}; }
-  void VisibleCandidates(const Camera& camera, const Rigid3d& world_from_cam,
-                         const VisibilityQueryOptions& options,
-                         std::vector<uint32_t>* candidates) const override {
-    StaticMapSource(*map_).VisibleCandidates(camera, world_from_cam, options, candidates);
-  }
-
- private:
-  const Map* map_;
-  uint64_t generation_ = 0;
-};
-
-// The events with first_ns < t_ns <= last_ns.
-EventBuffer EventsBetween(const EventBuffer& events, int64_t first_ns, int64_t last_ns) {
-  EventBuffer result;
-  for (size_t i = 0; i < events.size(); ++i) {
-    if (events.t_ns[i] > first_ns && events.t_ns[i] <= last_ns) result.push_back(events[i]);
-  }
-  return result;
-}
-
 // The tracker re-reads a source whose generation changed at the very next step, even when
 // nothing else would make it select points again: swapped to the same points moved 100 m behind
 // the camera it selects none and goes LOST; swapped back it selects as many points as before
@@ -433,7 +400,7 @@ TEST(Tracker, PicksUpASwappedMapSourceAtTheNextStep) {
   const Sequence& sequence = SmoothSequence();
   Map behind = sequence.map;
   for (Eigen::Vector3f& position : behind.positions) position.z() -= 100.0f;
-  SwappingMapSource source(&sequence.map);
+  testing::SwappingMapSource source(&sequence.map);
   TrackerOptions options;
   // The selection is never redone for motion or age: only a new generation redoes it.
   options.reselect_every_steps = 1'000'000;
@@ -445,7 +412,7 @@ TEST(Tracker, PicksUpASwappedMapSourceAtTheNextStep) {
   const int64_t swap_back_ns = 170'000'000;
 
   const std::vector<PoseEstimate> before =
-      tracker.AddEvents(EventsBetween(sequence.events, -1, swap_ns));
+      tracker.AddEvents(testing::EventsBetween(sequence.events, -1, swap_ns));
   ASSERT_GT(before.size(), 20u);
   EXPECT_EQ(before.back().status, TrackingStatus::kTracking);
   const int selected_before = before.back().quality.points_selected;
@@ -453,7 +420,7 @@ TEST(Tracker, PicksUpASwappedMapSourceAtTheNextStep) {
 
   source.Swap(&behind);
   const std::vector<PoseEstimate> swapped =
-      tracker.AddEvents(EventsBetween(sequence.events, swap_ns, swap_back_ns));
+      tracker.AddEvents(testing::EventsBetween(sequence.events, swap_ns, swap_back_ns));
   ASSERT_GE(swapped.size(), 3u);
   for (const PoseEstimate& estimate : swapped) {
     EXPECT_EQ(estimate.quality.points_selected, 0) << estimate.t_ns;
@@ -461,8 +428,8 @@ TEST(Tracker, PicksUpASwappedMapSourceAtTheNextStep) {
   }
 
   source.Swap(&sequence.map);
-  const std::vector<PoseEstimate> after =
-      tracker.AddEvents(EventsBetween(sequence.events, swap_back_ns, sequence.events.t_ns.back()));
+  const std::vector<PoseEstimate> after = tracker.AddEvents(
+      testing::EventsBetween(sequence.events, swap_back_ns, sequence.events.t_ns.back()));
   ASSERT_GT(after.size(), 20u);
   EXPECT_GT(after.front().quality.points_selected, selected_before / 2);
   EXPECT_EQ(after.back().status, TrackingStatus::kTracking);

@@ -148,4 +148,12 @@ cv::Mat RenderRectangles(const std::vector<Rectangle>& rectangles, const Camera&
   return image;
 }
 
+EventBuffer EventsBetween(const EventBuffer& events, int64_t first_ns, int64_t last_ns) {
+  EventBuffer result;
+  for (size_t i = 0; i < events.size(); ++i) {
+    if (events.t_ns[i] > first_ns && events.t_ns[i] <= last_ns) result.push_back(events[i]);
+  }
+  return result;
+}
+
 }  // namespace evloc::tracking::testing

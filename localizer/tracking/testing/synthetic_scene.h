@@ -11,6 +11,7 @@
 #include "core/camera/camera.h"
 #include "core/events/event.h"
 #include "core/geometry/rigid3.h"
+#include "localizer/tracking/map_source.h"
 #include "maps/map.h"
 
 namespace evloc::tracking::testing {
@@ -61,5 +62,36 @@ EventBuffer SimulateEdgeEvents(const Map& map, const Camera& camera,
 // `world_from_cam` by a pinhole `camera`, painted far to near.
 cv::Mat RenderRectangles(const std::vector<Rectangle>& rectangles, const Camera& camera,
                          const Rigid3d& world_from_cam);
+
+// The events with first_ns < t_ns <= last_ns.
+EventBuffer EventsBetween(const EventBuffer& events, int64_t first_ns, int64_t last_ns);
+
+// A MapSource whose point set is swapped for another map between calls into the tracker, each
+// swap a new generation (a local map that grows, a tile replaced mid-session, the tiles near a
+// GNSS fix arriving during a search); its candidates and viewpoints are those of the map it
+// serves (StaticMapSource without a visibility index).
+class SwappingMapSource final : public MapSource {
+ public:
+  explicit SwappingMapSource(const Map* map) : map_(map) {}
+  void Swap(const Map* map) {
+    map_ = map;
+    ++generation_;
+  }
+  uint64_t generation() const override { return generation_; }
+  MapPoints points() const override { return {map_->positions, map_->gradients}; }
+  void VisibleCandidates(const Camera& camera, const Rigid3d& world_from_cam,
+                         const VisibilityQueryOptions& options,
+                         std::vector<uint32_t>* candidates) const override {
+    StaticMapSource(*map_).VisibleCandidates(camera, world_from_cam, options, candidates);
+  }
+  void CandidateViewpoints(const ViewpointQuery& query,
+                           std::vector<Rigid3d>* world_from_cams) const override {
+    StaticMapSource(*map_).CandidateViewpoints(query, world_from_cams);
+  }
+
+ private:
+  const Map* map_;
+  uint64_t generation_ = 0;
+};
 
 }  // namespace evloc::tracking::testing
