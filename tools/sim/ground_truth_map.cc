@@ -236,7 +236,12 @@ std::vector<GroundTruthEdgePoint> SampleGroundTruthEdges(const Scene& scene,
               if (!OnSurface(surface_b, position)) continue;
               // Emitted once: from the lower-index surface when the edge is on both outlines.
               if (b < a && OnOutline(surface_b, position)) return;
-              Eigen::Vector3d into_b = normal_b.cross(edge_direction).normalized();
+              // A's edge crosses B's plane there (it runs along B's normal: the corner of two
+              // walls meeting a third at a right angle, sampled exactly where they meet): that is
+              // not a crease of A with B.
+              const Eigen::Vector3d across_b = normal_b.cross(edge_direction);
+              if (across_b.squaredNorm() < 1e-12) continue;
+              Eigen::Vector3d into_b = across_b.normalized();
               const bool plus_inside = InsideDomain(
                   surface_b, SurfaceCoordinates(surface_b, position + delta * into_b), 0);
               const bool minus_inside = InsideDomain(

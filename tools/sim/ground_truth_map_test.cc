@@ -96,6 +96,29 @@ TEST(GroundTruthEdges, CreasesPointIntoTheBrighterFaceAndAreClassified) {
   EXPECT_EQ(box_top, 4 * 20);
 }
 
+// Two walls meeting at a right angle on a floor, sampled so that a point of one wall's bottom
+// edge falls exactly on the other wall: that edge runs along the other wall's normal there (it
+// crosses it), which is no crease of the two. Every point keeps a unit gradient (the car park at
+// --map-spacing 0.2 had one of zero length, which the map refused).
+TEST(GroundTruthEdges, AnEdgeCrossingAnotherSurfaceIsNoCreaseWithIt) {
+  Scene scene;
+  scene.surfaces.push_back(FlatQuad("floor", Eigen::Vector3d(-1, -1, 0), Eigen::Vector3d::UnitX(),
+                                    Eigen::Vector3d::UnitY(), 2, 2, 1.0f, Gray(0.5f)));
+  scene.surfaces.push_back(FlatQuad("wall a", Eigen::Vector3d(-1, 1, 0), Eigen::Vector3d::UnitX(),
+                                    Eigen::Vector3d::UnitZ(), 2, 1, 0.5f, Gray(0.5f)));
+  // At x = 0.1: the 6th of the 10 samples of wall a's 2 m bottom edge at 0.2 m spacing.
+  scene.surfaces.push_back(FlatQuad("wall b", Eigen::Vector3d(0.1, 0, 0), Eigen::Vector3d::UnitY(),
+                                    Eigen::Vector3d::UnitZ(), 1, 1, 0.7f, Gray(0.5f)));
+  GroundTruthMapOptions options;
+  options.point_spacing_m = 0.2;
+  const auto points = SampleGroundTruthEdges(WithRegion(scene), options);
+  ASSERT_FALSE(points.empty());
+  for (const auto& point : points) {
+    EXPECT_NEAR(point.gradient.norm(), 1.0, 1e-9)
+        << "at " << point.position.transpose() << " (surface " << point.surface_index << ")";
+  }
+}
+
 TEST(GroundTruthMap, VisibilityIsOcclusionCorrect) {
   Scene scene;
   Surface wall = FlatQuad("wall", Eigen::Vector3d(-2, -2, 3), Eigen::Vector3d::UnitX(),
