@@ -2,6 +2,7 @@
 #   make test   install missing packages, configure (Release with assertions), build, run every test
 #   make build  configure and build only
 #   make demo   end to end on built-in data (see docs/demo.md)
+#   make demo-site  a small geo-referenced site of tiles end to end (docs/demo.md, "A site")
 #   make python build, then install the Python package evloc into .venv (see docs/python.md)
 #   make bench  build and run the benchmarks
 #   make fuzz   build the libFuzzer targets with clang (see docs/reliability.md)
@@ -19,7 +20,7 @@ CMAKE_FLAGS := -DCMAKE_BUILD_TYPE=Release -DEVLOC_ASSERTIONS=ON
 CCACHE_FLAGS = $$(command -v ccache >/dev/null 2>&1 && \
   echo -DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_C_COMPILER_LAUNCHER=ccache)
 
-.PHONY: deps configure build test test-long bench fuzz demo python clean format
+.PHONY: deps configure build test test-long bench fuzz demo demo-site python clean format
 
 deps:
 	@scripts/install-deps.sh
@@ -48,6 +49,9 @@ fuzz: deps
 
 demo: build
 	@BUILD_DIR=$(BUILD_DIR) scripts/demo.sh
+
+demo-site: build
+	@BUILD_DIR=$(BUILD_DIR) scripts/demo-site.sh
 
 # The Python package (docs/python.md): a venv that sees Debian's numpy, grpcio and protobuf, and
 # pip without build isolation (offline: setuptools and wheel are Debian's too).

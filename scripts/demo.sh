@@ -27,19 +27,12 @@ CIRCLE_RADIUS_M=0.2
 CIRCLE_LOOK_AT_M=2.0
 CIRCLE_LAP_S=3.0
 
-SIM="$BUILD_DIR/tools/sim/evloc-sim"
-MAPPER="$BUILD_DIR/mapper/evloc-mapper"
-SERVER="$BUILD_DIR/localizer/service/evloc-localizer"
-REPLAY="$BUILD_DIR/tools/replay/evloc-replay"
-EVAL="$BUILD_DIR/tools/eval/evloc-eval"
-PYTHON=/usr/bin/python3
-
-for binary in "$SIM" "$MAPPER" "$SERVER" "$REPLAY" "$EVAL"; do
-  if [[ ! -x "$binary" ]]; then
-    echo "demo: $binary is missing: run 'make build' first (make demo does it for you)" >&2
-    exit 1
-  fi
-done
+HERE=$(cd "$(dirname "$0")" && pwd)
+TOTAL=7
+# The tools, the steps, cleanup and the service (check_tools, begin, run, finish, fail,
+# start_service, stop_service).
+source "$HERE/demo-lib.sh"
+check_tools
 if ! command -v colmap >/dev/null 2>&1; then
   echo "demo: colmap is not installed: run scripts/install-deps.sh (make demo does it for you)" >&2
   exit 1
@@ -49,84 +42,6 @@ DATASET="$OUT/dataset"
 MAPS="$OUT/maps"
 LOGS="$OUT/logs"
 mkdir -p "$LOGS"
-START=$(date +%s)
-STEP=0
-TOTAL=7
-STEP_TIMES=()
-CURRENT_PID=""
-SERVER_PID=""
-
-elapsed() { echo $(($(date +%s) - START)); }
-
-# Stops whatever the demo started (the current step, the service) when it ends or is interrupted.
-cleanup() {
-  if [[ -n "$CURRENT_PID" ]] && kill -0 "$CURRENT_PID" 2>/dev/null; then
-    kill -TERM "$CURRENT_PID" 2>/dev/null || true
-  fi
-  if [[ -n "$SERVER_PID" ]] && kill -0 "$SERVER_PID" 2>/dev/null; then
-    kill -TERM "$SERVER_PID" 2>/dev/null || true
-    for _ in $(seq 50); do kill -0 "$SERVER_PID" 2>/dev/null || break; sleep 0.2; done
-    kill -KILL "$SERVER_PID" 2>/dev/null || true
-  fi
-}
-trap cleanup EXIT
-trap 'echo "demo: interrupted" >&2; exit 130' INT TERM
-
-# fail MESSAGE [LOG]: reports the failed step and exits non-zero.
-fail() {
-  echo >&2
-  echo "demo: FAILED at step $STEP/$TOTAL '$STEP_NAME' after $(elapsed) s: $1" >&2
-  if [[ -n "${2:-}" ]]; then
-    echo "demo: last lines of its log:" >&2
-    tail -n 15 "$2" | sed 's/^/    /' >&2
-    echo "demo: the full log is $2" >&2
-  fi
-  exit 1
-}
-
-# begin NAME: starts a step.
-begin() {
-  STEP=$((STEP + 1))
-  STEP_NAME=$1
-  STEP_START=$(date +%s)
-  echo
-  echo "== [$STEP/$TOTAL] $STEP_NAME  (elapsed $(elapsed) s)"
-}
-
-# finish: records the step's duration.
-finish() {
-  local seconds=$(($(date +%s) - STEP_START))
-  STEP_TIMES+=("$STEP. $STEP_NAME: $seconds s")
-  echo "   done in $seconds s"
-}
-
-# run LOG PROGRESS COMMAND...: runs a command with its output in LOG, printing the log's new lines
-# as they come and, every 15 s without any, a heartbeat from PROGRESS (a function name or "").
-run() {
-  local log=$1 progress=$2
-  shift 2
-  echo "   \$ $*" | cut -c1-200
-  echo "   (log: $log)"
-  "$@" >"$log" 2>&1 &
-  CURRENT_PID=$!
-  local shown=0 quiet=0 lines
-  while kill -0 "$CURRENT_PID" 2>/dev/null; do
-    sleep 1
-    lines=$(wc -l <"$log")
-    if ((lines > shown)); then
-      sed -n "$((shown + 1)),${lines}p" "$log" | cut -c1-160 | sed 's/^/   | /'
-      shown=$lines
-      quiet=0
-    elif ((++quiet % 15 == 0)); then
-      echo "   ... $(($(date +%s) - STEP_START)) s${progress:+: $($progress)}"
-    fi
-  done
-  local status=0
-  wait "$CURRENT_PID" || status=$?
-  CURRENT_PID=""
-  sed -n "$((shown + 1)),\$p" "$log" | cut -c1-160 | sed 's/^/   | /'
-  ((status == 0)) || fail "the command exited with status $status" "$log"
-}
 
 # ---------------------------------------------------------------------------------------------
 begin "simulate ${DURATION} s of a camera circling in the synthetic room (evloc-sim)"
@@ -214,37 +129,7 @@ finish
 
 # ---------------------------------------------------------------------------------------------
 begin "start the localizer service on loopback and wait until gRPC health says SERVING"
-SERVER_LOG="$LOGS/server.log"
-# One session at a time at --speed max: no neighbour for the search's CPU share to protect, and
-# with a share the search's progress per second of events depends on the machine's speed
-# (docs/relocalization.md, "Cost"), so the demo's time to find the camera would too. For the same
-# reason the search runs at normal priority: at idle priority it would wait for whatever else
-# the machine runs (the demo is not in a container or a unit of its own).
-echo "   \$ $SERVER serve --maps $MAPS --listen 127.0.0.1:0 --search-cpu-share 0 --search-priority normal   (log: $SERVER_LOG)"
-"$SERVER" serve --maps "$MAPS" --listen 127.0.0.1:0 --search-cpu-share 0 --search-priority normal \
-  >"$SERVER_LOG" 2>&1 &
-SERVER_PID=$!
-PORT=""
-for _ in $(seq 300); do
-  kill -0 "$SERVER_PID" 2>/dev/null || fail "the service exited at start" "$SERVER_LOG"
-  PORT=$(sed -n 's/^evloc-localizer: serving on port \([0-9]*\)$/\1/p' "$SERVER_LOG")
-  [[ -n "$PORT" ]] && break
-  sleep 0.2
-done
-[[ -n "$PORT" ]] || fail "the service did not report its port within 60 s" "$SERVER_LOG"
-echo "   listening on 127.0.0.1:$PORT (a free port chosen by the system)"
-HEALTHY=""
-for _ in $(seq 30); do
-  if "$REPLAY" --health-check --server "127.0.0.1:$PORT" --health-timeout 2 \
-    >"$LOGS/3-health.log" 2>&1; then
-    HEALTHY=1
-    break
-  fi
-  kill -0 "$SERVER_PID" 2>/dev/null || fail "the service exited" "$SERVER_LOG"
-  sleep 1
-done
-[[ -n "$HEALTHY" ]] || fail "gRPC health never said SERVING" "$LOGS/3-health.log"
-sed 's/^/   /' "$LOGS/3-health.log"
+start_service "$MAPS"
 finish
 
 # ---------------------------------------------------------------------------------------------
@@ -270,14 +155,7 @@ finish
 
 # ---------------------------------------------------------------------------------------------
 begin "stop the service (SIGTERM) and check that it stopped cleanly"
-kill -TERM "$SERVER_PID"
-SERVER_STATUS=0
-wait "$SERVER_PID" || SERVER_STATUS=$?
-SERVER_PID=""
-((SERVER_STATUS == 0)) || fail "the service exited with status $SERVER_STATUS" "$SERVER_LOG"
-grep -q '^evloc-localizer: stopped' "$SERVER_LOG" ||
-  fail "the service log does not end with 'stopped'" "$SERVER_LOG"
-grep -E 'session [0-9]+ (start|end)|stopped' "$SERVER_LOG" | cut -c1-160 | sed 's/^/   | /'
+stop_service
 finish
 
 # ---------------------------------------------------------------------------------------------

@@ -146,9 +146,10 @@ struct SearchedKeyframe {
   int tile = -1;
 };
 
-// One frame-tracker step from a PnP pose against the map's edges.
-using VerificationStep =
-    std::function<std::optional<tracking::PoseEstimate>(const Rigid3d& world_from_cam)>;
+// One frame-tracker step from a PnP pose against the map's edges; `depth_m` is the median depth
+// of the PnP inliers (how far the camera sees what it matched).
+using VerificationStep = std::function<std::optional<tracking::PoseEstimate>(
+    const Rigid3d& world_from_cam, double depth_m)>;
 
 // The keyframe's features pooled over its copies, each (keypoint, landmark) once in the order
 // met, and the position of the landmark each one sees.
@@ -263,11 +264,11 @@ LocateResult LocateAmong(const std::vector<SearchedKeyframe>& keyframes,
   }
 
   // Verification: one Canny-VT step from the PnP pose against the map's edges.
-  const std::optional<tracking::PoseEstimate> step = verify(pose.world_from_cam);
+  const double depth = MedianDepth(pose.world_from_cam, points, pose.inliers);
+  const std::optional<tracking::PoseEstimate> step = verify(pose.world_from_cam, depth);
   if (!step) throw InvalidArgumentError("locate: the verification tracker ran no step");
   const tracking::TrackingQuality& quality = step->quality;
   result.score = quality.alignment;
-  const double depth = MedianDepth(pose.world_from_cam, points, pose.inliers);
   const double shift = (step->world_from_cam.translation - pose.world_from_cam.translation).norm();
   const double rotation_deg =
       AngleBetween(step->world_from_cam.rotation, pose.world_from_cam.rotation) * 180.0 / M_PI;
@@ -331,7 +332,7 @@ LocateResult LocateImage(const Map& map, const VisibilityIndex& visibility,
     return result;
   }
   return LocateAmong(searched, VocabularyOf(data), query_camera, gray, options,
-                     [&](const Rigid3d& world_from_cam) {
+                     [&](const Rigid3d& world_from_cam, double /*depth_m*/) {
                        tracking::Tracker tracker(map, &visibility, query_camera,
                                                  options.verification);
                        tracker.Reset(world_from_cam, 0);
@@ -441,10 +442,13 @@ LocateResult LocateImageInSite(const std::shared_ptr<const Site>& site,
     return result;
   }
   result = LocateAmong(searched, VocabularyOf(*first), query_camera, gray, options,
-                       [&](const Rigid3d& world_from_cam) {
-                         // Against the tiles a session at the pose would track against.
+                       [&](const Rigid3d& world_from_cam, double depth_m) {
+                         // Against the tiles a session at the pose would track against, and
+                         // those around what the camera matched, at the inliers' depth on its
+                         // axis.
                          tracking::TileSelectionOptions selection = verification_tiles;
                          selection.synchronous = true;
+                         selection.view_distance_m = std::max(selection.view_distance_m, depth_m);
                          tracking::TiledMapSource source(site, cache, selection);
                          source.LoadNow(world_from_cam);
                          tracking::Tracker tracker(source, query_camera, options.verification);

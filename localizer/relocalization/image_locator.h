@@ -126,9 +126,10 @@ LocateResult LocateImage(const Map& map, const VisibilityIndex& visibility,
 // max_site_tiles in all) are loaded through `cache`, their keyframes are retrieved together
 // (each once, its features pooled from every loaded tile that keeps some), and the PnP pose is
 // verified against the tiles a session at that pose would track against (`verification_tiles`,
-// loaded synchronously). Deterministic. Throws like LocateImage, InvalidArgumentError when too many
-// tiles would be searched or the tiles' vocabularies differ, and the tile's IoError or ParseError
-// when a tile cannot be loaded.
+// loaded synchronously) and those around the point on its optical axis at the median depth of
+// the PnP inliers (what it matched). Deterministic. Throws like LocateImage, InvalidArgumentError
+// when too many tiles would be searched or the tiles' vocabularies differ, and the tile's IoError
+// or ParseError when a tile cannot be loaded.
 LocateResult LocateImageInSite(const std::shared_ptr<const Site>& site,
                                const std::shared_ptr<TileCache>& cache, const Camera& query_camera,
                                const cv::Mat& gray, const LocateOptions& options,

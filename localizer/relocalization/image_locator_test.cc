@@ -228,14 +228,19 @@ Map TwoTemples(const Map& map, const Eigen::Vector3f& offset) {
 
 // The temple map served as a site of 0.4 m tiles (the model's points and landmarks spread over a
 // few tiles, which keep the keyframes that see them; the cameras, 0.55 m away, stand over empty
-// squares):
-// the held-out views are found in the site as in the whole map, at the same poses, and the
-// result names the tile of the keyframe.
-TEST(LocateImageInSite, HeldOutTempleViewsAreFoundAsInTheWholeMap) {
+// squares), and of 0.2 m tiles: the held-out views are found in the site as in the whole map, at
+// the same poses, and the result names the tile of the keyframe. The verification composes the
+// default tiles (within one tile of the camera) and those around the point at the inliers' depth
+// on its axis: with 0.2 m tiles the first alone hold no point of the model, and no view was found.
+class LocateImageInSiteTiles : public ::testing::TestWithParam<double> {};
+
+TEST_P(LocateImageInSiteTiles, HeldOutTempleViewsAreFoundAsInTheWholeMap) {
   REQUIRE_TEMPLE();
   const TempleFixture& fixture = *Temple();
   const PrivateTempFolder folder("evloc-locate-site", "a tiled temple map");
-  const TilingOptions tiling = testing::TempleTiling();
+  TilingOptions tiling = testing::TempleTiling();
+  tiling.tile_size_m = GetParam();
+  tiling.overlap_m = GetParam() / 4;
   const Map map = testing::ZUpTempleMap(fixture.map);
   const SiteManifest manifest = TileMap(map, folder.path() / "site", tiling);
   int keeping = 0;
@@ -243,14 +248,12 @@ TEST(LocateImageInSite, HeldOutTempleViewsAreFoundAsInTheWholeMap) {
   ASSERT_GE(keeping, 3);
   const std::shared_ptr<const Site> site = OpenSite(folder.path() / "site");
   const auto cache = std::make_shared<TileCache>();
-  tracking::TileSelectionOptions verification;
-  verification.radius_m = 1.0;  // The model is 0.55 m from the cameras.
   int found_whole = 0, found_site = 0;
   for (int query = 1; query < 16; query += 2) {
     const cv::Mat& image = fixture.temple.images[query];
     const LocateResult whole = LocateImage(map, fixture.temple.camera, image, LocateOptions());
     const LocateResult tiled =
-        LocateImageInSite(site, cache, fixture.temple.camera, image, LocateOptions(), verification);
+        LocateImageInSite(site, cache, fixture.temple.camera, image, LocateOptions());
     const Rigid3d truth =
         testing::kZUpFromTemple * fixture.temple.views[query].cam_from_world.Inverse();
     std::cout << fixture.temple.views[query].name << ": whole " << LocateStatusName(whole.status)
@@ -286,6 +289,8 @@ TEST(LocateImageInSite, HeldOutTempleViewsAreFoundAsInTheWholeMap) {
   EXPECT_GE(found_whole, 6);
 }
 
+INSTANTIATE_TEST_SUITE_P(TileSizes, LocateImageInSiteTiles, ::testing::Values(0.4, 0.2));
+
 // Two identical temples 5 m apart: a search prior around the query's true position loads only
 // the tiles of its temple (the reason counts them) and finds the pose there; too many tiles is
 // an error that asks for a prior, a site without relocalization data says how to get it, and a
@@ -307,15 +312,12 @@ TEST(LocateImageInSite, APriorNarrowsTheTilesAndBadRequestsAreNamedErrors) {
     const size_t at = result.reason.rfind(" (");
     return at == std::string::npos ? -1 : std::atoi(result.reason.c_str() + at + 2);
   };
-  tracking::TileSelectionOptions verification;
-  verification.radius_m = 1.0;
   const LocateResult everywhere =
-      LocateImageInSite(site, cache, fixture.temple.camera, image, LocateOptions(), verification);
+      LocateImageInSite(site, cache, fixture.temple.camera, image, LocateOptions());
   LocateOptions near;
   near.search_center = truth.translation;
   near.search_radius_m = 0.6;
-  const LocateResult narrowed =
-      LocateImageInSite(site, cache, fixture.temple.camera, image, near, verification);
+  const LocateResult narrowed = LocateImageInSite(site, cache, fixture.temple.camera, image, near);
   std::cout << "everywhere: " << everywhere.reason << "\nnear: " << narrowed.reason << "\n";
   EXPECT_LT(tiles_searched(narrowed), tiles_searched(everywhere));
   EXPECT_GT(tiles_searched(narrowed), 0);

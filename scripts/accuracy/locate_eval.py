@@ -6,6 +6,9 @@
       the frames of an evloc dataset (images.txt, calib.yaml, groundtruth.txt): FOUND rate, how
       many FOUND within 2 cm / 1 degree of the ground truth (pose at the frame's time, linearly
       interpolated), how many FOUND farther than 10 cm, errors, time per locate.
+      With --gnss-sigma S --anchor LAT,LON,ALT,HEADING (the map's given anchor: its +y axis
+      HEADING degrees east of north), each locate gets --gnss: the true position moved by
+      Gaussian noise of S metres on each axis (seeded by --seed), in WGS84.
   locate_eval.py LOCALIZER MAP --foreign CALIB IMAGE... [--label L]
       images of scenes that are not in the map, with their calibration: every one should be
       NOT_FOUND (exit 3).
@@ -36,10 +39,49 @@ def pose_at(ground_truth, t):
     return np.array(truth[0]), truth[1]
 
 
-def locate(localizer, map_path, image, calib):
+WGS84_A = 6378137.0
+WGS84_E2 = 6.69437999014e-3
+
+
+def map_to_wgs84(position, anchor):
+    """The WGS84 latitude, longitude (degrees) and ellipsoid height of a map-frame position,
+    for an anchor (lat, lon, alt, heading) whose map +y axis points `heading` east of north:
+    map -> ENU (rotation about up), ENU -> ECEF about the anchor, ECEF -> geodetic (iterated)."""
+    lat0, lon0, alt0, heading = anchor
+    h = np.radians(heading)
+    x, y, z = position
+    east = x * np.cos(h) + y * np.sin(h)
+    north = -x * np.sin(h) + y * np.cos(h)
+    up = z
+    phi, lam = np.radians(lat0), np.radians(lon0)
+
+    def ecef(phi_, lam_, height):
+        n = WGS84_A / np.sqrt(1 - WGS84_E2 * np.sin(phi_) ** 2)
+        return np.array([(n + height) * np.cos(phi_) * np.cos(lam_),
+                         (n + height) * np.cos(phi_) * np.sin(lam_),
+                         (n * (1 - WGS84_E2) + height) * np.sin(phi_)])
+
+    p = ecef(phi, lam, alt0) + np.array([
+        -np.sin(lam) * east - np.sin(phi) * np.cos(lam) * north + np.cos(phi) * np.cos(lam) * up,
+        np.cos(lam) * east - np.sin(phi) * np.sin(lam) * north + np.cos(phi) * np.sin(lam) * up,
+        np.cos(phi) * north + np.sin(phi) * up])
+    lon = np.arctan2(p[1], p[0])
+    r = np.hypot(p[0], p[1])
+    lat = np.arctan2(p[2], r * (1 - WGS84_E2))
+    for _ in range(10):
+        n = WGS84_A / np.sqrt(1 - WGS84_E2 * np.sin(lat) ** 2)
+        height = r / np.cos(lat) - n
+        lat = np.arctan2(p[2], r * (1 - WGS84_E2 * n / (n + height)))
+    n = WGS84_A / np.sqrt(1 - WGS84_E2 * np.sin(lat) ** 2)
+    return np.degrees(lat), np.degrees(lon), r / np.cos(lat) - n
+
+
+def locate(localizer, map_path, image, calib, gnss=None):
     start = time.monotonic()
-    run = subprocess.run([localizer, "locate", "--map", map_path, "--image", image, "--calib",
-                          calib, "--json"], capture_output=True, text=True, check=False)
+    command = [localizer, "locate", "--map", map_path, "--image", image, "--calib", calib, "--json"]
+    if gnss is not None:
+        command += ["--gnss", ",".join("%.10f" % value for value in gnss)]
+    run = subprocess.run(command, capture_output=True, text=True, check=False)
     seconds = time.monotonic() - start
     if run.returncode not in (0, 3):
         sys.exit(f"locate failed on {image} (exit {run.returncode}): {run.stderr.strip()}")
@@ -60,7 +102,14 @@ def main():
                         help="a calibration file, then images of other scenes")
     parser.add_argument("--label", default="")
     parser.add_argument("--details", help="write every answer as JSON lines")
+    parser.add_argument("--gnss-sigma", type=float,
+                        help="send a GNSS fix this noisy (metres, each axis) with each locate")
+    parser.add_argument("--anchor", help="LAT,LON,ALT,HEADING of the map (with --gnss-sigma)")
+    parser.add_argument("--seed", type=int, default=1, help="seed of the GNSS noise")
     args = parser.parse_args()
+    if args.gnss_sigma is not None and not args.anchor:
+        parser.error("--gnss-sigma needs --anchor")
+    noise = np.random.default_rng(args.seed)
     answers = []
     figures = {"label": args.label}
     if args.dataset:
@@ -72,7 +121,13 @@ def main():
         translation_errors, rotation_errors = [], []
         within, far = 0, 0
         for t, name in frames[::args.every]:
-            answer = locate(args.localizer, args.map, os.path.join(args.dataset, name), calib)
+            gnss = None
+            if args.gnss_sigma is not None:
+                truth_t, _ = pose_at(ground_truth, float(t))
+                noisy = truth_t + noise.normal(0.0, args.gnss_sigma, 3)
+                anchor = [float(value) for value in args.anchor.split(",")]
+                gnss = list(map_to_wgs84(noisy, anchor)) + [args.gnss_sigma]
+            answer = locate(args.localizer, args.map, os.path.join(args.dataset, name), calib, gnss)
             answer["t_s"] = float(t)
             if answer["status"] == "FOUND":
                 truth_t, truth_q = pose_at(ground_truth, float(t))
