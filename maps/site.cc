@@ -233,6 +233,7 @@ void SiteManifest::Check() const {
                                std::to_string(kSiteFormatVersion));
   }
   grid.Check();
+  SiteGeoAnchor(*this);  // A stored anchor must decode and be valid.
   std::unordered_set<std::string> names;
   for (size_t i = 0; i < tiles.size(); ++i) {
     const SiteTile& tile = tiles[i];

@@ -121,8 +121,9 @@ struct SiteManifest {
   // Throws InvalidArgumentError naming the first problem unless: the version is supported, the
   // grid is valid, the tiles are sorted and unique, every file name is one plain path component
   // ending in ".evmap", every core and padded square is the grid's, num_core_points <=
-  // num_points, num_core_keyframes <= num_keyframes, finite bounding boxes with min <= max, and
-  // `version` equals SiteVersionOf(tiles).
+  // num_points, num_core_keyframes <= num_keyframes, finite bounding boxes with min <= max,
+  // `version` equals SiteVersionOf(tiles), and a geo anchor, when stored, is valid
+  // (SiteGeoAnchor).
   void Check() const;
 };
 

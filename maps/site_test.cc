@@ -221,6 +221,9 @@ TEST_F(SiteTest, SiteGeoAnchorRefusesAnInvalidStoredAnchor) {
   out_of_range.set_latitude_deg(123.0);
   manifest.geo_anchor = out_of_range.SerializeAsString();
   EXPECT_THROW(SiteGeoAnchor(manifest), InvalidArgumentError);
+  // The manifest's own check refuses it, so a manifest file holding it does not decode.
+  EXPECT_THROW(manifest.Check(), InvalidArgumentError);
+  EXPECT_THROW(EncodeSiteManifest(manifest), InvalidArgumentError);
 }
 
 TEST_F(SiteTest, DamagedManifestsAreRefusedWithTheirPosition) {

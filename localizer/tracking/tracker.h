@@ -466,6 +466,8 @@ class Tracker {
   double search_radius_m_ = 0;
   // Base viewpoints of the episode (regenerated when empty) and their pre-score points.
   std::vector<Rigid3d> viewpoints_;
+  // The search prior changed: the next round asks the source for viewpoints again.
+  bool refresh_viewpoints_ = false;
   std::vector<std::vector<uint32_t>> viewpoint_points_;
   std::vector<uint8_t> viewpoint_sampled_;
   // Median depth of each viewpoint's sampled points, metres (its look-at distance).

@@ -62,13 +62,14 @@ void Tracker::SetSearchPrior(const Eigen::Vector3d& center, double radius_m) {
   }
   search_center_ = center;
   search_radius_m_ = radius_m;
-  viewpoints_.clear();
+  // At the next round: the round in progress keeps the viewpoints its hypotheses index.
+  refresh_viewpoints_ = true;
 }
 
 void Tracker::ClearSearchPrior() {
   search_center_.reset();
   search_radius_m_ = 0;
-  viewpoints_.clear();
+  refresh_viewpoints_ = true;
 }
 
 void Tracker::SetImageHypothesisSource(const ImageHypothesisSource* source) {
@@ -193,6 +194,7 @@ double Tracker::BuildChamferFields(int64_t t_ns) {
 
 void Tracker::RestartSearchRound() {
   search_phase_ = SearchPhase::kStart;
+  refresh_viewpoints_ = false;
   viewpoints_.clear();
   viewpoint_points_.clear();
   hypotheses_.clear();
@@ -201,7 +203,11 @@ void Tracker::RestartSearchRound() {
 }
 
 void Tracker::GenerateHypotheses() {
-  if (viewpoints_.empty()) {
+  if (viewpoints_.empty() || refresh_viewpoints_) {
+    // New viewpoints: the last round's rivals index the old ones.
+    if (refresh_viewpoints_) rivals_.clear();
+    refresh_viewpoints_ = false;
+    viewpoints_.clear();
     ViewpointQuery query;
     query.samples_between_keyframes = options_.relocalization_samples_between_keyframes;
     query.search_center = search_center_;

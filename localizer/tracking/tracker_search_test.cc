@@ -661,5 +661,39 @@ TEST(TrackerSearch, ASourceChangedMidRoundIsSearchedAfresh) {
   EXPECT_GT(tracking, 50);
 }
 
+// A search prior that arrives while a round pre-scores (a GNSS receiver's fix every second)
+// takes effect at the next round and does not stall the one in progress: the camera is found,
+// every second's fix refreshing the prior. (Clearing the viewpoints under the round left it
+// pre-scoring forever.)
+TEST(TrackerSearch, APriorSetDuringARoundTakesEffectAtTheNextOne) {
+  const EventBuffer events = SceneEvents(800'000'000);
+  TrackerOptions options;
+  // A few viewpoints per step, so that the round is still pre-scoring when the prior comes.
+  options.relocalization_prescores_per_step = 1;
+  Tracker tracker(SceneMap(), nullptr, kCamera, options);
+  tracker.StartWithoutPose(0);
+  const int64_t period_ns = std::llround(1e9 / options.step_rate_hz);
+  int priors = 0;
+  int64_t first_tracking_ns = -1;
+  for (int64_t t_ns = 0; t_ns < 800'000'000; t_ns += period_ns) {
+    for (const PoseEstimate& estimate :
+         tracker.AddEvents(testing::EventsBetween(events, t_ns - period_ns, t_ns))) {
+      if (estimate.status == TrackingStatus::kTracking) {
+        if (first_tracking_ns < 0) first_tracking_ns = estimate.t_ns;
+        EXPECT_LT(PositionError(estimate), 0.05) << estimate.t_ns;
+      } else if (estimate.search.prescored > 0) {
+        // Mid-round, around the true position (as a fix would be), once per pre-scoring step.
+        tracker.SetSearchPrior(testing::SmoothMotion(estimate.t_ns).translation, 1.0);
+        ++priors;
+      }
+    }
+  }
+  std::cout << priors << " priors set while pre-scoring; TRACKING from " << first_tracking_ns * 1e-9
+            << " s\n";
+  EXPECT_GT(priors, 1);
+  ASSERT_GE(first_tracking_ns, 0) << "never TRACKING";
+  EXPECT_LT(first_tracking_ns, 600'000'000);
+}
+
 }  // namespace
 }  // namespace evloc::tracking

@@ -4,7 +4,8 @@
 // SiteManifest payload that this target wraps in a valid header (length and CRC32C recomputed),
 // so that mutations reach the protobuf and the manifest's own checks instead of stopping at the
 // checksum. Any input must either decode or throw ParseError; what decodes passes
-// SiteManifest::Check(), encodes again, and decodes to the same tiles.
+// SiteManifest::Check(), encodes again, decodes to the same tiles, and its geo anchor (if any)
+// decodes.
 #include <cstdint>
 #include <cstdlib>
 #include <string>
@@ -51,6 +52,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       if (manifest.Find(manifest.tiles[t].index) != t) std::abort();
     }
     (void)evloc::SummarizeSite(manifest);
+    (void)evloc::SiteGeoAnchor(manifest);  // Checked by the decoder: never throws here.
   } catch (const evloc::Error&) {
     std::abort();  // The reader returned a manifest that fails its own checks.
   }

@@ -25,6 +25,7 @@
 #include "core/events/event_reader.h"
 #include "core/events/evt3_encoder.h"
 #include "core/geo/geo_trajectory.h"
+#include "core/geo/geodetic.h"
 #include "core/trajectory/tum_io.h"
 #include "evloc/localizer.grpc.pb.h"
 #include "localizer/wire/packed_events.h"
@@ -453,6 +454,41 @@ grpc::Status Replayer::RunSession(const TimedPose& start, bool resumed, SessionO
     shared_.geo_anchor =
         GeoAnchorFromProto(response.started().map().geo_anchor(), "SessionStarted.map.geo_anchor");
   }
+  // The simulated GNSS receiver (--gnss-sigma): a fix at the session's start, then one every
+  // --gnss-period of session time before the packet that reaches it (docs/geo.md, "GNSS prior").
+  std::optional<GeoReference> gnss_reference;
+  int64_t next_fix_t_ns = start.t_ns;
+  std::mt19937 gnss_noise(options_.gnss_seed);
+  const auto send_fix = [&](int64_t t_ns) {
+    const std::optional<Rigid3d> truth =
+        dataset_.ground_truth ? dataset_.ground_truth->Lookup(t_ns) : std::nullopt;
+    if (!truth) {
+      throw InvalidArgumentError("--gnss-sigma: the dataset has no ground truth at t = " +
+                                 std::to_string(static_cast<double>(t_ns) * 1e-9) + " s");
+    }
+    std::normal_distribution<double> normal(0.0, *options_.gnss_sigma_m);
+    Eigen::Vector3d position = truth->translation;
+    for (int axis = 0; axis < 3; ++axis) position[axis] += normal(gnss_noise);
+    const GeodeticPoint fix = gnss_reference->GeodeticFromMap(position);
+    api::TrackRequest gnss;
+    gnss.mutable_gnss_fix()->set_latitude_deg(fix.latitude_deg);
+    gnss.mutable_gnss_fix()->set_longitude_deg(fix.longitude_deg);
+    gnss.mutable_gnss_fix()->set_altitude_m(fix.altitude_m);
+    gnss.mutable_gnss_fix()->set_horizontal_accuracy_m(*options_.gnss_sigma_m);
+    gnss.mutable_gnss_fix()->set_vertical_accuracy_m(*options_.gnss_sigma_m);
+    gnss.mutable_gnss_fix()->set_t_ns(t_ns);
+    ++result_.gnss_fixes_sent;
+    next_fix_t_ns = t_ns + std::llround(options_.gnss_period_s * 1e9);
+    return stream->Write(gnss);
+  };
+  if (options_.gnss_sigma_m) {
+    if (!response.started().map().has_geo_anchor()) {
+      throw InvalidArgumentError("--gnss-sigma: " +
+                                 MissingGeoAnchorMessage(response.started().map().name()));
+    }
+    gnss_reference.emplace(GeoAnchorFromProto(response.started().map().geo_anchor(), "geo_anchor"));
+    if (!send_fix(start.t_ns)) return finish();
+  }
   backoff_.SessionStarted(Clock::now());
   if (!schedule_start_) schedule_start_ = Clock::now();
   log_ << "evloc-replay: session " << response.started().session_id() << " on map "
@@ -613,6 +649,7 @@ grpc::Status Replayer::RunSession(const TimedPose& start, bool resumed, SessionO
       shared_.sent.push_back({packet_end_ns, Clock::now()});
       shared_.unconfirmed_window_ends.push_back(packet_end_ns);
     }
+    if (gnss_reference && packet_start_ns >= next_fix_t_ns && !send_fix(packet_start_ns)) break;
     stream_open = stream->Write(request);
     if (resend) {
       ++result_.packets_resent;
@@ -888,6 +925,7 @@ void WriteReplayReport(const std::filesystem::path& path, const ReplayResult& re
       {"events_sent", result.events_sent},
       {"packets_sent", result.packets_sent},
       {"packets_resent", result.packets_resent},
+      {"gnss_fixes_sent", result.gnss_fixes_sent},
       {"poses", result.trajectory.size()},
       {"lost_poses", result.lost_poses},
       {"searching_updates", result.searching_updates},
@@ -1021,6 +1059,34 @@ std::unique_ptr<CommandLine> DeclareReplayCommandLine(ReplayCommand* command) {
            })
       .Add("--rate", "HZ", "tracking steps per second (default: the server's)",
            &options->step_rate_hz)
+      .Add("--gnss-sigma", "M",
+           "simulate a GNSS receiver: send fixes at the true position moved by Gaussian noise of "
+           "M metres on each axis, with accuracy M, from the start and every --gnss-period "
+           "(needs ground truth and a map with a geo anchor; docs/geo.md)",
+           [options](const std::string& flag, const std::string& value) {
+             const double sigma = ParseDoubleFlag(flag, value);
+             if (!(sigma > 0) || !std::isfinite(sigma)) {
+               throw InvalidArgumentError(flag + " must be a positive distance in metres");
+             }
+             options->gnss_sigma_m = sigma;
+           })
+      .Add("--gnss-period", "S",
+           "with --gnss-sigma: seconds of session time between fixes (default 1: a 1 Hz receiver)",
+           [options](const std::string& flag, const std::string& value) {
+             const double period = ParseDoubleFlag(flag, value);
+             if (!(period > 0) || !std::isfinite(period)) {
+               throw InvalidArgumentError(flag + " must be a positive number of seconds");
+             }
+             options->gnss_period_s = period;
+           })
+      .Add("--gnss-seed", "N", "seed of the simulated GNSS noise (default 1)",
+           [options](const std::string& flag, const std::string& value) {
+             const int64_t seed = ParseIntegerFlag(flag, value);
+             if (seed < 0 || seed > 0xffffffffLL) {
+               throw InvalidArgumentError(flag + " must be in [0, 4294967295]");
+             }
+             options->gnss_seed = static_cast<uint32_t>(seed);
+           })
       .Add("--thin-while-searching", "on|off",
            "while the server searches the map, send at most the events per second it announced "
            "(SessionStarted.searching_event_rate; default on)",

@@ -68,6 +68,15 @@ struct ReplayOptions {
   // Start without a pose: the server searches the map (PoseUpdates INITIALIZING, without a pose,
   // until it verifies one); the dataset needs no ground truth (--init-pose none).
   bool start_without_pose = false;
+  // A simulated GNSS receiver (--gnss-sigma M): right after the session starts and then every
+  // gnss_period_s of session time (before the packet that reaches it), a GnssFix at the
+  // ground-truth position moved by Gaussian noise of this one-sigma on each axis (seed
+  // gnss_seed, --gnss-seed), with this accuracy, through the map's geo anchor; it narrows the
+  // search, and on a site chooses the tiles a session without a pose searches (docs/geo.md).
+  // Needs ground truth and a map with a geo anchor.
+  std::optional<double> gnss_sigma_m;
+  double gnss_period_s = 1.0;
+  uint32_t gnss_seed = 1;
   // Tracking steps per second asked of the server; nullopt: the server's default (--rate).
   std::optional<double> step_rate_hz;
   // While the session searches (no pose in its updates; from the start with --init-pose none),
@@ -160,6 +169,8 @@ struct ReplayResult {
   int64_t packets_sent = 0;
   // Packets sent again to a new session after a stream failure (priming and in-flight ones).
   int64_t packets_resent = 0;
+  // GnssFix requests sent (--gnss-sigma).
+  int64_t gnss_fixes_sent = 0;
   // Stream failures recovered by reconnecting, in order.
   std::vector<Outage> outages;
   // Poses received with status LOST.

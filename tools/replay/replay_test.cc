@@ -581,5 +581,39 @@ TEST_F(ReplayTest, GeoOutputHasTheOfflineGeodeticPoses) {
   EXPECT_FALSE(std::filesystem::exists(*plain.geo_output));
 }
 
+// --gnss-sigma (a simulated receiver, docs/geo.md): a fix at the start and one per --gnss-period
+// of session time, which the server accepts on an anchored map (a wrong fix would end the session
+// with INVALID_ARGUMENT or FAILED_PRECONDITION); the poses are those of the run without fixes (a
+// fix only narrows searches). A map without an anchor is refused with the remedy.
+TEST_F(ReplayTest, GnssSigmaSendsAFixEveryPeriodAndRequiresAnAnchor) {
+  GeoAnchor anchor;
+  anchor.origin = {47.3769, 8.5417, 408.0};
+  Map anchored = fixture::TestMap();
+  anchored.geo_anchor = anchor;
+  fixture::WriteTestMap(folder_.path() / "maps", "anchored", anchored);
+  ReplayOptions options = Options();
+  options.map_name = "anchored";
+  options.gnss_sigma_m = 3.0;
+  options.gnss_period_s = 0.1;
+  std::ostringstream log;
+  const ReplayResult result = RunReplay(options, log);
+  const Dataset dataset = ReadDataset(dataset_);
+  const double span_s =
+      static_cast<double>(dataset.ground_truth->end_ns() - dataset.ground_truth->start_ns()) * 1e-9;
+  EXPECT_GE(result.gnss_fixes_sent, static_cast<int64_t>(span_s / 0.1) - 1) << log.str();
+  EXPECT_LE(result.gnss_fixes_sent, static_cast<int64_t>(span_s / 0.1) + 2) << log.str();
+  ExpectSameTrajectory(result.trajectory, Offline().trajectory);
+
+  ReplayOptions plain = Options();
+  plain.gnss_sigma_m = 3.0;
+  try {
+    RunReplay(plain, log);
+    FAIL() << "--gnss-sigma on a map without an anchor";
+  } catch (const InvalidArgumentError& error) {
+    EXPECT_NE(std::string(error.what()).find("has no geo anchor"), std::string::npos)
+        << error.what();
+  }
+}
+
 }  // namespace
 }  // namespace evloc::replay
