@@ -388,11 +388,9 @@ LocateResult LocateImageInSite(const std::shared_ptr<const Site>& site,
         " one locate may load (LocateOptions::max_site_tiles): give a search prior (a GNSS fix) "
         "that narrows it");
   }
+  // Load returns a resident tile as it is (the cache's hit and miss counters stay the sessions').
   std::vector<std::shared_ptr<const LoadedTile>> tiles;
-  for (const size_t t : chosen) {
-    std::shared_ptr<const LoadedTile> tile = cache->Find(*site, t);
-    tiles.push_back(tile ? std::move(tile) : cache->Load(site, t));
-  }
+  for (const size_t t : chosen) tiles.push_back(cache->Load(site, t));
 
   // Every keyframe within the search region once, whichever tiles keep it (a tile keeps the
   // keyframes that see its points, with the features that see its landmarks): its copies are

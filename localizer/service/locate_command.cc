@@ -13,7 +13,7 @@
 #include "core/common/cli.h"
 #include "core/common/error.h"
 #include "core/geo/geo_trajectory.h"
-#include "core/geo/geodetic.h"
+#include "localizer/service/locate_rpc.h"
 #include "maps/site.h"
 #include "maps/tile_cache.h"
 
@@ -172,8 +172,7 @@ int LocateAndReport(const LocateCommand& command, const std::optional<GeoAnchor>
     if (!anchor) {
       throw InvalidArgumentError("--gnss: " + MissingGeoAnchorMessage(command.map.string()));
     }
-    options.search_center = GeoReference(*anchor).MapFromGeodetic(command.gnss->position);
-    options.search_radius_m = GnssSearchRadiusM(*command.gnss, *anchor);
+    options = NearGnssFix(options, *command.gnss, *anchor);
   }
   std::string tile;
   const relocalization::LocateResult result = locate(camera, gray, options, &tile);

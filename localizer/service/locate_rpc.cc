@@ -104,6 +104,13 @@ cv::Mat LocateImageFromProto(const api::LocateRequest& request, const Camera& ca
   throw InvalidArgumentError("LocateRequest: the image is missing (set encoded or gray)");
 }
 
+relocalization::LocateOptions NearGnssFix(relocalization::LocateOptions options,
+                                          const GnssPrior& prior, const GeoAnchor& anchor) {
+  options.search_center = GeoReference(anchor).MapFromGeodetic(prior.position);
+  options.search_radius_m = GnssSearchRadiusM(prior, anchor);
+  return options;
+}
+
 api::LocateResponse LocateResponseFromResult(const relocalization::LocateResult& result) {
   api::LocateResponse response;
   const bool found = result.status == relocalization::LocateStatus::kFound;
@@ -178,9 +185,7 @@ grpc::Status LocateInLoadedMap(const api::LocateRequest& request, const LoadedMa
         return {grpc::StatusCode::FAILED_PRECONDITION,
                 "LocateRequest.gnss_fix: " + MissingGeoAnchorMessage(map.name)};
       }
-      const GeoReference reference(*map.map.geo_anchor);
-      located.search_center = reference.MapFromGeodetic(prior.position);
-      located.search_radius_m = GnssSearchRadiusM(prior, *map.map.geo_anchor);
+      located = NearGnssFix(located, prior, *map.map.geo_anchor);
     }
     if (map.site) {
       // The tiles near the fix (every tile without one), verified against the tiles a session

@@ -14,6 +14,7 @@
 #include "evloc/localizer.pb.h"
 #include "localizer/relocalization/image_locator.h"
 #include "localizer/service/map_registry.h"
+#include "localizer/service/session.h"
 
 namespace evloc::service {
 
@@ -34,6 +35,12 @@ std::optional<EncodedImageSize> ReadEncodedImageSize(const std::string& bytes);
 // allocates more than the camera's pixels). Throws InvalidArgumentError for a missing image, a
 // size mismatch, another format or undecodable bytes.
 cv::Mat LocateImageFromProto(const api::LocateRequest& request, const Camera& camera);
+
+// `options` narrowed to the keyframes (and in a site the tiles) within GnssSearchRadiusM of a
+// GNSS fix, converted to the map frame through `anchor` (docs/geo.md, "GNSS prior"): the Locate
+// RPC's gnss_fix and evloc-localizer locate --gnss.
+relocalization::LocateOptions NearGnssFix(relocalization::LocateOptions options,
+                                          const GnssPrior& prior, const GeoAnchor& anchor);
 
 // The response fields of a result (map and locate_ms are left unset).
 api::LocateResponse LocateResponseFromResult(const relocalization::LocateResult& result);
