@@ -160,6 +160,12 @@ TEST(GeoEndToEnd, PosesInWgs84AreWithinATenthOfAMetreOfTheTruth) {
   EXPECT_EQ(run.exit_code, 1);
   EXPECT_NE(run.output.find("has no geo anchor"), std::string::npos) << run.output;
   EXPECT_NE(run.output.find("evloc-mapper georef"), std::string::npos) << run.output;
+  // So is a GNSS fix (it has no meaning in the map frame without one).
+  run = RunCommand(std::string(EVLOC_TRACK_BINARY) + " --map " + map.string() + " --dataset " +
+                   dataset.string() + " --quiet --out " + (directory / "estimate.txt").string() +
+                   " --init-pose none --gnss 47.3769,8.5417,408,3");
+  EXPECT_EQ(run.exit_code, 1);
+  EXPECT_NE(run.output.find("has no geo anchor"), std::string::npos) << run.output;
 
   char anchor[128];
   std::snprintf(anchor, sizeof(anchor), "%.4f,%.4f,%.1f,%.1f", kLatitude, kLongitude, kAltitude,
@@ -179,7 +185,7 @@ TEST(GeoEndToEnd, PosesInWgs84AreWithinATenthOfAMetreOfTheTruth) {
                            -v.x() * std::sin(h) + v.y() * std::cos(h), v.z());
   };
   // Scores one --geo file against the truth.
-  const auto score = [&](const fs::path& path, const char* what) {
+  const auto score = [&](const fs::path& path, const char* what, int min_poses = 250) {
     std::ifstream geo(path);
     std::string line;
     int poses = 0;
@@ -212,7 +218,7 @@ TEST(GeoEndToEnd, PosesInWgs84AreWithinATenthOfAMetreOfTheTruth) {
       worst_heading = std::max(worst_heading, heading_error);
       ++poses;
     }
-    ASSERT_GT(poses, 250) << what;
+    ASSERT_GT(poses, min_poses) << what;
     const double rms = std::sqrt(sum_squared / poses);
     std::printf(
         "geo end to end (%s): %d poses, WGS84 position error RMS %.4f m, max %.4f m; heading "
@@ -240,6 +246,26 @@ TEST(GeoEndToEnd, PosesInWgs84AreWithinATenthOfAMetreOfTheTruth) {
                  " --tile-radius 1.5 --tile-view-distance 2");
   ASSERT_EQ(run.exit_code, 0) << run.output;
   score(directory / "site_geo.txt", "site");
+
+  // Without a pose, a GNSS fix where the run starts (the true position at 0.4 s, accuracy 0.5 m)
+  // narrows the search (--gnss); on the site it also chooses the tiles, which no pose can. The
+  // poses written (TRACKING only) are right.
+  const Eigen::Vector3d start = to_enu(truth.Lookup(400'000'000)->translation);
+  double fix_latitude, fix_longitude, fix_altitude;
+  enu.Reverse(start.x(), start.y(), start.z(), fix_latitude, fix_longitude, fix_altitude);
+  char fix[160];
+  std::snprintf(fix, sizeof(fix), "%.9f,%.9f,%.3f,0.5", fix_latitude, fix_longitude, fix_altitude);
+  for (const auto& [target, what] :
+       {std::pair{map, "map, no pose, GNSS fix"}, std::pair{site, "site, no pose, GNSS fix"}}) {
+    const fs::path geo = directory / "fix_geo.txt";
+    run = RunCommand(std::string(EVLOC_TRACK_BINARY) + " --map " + target.string() + " --dataset " +
+                     dataset.string() + " --quiet --out " +
+                     (directory / "fix_estimate.txt").string() + " --geo " + geo.string() +
+                     " --init-pose none --start 0.4 --gnss " + fix +
+                     " --tile-radius 1.5 --tile-view-distance 2");
+    ASSERT_EQ(run.exit_code, 0) << what << ": " << run.output;
+    score(geo, what, 100);
+  }
   fs::remove_all(directory);
 }
 

@@ -153,6 +153,12 @@ void OfflineTrackingOptions::Check() const {
   if (read_ahead_batches < 0 || read_ahead_batches > 1024) {
     throw InvalidArgumentError("offline tracking: read_ahead_batches must be in 0..1024");
   }
+  if (search_prior_center &&
+      (!search_prior_center->allFinite() || !std::isfinite(search_prior_radius_m) ||
+       search_prior_radius_m <= 0)) {
+    throw InvalidArgumentError(
+        "offline tracking: the search prior needs a finite centre and a positive radius");
+  }
 }
 
 EventStreamTracker::EventStreamTracker(const MapSource& source, const Camera& camera,
@@ -223,6 +229,20 @@ OfflineTrackingResult TrackEventStream(EventReader& reader, const MapSource& sou
   if (options.image_hypotheses) {
     stream.mutable_tracker().SetImageHypothesisSource(options.image_hypotheses);
   }
+  bool prior_set = false;
+  if (options.search_prior_center) {
+    stream.mutable_tracker().SetSearchPrior(*options.search_prior_center,
+                                            options.search_prior_radius_m);
+    prior_set = true;
+  }
+  // Before each batch (where the tracker may be changed): the prior ends once a step has tracked.
+  const BetweenBatchesCallback before_step = [&](const Tracker& tracker) {
+    if (prior_set && tracker.status() == TrackingStatus::kTracking) {
+      stream.mutable_tracker().ClearSearchPrior();
+      prior_set = false;
+    }
+    if (between_batches) between_batches(tracker);
+  };
   OfflineTrackingResult result;
   EventBuffer batch;
   std::optional<ReadAheadQueue> read_ahead;
@@ -250,7 +270,7 @@ OfflineTrackingResult TrackEventStream(EventReader& reader, const MapSource& sou
       batch = std::move(kept);
       if (batch.empty()) continue;
     }
-    for (const PoseEstimate& step : stream.AddEvents(batch, between_batches)) {
+    for (const PoseEstimate& step : stream.AddEvents(batch, before_step)) {
       Record(step, stream.tracker(), on_step, &result);
     }
   }

@@ -42,6 +42,13 @@ struct OfflineTrackingOptions {
   // Hypotheses from an image of the events for the global search (Tracker::
   // SetImageHypothesisSource; not owned, must outlive the run); null: none.
   const ImageHypothesisSource* image_hypotheses = nullptr;
+  // A prior on where a run that starts without a pose is (evloc-track --gnss: a GNSS fix at the
+  // start): the search looks only at viewpoints within search_prior_radius_m of this centre
+  // (world frame, Tracker::SetSearchPrior) until it has tracked (checked before each batch of
+  // events), then everywhere again.
+  std::optional<Eigen::Vector3d> search_prior_center;
+  // Its radius, metres (> 0 when a centre is given).
+  double search_prior_radius_m = 0;
 
   // Throws InvalidArgumentError when a field is out of range.
   void Check() const;

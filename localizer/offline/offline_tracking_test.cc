@@ -76,6 +76,53 @@ TEST(TrackEventStream, FollowsSyntheticMotionAndIgnoresReadBatchSize) {
   }
 }
 
+// Two identical places 20 m apart, keyframes beside the path at both: from no pose the search
+// refuses the ambiguity; a search prior around either place finds the camera there, and the
+// prior ends with the first TRACKING step.
+TEST(TrackEventStream, ASearchPriorChoosesBetweenTwoIdenticalPlaces) {
+  const Camera camera = Camera::Pinhole(240, 180, 200.0, 200.0, 119.5, 89.5);
+  const Eigen::Vector3d shift(20.0, 0.0, 0.0);
+  const Vector6d beside = (Vector6d() << 0.06, -0.03, 0.0, 0.0, 0.05, 0.0).finished();
+  Map map = testing::MakeRectangleMap(testing::TwinRectangles(shift), 0.004);
+  testing::AddKeyframesBesideThePath(&map, camera, 900'000'000, 150'000'000, beside);
+  testing::AddKeyframesBesideThePath(&map, camera, 900'000'000, 150'000'000, beside, shift);
+  const EventBuffer events = testing::SimulateEdgeEvents(
+      map, camera, [](int64_t t) { return testing::SmoothMotion(t); }, 0, kDurationNs);
+
+  const auto run = [&](const std::optional<Eigen::Vector3d>& prior) {
+    OfflineTrackingOptions options;
+    options.search_prior_center = prior;
+    options.search_prior_radius_m = 1.0;
+    BufferEventReader reader(events);
+    return TrackEventStream(reader, map, nullptr, camera, std::nullopt, 0, options);
+  };
+  const auto tracking_steps = [](const OfflineTrackingResult& result) {
+    std::vector<PoseEstimate> steps;
+    for (const PoseEstimate& step : result.steps) {
+      if (step.status == TrackingStatus::kTracking) steps.push_back(step);
+    }
+    return steps;
+  };
+  EXPECT_TRUE(tracking_steps(run(std::nullopt)).empty());
+  for (const Eigen::Vector3d& place : {Eigen::Vector3d(Eigen::Vector3d::Zero()), shift}) {
+    const std::vector<PoseEstimate> tracked = tracking_steps(run(place));
+    ASSERT_FALSE(tracked.empty()) << place.transpose();
+    for (const PoseEstimate& step : tracked) {
+      Rigid3d truth = testing::SmoothMotion(step.t_ns);
+      truth.translation += place;
+      EXPECT_LT((step.world_from_cam.translation - truth.translation).norm(), 0.05)
+          << place.transpose() << " at " << step.t_ns;
+    }
+  }
+
+  OfflineTrackingOptions bad;
+  bad.search_prior_center = Eigen::Vector3d::Zero();
+  EXPECT_THROW(bad.Check(), InvalidArgumentError);  // no radius
+  bad.search_prior_radius_m = 1.0;
+  bad.search_prior_center = Eigen::Vector3d::Constant(NAN);
+  EXPECT_THROW(bad.Check(), InvalidArgumentError);
+}
+
 // A reader that fails after some events: the error reaches the caller whether the events are
 // read on the calling thread or ahead on a second one, and the read-ahead thread stops cleanly.
 class FailingEventReader : public EventReader {
@@ -251,10 +298,20 @@ TEST(TrackCommandLine, ParsesStartingWithoutAPoseAndTheBlackout) {
   EXPECT_EQ(options.blackout_end_s, 1.5);
   EXPECT_EQ(options.tracking.tracker.lost_steps_before_relocalization, 12);
   EXPECT_EQ(options.tracking.tracker.relocalization_give_up_s, 2.0);
+  EXPECT_FALSE(options.gnss.has_value());
+  const TrackCommandOptions with_fix =
+      ParseTrackCommandLine({"--map", "m", "--dataset", "d", "--out", "o", "--init-pose", "none",
+                             "--gnss", "47.3769,8.5417,408,3,5"});
+  ASSERT_TRUE(with_fix.gnss.has_value());
+  EXPECT_EQ(with_fix.gnss->position.latitude_deg, 47.3769);
+  EXPECT_EQ(with_fix.gnss->vertical_accuracy_m, 5.0);
   const std::vector<std::vector<std::string>> bad = {{"--start", "-1"},
                                                      {"--blackout", "2:1"},
                                                      {"--blackout", "1"},
-                                                     {"--init-pose", "none", "--mode", "frames"}};
+                                                     {"--init-pose", "none", "--mode", "frames"},
+                                                     {"--gnss", "47.3,8.5,400,3"},
+                                                     {"--init-pose", "none", "--gnss", "47.3,8.5"},
+                                                     {"--init-pose", "none", "--gnss", "91,8,0,3"}};
   for (const std::vector<std::string>& flags : bad) {
     std::vector<std::string> arguments = {"--map", "m", "--dataset", "d", "--out", "o"};
     arguments.insert(arguments.end(), flags.begin(), flags.end());

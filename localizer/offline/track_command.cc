@@ -164,6 +164,12 @@ void WriteTrackOutputs(const TrackCommandOptions& options, const std::string& va
   }
 }
 
+// --gnss as the run's search prior: the fix in the map frame and its search radius.
+void SetGnssPrior(const GnssPrior& prior, const GeoAnchor& anchor, OfflineTrackingOptions* run) {
+  run->search_prior_center = GeoReference(anchor).MapFromGeodetic(prior.position);
+  run->search_prior_radius_m = GnssSearchRadiusM(prior, anchor);
+}
+
 // evloc-track against a site (--map SITE): the tiles near the pose through a synchronous
 // TiledMapSource, updated between event batches. Events only; debug pictures need a whole map.
 OfflineTrackingResult RunSiteTrack(const TrackCommandOptions& options, const Dataset& dataset,
@@ -179,10 +185,10 @@ OfflineTrackingResult RunSiteTrack(const TrackCommandOptions& options, const Dat
     throw InvalidArgumentError("--debug-dir needs a whole map; --map " + options.map_path.string() +
                                " is a site");
   }
-  if (!initial_world_from_cam) {
+  if (!initial_world_from_cam && !options.gnss) {
     throw InvalidArgumentError("--map " + options.map_path.string() +
                                " is a site: its tiles are chosen by the pose, so give an initial "
-                               "pose (--init-pose none is not supported on sites)");
+                               "pose, or with --init-pose none a GNSS fix (--gnss)");
   }
   if (!dataset.events_path) {
     throw InvalidArgumentError("dataset '" + options.dataset_path.string() +
@@ -195,10 +201,17 @@ OfflineTrackingResult RunSiteTrack(const TrackCommandOptions& options, const Dat
   selection.synchronous = true;
   TiledMapSource source(OpenSite(options.map_path), cache, selection);
   const std::optional<GeoAnchor> anchor = SiteGeoAnchor(source.site().manifest);
-  if (options.geo_path && !anchor) {
+  if ((options.geo_path || options.gnss) && !anchor) {
     throw InvalidArgumentError(MissingGeoAnchorMessage(options.map_path.string()));
   }
-  source.LoadNow(*initial_world_from_cam);
+  OfflineTrackingOptions run = tracking;
+  if (initial_world_from_cam) {
+    source.LoadNow(*initial_world_from_cam);
+  } else {
+    // The tiles near the fix are composed (synchronously) when the run starts searching.
+    SetGnssPrior(*options.gnss, *anchor, &run);
+    source.SetSearchRegion(*run.search_prior_center, run.search_prior_radius_m);
+  }
   if (!options.quiet) {
     log << "evloc-track: site " << source.site().manifest.name << " version "
         << source.site().manifest.version << " (" << source.site().manifest.tiles.size()
@@ -209,7 +222,7 @@ OfflineTrackingResult RunSiteTrack(const TrackCommandOptions& options, const Dat
   int64_t compositions = 0;
   const auto reader = OpenDatasetEvents(dataset);
   OfflineTrackingResult result = TrackEventStream(
-      *reader, source, dataset.camera, initial_world_from_cam, initial_t_ns, tracking, {},
+      *reader, source, dataset.camera, initial_world_from_cam, initial_t_ns, run, {},
       [&](const Tracker& tracker) { compositions += source.Follow(tracker) ? 1 : 0; });
   WriteTrackOutputs(options, tracking.tracker.VariantName(), "events", result, log, anchor);
   if (!options.quiet) {
@@ -251,6 +264,10 @@ void TrackCommandOptions::Check() const {
   if (geo_path && odometry) {
     throw InvalidArgumentError("--geo needs a map with a geo anchor; --mode vo and devo have none");
   }
+  if (gnss && !no_initial_pose) {
+    throw InvalidArgumentError(
+        "--gnss narrows the search of a run without a pose: give --init-pose none with it");
+  }
   if (no_initial_pose && (tracking.tracker.input != TrackerInput::kEvents || odometry)) {
     throw InvalidArgumentError("--init-pose none needs --mode events (the search works on events)");
   }
@@ -286,6 +303,11 @@ Options:
   --geo PATH             also write the trajectory in WGS84: time, latitude, longitude,
                          altitude, heading, pitch and the ENU position per pose (docs/geo.md);
                          the map needs a geo anchor (evloc-mapper georef)
+  --gnss LAT,LON,ALT,SIGMA[,SIGMA_V]
+                         with --init-pose none: a GNSS fix where the run starts (WGS84 degrees,
+                         metres; one-sigma accuracy, horizontal and optionally vertical): the
+                         search looks only within 3 sigma of it, on a site in the tiles near it,
+                         until the first TRACKING step (docs/geo.md); needs a geo anchor
   --init-pose "tx ty tz qx qy qz qw" | none
                          initial world_from_cam; default: the dataset's first ground-truth pose
                          (at --start: the ground truth then; required when the dataset has no
@@ -508,6 +530,8 @@ TrackCommandOptions ParseTrackCommandLine(const std::vector<std::string>& argume
       options.stats_path = value;
     } else if (flag == "--geo") {
       options.geo_path = value;
+    } else if (flag == "--gnss") {
+      options.gnss = ParseGnssPrior(flag, value);
     } else if (flag == "--debug-dir") {
       options.debug_dir = value;
     } else if (flag == "--debug-every") {
@@ -585,9 +609,10 @@ OfflineTrackingResult RunTrackCommand(const TrackCommandOptions& options, std::o
                         events_mode, log);
   }
   const Map map = LoadMap(ResolveMapFile(options.map_path));
-  if (options.geo_path && !map.geo_anchor) {
+  if ((options.geo_path || options.gnss) && !map.geo_anchor) {
     throw InvalidArgumentError(MissingGeoAnchorMessage(options.map_path.string()));
   }
+  if (options.gnss) SetGnssPrior(*options.gnss, *map.geo_anchor, &tracking);
   const VisibilityIndex visibility(map);
   if (!options.quiet) {
     log << "evloc-track: map " << options.map_path.string() << " (" << map.size() << " points, "

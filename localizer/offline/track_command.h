@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "core/dataset/dataset.h"
+#include "core/geo/gnss_prior.h"
 #include "core/geometry/rigid3.h"
 #include "localizer/odometry/odometry_run.h"
 #include "localizer/offline/offline_tracking.h"
@@ -40,6 +41,10 @@ struct TrackCommandOptions {
   std::optional<Rigid3d> initial_world_from_cam;
   // Start without a pose and search the map (--init-pose none).
   bool no_initial_pose = false;
+  // A GNSS fix where the run starts (--gnss LAT,LON,ALT,SIGMA[,SIGMA_V]): with --init-pose none
+  // the search looks only near it (on a site, in the tiles near it) until the first TRACKING
+  // step. Needs a map or site with a geo anchor.
+  std::optional<GnssPrior> gnss;
   // The search also locates images of the events in the map's relocalization data (--search-images
   // on|off; used when the map has that data).
   bool search_images = true;

@@ -13,6 +13,7 @@
 #include "core/common/cli.h"
 #include "core/common/error.h"
 #include "core/geo/geo_trajectory.h"
+#include "core/geo/gnss_prior.h"
 #include "localizer/service/locate_rpc.h"
 #include "maps/site.h"
 #include "maps/tile_cache.h"
@@ -49,33 +50,6 @@ Exit codes: 0 FOUND, 3 NOT_FOUND, 2 bad command line, 1 any other error.
 )";
 }
 
-namespace {
-
-// LAT,LON,ALT,SIGMA[,SIGMA_V], checked as the service checks a GnssFix.
-GnssPrior ParseGnssFlag(const std::string& flag, const std::string& text) {
-  std::vector<double> values;
-  size_t start = 0;
-  while (true) {
-    const size_t comma = text.find(',', start);
-    values.push_back(ParseDoubleFlag(flag, text.substr(start, comma - start)));
-    if (comma == std::string::npos) break;
-    start = comma + 1;
-  }
-  if (values.size() != 4 && values.size() != 5) {
-    throw InvalidArgumentError(flag + " '" + text +
-                               "': give LAT,LON,ALT,SIGMA or LAT,LON,ALT,SIGMA,SIGMA_V");
-  }
-  api::GnssFix fix;
-  fix.set_latitude_deg(values[0]);
-  fix.set_longitude_deg(values[1]);
-  fix.set_altitude_m(values[2]);
-  fix.set_horizontal_accuracy_m(values[3]);
-  fix.set_vertical_accuracy_m(values.size() == 5 ? values[4] : values[3]);
-  return GnssPriorFromProto(fix, flag);
-}
-
-}  // namespace
-
 LocateCommand ParseLocateCommandLine(const std::vector<std::string>& arguments) {
   LocateCommand command;
   if (arguments.empty() || arguments[0] != "locate") {
@@ -96,7 +70,7 @@ LocateCommand ParseLocateCommandLine(const std::vector<std::string>& arguments) 
     } else if (flag == "--size") {
       ParseSizeFlag(flag, TakeFlagValue(arguments, &i), &command.width, &command.height);
     } else if (flag == "--gnss") {
-      command.gnss = ParseGnssFlag(flag, TakeFlagValue(arguments, &i));
+      command.gnss = ParseGnssPrior(flag, TakeFlagValue(arguments, &i));
     } else {
       throw InvalidArgumentError("unknown flag '" + flag + "' (see --help)");
     }

@@ -79,24 +79,10 @@ api::MapDescription DescribeMap(const LoadedMap& map) {
 GnssPrior GnssPriorFromProto(const api::GnssFix& fix, const std::string& what) {
   GnssPrior prior;
   prior.position = {fix.latitude_deg(), fix.longitude_deg(), fix.altitude_m()};
-  CheckGeodeticPoint(prior.position, what);
-  for (const auto& [name, value] : {std::pair{"horizontal_accuracy_m", fix.horizontal_accuracy_m()},
-                                    {"vertical_accuracy_m", fix.vertical_accuracy_m()}}) {
-    if (!std::isfinite(value) || value <= 0.0 || value > kMaxGnssAccuracyM) {
-      throw InvalidArgumentError(what + "." + name + " " + std::to_string(value) +
-                                 " is outside (0, " + std::to_string(kMaxGnssAccuracyM) + "] m");
-    }
-  }
   prior.horizontal_accuracy_m = fix.horizontal_accuracy_m();
   prior.vertical_accuracy_m = fix.vertical_accuracy_m();
+  CheckGnssPrior(prior, what);
   return prior;
-}
-
-double GnssSearchRadiusM(const GnssPrior& prior, const GeoAnchor& anchor) {
-  return kGnssPriorSigmas * std::sqrt(prior.horizontal_accuracy_m * prior.horizontal_accuracy_m +
-                                      prior.vertical_accuracy_m * prior.vertical_accuracy_m +
-                                      anchor.horizontal_sigma_m * anchor.horizontal_sigma_m +
-                                      anchor.vertical_sigma_m * anchor.vertical_sigma_m);
 }
 
 api::PoseUpdate PoseUpdateFromEstimate(const tracking::PoseEstimate& estimate,

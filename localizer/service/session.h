@@ -20,6 +20,7 @@
 #include "core/events/event.h"
 #include "core/events/prophesee_decoder.h"
 #include "core/geo/geo_anchor.h"
+#include "core/geo/gnss_prior.h"
 #include "core/geometry/rigid3.h"
 #include "evloc/localizer.pb.h"
 #include "localizer/odometry/handover.h"
@@ -30,17 +31,7 @@
 
 namespace evloc::service {
 
-// A validated GnssFix (TrackRequest.gnss_fix, LocateRequest.gnss_fix).
-struct GnssPrior {
-  // The WGS84 position.
-  GeodeticPoint position;
-  // One-sigma accuracies, metres.
-  double horizontal_accuracy_m = 0.0;
-  double vertical_accuracy_m = 0.0;
-};
-
-// Checks a GnssFix's position (CheckGeodeticPoint) and accuracies (finite, in (0,
-// kMaxGnssAccuracyM]); throws InvalidArgumentError naming `what` and the field.
+// Checks a GnssFix (CheckGnssPrior); throws InvalidArgumentError naming `what` and the field.
 GnssPrior GnssPriorFromProto(const api::GnssFix& fix, const std::string& what);
 
 // Describes a loaded map for clients.
@@ -283,18 +274,9 @@ class RequestValidator {
   std::optional<int64_t> latest_t_ns_;
 };
 
-// A GnssFix narrows the relocalization search to the viewpoints within this many sigmas (the
-// fix's and the anchor's accuracies combined) of it.
-inline constexpr double kGnssPriorSigmas = 3.0;
 // A fix stops narrowing the search this long after its time (session time), ns: a vehicle at
 // 10 m/s has moved 300 m.
 inline constexpr int64_t kGnssPriorLifetimeNs = 30'000'000'000;
-// Largest accepted GnssFix accuracy, metres.
-inline constexpr double kMaxGnssAccuracyM = 10000.0;
-
-// The radius of the search around a fix: kGnssPriorSigmas times the fix's and the anchor's
-// horizontal and vertical sigmas combined, metres.
-double GnssSearchRadiusM(const GnssPrior& prior, const GeoAnchor& anchor);
 
 // The tracker of one session and its start-up: events up to the initial time prime the time
 // surfaces, then the tracker is reset to the initial pose (exactly as the offline

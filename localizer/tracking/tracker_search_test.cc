@@ -29,15 +29,7 @@ Map MapWithKeyframes(const std::vector<testing::Rectangle>& rectangles,
                      const Vector6d& displacement =
                          (Vector6d() << 0.06, -0.03, 0.0, 0.0, 3 * kDegree, 0).finished()) {
   Map map = testing::MakeRectangleMap(rectangles, 0.004);
-  map.cameras.push_back(kCamera);
-  for (int64_t t_ns = 0; t_ns <= 900'000'000; t_ns += 150'000'000) {
-    Rigid3d world_from_cam = testing::SmoothMotion(t_ns) * ExpSE3(displacement);
-    world_from_cam.translation += shift;
-    Keyframe keyframe;
-    keyframe.cam_from_world = world_from_cam.Inverse();
-    keyframe.t_ns = t_ns;
-    map.keyframes.push_back(keyframe);
-  }
+  testing::AddKeyframesBesideThePath(&map, kCamera, 900'000'000, 150'000'000, displacement, shift);
   return map;
 }
 
@@ -304,16 +296,11 @@ TEST(TrackerSearch, RelocalizesOnItsOwnAfterABlackout) {
 // Two identical copies of the scene 20 m apart (never in one view) with keyframes at both: the
 // true pose and its copy align equally well, so no round may be accepted...
 TEST(TrackerSearch, RefusesWhenTheSecondBestDistinctHypothesisIsAlmostAsGood) {
-  std::vector<testing::Rectangle> twins = testing::DefaultRectangles();
   const Eigen::Vector3d shift(20.0, 0.0, 0.0);
-  for (const testing::Rectangle& rectangle : testing::DefaultRectangles()) {
-    testing::Rectangle copy = rectangle;
-    copy.centre += shift;
-    twins.push_back(copy);
-  }
-  Map map = MapWithKeyframes(twins);
-  const Map shifted = MapWithKeyframes(twins, shift);
-  map.keyframes.insert(map.keyframes.end(), shifted.keyframes.begin(), shifted.keyframes.end());
+  Map map = MapWithKeyframes(testing::TwinRectangles(shift));
+  testing::AddKeyframesBesideThePath(
+      &map, kCamera, 900'000'000, 150'000'000,
+      (Vector6d() << 0.06, -0.03, 0.0, 0.0, 3 * kDegree, 0).finished(), shift);
   const EventBuffer events = SceneEvents(600'000'000);
 
   TrackerOptions options;

@@ -27,16 +27,9 @@ Map TestMap() {
 
 Map TestMapWithKeyframesBesideThePath() {
   Map map = TestMap();
-  map.cameras.push_back(TestCamera());
-  for (int64_t t_ns = 0; t_ns <= 600'000'000; t_ns += 150'000'000) {
-    const Rigid3d world_from_cam =
-        tracking::testing::SmoothMotion(t_ns) *
-        ExpSE3((Vector6d() << 0.05, -0.03, 0.0, 0.0, 0.05, 0.0).finished());
-    Keyframe keyframe;
-    keyframe.cam_from_world = world_from_cam.Inverse();
-    keyframe.t_ns = t_ns;
-    map.keyframes.push_back(keyframe);
-  }
+  tracking::testing::AddKeyframesBesideThePath(
+      &map, TestCamera(), 600'000'000, 150'000'000,
+      (Vector6d() << 0.05, -0.03, 0.0, 0.0, 0.05, 0.0).finished());
   return map;
 }
 

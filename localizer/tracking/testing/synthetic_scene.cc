@@ -148,6 +148,31 @@ cv::Mat RenderRectangles(const std::vector<Rectangle>& rectangles, const Camera&
   return image;
 }
 
+void AddKeyframesBesideThePath(Map* map, const Camera& camera, int64_t end_ns, int64_t period_ns,
+                               const Vector6d& displacement, const Eigen::Vector3d& shift) {
+  const uint32_t camera_index = static_cast<uint32_t>(map->cameras.size());
+  map->cameras.push_back(camera);
+  for (int64_t t_ns = 0; t_ns <= end_ns; t_ns += period_ns) {
+    Rigid3d world_from_cam = SmoothMotion(t_ns) * ExpSE3(displacement);
+    world_from_cam.translation += shift;
+    Keyframe keyframe;
+    keyframe.cam_from_world = world_from_cam.Inverse();
+    keyframe.t_ns = t_ns;
+    keyframe.camera_index = camera_index;
+    map->keyframes.push_back(keyframe);
+  }
+}
+
+std::vector<Rectangle> TwinRectangles(const Eigen::Vector3d& shift) {
+  std::vector<Rectangle> twins = DefaultRectangles();
+  for (const Rectangle& rectangle : DefaultRectangles()) {
+    Rectangle copy = rectangle;
+    copy.centre += shift;
+    twins.push_back(copy);
+  }
+  return twins;
+}
+
 EventBuffer EventsBetween(const EventBuffer& events, int64_t first_ns, int64_t last_ns) {
   EventBuffer result;
   for (size_t i = 0; i < events.size(); ++i) {

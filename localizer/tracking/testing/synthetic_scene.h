@@ -40,6 +40,16 @@ std::vector<Rectangle> DefaultRectangles();
 // The outlines of `rectangles` sampled every `spacing_m`, gradients pointing inwards.
 Map MakeRectangleMap(const std::vector<Rectangle>& rectangles, double spacing_m);
 
+// Adds keyframes (camera `camera`, appended to map->cameras) along SmoothMotion every
+// `period_ns` from 0 to `end_ns`, each displaced by the body-frame twist `displacement` and
+// shifted by `shift` in the world: the viewpoints of a map built from another pass.
+void AddKeyframesBesideThePath(Map* map, const Camera& camera, int64_t end_ns, int64_t period_ns,
+                               const Vector6d& displacement,
+                               const Eigen::Vector3d& shift = Eigen::Vector3d::Zero());
+
+// DefaultRectangles and a copy of them shifted by `shift`: a scene of two identical places.
+std::vector<Rectangle> TwinRectangles(const Eigen::Vector3d& shift);
+
 // A smooth motion starting at the identity: translation (0.3, 0.1, 0.15) m/s with a slow
 // sinusoid, rotation rates (0.15, -0.25, 0.1) rad/s, scaled by `speed`.
 Rigid3d SmoothMotion(int64_t t_ns, double speed = 1.0);
