@@ -288,9 +288,10 @@ TEST(TrackCommandLine, ParsesFlagsAndRejectsBadValues) {
 }
 
 TEST(TrackCommandLine, ParsesStartingWithoutAPoseAndTheBlackout) {
-  const TrackCommandOptions options = ParseTrackCommandLine(
-      {"--map", "m", "--dataset", "d", "--out", "o", "--init-pose", "none", "--start", "0.5",
-       "--blackout", "1:1.5", "--relocalize-after", "12", "--give-up", "2"});
+  const TrackCommandOptions options =
+      ParseTrackCommandLine({"--map", "m", "--dataset", "d", "--out", "o", "--init-pose", "none",
+                             "--start", "0.5", "--blackout", "1:1.5", "--relocalize-after", "12",
+                             "--give-up", "2", "--search-distinct-depth", "0.03"});
   EXPECT_TRUE(options.no_initial_pose);
   EXPECT_FALSE(options.initial_world_from_cam.has_value());
   EXPECT_EQ(options.start_s, 0.5);
@@ -298,6 +299,7 @@ TEST(TrackCommandLine, ParsesStartingWithoutAPoseAndTheBlackout) {
   EXPECT_EQ(options.blackout_end_s, 1.5);
   EXPECT_EQ(options.tracking.tracker.lost_steps_before_relocalization, 12);
   EXPECT_EQ(options.tracking.tracker.relocalization_give_up_s, 2.0);
+  EXPECT_EQ(options.tracking.tracker.relocalization_distinct_depth_fraction, 0.03);
   EXPECT_FALSE(options.gnss.has_value());
   const TrackCommandOptions with_fix =
       ParseTrackCommandLine({"--map", "m", "--dataset", "d", "--out", "o", "--init-pose", "none",
@@ -308,6 +310,7 @@ TEST(TrackCommandLine, ParsesStartingWithoutAPoseAndTheBlackout) {
   const std::vector<std::vector<std::string>> bad = {{"--start", "-1"},
                                                      {"--blackout", "2:1"},
                                                      {"--blackout", "1"},
+                                                     {"--search-distinct-depth", "0.9"},
                                                      {"--init-pose", "none", "--mode", "frames"},
                                                      {"--gnss", "47.3,8.5,400,3"},
                                                      {"--init-pose", "none", "--gnss", "47.3,8.5"},

@@ -334,6 +334,10 @@ Options:
                          docs/relocalization.md)
   --search-probe F       probe each round's winner from starts shifted by F of the median
                          depth it sees (default 0.03; 0: none; docs/relocalization.md)
+  --search-distinct-depth F
+                         two refinements of a search round are one place unless farther apart
+                         than F of the median depth they see (or 5 cm, or 3 degrees; default
+                         0.02; 0: 5 cm at any depth; docs/relocalization.md)
   --search-image-blur PX the Gaussian blur of that image before it is located, pixels
                          (default 0.7; 0: none)
   --mode events|frames|vo|devo
@@ -456,6 +460,8 @@ TrackCommandOptions ParseTrackCommandLine(const std::vector<std::string>& argume
       options.search_images = ParseSwitchFlag(flag, value);
     } else if (flag == "--search-probe") {
       tracker.relocalization_probe_depth_fraction = ParseDoubleFlag(flag, value);
+    } else if (flag == "--search-distinct-depth") {
+      tracker.relocalization_distinct_depth_fraction = ParseDoubleFlag(flag, value);
     } else if (flag == "--search-image-blur") {
       tracker.relocalization_image_blur_px = ParseDoubleFlag(flag, value);
     } else if (flag == "--search-active-fraction") {

@@ -309,6 +309,9 @@ class Tracker {
     bool good = false;
     // Refined from a start around the round's winner (kProbe).
     bool probe = false;
+    // Median depth of the points selected at its pose, metres (0 when it selected too few): the
+    // scale of its place (relocalization_distinct_depth_fraction).
+    double depth_m = 0;
     // Its poses since it was refined (FollowBestRefinement): the velocity that predicts the next.
     ConstantVelocityModel motion;
   };
@@ -390,8 +393,15 @@ class Tracker {
   Refinement Refine(const Rigid3d& start_world_from_cam, int64_t t_ns);
   // Registers the current selection against `field` (no culling) from `start`.
   RegistrationResult RegisterSelection(PotentialField* field, const Rigid3d& start_world_from_cam);
-  // True when two poses are farther apart than relocalization_distinct_m / _deg.
-  bool Distinct(const Rigid3d& a, const Rigid3d& b) const;
+  // True when two poses are farther apart than `distinct_m` (default relocalization_distinct_m)
+  // or relocalization_distinct_deg.
+  bool Distinct(const Rigid3d& a, const Rigid3d& b, double distinct_m = 0) const;
+  // True when `other` is another place than `reference`: farther than relocalization_distinct_m
+  // or relocalization_distinct_depth_fraction of reference's depth, or turned by more than
+  // relocalization_distinct_deg. (Refinements of a round are of different instants; comparing
+  // them at one instant through the followed one's motion changed nothing measured, at 5 and
+  // 10 m/s on the car park, and is not done.)
+  bool DistinctPlaces(const Refinement& other, const Refinement& reference) const;
   // The round's good refinement with the highest alignment (among the non-probes only when
   // `with_probes` is false); null when none is good.
   Refinement* BestRefinement(bool with_probes = true);

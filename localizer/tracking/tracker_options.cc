@@ -128,6 +128,10 @@ void TrackerOptions::Check() const {
           "relocalization_min_alignment_margin must be in [0, 1].");
   Require(Positive(relocalization_distinct_m), "relocalization_distinct_m must be positive.");
   Require(Positive(relocalization_distinct_deg), "relocalization_distinct_deg must be positive.");
+  Require(std::isfinite(relocalization_distinct_depth_fraction) &&
+              relocalization_distinct_depth_fraction >= 0 &&
+              relocalization_distinct_depth_fraction <= 0.5,
+          "relocalization_distinct_depth_fraction must be in [0, 0.5].");
   Require(relocalization_verify_steps >= 1, "relocalization_verify_steps must be at least 1.");
   Require(std::isfinite(relocalization_verify_min_alignment) &&
               relocalization_verify_min_alignment >= 0 && relocalization_verify_min_alignment <= 1,

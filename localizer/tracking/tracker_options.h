@@ -258,8 +258,15 @@ struct TrackerOptions {
   // replaces the winner, and the other probes are judged as any refinement (a neighbourhood of
   // similar fits fails the margin); docs/relocalization.md. 0: no probes.
   double relocalization_probe_depth_fraction = 0.03;
-  // Two refined poses farther apart than this are distinct hypotheses, metres.
+  // Two refined poses farther apart than this are distinct hypotheses, metres...
   double relocalization_distinct_m = 0.05;
+  // ...or than this fraction of the median depth of the points the reference refinement sees,
+  // when that is more. Registration at range pins a pose down only to a fraction of the depth
+  // (most weakly along the optical axis): on the car park (median depth 30 m) the refinements of
+  // one search round that had all converged on the truth lay 0.1-1 m apart, mostly along the
+  // axis, so under a fixed 5 cm they were each other's rivals and every round was refused as
+  // ambiguous (docs/relocalization.md, "Distinct at range"). 0: the metres alone.
+  double relocalization_distinct_depth_fraction = 0.02;
   // Or rotated by more than this, degrees.
   double relocalization_distinct_deg = 3.0;
   // Consecutive good steps, tracked from the accepted hypothesis, before the status becomes

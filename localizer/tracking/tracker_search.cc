@@ -437,6 +437,8 @@ Tracker::Refinement Tracker::Refine(const Rigid3d& start_world_from_cam, int64_t
   refinement.t_ns = t_ns;
   const std::optional<Rigid3d> fine = ChamferStages(start_world_from_cam);
   if (!fine) return refinement;
+  // The selection is still the one ChamferStages ended with, at about the refined place.
+  refinement.depth_m = MedianDepth(selected_, fine->Inverse());
   const Attempt attempt = Solve(*fine, nullptr);
   refinement.world_from_cam = attempt.registration.cam_from_world.Inverse();
   refinement.alignment = attempt.quality.alignment;
@@ -449,7 +451,7 @@ Tracker::Refinement Tracker::Refine(const Rigid3d& start_world_from_cam, int64_t
 
 void Tracker::AddRefinement(Refinement refinement) {
   for (Refinement& kept : refinements_) {
-    if (kept.t_ns == refinement.t_ns && !Distinct(kept.world_from_cam, refinement.world_from_cam)) {
+    if (kept.t_ns == refinement.t_ns && !DistinctPlaces(refinement, kept)) {
       // One place: the better pose, under the first one's name (a probe that came back to its
       // winner is the winner).
       const bool probe = kept.probe;
@@ -498,10 +500,16 @@ Tracker::Refinement* Tracker::BestRefinement(bool with_probes) {
   return best;
 }
 
-bool Tracker::Distinct(const Rigid3d& a, const Rigid3d& b) const {
-  return (a.translation - b.translation).norm() > options_.relocalization_distinct_m ||
+bool Tracker::Distinct(const Rigid3d& a, const Rigid3d& b, double distinct_m) const {
+  return (a.translation - b.translation).norm() >
+             std::max(distinct_m, options_.relocalization_distinct_m) ||
          AngleBetween(a.rotation, b.rotation) >
              options_.relocalization_distinct_deg * kRadiansPerDegree;
+}
+
+bool Tracker::DistinctPlaces(const Refinement& other, const Refinement& reference) const {
+  return Distinct(other.world_from_cam, reference.world_from_cam,
+                  options_.relocalization_distinct_depth_fraction * reference.depth_m);
 }
 
 void Tracker::KeepRivals() {
@@ -517,7 +525,9 @@ void Tracker::KeepRivals() {
     if (rivals_.size() == static_cast<size_t>(options_.relocalization_rivals)) break;
     bool is_new = true;
     for (const Hypothesis& kept : rivals_) {
-      is_new = is_new && Distinct(kept.world_from_cam, refinement->world_from_cam);
+      is_new =
+          is_new && Distinct(kept.world_from_cam, refinement->world_from_cam,
+                             options_.relocalization_distinct_depth_fraction * refinement->depth_m);
     }
     if (is_new) rivals_.push_back({refinement->world_from_cam, 0, 0, refinement->alignment});
   }
@@ -535,8 +545,7 @@ bool Tracker::JudgeRound(Refinement* accepted) {
   }
   double second = 0;
   for (const Refinement& other : refinements_) {
-    if (other.points_used >= options_.min_points &&
-        Distinct(other.world_from_cam, best->world_from_cam)) {
+    if (other.points_used >= options_.min_points && DistinctPlaces(other, *best)) {
       second = std::max(second, other.alignment);
     }
   }
@@ -812,9 +821,9 @@ bool Tracker::JudgeProbedRound(Refinement* accepted) {
   const Refinement* winner = BestRefinement(/*with_probes=*/false);
   bool superseded = false;
   for (const Refinement& refinement : refinements_) {
-    superseded = superseded || (winner && refinement.probe && refinement.good &&
-                                refinement.alignment > winner->alignment &&
-                                Distinct(refinement.world_from_cam, winner->world_from_cam));
+    superseded = superseded ||
+                 (winner && refinement.probe && refinement.good &&
+                  refinement.alignment > winner->alignment && DistinctPlaces(refinement, *winner));
   }
   // The other probes stay: fits around the winner nearly as good as it are an ambiguity the
   // judgement's margin refuses (kept only to polish the winner, they let the 10.6 cm winner of
