@@ -2,24 +2,28 @@
 # Serving a site of tiles against serving the whole map (docs/benchmarks.md, "Sites"):
 #
 #   scripts/bench-site.sh --maps DIR --dataset DIR [--build DIR] [--out DIR] [--sessions N]
-#                         [--spread CxR:P] [--session-s S] [--duration S] [--rate HZ]
-#                         [--map-memory SIZE] [--server-args "ARGS"] [--taskset CPUS]
+#                         [--spread CxR:P | --stagger N:S] [--session-s S] [--duration S]
+#                         [--rate HZ] [--speed S] [--map-memory SIZE] [--server-args "ARGS"]
+#                         [--taskset CPUS]
 #
 # DIR (--maps) holds `whole` (a map) and `site` (the same map tiled), e.g. as written by
 # build/bench/evloc_replicated_site. For each of the two, starts evloc-localizer on 127.0.0.1
 # with --map-memory SIZE and a metrics endpoint, runs evloc-load with N sessions spread over the
-# copies of the dataset's scene (--spread) at real time for --duration seconds, and writes the
-# load report (server latency p50/p95/p99, step time p50/p99) and the final metrics (tile loads,
+# copies of the dataset's scene (--spread), or along a long dataset (--stagger: the k-th session
+# starts (k mod N) * S seconds into it), at real time (or --speed) for --duration seconds, and
+# writes the load report (server latency p50/p95/p99, step time p50/p99, the TRACKING poses'
+# error against the ground truth) and the final metrics (tile loads,
 # evictions, resident bytes) to OUT/{whole,site}.{json,metrics}, and one summary line per run to
 # OUT/summary.txt. Prints `uptime` before each run: the figures need a quiet machine.
 set -euo pipefail
-
 BUILD=build
 MAPS=""
 DATASET=""
 OUT=/tmp/evloc-bench-site
 SESSIONS=20
 SPREAD="8x8:5"
+STAGGER=""
+SPEED=1
 SESSION_S=3
 DURATION=30
 RATE=100
@@ -34,13 +38,15 @@ while [[ $# -gt 0 ]]; do
     --out) OUT="$2"; shift 2 ;;
     --sessions) SESSIONS="$2"; shift 2 ;;
     --spread) SPREAD="$2"; shift 2 ;;
+    --stagger) STAGGER="$2"; shift 2 ;;
+    --speed) SPEED="$2"; shift 2 ;;
     --session-s) SESSION_S="$2"; shift 2 ;;
     --duration) DURATION="$2"; shift 2 ;;
     --rate) RATE="$2"; shift 2 ;;
     --map-memory) MAP_MEMORY="$2"; shift 2 ;;
     --server-args) SERVER_ARGS="$2"; shift 2 ;;
     --taskset) TASKSET="$2"; shift 2 ;;
-    -h|--help) sed -n '2,16p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    -h|--help) sed -n '2,17p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
     *) echo "bench-site: unknown argument '$1' (see --help)" >&2; exit 2 ;;
   esac
 done
@@ -56,6 +62,8 @@ for name in whole site; do
 done
 mkdir -p "$OUT"
 : > "$OUT/summary.txt"
+PLACES=(--spread "$SPREAD")
+if [[ -n "$STAGGER" ]]; then PLACES=(--stagger "$STAGGER"); fi
 PINNED=()
 if [[ -n "$TASKSET" ]]; then PINNED=(taskset -c "$TASKSET"); fi
 
@@ -77,8 +85,9 @@ for name in whole site; do
   echo "bench-site: $name: $(uptime)" | tee -a "$OUT/summary.txt"
   status=0
   "$BUILD/tools/load/evloc-load" --server "127.0.0.1:$port" --map "$name" --dataset "$DATASET" \
-    --sessions "$SESSIONS" --spread "$SPREAD" --session-s "$SESSION_S" --duration "$DURATION" \
-    --rate "$RATE" --report "$OUT/$name.json" > "$OUT/$name.load.txt" 2>&1 || status=$?
+    --sessions "$SESSIONS" "${PLACES[@]}" --session-s "$SESSION_S" --duration "$DURATION" \
+    --rate "$RATE" --speed "$SPEED" --report "$OUT/$name.json" > "$OUT/$name.load.txt" 2>&1 ||
+    status=$?
   /usr/bin/python3 -c "import urllib.request,sys; sys.stdout.write(urllib.request.urlopen('http://127.0.0.1:$metrics_port/metrics').read().decode())" > "$OUT/$name.metrics" || true
   kill "$server"
   wait "$server" || true
@@ -92,7 +101,7 @@ for line in open(sys.argv[2]):
         metrics[key] = float(value)
 print(sys.argv[3], "load-exit", sys.argv[4], json.dumps({k: report[k] for k in report
       if k in ("sessions", "sessions_as_planned", "poses", "backpressure_notices",
-               "server_latency_us", "step_ms", "wall_s")}), json.dumps(metrics))
+               "server_latency_us", "step_ms", "error_m", "wall_s")}), json.dumps(metrics))
 PY
 done
 cat "$OUT/summary.txt"

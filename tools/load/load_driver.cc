@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <condition_variable>
 #include <limits>
 #include <mutex>
@@ -44,9 +45,17 @@ struct Workload {
   size_t first_tracked_packet = 0;
   int sensor_width = 0;
   int64_t events = 0;
+  // The dataset's ground truth (shared by the workloads), if any: the TRACKING poses are scored
+  // against it.
+  std::shared_ptr<const Trajectory> ground_truth;
 };
 
-Workload MakeWorkload(const LoadOptions& options) {
+// The events of the 50 ms before a staggered session's start prime its surfaces (the decay
+// times are 5-30 ms).
+constexpr int64_t kStaggerPrimeNs = 50'000'000;
+
+// The workloads of a run: one at the dataset's start, or one per --stagger start.
+std::vector<Workload> MakeWorkloads(const LoadOptions& options) {
   const Dataset dataset = ReadDataset(options.dataset);
   if (!dataset.events_path) {
     throw InvalidArgumentError("dataset '" + options.dataset.string() +
@@ -57,36 +66,73 @@ Workload MakeWorkload(const LoadOptions& options) {
   if (reader->Read(1, &events) == 0) {
     throw InvalidArgumentError("dataset '" + options.dataset.string() + "' has no events");
   }
-  const TimedPose initial = ResolveInitialPose(dataset, std::nullopt, events.t_ns[0]);
-  const int64_t stop_ns = initial.t_ns + static_cast<int64_t>(options.session_s * 1e9);
+  const TimedPose first = ResolveInitialPose(dataset, std::nullopt, events.t_ns[0]);
+  const int count = std::max(1, options.stagger_count);
+  const int64_t stagger_ns = static_cast<int64_t>(options.stagger_s * 1e9);
+  const int64_t session_ns = static_cast<int64_t>(options.session_s * 1e9);
+  const int64_t stop_ns = first.t_ns + (count - 1) * stagger_ns + session_ns;
   while (events.t_ns.back() <= stop_ns && reader->Read(1 << 20, &events) > 0) {
   }
-  const size_t keep = static_cast<size_t>(
-      std::upper_bound(events.t_ns.begin(), events.t_ns.end(), stop_ns) - events.t_ns.begin());
-  events.t_ns.resize(keep);
-  events.x.resize(keep);
-  events.y.resize(keep);
-  events.polarity.resize(keep);
-
-  Workload workload;
-  workload.packet_ns = options.packet_us * 1000;
-  workload.origin_ns = events.t_ns.front() - 1;
-  workload.sensor_width = dataset.camera.width;
-  workload.events = static_cast<int64_t>(events.size());
-  for (api::EventPacket& packet :
-       wire::PackEventWindows(events, workload.origin_ns, workload.packet_ns)) {
-    *workload.packets.emplace_back().mutable_events() = std::move(packet);
+  if (events.t_ns.back() < stop_ns) {
+    throw InvalidArgumentError(
+        "dataset '" + options.dataset.string() + "' ends " +
+        std::to_string((stop_ns - events.t_ns.back()) * 1e-9) +
+        " s before the last session would (--stagger COUNT:SECONDS and --session-s): give fewer "
+        "or closer starts");
   }
-  workload.first_tracked_packet = static_cast<size_t>(
-      std::max<int64_t>(0, (initial.t_ns - workload.origin_ns) / workload.packet_ns));
-  api::SessionStart* start = workload.start.mutable_start();
-  start->set_map_name(options.map_name);
-  *start->mutable_camera() = CameraToProto(dataset.camera);
-  *start->mutable_initial_world_from_cam() = RigidToProto(initial.world_from_cam);
-  start->set_initial_t_ns(initial.t_ns);
-  if (options.step_rate_hz) start->mutable_options()->set_step_rate_hz(*options.step_rate_hz);
-  start->set_client_name("evloc-load " + options.dataset.filename().string());
-  return workload;
+  std::shared_ptr<const Trajectory> ground_truth;
+  if (dataset.ground_truth)
+    ground_truth = std::make_shared<const Trajectory>(*dataset.ground_truth);
+  std::vector<Workload> workloads;
+  for (int k = 0; k < count; ++k) {
+    TimedPose initial = first;
+    if (k > 0) {
+      initial.t_ns = first.t_ns + k * stagger_ns;
+      const std::optional<Rigid3d> pose =
+          dataset.ground_truth ? dataset.ground_truth->Lookup(initial.t_ns) : std::nullopt;
+      if (!pose) {
+        throw InvalidArgumentError(
+            "dataset '" + options.dataset.string() + "' has no ground truth " +
+            std::to_string(k * options.stagger_s) + " s after its start (--stagger)");
+      }
+      initial.world_from_cam = *pose;
+    }
+    // The session's events: from the dataset's start (k = 0, as without --stagger) or the
+    // priming window, to the end of its session time.
+    const int64_t begin_ns = k == 0 ? events.t_ns.front() : initial.t_ns - kStaggerPrimeNs;
+    const auto begin = std::lower_bound(events.t_ns.begin(), events.t_ns.end(), begin_ns);
+    const auto end = std::upper_bound(begin, events.t_ns.end(), initial.t_ns + session_ns);
+    EventBuffer session;
+    for (size_t i = static_cast<size_t>(begin - events.t_ns.begin());
+         i < static_cast<size_t>(end - events.t_ns.begin()); ++i) {
+      session.push_back(events[i]);
+    }
+    if (session.empty()) {
+      throw InvalidArgumentError("dataset '" + options.dataset.string() + "' has no events " +
+                                 std::to_string(k * options.stagger_s) +
+                                 " s after its start (--stagger)");
+    }
+    Workload& workload = workloads.emplace_back();
+    workload.packet_ns = options.packet_us * 1000;
+    workload.origin_ns = session.t_ns.front() - 1;
+    workload.sensor_width = dataset.camera.width;
+    workload.events = static_cast<int64_t>(session.size());
+    workload.ground_truth = ground_truth;
+    for (api::EventPacket& packet :
+         wire::PackEventWindows(session, workload.origin_ns, workload.packet_ns)) {
+      *workload.packets.emplace_back().mutable_events() = std::move(packet);
+    }
+    workload.first_tracked_packet = static_cast<size_t>(
+        std::max<int64_t>(0, (initial.t_ns - workload.origin_ns) / workload.packet_ns));
+    api::SessionStart* start = workload.start.mutable_start();
+    start->set_map_name(options.map_name);
+    *start->mutable_camera() = CameraToProto(dataset.camera);
+    *start->mutable_initial_world_from_cam() = RigidToProto(initial.world_from_cam);
+    start->set_initial_t_ns(initial.t_ns);
+    if (options.step_rate_hz) start->mutable_options()->set_step_rate_hz(*options.step_rate_hz);
+    start->set_client_name("evloc-load " + options.dataset.filename().string());
+  }
+  return workloads;
 }
 
 // What one session measured.
@@ -99,6 +145,8 @@ struct SessionOutcome {
   std::vector<double> server_latency_us;
   std::vector<double> client_latency_us;
   std::vector<double> step_ms;
+  // Distance of each TRACKING pose from the ground truth at its time, metres.
+  std::vector<double> error_m;
 };
 
 // A packet with one event outside the sensor (x = width) after the window's start.
@@ -149,6 +197,14 @@ SessionOutcome RunSession(api::Localizer::Stub& stub, const Workload& workload,
         if (sent >= 0) outcome.client_latency_us.push_back((now_ns - sent) * 1e-3);
         outcome.server_latency_us.push_back(pose.latency_us());
         outcome.step_ms.push_back(pose.step_ms());
+        if (workload.ground_truth && pose.status() == api::TRACKING && pose.has_world_from_cam()) {
+          if (const auto truth = workload.ground_truth->Lookup(pose.t_ns())) {
+            outcome.error_m.push_back(
+                (RigidFromProto(pose.world_from_cam(), "PoseUpdate").translation -
+                 truth->translation)
+                    .norm());
+          }
+        }
         confirmed = std::max(confirmed, index + 1);
         confirmed_cv.notify_all();
       } else if (message.has_backpressure()) {
@@ -230,6 +286,7 @@ nlohmann::json ResultJson(const LoadOptions& options, const LoadResult& result) 
                                {"max", result.client_latency_max_us}};
   json["step_ms"] = {
       {"p50", result.step_p50_ms}, {"p95", result.step_p95_ms}, {"p99", result.step_p99_ms}};
+  json["error_m"] = {{"p50", result.error_p50_m}, {"max", result.error_max_m}};
   json["wall_s"] = result.wall_s;
   return json;
 }
@@ -248,6 +305,10 @@ void LoadOptions::Check() const {
     throw InvalidArgumentError("--packet-us must be in 1..1000000");
   }
   if (step_rate_hz && !(*step_rate_hz > 0)) throw InvalidArgumentError("--rate must be positive");
+  if (stagger_count < 0 || stagger_count > 10000 || !std::isfinite(stagger_s) || stagger_s < 0 ||
+      (stagger_count > 1 && !(stagger_s > 0))) {
+    throw InvalidArgumentError("--stagger needs a count in 0..10000 and positive seconds");
+  }
   if (!(cancel_fraction >= 0 && bad_fraction >= 0 && cancel_fraction + bad_fraction <= 1)) {
     throw InvalidArgumentError(
         "--cancel-fraction and --bad-fraction must be >= 0 with a sum of at most 1");
@@ -256,11 +317,13 @@ void LoadOptions::Check() const {
 
 LoadResult RunLoad(const LoadOptions& options, std::ostream& log) {
   options.Check();
-  const Workload workload = MakeWorkload(options);
-  log << "evloc-load: " << options.sessions << " session slots, " << workload.packets.size()
-      << " packets (" << workload.events << " events) per session, speed "
-      << (options.speed ? std::to_string(*options.speed) : std::string("max")) << ", run "
-      << options.duration_s << " s\n";
+  const std::vector<Workload> workloads = MakeWorkloads(options);
+  log << "evloc-load: " << options.sessions << " session slots, "
+      << workloads.front().packets.size() << " packets (" << workloads.front().events
+      << " events) per session";
+  if (workloads.size() > 1) log << " (the first of " << workloads.size() << " starts)";
+  log << ", speed " << (options.speed ? std::to_string(*options.speed) : std::string("max"))
+      << ", run " << options.duration_s << " s\n";
   grpc::ChannelArguments arguments;
   arguments.SetMaxReceiveMessageSize(64 << 20);
   // One connection per slot, as separate clients would have.
@@ -271,20 +334,27 @@ LoadResult RunLoad(const LoadOptions& options, std::ostream& log) {
   std::vector<double> server_latency_us;
   std::vector<double> client_latency_us;
   std::vector<double> step_ms;
+  std::vector<double> error_m;
   const auto wall_start = Clock::now();
   const auto deadline = wall_start + std::chrono::duration_cast<Clock::duration>(
                                          std::chrono::duration<double>(options.duration_s));
   std::vector<std::thread> slots;
-  int64_t spread_next = 0;
+  int64_t session_next = 0;  // the k of --spread and --stagger
   for (int slot = 0; slot < options.sessions; ++slot) {
     slots.emplace_back([&, slot] {
       auto stub = api::Localizer::NewStub(
           grpc::CreateCustomChannel(options.server, grpc::InsecureChannelCredentials(), arguments));
       std::mt19937 random(options.seed * 7919u + static_cast<uint32_t>(slot));
       std::uniform_real_distribution<double> unit(0.0, 1.0);
-      std::uniform_int_distribution<size_t> packet_index(workload.first_tracked_packet,
-                                                         workload.packets.size() - 1);
       do {
+        int64_t k = 0;
+        {
+          std::lock_guard<std::mutex> lock(mutex);
+          k = session_next++;
+        }
+        const Workload& workload = workloads[static_cast<size_t>(k) % workloads.size()];
+        std::uniform_int_distribution<size_t> packet_index(workload.first_tracked_packet,
+                                                           workload.packets.size() - 1);
         const double draw = unit(random);
         const Ending ending = draw < options.cancel_fraction ? Ending::kCancel
                               : draw < options.cancel_fraction + options.bad_fraction
@@ -292,11 +362,6 @@ LoadResult RunLoad(const LoadOptions& options, std::ostream& log) {
                                   : Ending::kNormal;
         api::TrackRequest start = workload.start;
         if (options.spread_columns > 0) {
-          int64_t k = 0;
-          {
-            std::lock_guard<std::mutex> lock(mutex);
-            k = spread_next++;
-          }
           auto* translation =
               start.mutable_start()->mutable_initial_world_from_cam()->mutable_translation();
           translation->set_x(translation->x() + static_cast<double>(k % options.spread_columns) *
@@ -329,6 +394,7 @@ LoadResult RunLoad(const LoadOptions& options, std::ostream& log) {
         client_latency_us.insert(client_latency_us.end(), outcome.client_latency_us.begin(),
                                  outcome.client_latency_us.end());
         step_ms.insert(step_ms.end(), outcome.step_ms.begin(), outcome.step_ms.end());
+        error_m.insert(error_m.end(), outcome.error_m.begin(), outcome.error_m.end());
       } while (Clock::now() < deadline);
     });
   }
@@ -344,6 +410,8 @@ LoadResult RunLoad(const LoadOptions& options, std::ostream& log) {
   result.step_p50_ms = Percentile(step_ms, 0.5);
   result.step_p95_ms = Percentile(step_ms, 0.95);
   result.step_p99_ms = Percentile(step_ms, 0.99);
+  result.error_p50_m = Percentile(error_m, 0.5);
+  result.error_max_m = Percentile(error_m, 1.0);
 
   log << "evloc-load: " << result.sessions << " sessions (" << result.normal_sessions << " normal, "
       << result.cancelled_sessions << " cancelled, " << result.bad_packet_sessions
@@ -356,6 +424,10 @@ LoadResult RunLoad(const LoadOptions& options, std::ostream& log) {
       << " us; client latency p50 " << result.client_latency_p50_us << " us p99 "
       << result.client_latency_p99_us << " us max " << result.client_latency_max_us
       << " us; step p50 " << result.step_p50_ms << " ms p99 " << result.step_p99_ms << " ms\n";
+  if (!error_m.empty()) {
+    log << "evloc-load: TRACKING poses against the ground truth: median " << result.error_p50_m
+        << " m, max " << result.error_max_m << " m\n";
+  }
   for (const std::string& message : result.unplanned_messages) {
     log << "evloc-load: unplanned: " << message << "\n";
   }
@@ -385,6 +457,16 @@ void ApplySpread(const std::string& flag, const std::string& value, LoadOptions*
   if (options->spread_columns < 1 || options->spread_rows < 1 || !(options->spread_pitch_m > 0)) {
     throw InvalidArgumentError("--spread needs positive columns, rows and pitch");
   }
+}
+
+// Applies --stagger COUNT:SECONDS.
+void ApplyStagger(const std::string& flag, const std::string& value, LoadOptions* options) {
+  const size_t colon = value.find(':');
+  if (colon == std::string::npos) {
+    throw InvalidArgumentError("--stagger expects COUNT:SECONDS, e.g. 20:2.5");
+  }
+  options->stagger_count = ParseIntFlag(flag, value.substr(0, colon));
+  options->stagger_s = ParseDoubleFlag(flag, value.substr(colon + 1));
 }
 
 // The command line of evloc-load over `arguments`.
@@ -430,6 +512,13 @@ std::unique_ptr<CommandLine> DeclareLoadCommandLine(LoadArguments* arguments) {
            "(docs/benchmarks.md, \"Sites\")",
            [options](const std::string& flag, const std::string& value) {
              ApplySpread(flag, value, options);
+           })
+      .Add("--stagger", "N:S",
+           "the k-th session starts (k mod N) * S seconds into the dataset, from its ground "
+           "truth there (50 ms of events before it prime): sessions along a long route "
+           "(docs/benchmarks.md, \"Sites\")",
+           [options](const std::string& flag, const std::string& value) {
+             ApplyStagger(flag, value, options);
            })
       .Add("--seed", "N", "seed of those random choices (default 1)",
            [options](const std::string& flag, const std::string& value) {

@@ -50,6 +50,13 @@ struct LoadOptions {
   int spread_columns = 0;
   int spread_rows = 0;
   double spread_pitch_m = 0;
+  // Start the sessions along a long dataset instead of all at its start (a vehicle route through
+  // a site, docs/benchmarks.md "Sites"): the k-th session opened (over all slots) starts
+  // (k mod stagger_count) * stagger_s seconds after the dataset's first ground-truth pose, from
+  // the ground truth there, with the events of the 50 ms before it priming its surfaces
+  // (--stagger COUNT:SECONDS); 0: every session at the dataset's start.
+  int stagger_count = 0;
+  double stagger_s = 0;
   // Seed of the random choices (--seed).
   uint32_t seed = 1;
   // Write the result as JSON here (--report).
@@ -103,6 +110,10 @@ struct LoadResult {
   // 99th percentile.
   double step_p95_ms = 0;
   double step_p99_ms = 0;
+  // Distance of the TRACKING poses from the dataset's ground truth at their time: median and
+  // maximum, metres (0 without ground truth).
+  double error_p50_m = 0;
+  double error_max_m = 0;
   // Wall time of the run, seconds.
   double wall_s = 0;
 };

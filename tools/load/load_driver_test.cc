@@ -53,6 +53,41 @@ TEST(LoadDriver, SessionsEndAsPlannedAndTheServerIsClean) {
   EXPECT_EQ(server.counters().sessions_active, 0);
 }
 
+// --stagger: the sessions start along the dataset from its ground truth there (a wrong start
+// pose would be LOST on the moving test scene), and a stagger beyond the dataset is refused.
+TEST(LoadDriver, StaggeredSessionsStartAlongTheDatasetFromItsGroundTruth) {
+  fixture::TemporaryFolder folder;
+  fixture::WriteTestMap(folder.path() / "maps", fixture::kTestMapName, fixture::TestMap());
+  service::LocalizerServer server(fixture::TestServerOptions(folder.path() / "maps"));
+  LoadOptions options;
+  options.server = "127.0.0.1:" + std::to_string(server.port());
+  options.map_name = fixture::kTestMapName;
+  options.dataset = fixture::WriteTestDataset(folder.path(), 600'000'000);
+  options.sessions = 3;
+  options.session_s = 0.1;
+  options.speed = std::nullopt;
+  options.step_rate_hz = 200;
+  options.stagger_count = 3;
+  options.stagger_s = 0.2;
+  std::ostringstream log;
+  const LoadResult result = RunLoad(options, log);
+  EXPECT_EQ(result.sessions, 3);
+  EXPECT_EQ(result.sessions_as_planned, 3) << log.str();
+  EXPECT_NE(log.str().find("the first of 3 starts"), std::string::npos) << log.str();
+  // 0.1 s at 200 Hz per session.
+  EXPECT_GE(result.poses, 3 * 18);
+  EXPECT_EQ(server.counters().lost_poses, 0);
+  EXPECT_LT(result.error_max_m, 0.02);  // every session tracked from its own start
+
+  options.stagger_s = 0.3;  // the last session would end at 0.7 s
+  try {
+    RunLoad(options, log);
+    ADD_FAILURE() << "a stagger beyond the dataset was accepted";
+  } catch (const InvalidArgumentError& error) {
+    EXPECT_NE(std::string(error.what()).find("--stagger"), std::string::npos) << error.what();
+  }
+}
+
 TEST(LoadDriver, CommandLineMapsToOptions) {
   bool help = false;
   const LoadOptions options = ParseLoadCommandLine({"--server",
@@ -79,6 +114,8 @@ TEST(LoadDriver, CommandLineMapsToOptions) {
                                                     "300",
                                                     "--packet-us",
                                                     "500",
+                                                    "--stagger",
+                                                    "20:2.5",
                                                     "--report",
                                                     "r.json"},
                                                    &help);
@@ -88,6 +125,14 @@ TEST(LoadDriver, CommandLineMapsToOptions) {
   EXPECT_FALSE(options.speed.has_value());
   EXPECT_EQ(options.bad_fraction, 0.2);
   EXPECT_EQ(options.packet_us, 500);
+  EXPECT_EQ(options.stagger_count, 20);
+  EXPECT_EQ(options.stagger_s, 2.5);
+  EXPECT_THROW(ParseLoadCommandLine(
+                   {"--server", "h:1", "--map", "m", "--dataset", "d", "--stagger", "20"}, &help),
+               InvalidArgumentError);
+  EXPECT_THROW(ParseLoadCommandLine(
+                   {"--server", "h:1", "--map", "m", "--dataset", "d", "--stagger", "4:0"}, &help),
+               InvalidArgumentError);
   EXPECT_THROW(ParseLoadCommandLine({"--server", "h:1", "--map", "m", "--dataset", "d",
                                      "--cancel-fraction", "0.7", "--bad-fraction", "0.5"},
                                     &help),
