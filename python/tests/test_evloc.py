@@ -374,7 +374,9 @@ def test_client_thins_its_stream_only_while_the_server_searches(maps_folder, sim
                     s.close(end_t_ns=int(events["t"][-1]) + 1_000_000)
                     updates = list(s.poses())
                 assert s.end is not None
-                counts[thin] = (s.events_thinned, s.end.events, updates)
+                # A server behind a searching stream sheds its oldest packets (SessionEnd.
+                # events_shed; under a loaded machine it does): those were sent, not thinned.
+                counts[thin] = (s.events_thinned, s.end.events + s.end.events_shed, updates)
         assert counts[False][0] == 0 and counts[False][1] == len(events)
         thinned, received, updates = counts[True]
         assert thinned > 0
