@@ -221,9 +221,15 @@ OfflineTrackingResult RunSiteTrack(const TrackCommandOptions& options, const Dat
   }
   int64_t compositions = 0;
   const auto reader = OpenDatasetEvents(dataset);
-  OfflineTrackingResult result = TrackEventStream(
-      *reader, source, dataset.camera, initial_world_from_cam, initial_t_ns, run, {},
-      [&](const Tracker& tracker) { compositions += source.Follow(tracker) ? 1 : 0; });
+  OfflineTrackingResult result =
+      TrackEventStream(*reader, source, dataset.camera, initial_world_from_cam, initial_t_ns, run,
+                       {}, [&](const Tracker& tracker) {
+                         // The fix's region ends with the prior (OfflineTrackingOptions): once
+                         // tracked, a later search starts from the last good pose's tiles.
+                         if (tracker.status() == TrackingStatus::kTracking)
+                           source.ClearSearchRegion();
+                         compositions += source.Follow(tracker) ? 1 : 0;
+                       });
   WriteTrackOutputs(options, tracking.tracker.VariantName(), "events", result, log, anchor);
   if (!options.quiet) {
     const TileCacheStats stats = cache->stats();
