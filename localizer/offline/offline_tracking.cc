@@ -153,11 +153,9 @@ void OfflineTrackingOptions::Check() const {
   if (read_ahead_batches < 0 || read_ahead_batches > 1024) {
     throw InvalidArgumentError("offline tracking: read_ahead_batches must be in 0..1024");
   }
-  if (search_prior_center &&
-      (!search_prior_center->allFinite() || !std::isfinite(search_prior_radius_m) ||
-       search_prior_radius_m <= 0)) {
-    throw InvalidArgumentError(
-        "offline tracking: the search prior needs a finite centre and a positive radius");
+  if (search_prior_center) {
+    CheckSearchRegion(*search_prior_center, search_prior_radius_m,
+                      "offline tracking: the search prior");
   }
 }
 

@@ -85,10 +85,9 @@ void LocateOptions::Check() const {
   if (max_site_tiles < 1) {
     throw InvalidArgumentError("LocateOptions: max_site_tiles must be at least 1");
   }
-  if (search_center && (!search_center->allFinite() || !(search_radius_m > 0.0) ||
-                        !std::isfinite(search_radius_m))) {
-    throw InvalidArgumentError(
-        "LocateOptions: a search centre must be finite and its radius finite and positive");
+  if (search_center) {
+    tracking::CheckSearchRegion(*search_center, search_radius_m,
+                                "LocateOptions: the search region");
   }
   if (verification.input != tracking::TrackerInput::kFrames) {
     throw InvalidArgumentError("LocateOptions: the verification tracker must take frames");

@@ -17,6 +17,7 @@
 #include "core/features/features.h"
 #include "core/geometry/rigid3.h"
 #include "localizer/relocalization/absolute_pose.h"
+#include "localizer/tracking/map_source.h"
 #include "localizer/tracking/tiled_map_source.h"
 #include "localizer/tracking/tracker.h"
 #include "localizer/tracking/tracker_options.h"

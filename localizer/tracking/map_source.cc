@@ -1,12 +1,19 @@
 #include "localizer/tracking/map_source.h"
 
 #include <algorithm>
+#include <cmath>
 #include <numeric>
 #include <utility>
 
 #include "core/common/error.h"
 
 namespace evloc::tracking {
+
+void CheckSearchRegion(const Eigen::Vector3d& center, double radius_m, const std::string& what) {
+  if (!center.allFinite() || !std::isfinite(radius_m) || radius_m <= 0) {
+    throw InvalidArgumentError(what + ": the centre must be finite and the radius positive");
+  }
+}
 
 StaticMapSource::StaticMapSource(const Map& map, const VisibilityIndex* visibility)
     : map_(map), visibility_(visibility) {

@@ -11,6 +11,7 @@
 #include <cstdint>
 #include <optional>
 #include <span>
+#include <string>
 #include <utility>
 #include <vector>
 
@@ -42,6 +43,11 @@ struct ViewpointQuery {
   // Radius around search_center, metres.
   double search_radius_m = 0;
 };
+
+// Throws InvalidArgumentError starting with `what` unless a search region's centre is finite and
+// its radius positive (Tracker::SetSearchPrior, TiledMapSource::SetSearchRegion, an offline
+// run's search prior).
+void CheckSearchRegion(const Eigen::Vector3d& center, double radius_m, const std::string& what);
 
 // The points a tracker registers against. Contract: the spans returned by points() and the
 // indices returned by VisibleCandidates stay valid and unchanged as long as generation() returns

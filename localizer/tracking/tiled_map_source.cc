@@ -198,10 +198,7 @@ bool TiledMapSource::UpdateWithin(const Rigid3d& world_from_cam,
 }
 
 void TiledMapSource::SetSearchRegion(const Eigen::Vector3d& center, double radius_m) {
-  if (!center.allFinite() || !std::isfinite(radius_m) || radius_m <= 0) {
-    throw InvalidArgumentError(
-        "TiledMapSource::SetSearchRegion: the centre must be finite and the radius positive");
-  }
+  CheckSearchRegion(center, radius_m, "TiledMapSource::SetSearchRegion");
   search_center_ = center;
   search_radius_m_ = radius_m;
 }

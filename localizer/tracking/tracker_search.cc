@@ -56,10 +56,7 @@ void Tracker::StartWithoutPose(int64_t t_ns) {
 }
 
 void Tracker::SetSearchPrior(const Eigen::Vector3d& center, double radius_m) {
-  if (!center.allFinite() || !std::isfinite(radius_m) || radius_m <= 0) {
-    throw InvalidArgumentError(
-        "Tracker::SetSearchPrior: the centre must be finite and the radius positive.");
-  }
+  CheckSearchRegion(center, radius_m, "Tracker::SetSearchPrior");
   search_center_ = center;
   search_radius_m_ = radius_m;
   // At the next round: the round in progress keeps the viewpoints its hypotheses index.
