@@ -245,10 +245,101 @@ TEST(Aedat4EventReader, CorruptPacketsAreParseErrorsSayingWhatWasExpected) {
   }
 }
 
-// Real DV recordings, when someone puts them in the shared data folder (none is there yet: no
-// public AEDAT4 file with a licence allowing redistribution could be fetched,
-// docs/event-formats.md 8.5): every packet of every stream decodes, events lie inside the stated
-// sensor and their times never decrease within a stream.
+// The summary lines of summarize_aedat4.py (core/events/testing) of what evloc's reader reads
+// in `path`: packets per stream, then per stream type the events (count, ON events, events
+// outside the sensor, first and last time, sums of time since the first, x and y), the IMU
+// samples (count, first and last time) and the triggers (count).
+std::string SummaryOf(const std::filesystem::path& path) {
+  Aedat4Reader file(path);
+  Aedat4Packet packet;
+  std::map<int32_t, int> packets;
+  for (const Aedat4Stream& stream : file.streams()) packets[stream.id] = 0;
+  std::map<int32_t, EventBuffer> events;
+  std::map<int32_t, uint64_t> outside;
+  std::map<int32_t, std::vector<Aedat4ImuSample>> imu;
+  std::map<int32_t, std::vector<Aedat4Trigger>> triggers;
+  while (file.Next(&packet)) {
+    const int32_t id = packet.stream->id;
+    ++packets[id];
+    if (packet.stream->type == "EVTS") {
+      DecodeAedat4Events(packet, file.source(), packet.stream->size, &events[id], &outside[id]);
+    } else if (packet.stream->type == "IMUS") {
+      DecodeAedat4Imu(packet, file.source(), &imu[id]);
+    } else if (packet.stream->type == "TRIG") {
+      DecodeAedat4Triggers(packet, file.source(), &triggers[id]);
+    }
+  }
+  std::ostringstream out;
+  for (const auto& [id, count] : packets) {
+    out << "stream " << id << " " << file.FindStream(std::to_string(id))->type << " packets "
+        << count << "\n";
+  }
+  for (const auto& [id, buffer] : events) {
+    if (buffer.empty()) continue;
+    const int64_t first_us = buffer.t_ns.front() / 1000;
+    int64_t on = 0, sum_dt = 0, sum_x = 0, sum_y = 0;
+    for (size_t i = 0; i < buffer.size(); ++i) {
+      on += buffer.polarity[i] > 0;
+      sum_dt += buffer.t_ns[i] / 1000 - first_us;
+      sum_x += buffer.x[i];
+      sum_y += buffer.y[i];
+    }
+    out << "events " << id << " count " << buffer.size() << " on " << on << " outside "
+        << outside[id] << " t_first_us " << first_us << " t_last_us " << buffer.t_ns.back() / 1000
+        << " sum_dt_us " << sum_dt << " sum_x " << sum_x << " sum_y " << sum_y << "\n";
+  }
+  for (const auto& [id, samples] : imu) {
+    if (samples.empty()) continue;
+    out << "imu " << id << " count " << samples.size() << " t_first_us "
+        << samples.front().t_ns / 1000 << " t_last_us " << samples.back().t_ns / 1000 << "\n";
+  }
+  for (const auto& [id, list] : triggers) {
+    if (!list.empty()) out << "triggers " << id << " count " << list.size() << "\n";
+  }
+  return out.str();
+}
+
+// A real recording, written by iniVation's DV with a DVXplorer (core/events/testdata/README.md:
+// its source and licence): evloc's reader reads what an independent reader of the format
+// (summarize_aedat4.py) read in it, and the independent reader, when /usr/bin/python3 has its
+// packages, still reads the summary that is checked in.
+TEST(Aedat4Reader, ReadsARealDvxplorerRecordingAsAnIndependentReaderDoes) {
+  const std::filesystem::path folder = testing::SourceDir() / "core/events/testdata";
+  const std::filesystem::path file = folder / "dvxplorer_sample.aedat4";
+  const std::string expected = ReadBytes(folder / "dvxplorer_sample.summary.txt");
+  ASSERT_NE(expected.find("events 0 count 111954 "), std::string::npos) << expected;
+  EXPECT_EQ(SummaryOf(file), expected);
+
+  Aedat4Reader reader(file);
+  const Aedat4Stream* events = reader.FindStream("events");
+  ASSERT_NE(events, nullptr);
+  ASSERT_TRUE(events->size.has_value());
+  EXPECT_EQ(events->size->width, 320);
+  EXPECT_EQ(events->size->height, 240);
+  EXPECT_EQ(events->camera, "DVXplorer_DXB00010");
+
+  std::string output;
+  if (testing::RunShellCommand(
+          "/usr/bin/python3 -c 'import flatbuffers, lz4.frame, zstandard' 2>&1", &output) != 0) {
+    GTEST_SKIP()
+        << "the independent reader was not run: /usr/bin/python3 lacks python3-flatbuffers, "
+           "python3-lz4 or python3-zstandard: "
+        << output;
+  }
+  output.clear();
+  ASSERT_EQ(testing::RunShellCommand(
+                "/usr/bin/python3 '" +
+                    (testing::SourceDir() / "core/events/testing/summarize_aedat4.py").string() +
+                    "' '" + file.string() + "' 2>&1",
+                &output),
+            0)
+      << output;
+  EXPECT_EQ(output, expected);
+}
+
+// Real DV recordings, when someone puts them in the shared data folder (one is in the
+// repository: the test above): every packet of every stream decodes, events lie inside the
+// stated sensor and their times never decrease within a stream.
 TEST(Aedat4Reader, ReadsRealRecordingsOfTheSharedData) {
   EVLOC_REQUIRE_SHARED_DATA(folder, "aedat4");
   size_t files = 0;

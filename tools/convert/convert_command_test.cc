@@ -57,13 +57,7 @@ TEST(ConvertCommand, WritesADatasetFolderAndSaysWhatItWrote) {
 TEST(ConvertCommand, ConvertsAnAedat4FileWithItsCalibration) {
   EVLOC_REQUIRE_TEST_AEDAT4(dir);
   const auto folder = testing::MakeTempDir("convert-aedat4");
-  Camera camera;
-  camera.width = 346;
-  camera.height = 260;
-  camera.fx = camera.fy = 300;
-  camera.cx = 172.5;
-  camera.cy = 129.5;
-  WriteCameraYaml(folder / "cam.yaml", camera);
+  WriteCameraYaml(folder / "cam.yaml", Camera::Pinhole(346, 260, 300, 300, 172.5, 129.5));
   std::ostringstream log;
   const auto summary =
       RunConvertCommand(ParseConvertCommandLine({"--input", (dir / "test_lz4.aedat4").string(),
@@ -76,6 +70,29 @@ TEST(ConvertCommand, ConvertsAnAedat4FileWithItsCalibration) {
       << log.str();
   const Dataset dataset = ReadDataset(folder / "dataset");
   EXPECT_EQ(dataset.images.size(), 4u);
+  std::filesystem::remove_all(folder);
+}
+
+// A real DVXplorer recording written by DV (core/events/testdata/README.md), converted with the
+// DVXplorer's sensor size: every event and IMU sample of the file, in time order, no image.
+TEST(ConvertCommand, ConvertsARealDvxplorerRecording) {
+  const auto folder = testing::MakeTempDir("convert-dvxplorer");
+  WriteCameraYaml(folder / "cam.yaml", Camera::Pinhole(320, 240, 250, 250, 159.5, 119.5));
+  std::ostringstream log;
+  const auto summary = RunConvertCommand(
+      ParseConvertCommandLine(
+          {"--input",
+           (testing::SourceDir() / "core/events/testdata/dvxplorer_sample.aedat4").string(),
+           "--out", (folder / "dataset").string(), "--calib", (folder / "cam.yaml").string()}),
+      log);
+  // The counts of the independent reader (core/events/testdata/dvxplorer_sample.summary.txt).
+  EXPECT_EQ(summary.events, 111954u);
+  EXPECT_EQ(summary.dropped_events, 0u);
+  EXPECT_EQ(summary.imu_samples, 475u);
+  EXPECT_EQ(summary.images, 0u);
+  const Dataset dataset = ReadDataset(folder / "dataset");
+  EXPECT_EQ(dataset.camera.width, 320);
+  EXPECT_TRUE(dataset.images.empty());
   std::filesystem::remove_all(folder);
 }
 
