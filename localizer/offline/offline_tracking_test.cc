@@ -288,10 +288,26 @@ TEST(TrackCommandLine, ParsesFlagsAndRejectsBadValues) {
 }
 
 TEST(TrackCommandLine, ParsesStartingWithoutAPoseAndTheBlackout) {
-  const TrackCommandOptions options =
-      ParseTrackCommandLine({"--map", "m", "--dataset", "d", "--out", "o", "--init-pose", "none",
-                             "--start", "0.5", "--blackout", "1:1.5", "--relocalize-after", "12",
-                             "--give-up", "2", "--search-distinct-depth", "0.03"});
+  const TrackCommandOptions options = ParseTrackCommandLine({"--map",
+                                                             "m",
+                                                             "--dataset",
+                                                             "d",
+                                                             "--out",
+                                                             "o",
+                                                             "--init-pose",
+                                                             "none",
+                                                             "--start",
+                                                             "0.5",
+                                                             "--blackout",
+                                                             "1:1.5",
+                                                             "--relocalize-after",
+                                                             "12",
+                                                             "--give-up",
+                                                             "2",
+                                                             "--search-distinct-depth",
+                                                             "0.03",
+                                                             "--search-verify-s-per-m",
+                                                             "0.01"});
   EXPECT_TRUE(options.no_initial_pose);
   EXPECT_FALSE(options.initial_world_from_cam.has_value());
   EXPECT_EQ(options.start_s, 0.5);
@@ -300,6 +316,7 @@ TEST(TrackCommandLine, ParsesStartingWithoutAPoseAndTheBlackout) {
   EXPECT_EQ(options.tracking.tracker.lost_steps_before_relocalization, 12);
   EXPECT_EQ(options.tracking.tracker.relocalization_give_up_s, 2.0);
   EXPECT_EQ(options.tracking.tracker.relocalization_distinct_depth_fraction, 0.03);
+  EXPECT_EQ(options.tracking.tracker.relocalization_verify_s_per_depth_m, 0.01);
   EXPECT_FALSE(options.gnss.has_value());
   const TrackCommandOptions with_fix =
       ParseTrackCommandLine({"--map", "m", "--dataset", "d", "--out", "o", "--init-pose", "none",
@@ -311,6 +328,7 @@ TEST(TrackCommandLine, ParsesStartingWithoutAPoseAndTheBlackout) {
                                                      {"--blackout", "2:1"},
                                                      {"--blackout", "1"},
                                                      {"--search-distinct-depth", "0.9"},
+                                                     {"--search-verify-s-per-m", "-0.1"},
                                                      {"--init-pose", "none", "--mode", "frames"},
                                                      {"--gnss", "47.3,8.5,400,3"},
                                                      {"--init-pose", "none", "--gnss", "47.3,8.5"},

@@ -344,6 +344,10 @@ Options:
                          two refinements of a search round are one place unless farther apart
                          than F of the median depth they see (or 5 cm, or 3 degrees; default
                          0.02; 0: 5 cm at any depth; docs/relocalization.md)
+  --search-verify-s-per-m S
+                         a found pose is verified over at least S seconds per metre of the
+                         median depth it sees, and the 10 steps (default 0.005: 0.15 s at 30 m;
+                         0: the steps alone; docs/relocalization.md)
   --search-image-blur PX the Gaussian blur of that image before it is located, pixels
                          (default 0.7; 0: none)
   --mode events|frames|vo|devo
@@ -468,6 +472,8 @@ TrackCommandOptions ParseTrackCommandLine(const std::vector<std::string>& argume
       tracker.relocalization_probe_depth_fraction = ParseDoubleFlag(flag, value);
     } else if (flag == "--search-distinct-depth") {
       tracker.relocalization_distinct_depth_fraction = ParseDoubleFlag(flag, value);
+    } else if (flag == "--search-verify-s-per-m") {
+      tracker.relocalization_verify_s_per_depth_m = ParseDoubleFlag(flag, value);
     } else if (flag == "--search-image-blur") {
       tracker.relocalization_image_blur_px = ParseDoubleFlag(flag, value);
     } else if (flag == "--search-active-fraction") {

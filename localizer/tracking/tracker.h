@@ -463,6 +463,10 @@ class Tracker {
   // step at search_credit_t_ns_.
   double search_credit_ns_ = 0;
   int64_t search_credit_t_ns_ = 0;
+  // The verification: the accepted pose's median depth (Refinement::depth_m) and the time of the
+  // window's first good step.
+  double verify_depth_m_ = 0;
+  int64_t verify_start_t_ns_ = 0;
   // With a CPU share a round starts only once the budget covers the CPU of the last whole round
   // of this session (0: none ended yet), and the budget may save up that much: a round then runs
   // on consecutive steps unless it costs more than the last one. (Spread over deferred steps, a

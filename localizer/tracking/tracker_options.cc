@@ -133,6 +133,9 @@ void TrackerOptions::Check() const {
               relocalization_distinct_depth_fraction <= 0.5,
           "relocalization_distinct_depth_fraction must be in [0, 0.5].");
   Require(relocalization_verify_steps >= 1, "relocalization_verify_steps must be at least 1.");
+  Require(std::isfinite(relocalization_verify_s_per_depth_m) &&
+              relocalization_verify_s_per_depth_m >= 0 && relocalization_verify_s_per_depth_m <= 1,
+          "relocalization_verify_s_per_depth_m must be in [0, 1].");
   Require(std::isfinite(relocalization_verify_min_alignment) &&
               relocalization_verify_min_alignment >= 0 && relocalization_verify_min_alignment <= 1,
           "relocalization_verify_min_alignment must be in [0, 1].");

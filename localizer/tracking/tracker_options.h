@@ -272,6 +272,15 @@ struct TrackerOptions {
   // Consecutive good steps, tracked from the accepted hypothesis, before the status becomes
   // TRACKING (the first TRACKING pose is the last of them).
   int relocalization_verify_steps = 10;
+  // And they must span at least this many seconds per metre of the accepted pose's median depth
+  // (Refinement::depth_m). One instant of events fixes a pose along the optical axis only to a
+  // few percent of the depth it sees; a camera moving along that axis (a vehicle) shows a pose
+  // found that far behind it only once it has moved on by about as much, and a verification
+  // from rest of a few steps passes it (docs/relocalization.md, "Verification at speed": at 10
+  // m/s, a pose 0.9 m behind at 30 m verified in 10 steps and its alignment fell below 0.4
+  // 20-35 steps later). 0.005: 33 ms (the 10 steps at 300 Hz) at 6.7 m, 0.15 s at 30 m.
+  // 0: the steps alone.
+  double relocalization_verify_s_per_depth_m = 0.005;
   // Each verification step must also reach this chance-corrected alignment (above min_alignment:
   // a pose found from nothing needs a clearer fit than one tracked; a hypothesis refined into a
   // shifted-and-turned pose 5 cm from the truth verified at 0.22-0.29 where right ones verify at

@@ -609,11 +609,14 @@ void Tracker::SearchStep(int64_t t_ns, PoseEstimate* estimate) {
       // tracking would start from a wrong prediction. The velocity comes from tracked steps.
       if (progress.verified_steps == 0) {
         motion_.Reset(pose, t_ns);
+        verify_start_t_ns_ = t_ns;
       } else {
         motion_.Update(pose, t_ns);
       }
       ++progress.verified_steps;
-      if (progress.verified_steps >= options_.relocalization_verify_steps) {
+      const double window_s = static_cast<double>(t_ns - verify_start_t_ns_) * 1e-9;
+      if (progress.verified_steps >= options_.relocalization_verify_steps &&
+          window_s >= options_.relocalization_verify_s_per_depth_m * verify_depth_m_) {
         status_ = TrackingStatus::kTracking;
         has_pose_ = true;
         lost_steps_ = 0;
@@ -784,6 +787,7 @@ void Tracker::SearchWork(int64_t t_ns) {
       Refinement accepted;
       if (best && JudgeProbedRound(&accepted)) {
         motion_.Reset(accepted.world_from_cam, accepted.t_ns);
+        verify_depth_m_ = accepted.depth_m;
         progress.verified_steps = 0;
         search_phase_ = SearchPhase::kVerify;
       } else {

@@ -348,37 +348,53 @@ TEST(TrackerSearch, RefusesWhenTheSecondBestDistinctHypothesisIsAlmostAsGood) {
 // of the depth they are one place, and the search finds the camera within 0.3 s.
 constexpr double kLargeScale = 10.0;
 
+Rigid3d LargeMotion(int64_t t_ns) {
+  Rigid3d world_from_cam = testing::SmoothMotion(t_ns);
+  world_from_cam.translation *= kLargeScale;
+  return world_from_cam;
+}
+
+struct LargeScene {
+  Map map;
+  EventBuffer events;
+};
+
+const LargeScene& NoisyLargeScene() {
+  static const LargeScene scene = [] {
+    std::vector<testing::Rectangle> rectangles = testing::DefaultRectangles();
+    for (testing::Rectangle& rectangle : rectangles) {
+      rectangle.centre *= kLargeScale;
+      rectangle.half_u *= kLargeScale;
+      rectangle.half_v *= kLargeScale;
+    }
+    LargeScene large;
+    large.map = testing::MakeRectangleMap(rectangles, 0.004 * kLargeScale);
+    large.map.cameras.push_back(kCamera);
+    for (int64_t t_ns = 0; t_ns <= 900'000'000; t_ns += 150'000'000) {
+      Rigid3d world_from_cam =
+          testing::SmoothMotion(t_ns) *
+          ExpSE3((Vector6d() << 0.06, -0.03, 0.0, 0.0, 3 * kDegree, 0).finished());
+      world_from_cam.translation *= kLargeScale;
+      Keyframe keyframe;
+      keyframe.cam_from_world = world_from_cam.Inverse();
+      keyframe.t_ns = t_ns;
+      large.map.keyframes.push_back(keyframe);
+    }
+    large.events = testing::SimulateEdgeEvents(large.map, kCamera, LargeMotion, 0, 600'000'000);
+    std::mt19937 random(7);
+    std::normal_distribution<float> noise(0.0f, 0.2f);
+    for (Eigen::Vector3f& position : large.map.positions) {
+      position += Eigen::Vector3f(noise(random), noise(random), noise(random));
+    }
+    return large;
+  }();
+  return scene;
+}
+
 TEST(TrackerSearch, AtTensOfMetresRefinementsOfOnePlaceAreNotRivals) {
-  std::vector<testing::Rectangle> rectangles = testing::DefaultRectangles();
-  for (testing::Rectangle& rectangle : rectangles) {
-    rectangle.centre *= kLargeScale;
-    rectangle.half_u *= kLargeScale;
-    rectangle.half_v *= kLargeScale;
-  }
-  const auto large_motion = [](int64_t t_ns) {
-    Rigid3d world_from_cam = testing::SmoothMotion(t_ns);
-    world_from_cam.translation *= kLargeScale;
-    return world_from_cam;
-  };
-  Map map = testing::MakeRectangleMap(rectangles, 0.004 * kLargeScale);
-  map.cameras.push_back(kCamera);
-  for (int64_t t_ns = 0; t_ns <= 900'000'000; t_ns += 150'000'000) {
-    Rigid3d world_from_cam =
-        testing::SmoothMotion(t_ns) *
-        ExpSE3((Vector6d() << 0.06, -0.03, 0.0, 0.0, 3 * kDegree, 0).finished());
-    world_from_cam.translation *= kLargeScale;
-    Keyframe keyframe;
-    keyframe.cam_from_world = world_from_cam.Inverse();
-    keyframe.t_ns = t_ns;
-    map.keyframes.push_back(keyframe);
-  }
-  const EventBuffer events =
-      testing::SimulateEdgeEvents(map, kCamera, large_motion, 0, 600'000'000);
-  std::mt19937 random(7);
-  std::normal_distribution<float> noise(0.0f, 0.2f);
-  for (Eigen::Vector3f& position : map.positions) {
-    position += Eigen::Vector3f(noise(random), noise(random), noise(random));
-  }
+  const Map& map = NoisyLargeScene().map;
+  const EventBuffer& events = NoisyLargeScene().events;
+  const auto large_motion = LargeMotion;
 
   // The first TRACKING time (-1: never) and the largest TRACKING position error.
   const auto search = [&](const TrackerOptions& options, double* worst_m) {
@@ -408,6 +424,58 @@ TEST(TrackerSearch, AtTensOfMetresRefinementsOfOnePlaceAreNotRivals) {
   TrackerOptions fixed = options;
   fixed.relocalization_distinct_depth_fraction = 0;
   EXPECT_LT(search(fixed, &worst_m), 0) << "a fixed 5 cm no longer refuses: the test shows nothing";
+}
+
+// At range a found pose is verified over a time that grows with the depth it sees
+// (relocalization_verify_s_per_depth_m): one instant of events fixes a pose along the optical
+// axis only to a few percent of that depth, and a camera moving along it shows a pose found that
+// far behind only once it has moved on. On the large scene (median depth about 25 m) the
+// window lasts at least 0.005 s per metre and the pose that ends it is still right; without the
+// term it is the 10 steps.
+TEST(TrackerSearch, AtRangeTheVerificationLastsLongerTheDeeperThePlace) {
+  const Map& map = NoisyLargeScene().map;
+  const EventBuffer& events = NoisyLargeScene().events;
+  // The verification window (first good verification step to the first TRACKING step) in steps
+  // and seconds, and the first TRACKING pose's error; false when never TRACKING.
+  struct Window {
+    int steps = 0;
+    double seconds = 0;
+    double error_m = 0;
+  };
+  const auto verify = [&](const TrackerOptions& options, Window* window) {
+    Tracker tracker(map, nullptr, kCamera, options);
+    tracker.SetSearchPrior(LargeMotion(0).translation, 10.0);
+    tracker.StartWithoutPose(0);
+    int64_t start_ns = -1;
+    for (const PoseEstimate& estimate : tracker.AddEvents(events)) {
+      if (estimate.search.verified_steps == 1 && estimate.status != TrackingStatus::kTracking) {
+        start_ns = estimate.t_ns;
+      }
+      if (estimate.status == TrackingStatus::kTracking) {
+        window->steps = estimate.search.verified_steps;
+        window->seconds = static_cast<double>(estimate.t_ns - start_ns) * 1e-9;
+        window->error_m =
+            (estimate.world_from_cam.translation - LargeMotion(estimate.t_ns).translation).norm();
+        return start_ns >= 0;
+      }
+    }
+    return false;
+  };
+  TrackerOptions options;  // 300 Hz steps
+  Window deep;
+  ASSERT_TRUE(verify(options, &deep)) << "never TRACKING";
+  std::cout << "verified over " << deep.steps << " steps, " << deep.seconds << " s; error "
+            << deep.error_m << " m\n";
+  // 0.005 s/m at 15-35 m of depth: 0.075-0.175 s, 22-53 steps at 300 Hz.
+  EXPECT_GE(deep.seconds, 0.075);
+  EXPECT_GT(deep.steps, options.relocalization_verify_steps);
+  EXPECT_LT(deep.error_m, 1.0);
+
+  options.relocalization_verify_s_per_depth_m = 0;
+  Window steps_only;
+  ASSERT_TRUE(verify(options, &steps_only)) << "never TRACKING";
+  EXPECT_EQ(steps_only.steps, options.relocalization_verify_steps);
+  EXPECT_LT(steps_only.seconds, 0.04);
 }
 
 // The rectangle map with keyframes on a pass 0.78 m and 20 degrees from the events' path: beyond
