@@ -20,6 +20,7 @@
 #include <utility>
 #include <vector>
 
+#include "core/common/thread_priority.h"
 #include "maps/map.h"
 #include "maps/site.h"
 #include "maps/visibility.h"
@@ -64,6 +65,10 @@ struct TileCacheOptions {
   uint64_t memory_budget_bytes = uint64_t{2} << 30;
   // Background loader threads.
   int loader_threads = 1;
+  // Their scheduling priority (the server's --tile-loader-priority): a tile load or composition
+  // takes tens of milliseconds of CPU, which on a busy core delays the tracking steps queued
+  // behind it (docs/benchmarks.md, 4.y).
+  ThreadPriority loader_priority = ThreadPriority::kNormal;
   // Voxel size of the tiles' voxel visibility indexes, metres.
   double voxel_size_m = 0.25;
   // Use the tiles' keyframe visibility when they have it (else always voxels).
@@ -96,6 +101,8 @@ struct TileCacheStats {
   int64_t pending_loads = 0;
   // The budget.
   uint64_t budget_bytes = 0;
+  // False when the kernel refused the loaders' priority (TileCacheOptions::loader_priority).
+  bool loader_priority_applied = true;
 };
 
 // Thread-safe cache of loaded tiles, shared by every session of a server.

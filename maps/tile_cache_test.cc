@@ -2,8 +2,15 @@
 
 #include <gtest/gtest.h>
 
+#include <pthread.h>
+#include <sched.h>
+#include <sys/resource.h>
+#include <sys/syscall.h>
+#include <unistd.h>
+
 #include <chrono>
 #include <fstream>
+#include <future>
 #include <thread>
 
 #include "core/common/error.h"
@@ -70,6 +77,31 @@ TEST_F(TileCacheTest, RequestLoadsInTheBackground) {
   EXPECT_EQ(cache.stats().loads, 1);
   EXPECT_EQ(cache.stats().pending_loads, 0);
   EXPECT_GT(cache.stats().load_seconds, 0.0);
+}
+
+// The loader threads run at the priority asked for, and so does the work posted to them
+// (compositions): SCHED_IDLE, or nice 19 where the kernel refuses the policy.
+TEST_F(TileCacheTest, LoadersRunAtTheirPriority) {
+  TileCacheOptions options;
+  options.loader_priority = ThreadPriority::kIdle;
+  TileCache cache(options);
+  std::promise<std::pair<int, int>> seen;
+  cache.Post([&seen] {
+    int policy = 0;
+    sched_param param{};
+    pthread_getschedparam(pthread_self(), &policy, &param);
+    seen.set_value({policy, getpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)))});
+  });
+  const std::pair<int, int> loader = seen.get_future().get();
+  if (cache.stats().loader_priority_applied) {
+    EXPECT_EQ(loader.first, SCHED_IDLE);
+  } else {
+    EXPECT_EQ(loader.second, 19);
+  }
+  int policy = 0;
+  sched_param param{};
+  pthread_getschedparam(pthread_self(), &policy, &param);
+  EXPECT_NE(policy, SCHED_IDLE);  // The caller's own priority is untouched.
 }
 
 TEST_F(TileCacheTest, EvictsLeastRecentlyUsedUnusedTilesBeyondTheBudget) {

@@ -136,6 +136,7 @@ MapRegistryOptions LocalizerServerOptions::registry_options() const {
   options.max_map_memory_bytes = max_map_memory_bytes;
   options.max_tile_memory_bytes = max_map_memory_bytes;
   options.tile_loader_threads = tile_loader_threads;
+  options.tile_loader_priority = tile_loader_priority;
   if (keep_maps && map_keep_dir) options.keep_dir = *map_keep_dir;
   return options;
 }
@@ -255,6 +256,7 @@ std::string LocalizerServerOptions::Describe() const {
                           : std::string("a private folder under the temporary directory"))
        << "\n"
        << "tile-loader-threads: " << tile_loader_threads << "\n"
+       << "tile-loader-priority: " << ThreadPriorityName(tile_loader_priority) << "\n"
        << "max-camera-pixels: " << max_camera_pixels << "\n"
        << "max-packet-span: " << max_packet_span_s << " s\n"
        << "max-rate: " << max_step_rate_hz << " Hz\n"
@@ -335,6 +337,14 @@ class LocalizerServer::Service final
           std::string("the kernel refused the search workers' priority (--search-priority ") +
               SearchPriorityName(options.search_priority) + "); they run at " +
               (options.search_priority == TrackingPool::BackgroundPriority::kIdle
+                   ? "nice 19"
+                   : "the tracking workers' priority"));
+    }
+    if (!registry_.tile_cache().stats().loader_priority_applied) {
+      Log(LogLevel::kWarning,
+          std::string("the kernel refused the tile loaders' priority (--tile-loader-priority ") +
+              ThreadPriorityName(options.tile_loader_priority) + "); they run at " +
+              (options.tile_loader_priority == ThreadPriority::kIdle
                    ? "nice 19"
                    : "the tracking workers' priority"));
     }

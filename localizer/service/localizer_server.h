@@ -109,6 +109,8 @@ struct LocalizerServerOptions {
   // Background threads that load the sites' tiles and compose them for sessions
   // (--tile-loader-threads); never the tracking workers.
   int tile_loader_threads = 1;
+  // Their priority (--tile-loader-priority idle|low|normal; ThreadPriority).
+  ThreadPriority tile_loader_priority = MapRegistryOptions{}.tile_loader_priority;
   // Keep a copy of each map version the server loaded, to serve again when the map's file stops
   // loading (copied in place, truncated) after the version left the memory budget
   // (--map-keep-dir none: false).

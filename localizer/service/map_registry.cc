@@ -124,6 +124,7 @@ TileCacheOptions TileCacheOptionsOf(const MapRegistryOptions& options) {
   TileCacheOptions tiles;
   tiles.memory_budget_bytes = options.max_tile_memory_bytes;
   tiles.loader_threads = options.tile_loader_threads;
+  tiles.loader_priority = options.tile_loader_priority;
   return tiles;
 }
 

@@ -103,6 +103,8 @@ struct MapRegistryOptions {
   uint64_t max_tile_memory_bytes = uint64_t{1} << 30;
   // Background threads of the tile cache (loads and compositions of the sites' tiles).
   int tile_loader_threads = 1;
+  // Their scheduling priority (TileCacheOptions::loader_priority).
+  ThreadPriority tile_loader_priority = TileCacheOptions{}.loader_priority;
   // Folder (existing, writable) where each map version loaded is kept, to serve again when its
   // file stops loading after the version left the cache; empty: nothing is kept. Takes disk
   // space of one file per map name. Sites are not kept (evloc-mapper tile writes their manifests

@@ -43,6 +43,8 @@ Options:
                              and so are tiles no session uses (default 1G)
   --max-map-memory MIB       the same in MiB (default 1024)
   --tile-loader-threads N    background threads loading and composing sites' tiles (default 1)
+  --tile-loader-priority P   their priority: idle (SCHED_IDLE), low (nice 10) or normal (default
+                             normal; docs/benchmarks.md 4.y)
   --map-keep-dir DIR|none    where a copy of each map version loaded is kept, to serve again
                              when the map's file stops loading after the version left the
                              memory budget (default: a private folder under $TMPDIR, removed at
@@ -174,6 +176,13 @@ ServeCommand ParseServeCommandLine(const std::vector<std::string>& arguments) {
       if (server.max_map_memory_bytes == 0) {
         throw InvalidArgumentError("--map-memory must be more than 0 bytes, got " + value);
       }
+    } else if (flag == "--tile-loader-priority") {
+      const std::optional<ThreadPriority> priority = ThreadPriorityNamed(value);
+      if (!priority) {
+        throw InvalidArgumentError("--tile-loader-priority must be idle, low or normal, got '" +
+                                   value + "'");
+      }
+      server.tile_loader_priority = *priority;
     } else if (flag == "--tile-loader-threads") {
       server.tile_loader_threads = ParseIntFlag(flag, value);
     } else if (flag == "--max-camera-pixels") {

@@ -25,6 +25,8 @@ TEST(ServeCommand, EveryFlagReachesItsOption) {
                                               "2",
                                               "--search-priority",
                                               "low",
+                                              "--tile-loader-priority",
+                                              "idle",
                                               "--max-message-bytes",
                                               "65536",
                                               "--idle-timeout",
@@ -108,6 +110,8 @@ TEST(ServeCommand, EveryFlagReachesItsOption) {
   EXPECT_EQ(server.search_threads, 2);
   EXPECT_EQ(server.search_priority, TrackingPool::BackgroundPriority::kLow);
   EXPECT_NE(server.Describe().find("search-priority: low"), std::string::npos);
+  EXPECT_EQ(server.tile_loader_priority, ThreadPriority::kIdle);
+  EXPECT_NE(server.Describe().find("tile-loader-priority: idle"), std::string::npos);
   EXPECT_EQ(server.max_message_bytes, 65536);
   EXPECT_EQ(server.idle_timeout_s, 2.5);
   EXPECT_EQ(server.queue_packets, 16);
@@ -171,6 +175,8 @@ TEST(ServeCommand, BadCommandLinesAreRejectedWithTheFlag) {
   EXPECT_THROW(ParseServeCommandLine({"serve", "--maps", maps, "--search-threads", "-1"}),
                InvalidArgumentError);
   EXPECT_THROW(ParseServeCommandLine({"serve", "--maps", maps, "--search-priority", "high"}),
+               InvalidArgumentError);
+  EXPECT_THROW(ParseServeCommandLine({"serve", "--maps", maps, "--tile-loader-priority", "high"}),
                InvalidArgumentError);
   EXPECT_THROW(ParseServeCommandLine({"serve", "--maps", maps, "--max-camera-pixels", "0"}),
                InvalidArgumentError);

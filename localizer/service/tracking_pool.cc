@@ -5,10 +5,6 @@
 #include <utility>
 
 #include <pthread.h>
-#include <sched.h>
-#include <sys/resource.h>
-#include <sys/syscall.h>
-#include <unistd.h>
 
 #include "core/common/error.h"
 
@@ -42,21 +38,7 @@ TrackingPool::TrackingPool(int threads, int background_threads,
   for (int i = 0; i < background_threads; ++i) {
     background_workers_.emplace_back([this, i, background_priority, &refused, &started] {
       pthread_setname_np(pthread_self(), ("evloc-bg-" + std::to_string(i)).substr(0, 15).c_str());
-      // Lowering a thread's priority needs no privilege. setpriority on a thread id sets that
-      // thread alone (Linux).
-      const auto set_nice = [](int nice) {
-        return setpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)), nice) == 0;
-      };
-      if (background_priority == BackgroundPriority::kIdle) {
-        // Where SCHED_IDLE is refused (a seccomp profile, another kernel): nice 19.
-        const sched_param param{};
-        if (pthread_setschedparam(pthread_self(), SCHED_IDLE, &param) != 0) {
-          ++refused;
-          set_nice(19);
-        }
-      } else if (background_priority == BackgroundPriority::kLow && !set_nice(10)) {
-        ++refused;
-      }
+      if (!SetThisThreadPriority(background_priority)) ++refused;
       ++started;
       WorkerLoop(background_lane_);
     });
@@ -150,24 +132,15 @@ void TrackingPool::WorkerLoop(Lane& own) {
 }
 
 const char* SearchPriorityName(TrackingPool::BackgroundPriority priority) {
-  switch (priority) {
-    case TrackingPool::BackgroundPriority::kIdle:
-      return "idle";
-    case TrackingPool::BackgroundPriority::kLow:
-      return "low";
-    case TrackingPool::BackgroundPriority::kNormal:
-      return "normal";
-  }
-  return "normal";
+  return ThreadPriorityName(priority);
 }
 
 TrackingPool::BackgroundPriority ParseSearchPriority(const std::string& name) {
-  for (const auto priority :
-       {TrackingPool::BackgroundPriority::kIdle, TrackingPool::BackgroundPriority::kLow,
-        TrackingPool::BackgroundPriority::kNormal}) {
-    if (name == SearchPriorityName(priority)) return priority;
+  const std::optional<ThreadPriority> priority = ThreadPriorityNamed(name);
+  if (!priority) {
+    throw InvalidArgumentError("--search-priority must be idle, low or normal, got '" + name + "'");
   }
-  throw InvalidArgumentError("--search-priority must be idle, low or normal, got '" + name + "'");
+  return *priority;
 }
 
 SharedTimer::SharedTimer()

@@ -16,6 +16,8 @@
 #include <thread>
 #include <vector>
 
+#include "core/common/thread_priority.h"
+
 namespace evloc::service {
 
 // A fixed pool of worker threads running serial jobs. A job (a session) is run by one worker at a
@@ -48,15 +50,9 @@ class TrackingPool {
     State state_ = State::kIdle;
   };
 
-  // The scheduling of the background workers.
-  enum class BackgroundPriority {
-    // SCHED_IDLE (else nice 19 where the policy cannot be set): only CPU nothing else wants.
-    kIdle,
-    // Nice 10: about a tenth of a core against each busy thread of normal priority.
-    kLow,
-    // The tracking workers' priority: only the queue is separate.
-    kNormal,
-  };
+  // The scheduling of the background workers (kNormal: the tracking workers' priority, only the
+  // queue is separate).
+  using BackgroundPriority = ThreadPriority;
 
   // Starts `threads` workers (>= 1; 0 is taken as the number of cores) and `background_threads`
   // background workers (0: background jobs share the workers).
