@@ -106,6 +106,10 @@ Options:
                              docs/tracking.md)
   --search-cpu-share F       CPU a searching session's search may use, cores per second of
                              session time (default 0.5; 0: unbounded; docs/relocalization.md)
+  --stamp-at-step-time on|off
+                             move each pose forward by the age of the events it was registered
+                             to, to its step time (default off; on for vehicles: 11.5 -> 7.6 cm
+                             at 10 m/s; docs/tracking.md, "Pose time")
   default noise filters (docs/tracking.md, "Noise filters"; a session's
   TrackingOptions.event_filter overrides them):
 )" + std::string(tracking::kEventFilterFlagsUsage) +
@@ -256,6 +260,8 @@ ServeCommand ParseServeCommandLine(const std::vector<std::string>& arguments) {
       server.tracker.decay_trail_px = ParseDoubleFlag(flag, value);
     } else if (flag == "--search-cpu-share") {
       server.tracker.relocalization_cpu_share = ParseDoubleFlag(flag, value);
+    } else if (flag == "--stamp-at-step-time") {
+      server.tracker.stamp_at_step_time = ParseSwitchFlag(flag, value);
     } else if (tracking::ApplyEventFilterFlag(flag, value, &server.tracker.event_filter)) {
     } else {
       throw InvalidArgumentError("unknown flag '" + flag + "' (see --help)");

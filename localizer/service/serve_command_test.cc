@@ -27,6 +27,8 @@ TEST(ServeCommand, EveryFlagReachesItsOption) {
                                               "low",
                                               "--tile-loader-priority",
                                               "idle",
+                                              "--stamp-at-step-time",
+                                              "on",
                                               "--max-message-bytes",
                                               "65536",
                                               "--idle-timeout",
@@ -112,6 +114,8 @@ TEST(ServeCommand, EveryFlagReachesItsOption) {
   EXPECT_NE(server.Describe().find("search-priority: low"), std::string::npos);
   EXPECT_EQ(server.tile_loader_priority, ThreadPriority::kIdle);
   EXPECT_NE(server.Describe().find("tile-loader-priority: idle"), std::string::npos);
+  EXPECT_TRUE(server.tracker.stamp_at_step_time);
+  EXPECT_NE(server.Describe().find("stamp-at-step-time: on"), std::string::npos);
   EXPECT_EQ(server.max_message_bytes, 65536);
   EXPECT_EQ(server.idle_timeout_s, 2.5);
   EXPECT_EQ(server.queue_packets, 16);
@@ -177,6 +181,8 @@ TEST(ServeCommand, BadCommandLinesAreRejectedWithTheFlag) {
   EXPECT_THROW(ParseServeCommandLine({"serve", "--maps", maps, "--search-priority", "high"}),
                InvalidArgumentError);
   EXPECT_THROW(ParseServeCommandLine({"serve", "--maps", maps, "--tile-loader-priority", "high"}),
+               InvalidArgumentError);
+  EXPECT_THROW(ParseServeCommandLine({"serve", "--maps", maps, "--stamp-at-step-time", "yes"}),
                InvalidArgumentError);
   EXPECT_THROW(ParseServeCommandLine({"serve", "--maps", maps, "--max-camera-pixels", "0"}),
                InvalidArgumentError);
