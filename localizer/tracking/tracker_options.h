@@ -278,7 +278,7 @@ struct TrackerOptions {
   // found that far behind it only once it has moved on by about as much, and a verification
   // from rest of a few steps passes it (docs/relocalization.md, "Verification at speed": at 10
   // m/s, a pose 0.9 m behind at 30 m verified in 10 steps and its alignment fell below 0.4
-  // 20-35 steps later). 0.005: 33 ms (the 10 steps at 300 Hz) at 6.7 m, 0.15 s at 30 m.
+  // 20-35 steps later). 0.005: 30 ms (what 10 steps at 300 Hz span) at 6 m, 0.15 s at 30 m.
   // 0: the steps alone.
   double relocalization_verify_s_per_depth_m = 0.005;
   // Each verification step must also reach this chance-corrected alignment (above min_alignment:
