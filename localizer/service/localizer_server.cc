@@ -242,7 +242,7 @@ std::string LocalizerServerOptions::Describe() const {
        << "tracking-threads: " << TrackingPool::ThreadsFor(tracking_threads)
        << (tracking_threads == 0 ? " (one per core)" : "") << "\n"
        << "search-threads: " << search_threads << "\n"
-       << "search-priority: " << SearchPriorityName(search_priority) << "\n"
+       << "search-priority: " << ThreadPriorityName(search_priority) << "\n"
        << "max-message-bytes: " << max_message_bytes << "\n"
        << "idle-timeout: " << idle_timeout_s << " s\n"
        << "queue-packets: " << queue_packets << "\n"
@@ -333,21 +333,19 @@ class LocalizerServer::Service final
           [this](LogLevel level, const std::string& line) { Log(level, line); });
     }
     if (options.viewer_address) viewer_board_ = std::make_unique<ViewerBoard>();
-    if (!pool_.background_priority_applied()) {
+    // Background threads whose lower priority the kernel refused (SetThisThreadPriority).
+    const auto warn_refused = [this](const std::string& threads, const std::string& flag,
+                                     ThreadPriority priority) {
       Log(LogLevel::kWarning,
-          std::string("the kernel refused the search workers' priority (--search-priority ") +
-              SearchPriorityName(options.search_priority) + "); they run at " +
-              (options.search_priority == TrackingPool::BackgroundPriority::kIdle
-                   ? "nice 19"
-                   : "the tracking workers' priority"));
+          "the kernel refused the " + threads + "' priority (" + flag + " " +
+              ThreadPriorityName(priority) + "); they run at " +
+              (priority == ThreadPriority::kIdle ? "nice 19" : "the tracking workers' priority"));
+    };
+    if (!pool_.background_priority_applied()) {
+      warn_refused("search workers", "--search-priority", options.search_priority);
     }
     if (!registry_.tile_cache().stats().loader_priority_applied) {
-      Log(LogLevel::kWarning,
-          std::string("the kernel refused the tile loaders' priority (--tile-loader-priority ") +
-              ThreadPriorityName(options.tile_loader_priority) + "); they run at " +
-              (options.tile_loader_priority == ThreadPriority::kIdle
-                   ? "nice 19"
-                   : "the tracking workers' priority"));
+      warn_refused("tile loaders", "--tile-loader-priority", options.tile_loader_priority);
     }
   }
 

@@ -131,10 +131,6 @@ void TrackingPool::WorkerLoop(Lane& own) {
   }
 }
 
-const char* SearchPriorityName(TrackingPool::BackgroundPriority priority) {
-  return ThreadPriorityName(priority);
-}
-
 TrackingPool::BackgroundPriority ParseSearchPriority(const std::string& name) {
   const std::optional<ThreadPriority> priority = ThreadPriorityNamed(name);
   if (!priority) {

@@ -103,8 +103,6 @@ class TrackingPool {
   std::vector<std::thread> background_workers_;
 };
 
-// "idle", "low" or "normal".
-const char* SearchPriorityName(TrackingPool::BackgroundPriority priority);
 // The priority named "idle", "low" or "normal"; throws InvalidArgumentError naming
 // --search-priority otherwise.
 TrackingPool::BackgroundPriority ParseSearchPriority(const std::string& name);
