@@ -97,20 +97,21 @@ run() {
   ((status == 0)) || fail "the command exited with status $status" "$log"
 }
 
-# start_service MAPS: starts `evloc-localizer serve --maps MAPS` on a free loopback port (log
-# LOGS/server.log), waits until gRPC health says SERVING (LOGS/health.log) and sets SERVER_PID,
-# SERVER_LOG and PORT.
+# start_service MAPS [FLAGS...]: starts `evloc-localizer serve --maps MAPS [FLAGS...]` on a free
+# loopback port (log LOGS/server.log), waits until gRPC health says SERVING (LOGS/health.log) and
+# sets SERVER_PID, SERVER_LOG and PORT.
 start_service() {
   local maps=$1
+  shift
   SERVER_LOG="$LOGS/server.log"
   # One session at a time at --speed max: no neighbour for the search's CPU share to protect, and
   # with a share the search's progress per second of events depends on the machine's speed
   # (docs/relocalization.md, "Cost"), so the demo's time to find the camera would too. For the
   # same reason the search runs at normal priority: at idle priority it would wait for whatever
   # else the machine runs (the demo is not in a container or a unit of its own).
-  echo "   \$ $SERVER serve --maps $maps --listen 127.0.0.1:0 --search-cpu-share 0 --search-priority normal   (log: $SERVER_LOG)"
+  echo "   \$ $SERVER serve --maps $maps --listen 127.0.0.1:0 --search-cpu-share 0 --search-priority normal $*   (log: $SERVER_LOG)"
   "$SERVER" serve --maps "$maps" --listen 127.0.0.1:0 --search-cpu-share 0 \
-    --search-priority normal >"$SERVER_LOG" 2>&1 &
+    --search-priority normal "$@" >"$SERVER_LOG" 2>&1 &
   SERVER_PID=$!
   PORT=""
   for _ in $(seq 300); do
