@@ -822,9 +822,11 @@ bool Tracker::JudgeProbedRound(Refinement* accepted) {
   const Refinement* winner = BestRefinement(/*with_probes=*/false);
   bool superseded = false;
   for (const Refinement& refinement : refinements_) {
-    superseded = superseded ||
-                 (winner && refinement.probe && refinement.good &&
-                  refinement.alignment > winner->alignment && DistinctPlaces(refinement, *winner));
+    superseded =
+        superseded ||
+        (winner && refinement.probe && refinement.good &&
+         refinement.alignment > winner->alignment + options_.relocalization_min_alignment_margin &&
+         DistinctPlaces(refinement, *winner));
   }
   // The other probes stay: fits around the winner nearly as good as it are an ambiguity the
   // judgement's margin refuses (kept only to polish the winner, they let the 10.6 cm winner of
