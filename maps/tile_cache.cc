@@ -1,6 +1,5 @@
 #include "maps/tile_cache.h"
 
-#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <exception>
@@ -49,17 +48,8 @@ void TileCacheOptions::Check() const {
 TileCache::TileCache(const TileCacheOptions& options) : options_(options) {
   options_.Check();
   stats_.budget_bytes = options_.memory_budget_bytes;
-  std::atomic<int> refused{0};
-  std::atomic<int> started{0};
-  for (int i = 0; i < options_.loader_threads; ++i) {
-    threads_.emplace_back([this, &refused, &started] {
-      if (!SetThisThreadPriority(options_.loader_priority)) ++refused;
-      ++started;
-      Run();
-    });
-  }
-  while (started.load() < options_.loader_threads) std::this_thread::yield();
-  stats_.loader_priority_applied = refused.load() == 0;
+  stats_.loader_priority_applied = StartThreadsAtPriority(
+      options_.loader_threads, options_.loader_priority, [this](int) { Run(); }, &threads_);
 }
 
 TileCache::~TileCache() {

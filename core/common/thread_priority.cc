@@ -1,5 +1,7 @@
 #include "core/common/thread_priority.h"
 
+#include <atomic>
+
 #include <pthread.h>
 #include <sched.h>
 #include <sys/resource.h>
@@ -50,6 +52,22 @@ bool SetThisThreadPriority(ThreadPriority priority) {
       return true;
   }
   return true;
+}
+
+bool StartThreadsAtPriority(int count, ThreadPriority priority,
+                            const std::function<void(int)>& body,
+                            std::vector<std::thread>* threads) {
+  std::atomic<int> refused{0};
+  std::atomic<int> started{0};
+  for (int i = 0; i < count; ++i) {
+    threads->emplace_back([i, priority, body, &refused, &started] {
+      if (!SetThisThreadPriority(priority)) ++refused;
+      ++started;  // The last use of the caller's counters.
+      body(i);
+    });
+  }
+  while (started.load() < count) std::this_thread::yield();
+  return refused.load() == 0;
 }
 
 }  // namespace evloc

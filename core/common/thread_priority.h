@@ -2,8 +2,11 @@
 // CPU from latency-bound threads: the service's search workers and the tile loaders.
 #pragma once
 
+#include <functional>
 #include <optional>
 #include <string>
+#include <thread>
+#include <vector>
 
 namespace evloc {
 
@@ -24,5 +27,11 @@ std::optional<ThreadPriority> ThreadPriorityNamed(const std::string& name);
 // Sets the calling thread's priority (Linux: per thread; lowering needs no privilege). Returns
 // false when the kernel refused it: kIdle then falls back to nice 19, kLow stays unchanged.
 bool SetThisThreadPriority(ThreadPriority priority);
+
+// Starts `count` threads into `threads`; the i-th sets its priority (SetThisThreadPriority) and
+// then runs body(i). Returns once every one has set it: true when none was refused.
+bool StartThreadsAtPriority(int count, ThreadPriority priority,
+                            const std::function<void(int)>& body,
+                            std::vector<std::thread>* threads);
 
 }  // namespace evloc

@@ -1,6 +1,5 @@
 #include "localizer/service/tracking_pool.h"
 
-#include <atomic>
 #include <string>
 #include <utility>
 
@@ -33,18 +32,13 @@ TrackingPool::TrackingPool(int threads, int background_threads,
       WorkerLoop(lane_);
     });
   }
-  std::atomic<int> refused{0};
-  std::atomic<int> started{0};
-  for (int i = 0; i < background_threads; ++i) {
-    background_workers_.emplace_back([this, i, background_priority, &refused, &started] {
-      pthread_setname_np(pthread_self(), ("evloc-bg-" + std::to_string(i)).substr(0, 15).c_str());
-      if (!SetThisThreadPriority(background_priority)) ++refused;
-      ++started;
-      WorkerLoop(background_lane_);
-    });
-  }
-  while (started.load() < background_threads) std::this_thread::yield();
-  background_priority_applied_ = refused.load() == 0;
+  background_priority_applied_ = StartThreadsAtPriority(
+      background_threads, background_priority,
+      [this](int i) {
+        pthread_setname_np(pthread_self(), ("evloc-bg-" + std::to_string(i)).substr(0, 15).c_str());
+        WorkerLoop(background_lane_);
+      },
+      &background_workers_);
 }
 
 TrackingPool::~TrackingPool() {
