@@ -103,10 +103,8 @@ std::vector<Workload> MakeWorkloads(const LoadOptions& options) {
     const auto begin = std::lower_bound(events.t_ns.begin(), events.t_ns.end(), begin_ns);
     const auto end = std::upper_bound(begin, events.t_ns.end(), initial.t_ns + session_ns);
     EventBuffer session;
-    for (size_t i = static_cast<size_t>(begin - events.t_ns.begin());
-         i < static_cast<size_t>(end - events.t_ns.begin()); ++i) {
-      session.push_back(events[i]);
-    }
+    session.Append(events, static_cast<size_t>(begin - events.t_ns.begin()),
+                   static_cast<size_t>(end - begin));
     if (session.empty()) {
       throw InvalidArgumentError("dataset '" + options.dataset.string() + "' has no events " +
                                  std::to_string(k * options.stagger_s) +
