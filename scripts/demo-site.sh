@@ -68,8 +68,9 @@ finish
 # ---------------------------------------------------------------------------------------------
 begin "start the localizer service on the site and wait until gRPC health says SERVING"
 # A vehicle's poses are stamped at their step time (docs/tracking.md, "Pose time": at 5 m/s the
-# registered pose is about 9 cm behind).
-start_service "$MAPS" --stamp-at-step-time on
+# registered pose is about 9 cm behind), and its solves hold the smooth velocity's prediction
+# (docs/tracking.md, "Motion prior").
+start_service "$MAPS" --stamp-at-step-time on --motion-prior 2,0
 finish
 
 # ---------------------------------------------------------------------------------------------

@@ -307,7 +307,9 @@ TEST(TrackCommandLine, ParsesStartingWithoutAPoseAndTheBlackout) {
                                                              "--search-distinct-depth",
                                                              "0.03",
                                                              "--search-verify-s-per-m",
-                                                             "0.01"});
+                                                             "0.01",
+                                                             "--motion-prior",
+                                                             "2,15"});
   EXPECT_TRUE(options.no_initial_pose);
   EXPECT_FALSE(options.initial_world_from_cam.has_value());
   EXPECT_EQ(options.start_s, 0.5);
@@ -317,6 +319,8 @@ TEST(TrackCommandLine, ParsesStartingWithoutAPoseAndTheBlackout) {
   EXPECT_EQ(options.tracking.tracker.relocalization_give_up_s, 2.0);
   EXPECT_EQ(options.tracking.tracker.relocalization_distinct_depth_fraction, 0.03);
   EXPECT_EQ(options.tracking.tracker.relocalization_verify_s_per_depth_m, 0.01);
+  EXPECT_EQ(options.tracking.tracker.motion_prior_velocity_sigma_mps, 2.0);
+  EXPECT_EQ(options.tracking.tracker.motion_prior_angular_velocity_sigma_dps, 15.0);
   EXPECT_FALSE(options.gnss.has_value());
   const TrackCommandOptions with_fix =
       ParseTrackCommandLine({"--map", "m", "--dataset", "d", "--out", "o", "--init-pose", "none",
@@ -329,6 +333,9 @@ TEST(TrackCommandLine, ParsesStartingWithoutAPoseAndTheBlackout) {
                                                      {"--blackout", "1"},
                                                      {"--search-distinct-depth", "0.9"},
                                                      {"--search-verify-s-per-m", "-0.1"},
+                                                     {"--motion-prior", "2"},
+                                                     {"--motion-prior", "-1,0"},
+                                                     {"--motion-prior", "2,x"},
                                                      {"--init-pose", "none", "--mode", "frames"},
                                                      {"--gnss", "47.3,8.5,400,3"},
                                                      {"--init-pose", "none", "--gnss", "47.3,8.5"},

@@ -385,6 +385,9 @@ Options:
                          with polarity and occlusion: points claim edge pixels of their
                          predicted polarity (default on)
   --velocity-window S    constant-velocity window, seconds (default 0.02)
+  --motion-prior V,W     the constant-velocity prediction as a prior in each tracking solve,
+                         its velocity trusted to V m/s and W deg/s (default 0,0: none; a
+                         vehicle: docs/tracking.md, "Motion prior")
 )" + std::string(kEventFilterFlagsUsage) +
          R"(  --stamp-at-step-time on|off
                          move each pose forward by the age of the events it was registered to,
@@ -527,6 +530,8 @@ TrackCommandOptions ParseTrackCommandLine(const std::vector<std::string>& argume
       tracker.max_depth_m = ParseDoubleFlag(flag, value);
     } else if (flag == "--velocity-window") {
       tracker.velocity_window_s = ParseDoubleFlag(flag, value);
+    } else if (flag == "--motion-prior") {
+      ParseMotionPriorFlag(flag, value, &tracker);
     } else if (flag == "--polarity-band") {
       tracker.polarity_neutral_band_deg = ParseDoubleFlag(flag, value);
     } else if (flag == "--min-flow") {

@@ -110,6 +110,9 @@ Options:
                              move each pose forward by the age of the events it was registered
                              to, to its step time (default off; on for vehicles: 11.5 -> 7.6 cm
                              at 10 m/s; docs/tracking.md, "Pose time")
+  --motion-prior V,W          each session's constant-velocity prediction as a prior in its
+                             tracking solves, the velocity trusted to V m/s and W deg/s (default
+                             0,0: none; docs/tracking.md, "Motion prior")
   default noise filters (docs/tracking.md, "Noise filters"; a session's
   TrackingOptions.event_filter overrides them):
 )" + std::string(tracking::kEventFilterFlagsUsage) +
@@ -262,6 +265,8 @@ ServeCommand ParseServeCommandLine(const std::vector<std::string>& arguments) {
       server.tracker.relocalization_cpu_share = ParseDoubleFlag(flag, value);
     } else if (flag == "--stamp-at-step-time") {
       server.tracker.stamp_at_step_time = ParseSwitchFlag(flag, value);
+    } else if (flag == "--motion-prior") {
+      tracking::ParseMotionPriorFlag(flag, value, &server.tracker);
     } else if (tracking::ApplyEventFilterFlag(flag, value, &server.tracker.event_filter)) {
     } else {
       throw InvalidArgumentError("unknown flag '" + flag + "' (see --help)");

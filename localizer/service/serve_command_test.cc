@@ -29,6 +29,8 @@ TEST(ServeCommand, EveryFlagReachesItsOption) {
                                               "idle",
                                               "--stamp-at-step-time",
                                               "on",
+                                              "--motion-prior",
+                                              "2,0",
                                               "--max-message-bytes",
                                               "65536",
                                               "--idle-timeout",
@@ -116,6 +118,9 @@ TEST(ServeCommand, EveryFlagReachesItsOption) {
   EXPECT_NE(server.Describe().find("tile-loader-priority: idle"), std::string::npos);
   EXPECT_TRUE(server.tracker.stamp_at_step_time);
   EXPECT_NE(server.Describe().find("stamp-at-step-time: on"), std::string::npos);
+  EXPECT_EQ(server.tracker.motion_prior_velocity_sigma_mps, 2.0);
+  EXPECT_EQ(server.tracker.motion_prior_angular_velocity_sigma_dps, 0.0);
+  EXPECT_NE(server.Describe().find("motion-prior: 2 m/s, 0 deg/s\n"), std::string::npos);
   EXPECT_EQ(server.max_message_bytes, 65536);
   EXPECT_EQ(server.idle_timeout_s, 2.5);
   EXPECT_EQ(server.queue_packets, 16);
@@ -183,6 +188,10 @@ TEST(ServeCommand, BadCommandLinesAreRejectedWithTheFlag) {
   EXPECT_THROW(ParseServeCommandLine({"serve", "--maps", maps, "--tile-loader-priority", "high"}),
                InvalidArgumentError);
   EXPECT_THROW(ParseServeCommandLine({"serve", "--maps", maps, "--stamp-at-step-time", "yes"}),
+               InvalidArgumentError);
+  EXPECT_THROW(ParseServeCommandLine({"serve", "--maps", maps, "--motion-prior", "2"}),
+               InvalidArgumentError);
+  EXPECT_THROW(ParseServeCommandLine({"serve", "--maps", maps, "--motion-prior", "2,-1"}),
                InvalidArgumentError);
   EXPECT_THROW(ParseServeCommandLine({"serve", "--maps", maps, "--max-camera-pixels", "0"}),
                InvalidArgumentError);

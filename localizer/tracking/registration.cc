@@ -326,11 +326,40 @@ Linearization LinearizeAny(FieldKind kind, const std::vector<RegistrationPoint>&
                                                workspace);
 }
 
+// The prior's residual at `cam_from_world`: the left increment from the prior to it.
+Vector6d PriorResidual(const PosePrior& prior, const Rigid3d& cam_from_world) {
+  return LogSE3(cam_from_world * prior.cam_from_world.Inverse());
+}
+
+// Adds the prior's cost at `cam_from_world` to `linearization` (not its normal equations).
+void AddPriorCost(const PosePrior* prior, const Rigid3d& cam_from_world,
+                  Linearization* linearization) {
+  if (prior == nullptr) return;
+  const Vector6d residual = PriorResidual(*prior, cam_from_world);
+  linearization->cost += 0.5 * residual.dot(prior->information * residual);
+}
+
+// Adds the prior's term to the normal equations of `linearization` at `cam_from_world` (its cost
+// is added by AddPriorCost). The residual's derivative with respect to the left increment is
+// taken as the identity (exact at the prior; the prior and the pose differ by one step's
+// prediction error, centimetres and fractions of a degree).
+void AddPriorToSystem(const PosePrior* prior, const Rigid3d& cam_from_world,
+                      Linearization* linearization) {
+  if (prior == nullptr) return;
+  const Vector6d residual = PriorResidual(*prior, cam_from_world);
+  linearization->gradient += prior->information * residual;
+  linearization->information += prior->information;
+}
+
+// sigma^2: the weighted residual variance of the points (1 without redundancy).
+double ResidualVariance(const Linearization& linearization) {
+  const int redundancy = linearization.points_used - 6;
+  return redundancy > 0 ? linearization.weighted_squared_residuals / redundancy : 1.0;
+}
+
 // sigma^2 H^-1, with unconstrained directions given a large variance.
 Matrix6d Covariance(const Linearization& linearization, bool* well_conditioned) {
-  const int redundancy = linearization.points_used - 6;
-  const double variance =
-      redundancy > 0 ? linearization.weighted_squared_residuals / redundancy : 1.0;
+  const double variance = ResidualVariance(linearization);
   const Eigen::SelfAdjointEigenSolver<Matrix6d> solver(linearization.information);
   const Vector6d eigenvalues = solver.eigenvalues();
   const double largest = eigenvalues.cwiseAbs().maxCoeff();
@@ -363,11 +392,14 @@ bool EvaluatePointResidual(PotentialField& field, const PinholeIntrinsics& intri
 RegistrationResult RegisterPoints(const std::vector<RegistrationPoint>& points,
                                   const PinholeIntrinsics& intrinsics,
                                   const Rigid3d& initial_cam_from_world,
-                                  const RegistrationOptions& options) {
+                                  const RegistrationOptions& options, const PosePrior* prior) {
   for (const RegistrationPoint& point : points) {
     if (point.field == nullptr) {
       throw InvalidArgumentError("RegisterPoints: every point needs a field.");
     }
+  }
+  if (prior != nullptr && !prior->information.allFinite()) {
+    throw InvalidArgumentError("RegisterPoints: the prior's information is not finite.");
   }
   RegistrationResult result;
   result.cam_from_world = initial_cam_from_world;
@@ -377,6 +409,8 @@ RegistrationResult RegisterPoints(const std::vector<RegistrationPoint>& points,
   Linearization current =
       LinearizeAny(kind, points, intrinsics, initial_cam_from_world, options, &workspace);
   Accumulate(workspace.rows, &current);
+  AddPriorCost(prior, initial_cam_from_world, &current);
+  AddPriorToSystem(prior, initial_cam_from_world, &current);
   double damping = options.initial_damping;
   double growth = 2.0;
   const double focal_px = std::max(intrinsics.fx, intrinsics.fy);
@@ -406,6 +440,7 @@ RegistrationResult RegisterPoints(const std::vector<RegistrationPoint>& points,
     ++result.iterations;
     const Rigid3d candidate = ExpSE3(increment) * result.cam_from_world;
     Linearization trial = LinearizeAny(kind, points, intrinsics, candidate, options, &workspace);
+    AddPriorCost(prior, candidate, &trial);
     const bool small = increment.head<3>().norm() < options.min_increment &&
                        increment.tail<3>().norm() < options.min_increment;
     // Gain ratio: actual over predicted decrease of the (robust) cost (Nielsen's LM update).
@@ -424,6 +459,7 @@ RegistrationResult RegisterPoints(const std::vector<RegistrationPoint>& points,
       converged |= current.cost - trial.cost < negligible;
       result.cam_from_world = candidate;
       Accumulate(workspace.rows, &trial);
+      AddPriorToSystem(prior, candidate, &trial);
       current = trial;
       const double factor = 2 * gain - 1;
       damping *= std::max(1.0 / 3.0, 1.0 - factor * factor * factor);
@@ -446,6 +482,13 @@ RegistrationResult RegisterPoints(const std::vector<RegistrationPoint>& points,
   result.points_used = current.points_used;
   result.mean_residual = current.points_used > 0 ? current.sum_residuals / current.points_used : 1;
   result.covariance = Covariance(current, &result.well_conditioned);
+  result.residual_variance = ResidualVariance(current);
+  if (prior != nullptr) {
+    // Conditioned by the points alone: a prior fills in what they do not constrain.
+    Linearization points_only = current;
+    points_only.information -= prior->information;
+    Covariance(points_only, &result.well_conditioned);
+  }
   return result;
 }
 

@@ -125,15 +125,32 @@ struct RegistrationResult {
   // cost or an increment that moves the points by a negligible fraction of a pixel, rather than on
   // max_iterations.
   bool converged = false;
-  // True when H had full rank at the estimate (otherwise the covariance is large, 1e6).
+  // True when the points' own H had full rank at the estimate (otherwise the covariance is
+  // large, 1e6, along what neither the points nor a prior constrain).
   bool well_conditioned = false;
+  // The weighted residual variance of the points at the estimate (sigma^2 above; 1 when there are
+  // no more points than the pose has parameters).
+  double residual_variance = 1;
 };
 
-// Registers `points` starting from `initial_cam_from_world` with Levenberg-Marquardt. Throws
-// InvalidArgumentError when a point has no field.
+// A Gaussian prior on the pose, e.g. the motion model's prediction: the cost gains
+// 0.5 * e^T * information * e with e = LogSE3(cam_from_world * prior.cam_from_world^-1), the left
+// increment from the prior to the pose in the camera frame, (v, omega). `information` is in the
+// units of the points' cost (half squared field values per squared metre or radian): a prior of
+// standard deviation s per axis against points whose residuals vary by sigma has sigma^2 / s^2.
+struct PosePrior {
+  Rigid3d cam_from_world;
+  Matrix6d information = Matrix6d::Zero();
+};
+
+// Registers `points` starting from `initial_cam_from_world` with Levenberg-Marquardt, with the
+// prior's term in the cost when `prior` is not null (then the covariance is the posterior's:
+// sigma^2 (H + prior information)^-1). Throws InvalidArgumentError when a point has no field or
+// the prior's information is not finite.
 RegistrationResult RegisterPoints(const std::vector<RegistrationPoint>& points,
                                   const PinholeIntrinsics& intrinsics,
                                   const Rigid3d& initial_cam_from_world,
-                                  const RegistrationOptions& options);
+                                  const RegistrationOptions& options,
+                                  const PosePrior* prior = nullptr);
 
 }  // namespace evloc::tracking

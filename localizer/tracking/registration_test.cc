@@ -1,6 +1,7 @@
 #include "localizer/tracking/registration.h"
 
 #include <cmath>
+#include <limits>
 #include <random>
 
 #include <gtest/gtest.h>
@@ -181,6 +182,97 @@ TEST_P(RegistrationConvergence, ConvergesFromTwoCentimetresAndOneDegree) {
 
 INSTANTIATE_TEST_SUITE_P(Losses, RegistrationConvergence,
                          ::testing::Values(RobustLoss::kHuber, RobustLoss::kCauchy));
+
+// Vertical lines on two planes, 0.2 m apart at z = 2 m and, between them, at z = 4 m (two depths
+// tell a sideways translation from a turn), over |y| <= half_height (5 mm steps).
+Map VerticalLinesMap(double half_height) {
+  Map map;
+  for (int line = -3; line <= 3; ++line) {
+    for (double y = -half_height; y <= half_height + 1e-9; y += 0.005) {
+      map.positions.emplace_back(static_cast<float>(0.2 * line), static_cast<float>(y), 2.0f);
+      map.positions.emplace_back(static_cast<float>(0.2 * line + 0.1), static_cast<float>(y), 4.0f);
+    }
+  }
+  return map;
+}
+
+// Points on vertical lines registered against a field of longer vertical lines: the points fix
+// the pose across the lines and leave it free along them (y).
+class RegistrationPrior : public ::testing::Test {
+ protected:
+  RegistrationPrior()
+      : field_(ProjectedEdgeField(VerticalLinesMap(1.5), intrinsics_, 320, 240, Rigid3d())) {
+    for (const Eigen::Vector3f& position : VerticalLinesMap(0.3).positions) {
+      points_.push_back({position.cast<double>(), &field_});
+    }
+    options_.max_iterations = 20;
+    options_.min_relative_decrease = 0;
+  }
+
+  // A prior at `cam_from_world` with standard deviation `sigma_m` in translation and
+  // `sigma_rad` in rotation, for residuals that vary by 0.1.
+  static PosePrior Prior(const Rigid3d& cam_from_world, double sigma_m, double sigma_rad) {
+    PosePrior prior;
+    prior.cam_from_world = cam_from_world;
+    prior.information.diagonal() << Eigen::Vector3d::Constant(0.01 / (sigma_m * sigma_m)),
+        Eigen::Vector3d::Constant(0.01 / (sigma_rad * sigma_rad));
+    return prior;
+  }
+
+  const PinholeIntrinsics intrinsics_{260.0, 260.0, 159.5, 119.5};
+  DenseField field_;
+  std::vector<RegistrationPoint> points_;
+  RegistrationOptions options_;
+};
+
+TEST_F(RegistrationPrior, HoldsWhatThePointsLeaveFreeAndYieldsWhereTheyConstrain) {
+  // The camera truly at the origin; the prior 1 cm off along the lines (y) and 1 cm across (x).
+  const Rigid3d truth;
+  const Rigid3d prior_pose = ExpSE3((Vector6d() << 0.01, 0.01, 0, 0, 0, 0).finished()) * truth;
+  const PosePrior prior = Prior(prior_pose, 0.005, 0.01);
+  // Both solves start at the truth.
+  const RegistrationResult with_prior =
+      RegisterPoints(points_, intrinsics_, truth, options_, &prior);
+  const RegistrationResult without = RegisterPoints(points_, intrinsics_, truth, options_);
+  // Along the lines the points say nothing: the prior moves y to its own; without it y stays.
+  EXPECT_NEAR(with_prior.cam_from_world.translation.y(), 0.01, 1e-4);
+  EXPECT_NEAR(without.cam_from_world.translation.y(), 0.0, 1e-4);
+  // Across the lines hundreds of points outweigh a 5 mm prior: back within 2 mm of the truth.
+  EXPECT_LT(std::abs(with_prior.cam_from_world.translation.x()), 0.002);
+  EXPECT_LT(std::abs(without.cam_from_world.translation.x()), 0.002);
+  // The points alone do not constrain the pose; the covariance along y is the prior's order.
+  EXPECT_FALSE(with_prior.well_conditioned);
+  EXPECT_LT(std::sqrt(with_prior.covariance(1, 1)), 0.05);
+  EXPECT_GT(with_prior.residual_variance, 0);
+}
+
+TEST_F(RegistrationPrior, AWeakPriorChangesLittleAndAStrongOneWins) {
+  const Rigid3d truth = ExpSE3((Vector6d() << 0.015, 0, 0.02, 0, 0, 0).finished());
+  DenseField field = ProjectedEdgeField(VerticalLinesMap(1.5), intrinsics_, 320, 240, truth);
+  for (RegistrationPoint& point : points_) point.field = &field;
+  const Rigid3d start;
+  const Rigid3d prior_pose = ExpSE3((Vector6d() << 0.02, 0, 0, 0, 0, 0).finished());
+  const RegistrationResult without = RegisterPoints(points_, intrinsics_, start, options_);
+  ASSERT_LT(std::abs(without.cam_from_world.translation.x() - truth.translation.x()), 0.003);
+  const PosePrior weak = Prior(prior_pose, 10.0, 10.0);
+  const RegistrationResult weak_result =
+      RegisterPoints(points_, intrinsics_, start, options_, &weak);
+  EXPECT_LT((weak_result.cam_from_world.translation - without.cam_from_world.translation).norm(),
+            2e-4);
+  const PosePrior strong = Prior(prior_pose, 1e-5, 1e-5);
+  const RegistrationResult strong_result =
+      RegisterPoints(points_, intrinsics_, start, options_, &strong);
+  EXPECT_LT((strong_result.cam_from_world.translation - prior_pose.translation).norm(), 1e-4);
+  // The cost includes the prior's term.
+  EXPECT_GT(strong_result.cost, without.cost);
+}
+
+TEST_F(RegistrationPrior, NonFiniteInformationIsRejected) {
+  PosePrior prior = Prior(Rigid3d(), 0.01, 0.01);
+  prior.information(2, 2) = std::numeric_limits<double>::infinity();
+  EXPECT_THROW(RegisterPoints(points_, intrinsics_, Rigid3d(), options_, &prior),
+               InvalidArgumentError);
+}
 
 TEST(Registration, PointsWithoutFieldAreRejected) {
   std::vector<RegistrationPoint> points(1);

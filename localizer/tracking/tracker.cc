@@ -341,8 +341,39 @@ bool Tracker::IsGood(const TrackingQuality& quality) const {
          quality.mean_residual <= options_.max_mean_residual;
 }
 
+std::optional<PosePrior> Tracker::MotionPrior(int64_t t_ns) const {
+  const double sigma_v = options_.motion_prior_velocity_sigma_mps;
+  const double sigma_w = options_.motion_prior_angular_velocity_sigma_dps * kRadiansPerDegree;
+  const double dt_s = static_cast<double>(t_ns - motion_.last_t_ns()) * 1e-9;
+  if ((sigma_v <= 0 && sigma_w <= 0) || !(dt_s > 0)) return std::nullopt;
+  // As for stamping: right after a Reset the velocity is the difference of a few poses.
+  if (motion_.smooth_velocity_span_ns() <= 0 ||
+      motion_.smooth_velocity_span_ns() < motion_.smooth_window_ns()) {
+    return std::nullopt;
+  }
+  const double residual_variance =
+      last_residual_variance_ > 0
+          ? last_residual_variance_
+          : options_.registration.robust_scale * options_.registration.robust_scale;
+  PosePrior prior;
+  // Centred on the last pose moved on by the smooth velocity (the stamping window, 0.1 s): the
+  // short window's velocity follows the estimates' own step-to-step noise, and a prior that
+  // holds each pose to it feeds that noise back (measured: 2.5 m excursions at 10 m/s).
+  prior.cam_from_world =
+      (motion_.last_world_from_cam() * ExpSE3(motion_.smooth_velocity() * dt_s)).Inverse();
+  // The prediction's error after dt at a velocity known to sigma: sigma * dt per axis.
+  const double translation_information =
+      sigma_v > 0 ? residual_variance / ((sigma_v * dt_s) * (sigma_v * dt_s)) : 0.0;
+  const double rotation_information =
+      sigma_w > 0 ? residual_variance / ((sigma_w * dt_s) * (sigma_w * dt_s)) : 0.0;
+  prior.information.diagonal() << Eigen::Vector3d::Constant(translation_information),
+      Eigen::Vector3d::Constant(rotation_information);
+  return prior;
+}
+
 Tracker::Attempt Tracker::Solve(const Rigid3d& start_world_from_cam,
-                                const Rigid3d* previous_world_from_cam, bool assess) {
+                                const Rigid3d* previous_world_from_cam, bool assess,
+                                const PosePrior* prior) {
   const Rigid3d start_cam_from_world = start_world_from_cam.Inverse();
   const bool predict_polarity = options_.use_polarity && previous_world_from_cam != nullptr &&
                                 options_.input == TrackerInput::kEvents;
@@ -411,7 +442,7 @@ Tracker::Attempt Tracker::Solve(const Rigid3d& start_world_from_cam,
   }
   Attempt attempt;
   attempt.registration =
-      RegisterPoints(points, intrinsics_, start_cam_from_world, options_.registration);
+      RegisterPoints(points, intrinsics_, start_cam_from_world, options_.registration, prior);
   attempt.quality.mean_residual = attempt.registration.mean_residual;
   attempt.quality.points_used = attempt.registration.points_used;
   attempt.quality.points_selected = static_cast<int>(num_selected);
@@ -530,6 +561,9 @@ PoseEstimate Tracker::Step(int64_t t_ns) {
       2 * motion_.velocity_span_ns() >= std::llround(options_.velocity_window_s * 1e9) &&
       motion_.velocity_span_ns() > 0;
   const bool predict_polarity = was_tracking && velocity_settled && options_.use_polarity;
+  // The smooth constant-velocity prediction as a prior, once there is a velocity to trust.
+  const std::optional<PosePrior> motion_prior = was_tracking ? MotionPrior(t_ns) : std::nullopt;
+  const PosePrior* prior = motion_prior ? &*motion_prior : nullptr;
   Attempt best;
   bool solved_unsigned_from_prediction = false;
   if (predict_polarity && options_.polarity_after_unsigned_solve) {
@@ -538,16 +572,16 @@ PoseEstimate Tracker::Step(int64_t t_ns) {
     // attracts points to the wrong edges; starting the signed solve from the unsigned optimum
     // predicts the polarities from a flow measured up to it.
     // The unsigned result's quality only matters when the signed one is bad: assessed then.
-    Attempt coarse = Solve(predicted, nullptr, /*assess=*/false);
+    Attempt coarse = Solve(predicted, nullptr, /*assess=*/false, prior);
     solved_unsigned_from_prediction = true;
-    best = Solve(coarse.registration.cam_from_world.Inverse(), &previous);
+    best = Solve(coarse.registration.cam_from_world.Inverse(), &previous, /*assess=*/true, prior);
     best.quality.iterations += coarse.quality.iterations;
     if (!best.good) {
       Assess(/*predicted_polarity=*/false, &coarse);
       if (coarse.good) best = std::move(coarse);
     }
   } else {
-    best = Solve(predicted, predict_polarity ? &previous : nullptr);
+    best = Solve(predicted, predict_polarity ? &previous : nullptr, /*assess=*/true, prior);
   }
   int recovery_attempts = 0;
   // While the surfaces hold less than one decay time of events (the start of a stream), a bad
@@ -603,6 +637,7 @@ PoseEstimate Tracker::Step(int64_t t_ns) {
       motion_.Reset(estimate.world_from_cam, t_ns);
     }
     last_good_world_from_cam_ = estimate.world_from_cam;
+    last_residual_variance_ = best.registration.residual_variance;
     status_ = TrackingStatus::kTracking;
     lost_steps_ = 0;
     // The registered pose shows the camera when the events under its points fired: move it

@@ -283,8 +283,13 @@ class Tracker {
   // Predicts polarities (when `previous_world_from_cam` is given), culls, registers from the
   // start pose and, when `assess`, judges the result (Assess); otherwise only the quality fields
   // that come from the registration are set and `good` is false.
+  // With `prior`, its term joins the registration's cost (the motion prior of a tracking step).
   Attempt Solve(const Rigid3d& start_world_from_cam, const Rigid3d* previous_world_from_cam,
-                bool assess = true);
+                bool assess = true, const PosePrior* prior = nullptr);
+  // The motion prior of a tracking step at t_ns (TrackerOptions::motion_prior_*), when the
+  // options ask for one and the smooth velocity spans its whole window since the last Reset;
+  // nullopt otherwise.
+  std::optional<PosePrior> MotionPrior(int64_t t_ns) const;
   // On-edge, chance and alignment figures of `attempt` at its estimate over the current
   // selection, the polarity check when its points had `predicted_polarity` (the per-point fields
   // of the last Solve), and `good`.
@@ -445,6 +450,9 @@ class Tracker {
   TrackingStatus status_ = TrackingStatus::kTracking;
   // The last good registered pose (the motion model's, the recovery's centre).
   Rigid3d last_good_world_from_cam_;
+  // The points' residual variance at the last good registration (the motion prior's scale; see
+  // PosePrior), the robust scale squared until one.
+  double last_residual_variance_ = 0;
   // The last good pose as reported (stamped at its step time): what steps without an estimate
   // report.
   Rigid3d last_good_reported_world_from_cam_;

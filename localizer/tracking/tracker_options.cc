@@ -3,6 +3,7 @@
 #include <cmath>
 #include <string>
 
+#include "core/common/cli.h"
 #include "core/common/error.h"
 
 namespace evloc::tracking {
@@ -86,6 +87,11 @@ void TrackerOptions::Check() const {
           "on_edge_radius_px must be in [0, 10].");
   Require(std::isfinite(velocity_window_s) && velocity_window_s >= 0 && velocity_window_s <= 1,
           "velocity_window_s must be in [0, 1] seconds.");
+  Require(std::isfinite(motion_prior_velocity_sigma_mps) && motion_prior_velocity_sigma_mps >= 0,
+          "motion_prior_velocity_sigma_mps must be finite and >= 0 (0 = no prior).");
+  Require(std::isfinite(motion_prior_angular_velocity_sigma_dps) &&
+              motion_prior_angular_velocity_sigma_dps >= 0,
+          "motion_prior_angular_velocity_sigma_dps must be finite and >= 0 (0 = no prior).");
   Require(std::isfinite(stamp_velocity_window_s) && stamp_velocity_window_s >= 0 &&
               stamp_velocity_window_s <= 1,
           "stamp_velocity_window_s must be in [0, 1] seconds.");
@@ -197,6 +203,16 @@ std::string TrackerOptions::VariantName() const {
   if (use_polarity) return "EVT-PR";
   if (use_occlusion_culling) return "EVT-OH";
   return "EVT--";
+}
+
+void ParseMotionPriorFlag(std::string_view flag, std::string_view value, TrackerOptions* options) {
+  const size_t comma = value.find(',');
+  if (comma == std::string_view::npos) {
+    throw InvalidArgumentError(std::string(flag) + ": expected V,W (m/s, deg/s), got '" +
+                               std::string(value) + "'; e.g. " + std::string(flag) + " 2,20");
+  }
+  options->motion_prior_velocity_sigma_mps = ParseDoubleFlag(flag, value.substr(0, comma));
+  options->motion_prior_angular_velocity_sigma_dps = ParseDoubleFlag(flag, value.substr(comma + 1));
 }
 
 }  // namespace evloc::tracking

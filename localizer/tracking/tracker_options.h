@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <string_view>
 
 namespace evloc::tracking {
 
@@ -159,6 +160,14 @@ struct TrackerOptions {
   // long before it (seconds; 0 = the last two steps). Pose noise divided by one step period
   // swamps the velocity; the polarity prediction needs its direction.
   double velocity_window_s = 0.02;
+  // The motion prior (docs/tracking.md, "Motion prior"): the last pose moved on by the smooth
+  // velocity (measured over stamp_velocity_window_s) enters each tracking solve as a prior once
+  // that velocity spans its whole window since the last Reset; recovery solves go without. The
+  // velocity is trusted to this standard deviation, m/s, so the predicted position to this times
+  // the step interval per axis. 0 = no translation prior (the default; vehicles: 2).
+  double motion_prior_velocity_sigma_mps = 0.0;
+  // The same for the angular velocity, degrees per second. 0 = no rotation prior.
+  double motion_prior_angular_velocity_sigma_dps = 0.0;
 
   // --- Polarity-aware registration (signed time surfaces) ---
   // Register points against the ON or OFF surface of their predicted polarity.
@@ -343,5 +352,9 @@ struct TrackerOptions {
   // The variant name of the current switches.
   std::string VariantName() const;
 };
+
+// Sets the two motion prior sigmas from a command-line value "V,W" (m/s, deg/s) of `flag`.
+// Throws InvalidArgumentError naming the flag for any other form.
+void ParseMotionPriorFlag(std::string_view flag, std::string_view value, TrackerOptions* options);
 
 }  // namespace evloc::tracking

@@ -11,6 +11,8 @@
 #               the half turn at its end (30 m at 5 m/s from 150 m along the route, 50 m at 10 m/s
 #               from 140 m); walk: the pedestrian path (1.4 m/s, 8 s)
 #   TRACK_FLAGS evloc-track flags replacing the vehicle defaults below
+# Vehicle defaults: poses stamped at their step time and the motion prior (docs/tracking.md,
+# "Vehicle speed", "Motion prior"): --stamp-at-step-time on --motion-prior 2,0.
 # Camera: the DAVIS240 preset (240x180). Ground-truth map: the whole site at 5 cm spacing.
 # A dataset already in OUT_DIR is reused (2-10 min each to render on this VM).
 # Prints one table row per run: ATE and RPE (evloc-eval, no alignment, delta 1 s), the largest
@@ -19,7 +21,7 @@
 set -euo pipefail
 if [ $# -lt 2 ]; then sed -n 2,21p "$0"; exit 2; fi
 BUILD=$(realpath "$1"); OUT=$2; shift 2
-RUNS=(); TRACK_FLAGS=(--stamp-at-step-time on)
+RUNS=(); TRACK_FLAGS=(--stamp-at-step-time on --motion-prior 2,0)
 while [ $# -gt 0 ]; do
   if [ "$1" = "--" ]; then shift; TRACK_FLAGS=("$@"); break; fi
   RUNS+=("$1"); shift
