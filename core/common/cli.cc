@@ -122,6 +122,16 @@ int ParseIntFlag(std::string_view flag, std::string_view text) {
   return static_cast<int>(value);
 }
 
+std::pair<double, double> ParseDoublePairFlag(std::string_view flag, std::string_view text) {
+  const size_t comma = text.find(',');
+  if (comma == std::string_view::npos) {
+    throw UsageError(std::string(flag) + " expects two numbers A,B, got '" + std::string(text) +
+                     "'");
+  }
+  return {ParseDoubleFlag(flag, text.substr(0, comma)),
+          ParseDoubleFlag(flag, text.substr(comma + 1))};
+}
+
 void ParseSizeFlag(std::string_view flag, std::string_view text, int* width, int* height) {
   const size_t x = text.find('x');
   if (x == std::string_view::npos) {

@@ -10,6 +10,7 @@
 #include <ostream>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include "core/common/error.h"
@@ -99,6 +100,10 @@ uint64_t ParseByteSizeFlag(std::string_view flag, std::string_view text);
 
 // Parses a base-10 integer that fits an int. Throws UsageError.
 int ParseIntFlag(std::string_view flag, std::string_view text);
+
+// Parses "A,B", two finite numbers as ParseDoubleFlag does ("--motion-prior 2,0"). Throws
+// UsageError.
+std::pair<double, double> ParseDoublePairFlag(std::string_view flag, std::string_view text);
 
 // Parses a size "WIDTHxHEIGHT" of two positive integers. Throws UsageError.
 void ParseSizeFlag(std::string_view flag, std::string_view text, int* width, int* height);

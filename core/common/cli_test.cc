@@ -79,6 +79,22 @@ TEST(ParseIntFlag, RejectsValuesBeyondInt) {
   EXPECT_THROW(ParseIntFlag("--n", "4294967296"), UsageError);
 }
 
+TEST(ParseDoublePairFlag, TwoNumbersSplitAtTheComma) {
+  EXPECT_EQ(ParseDoublePairFlag("--motion-prior", "2,0"), std::make_pair(2.0, 0.0));
+  EXPECT_EQ(ParseDoublePairFlag("--motion-prior", "-1.5,2e1"), std::make_pair(-1.5, 20.0));
+  EXPECT_THROW(ParseDoublePairFlag("--motion-prior", "2"), UsageError);
+  EXPECT_THROW(ParseDoublePairFlag("--motion-prior", "2,"), UsageError);
+  EXPECT_THROW(ParseDoublePairFlag("--motion-prior", "2,0,1"), UsageError);
+  EXPECT_THROW(ParseDoublePairFlag("--motion-prior", "nan,0"), UsageError);
+  try {
+    ParseDoublePairFlag("--motion-prior", "2");
+  } catch (const UsageError& error) {
+    EXPECT_NE(std::string(error.what()).find("--motion-prior expects two numbers A,B, got '2'"),
+              std::string::npos)
+        << error.what();
+  }
+}
+
 TEST(ParseSizeFlag, WidthByHeight) {
   int width = 0;
   int height = 0;

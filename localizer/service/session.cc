@@ -297,6 +297,13 @@ SessionSettings SessionSettingsFromProto(const api::SessionStart& start,
     }
     if (options.decay_time_s() != 0) settings.tracker.decay_time_s = options.decay_time_s();
     if (options.has_decay_trail_px()) settings.tracker.decay_trail_px = options.decay_trail_px();
+    if (options.has_motion_prior_velocity_sigma_mps()) {
+      settings.tracker.motion_prior_velocity_sigma_mps = options.motion_prior_velocity_sigma_mps();
+    }
+    if (options.has_motion_prior_angular_velocity_sigma_dps()) {
+      settings.tracker.motion_prior_angular_velocity_sigma_dps =
+          options.motion_prior_angular_velocity_sigma_dps();
+    }
     ApplyEventFilterOptions(options.event_filter(), &settings.tracker.event_filter);
     settings.tracker.input =
         options.frames() ? tracking::TrackerInput::kFrames : tracking::TrackerInput::kEvents;

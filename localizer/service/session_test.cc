@@ -5,6 +5,7 @@
 #include <fstream>
 #include <functional>
 #include <iterator>
+#include <limits>
 
 #include "core/common/error.h"
 #include "core/common/file_util.h"
@@ -331,6 +332,26 @@ TEST(SessionSettings, RejectsInvalidCamerasAndOptions) {
   EXPECT_EQ(SessionSettingsFromProto(adaptive, defaults).tracker.decay_trail_px, 2);
   bad = start;
   bad.mutable_options()->set_decay_trail_px(-1);
+  EXPECT_THROW(SessionSettingsFromProto(bad, defaults), InvalidArgumentError);
+  // The motion prior: a set field overrides the server's default, an unset one keeps it.
+  SessionLimits vehicles = defaults;
+  vehicles.tracker.motion_prior_velocity_sigma_mps = 2;
+  EXPECT_EQ(SessionSettingsFromProto(start, vehicles).tracker.motion_prior_velocity_sigma_mps, 2);
+  api::SessionStart handheld = start;
+  handheld.mutable_options()->set_motion_prior_velocity_sigma_mps(0);
+  EXPECT_EQ(SessionSettingsFromProto(handheld, vehicles).tracker.motion_prior_velocity_sigma_mps,
+            0);
+  api::SessionStart turning = start;
+  turning.mutable_options()->set_motion_prior_angular_velocity_sigma_dps(20);
+  const SessionSettings turning_settings = SessionSettingsFromProto(turning, vehicles);
+  EXPECT_EQ(turning_settings.tracker.motion_prior_angular_velocity_sigma_dps, 20);
+  EXPECT_EQ(turning_settings.tracker.motion_prior_velocity_sigma_mps, 2);
+  bad = start;
+  bad.mutable_options()->set_motion_prior_velocity_sigma_mps(-1);
+  EXPECT_THROW(SessionSettingsFromProto(bad, defaults), InvalidArgumentError);
+  bad = start;
+  bad.mutable_options()->set_motion_prior_angular_velocity_sigma_dps(
+      std::numeric_limits<double>::quiet_NaN());
   EXPECT_THROW(SessionSettingsFromProto(bad, defaults), InvalidArgumentError);
   // Noise filters: a set field overrides the server's default, an unset one keeps it.
   SessionLimits filtering = defaults;

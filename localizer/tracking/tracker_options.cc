@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <string>
+#include <tuple>
 
 #include "core/common/cli.h"
 #include "core/common/error.h"
@@ -206,13 +207,8 @@ std::string TrackerOptions::VariantName() const {
 }
 
 void ParseMotionPriorFlag(std::string_view flag, std::string_view value, TrackerOptions* options) {
-  const size_t comma = value.find(',');
-  if (comma == std::string_view::npos) {
-    throw InvalidArgumentError(std::string(flag) + ": expected V,W (m/s, deg/s), got '" +
-                               std::string(value) + "'; e.g. " + std::string(flag) + " 2,20");
-  }
-  options->motion_prior_velocity_sigma_mps = ParseDoubleFlag(flag, value.substr(0, comma));
-  options->motion_prior_angular_velocity_sigma_dps = ParseDoubleFlag(flag, value.substr(comma + 1));
+  std::tie(options->motion_prior_velocity_sigma_mps,
+           options->motion_prior_angular_velocity_sigma_dps) = ParseDoublePairFlag(flag, value);
 }
 
 }  // namespace evloc::tracking

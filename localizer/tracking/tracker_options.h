@@ -354,7 +354,7 @@ struct TrackerOptions {
 };
 
 // Sets the two motion prior sigmas from a command-line value "V,W" (m/s, deg/s) of `flag`.
-// Throws InvalidArgumentError naming the flag for any other form.
+// Throws UsageError naming the flag for any other form (TrackerOptions::Check judges the values).
 void ParseMotionPriorFlag(std::string_view flag, std::string_view value, TrackerOptions* options);
 
 }  // namespace evloc::tracking

@@ -441,6 +441,12 @@ grpc::Status Replayer::RunSession(const TimedPose& start, bool resumed, SessionO
   if (options_.step_rate_hz) {
     session_start->mutable_options()->set_step_rate_hz(*options_.step_rate_hz);
   }
+  if (options_.motion_prior) {
+    session_start->mutable_options()->set_motion_prior_velocity_sigma_mps(
+        options_.motion_prior->first);
+    session_start->mutable_options()->set_motion_prior_angular_velocity_sigma_dps(
+        options_.motion_prior->second);
+  }
   session_start->set_sensor_time_offset_ns(sensor_offset_ns);
   session_start->set_client_name("evloc-replay " + options_.dataset.filename().string());
 
@@ -1059,6 +1065,12 @@ std::unique_ptr<CommandLine> DeclareReplayCommandLine(ReplayCommand* command) {
            })
       .Add("--rate", "HZ", "tracking steps per second (default: the server's)",
            &options->step_rate_hz)
+      .Add("--motion-prior", "V,W",
+           "ask the server for the motion prior of a vehicle, the velocity trusted to V m/s and "
+           "W deg/s (default: the server's; docs/tracking.md, \"Motion prior\")",
+           [options](const std::string& flag, const std::string& value) {
+             options->motion_prior = ParseDoublePairFlag(flag, value);
+           })
       .Add("--gnss-sigma", "M",
            "simulate a GNSS receiver: send fixes at the true position moved by Gaussian noise of "
            "M metres on each axis, with accuracy M, from the start and every --gnss-period "

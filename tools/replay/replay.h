@@ -7,6 +7,7 @@
 #include <optional>
 #include <ostream>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "core/dataset/dataset.h"
@@ -79,6 +80,9 @@ struct ReplayOptions {
   uint32_t gnss_seed = 1;
   // Tracking steps per second asked of the server; nullopt: the server's default (--rate).
   std::optional<double> step_rate_hz;
+  // The motion prior asked of the server, (m/s, deg/s) (TrackingOptions.motion_prior_*); nullopt:
+  // the server's default (evloc-localizer serve --motion-prior).
+  std::optional<std::pair<double, double>> motion_prior;
   // While the session searches (no pose in its updates; from the start with --init-pose none),
   // send only every k-th event of a packet whose rate exceeds the server's
   // SessionStarted.searching_event_rate (wire::ThinningStride); the rest of the stream goes out

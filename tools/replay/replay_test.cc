@@ -48,12 +48,14 @@ class ReplayTest : public ::testing::Test {
     return options;
   }
 
-  // The offline reference: TrackEventStream over the same event file.
-  tracking::OfflineTrackingResult Offline() const {
+  // The offline reference: TrackEventStream over the same event file (with the motion prior
+  // trusting the velocity to `prior_sigma_mps`, 0: none).
+  tracking::OfflineTrackingResult Offline(double prior_sigma_mps = 0) const {
     const Dataset dataset = ReadDataset(dataset_);
     const auto reader = OpenEventFile(*dataset.events_path);
     tracking::OfflineTrackingOptions options;
     options.tracker.step_rate_hz = 200;
+    options.tracker.motion_prior_velocity_sigma_mps = prior_sigma_mps;
     const Map map = fixture::TestMap();
     const VisibilityIndex visibility(map);
     return tracking::TrackEventStream(*reader, map, &visibility, dataset.camera,
@@ -97,6 +99,27 @@ TEST_F(ReplayTest, PackedReplayReproducesOfflineTrackingExactly) {
   EXPECT_GT(result.server_latency_p50_us, 0);
   EXPECT_GE(result.client_latency_p99_us, result.client_latency_p50_us);
   EXPECT_NE(log.str().find("poses (0 LOST)"), std::string::npos) << log.str();
+}
+
+// A session's TrackingOptions.motion_prior_* reach its tracker (the server's default is none):
+// the poses are offline tracking's with the same prior, and not those without it.
+TEST_F(ReplayTest, ASessionsMotionPriorReachesItsTracker) {
+  ReplayOptions options = Options();
+  options.motion_prior = std::make_pair(0.05, 0.0);
+  std::ostringstream log;
+  const ReplayResult result = RunReplay(options, log);
+  const Trajectory with_prior = Offline(0.05).trajectory;
+  ExpectSameTrajectory(result.trajectory, with_prior);
+  const Trajectory without = Offline().trajectory;
+  ASSERT_EQ(without.size(), with_prior.size());
+  double largest_difference_m = 0;
+  for (size_t i = 0; i < without.size(); ++i) {
+    largest_difference_m =
+        std::max(largest_difference_m, (without.poses()[i].world_from_cam.translation -
+                                        with_prior.poses()[i].world_from_cam.translation)
+                                           .norm());
+  }
+  EXPECT_GT(largest_difference_m, 1e-6);
 }
 
 TEST_F(ReplayTest, Evt3ReplayOfWholeMicrosecondEventsReproducesOfflineTracking) {
@@ -275,6 +298,8 @@ TEST(ReplayCommandLine, FlagsMapToOptions) {
                                                         "T",
                                                         "--rate",
                                                         "250",
+                                                        "--motion-prior",
+                                                        "2,5",
                                                         "--init-pose",
                                                         "1 2 3 0 0 0 1",
                                                         "--max-lead-ms",
@@ -307,6 +332,9 @@ TEST(ReplayCommandLine, FlagsMapToOptions) {
   EXPECT_EQ(options.packet_us, 500);
   EXPECT_EQ(options.token, "T");
   EXPECT_EQ(options.step_rate_hz, 250);
+  ASSERT_TRUE(options.motion_prior.has_value());
+  EXPECT_EQ(options.motion_prior->first, 2);
+  EXPECT_EQ(options.motion_prior->second, 5);
   EXPECT_EQ(options.initial_world_from_cam->translation.z(), 3);
   EXPECT_EQ(options.max_lead_ms, 20);
   EXPECT_EQ(options.duration_s, 2);

@@ -105,9 +105,10 @@ Camera SmallCamera() { return Camera::Pinhole(80, 60, 62.5, 62.5, 39.5, 29.5); }
 // EventPackets (coordinates scaled to the small camera; from 0.1 ms before the initial time, so
 // that the first one primes the surfaces); with `pose_hint` a PoseHint and an empty packet in the
 // middle; with `filters` every noise filter on, the hot-pixel learning period (1 ms) ending within
-// the seed's windows; with `velocity` an initial velocity (a resumed session); with `gnss_fix`
-// the session tracks the anchored map; with `depth` the session has a depth camera (16x12) and a
-// DepthFrame follows every third packet (TrackRequest.depth, the hand-over to odometry).
+// the seed's windows; with `velocity` an initial velocity (a resumed session) and the motion
+// prior; with `gnss_fix` the session tracks the anchored map; with `depth` the session has a
+// depth camera (16x12) and a DepthFrame follows every third packet (TrackRequest.depth, the
+// hand-over to odometry).
 std::string RequestsSeed(api::EventEncoding encoding, bool pose_hint, bool filters = false,
                          bool velocity = false, bool gnss_fix = false, bool depth = false) {
   const int64_t start_ns = testing::kInitialTimeNs - kWindowNs;
@@ -130,6 +131,10 @@ std::string RequestsSeed(api::EventEncoding encoding, bool pose_hint, bool filte
   if (velocity) {
     *start.mutable_start()->mutable_initial_velocity() =
         wire::TwistToProto((Vector6d() << 0.2, -0.1, 0.05, 0.3, 0.1, -0.2).finished());
+    // A resumed session's velocity spans the smooth window at once: its motion prior applies
+    // from the first step.
+    start.mutable_start()->mutable_options()->set_motion_prior_velocity_sigma_mps(2);
+    start.mutable_start()->mutable_options()->set_motion_prior_angular_velocity_sigma_dps(20);
   }
   if (gnss_fix) start.mutable_start()->set_map_name(kAnchoredTestMapName);
   const Camera depth_camera = Camera::Pinhole(16, 12, 14, 14, 7.5, 5.5);
