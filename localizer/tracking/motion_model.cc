@@ -71,10 +71,16 @@ std::pair<Vector6d, int64_t> ConstantVelocityModel::TwistOver(int64_t window_ns)
           span_ns};
 }
 
-Rigid3d ConstantVelocityModel::Predict(int64_t t_ns) const {
+Rigid3d ConstantVelocityModel::Predict(int64_t t_ns) const { return Extrapolate(velocity_, t_ns); }
+
+Rigid3d ConstantVelocityModel::PredictSmooth(int64_t t_ns) const {
+  return Extrapolate(smooth_velocity_, t_ns);
+}
+
+Rigid3d ConstantVelocityModel::Extrapolate(const Vector6d& velocity, int64_t t_ns) const {
   if (!last_t_ns_) return last_world_from_cam_;
   const double dt_s = static_cast<double>(t_ns - *last_t_ns_) * 1e-9;
-  return last_world_from_cam_ * ExpSE3(velocity_ * dt_s);
+  return last_world_from_cam_ * ExpSE3(velocity * dt_s);
 }
 
 }  // namespace evloc::tracking

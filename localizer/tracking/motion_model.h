@@ -59,11 +59,15 @@ class ConstantVelocityModel {
 
   // The pose predicted at t_ns (the last pose when not initialized or at the same time).
   Rigid3d Predict(int64_t t_ns) const;
+  // The same along smooth_velocity() (the motion prior's centre).
+  Rigid3d PredictSmooth(int64_t t_ns) const;
 
  private:
   // The twist from the oldest pose of `history_` that is at least `window_ns` older than the
   // newest (at least the previous pose; the oldest when none is), and that span.
   std::pair<Vector6d, int64_t> TwistOver(int64_t window_ns) const;
+  // The last pose moved on to t_ns by `velocity`.
+  Rigid3d Extrapolate(const Vector6d& velocity, int64_t t_ns) const;
 
   int64_t window_ns_ = 0;
   int64_t smooth_window_ns_ = 0;

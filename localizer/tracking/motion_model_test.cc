@@ -117,6 +117,12 @@ TEST(ConstantVelocityModel, SmoothVelocityUsesTheLongerWindow) {
   both.Reset(start, 0);
   for (int step = 1; step <= 40; ++step) both.Update(ExactPose(step), step * 5'000'000);
   EXPECT_LT((both.smooth_velocity() - twist).norm(), 1e-9);
+  // PredictSmooth extrapolates along the smooth velocity as Predict does along the short one;
+  // with no longer window the two are the same.
+  EXPECT_LT((both.PredictSmooth(205'000'000).translation - ExactPose(41).translation).norm(), 1e-9);
+  const int64_t next_ns = 91 * period_ns;
+  EXPECT_EQ(short_only.PredictSmooth(next_ns).translation, short_only.Predict(next_ns).translation);
+  EXPECT_NE(both.PredictSmooth(next_ns).translation, both.Predict(next_ns).translation);
 }
 
 // A Reset with a velocity (a resumed session) predicts, and spans both windows, at once; the

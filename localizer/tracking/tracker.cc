@@ -359,8 +359,7 @@ std::optional<PosePrior> Tracker::MotionPrior(int64_t t_ns) const {
   // Centred on the last pose moved on by the smooth velocity (the stamping window, 0.1 s): the
   // short window's velocity follows the estimates' own step-to-step noise, and a prior that
   // holds each pose to it feeds that noise back (measured: 2.5 m excursions at 10 m/s).
-  prior.cam_from_world =
-      (motion_.last_world_from_cam() * ExpSE3(motion_.smooth_velocity() * dt_s)).Inverse();
+  prior.cam_from_world = motion_.PredictSmooth(t_ns).Inverse();
   // The prediction's error after dt at a velocity known to sigma: sigma * dt per axis.
   const double translation_information =
       sigma_v > 0 ? residual_variance / ((sigma_v * dt_s) * (sigma_v * dt_s)) : 0.0;
