@@ -126,8 +126,10 @@ Inputs:
   --max-alignment-rotation DEG  largest camera-orientation RMS after --align-to (default 5)
   --accept-bad-alignment   build the map anyway beyond those limits, with a warning
 COLMAP:
-  --matcher M              sequential | exhaustive | auto (default auto: sequential for a timed
-                           --images-list (video), else exhaustive up to 50 images)
+  --matcher M              sequential | exhaustive | retrieval (each photo with its 25 most
+                           similar) | auto (default: sequential for a timed --images-list
+                           (video), else exhaustive up to 50 images, else sequential; in a
+                           chunked build retrieval for chunks cut by retrieval)
   --colmap PATH            COLMAP executable (default: colmap in PATH)
   --colmap-workspace DIR   workspace kept for re-runs (default: MAPDIR.colmap-workspace)
   --threads N              threads for matching, COLMAP and the semi-dense stage (default 2);
@@ -155,13 +157,17 @@ Geo-reference (docs/geo.md; one source at most):
                            aligned to them robustly
   --geo-inlier-threshold M  a point agrees with the alignment within M metres (default 10)
 Chunked build (docs/mapper.md, "Chunked build"; automatic above 1000 photos):
-  --chunked                cut the photos into overlapping chunks (by position with
-                           --known-poses or --align-to, else by input order of a timed
-                           --images-list), build each, align (Sim(3) and a global adjustment)
-                           and merge them; MAPDIR becomes a site of tiles
+  --chunked                cut the photos into overlapping chunks, build each, align (Sim(3)
+                           and a global adjustment) and merge them; MAPDIR becomes a site of
+                           tiles
+  --chunk-by METHOD        auto (default: position with --known-poses or --align-to, else
+                           sequence for a timed --images-list, else retrieval) | position |
+                           sequence (input order) | retrieval (image similarity; each chunk's
+                           photos are matched exhaustively)
   --chunk-size N           core photos per chunk (default 250)
   --chunk-overlap M        photos within M metres of a chunk join it (default 6)
-  --chunk-overlap-photos N by input order: N photos on each side join a chunk (default 20)
+  --chunk-overlap-photos N by input order: N photos on each side join a chunk; by retrieval
+                           the 2N photos most similar to the chunk (default 20)
   --chunk-workspace DIR    finished chunks and their COLMAP workspaces, kept for a restart
                            (default: MAPDIR.chunks)
   --workers N              chunks computed at once, each by a worker process (default 1: in
@@ -279,6 +285,8 @@ BuildCommandLine ParseBuildCommandLine(const std::vector<std::string>& arguments
       options.geo.alignment.inlier_threshold_m = ParseDoubleFlag(flag, value);
     } else if (flag == "--voxel-size") {
       options.merge.voxel_size = ParseDoubleFlag(flag, value);
+    } else if (flag == "--chunk-by") {
+      chunked.chunking.method = ParseChunkMethod(value);
     } else if (flag == "--chunk-size") {
       chunked.chunking.chunk_size = static_cast<size_t>(ParseUnsignedFlag(flag, value));
     } else if (flag == "--chunk-overlap") {

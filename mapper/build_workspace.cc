@@ -52,8 +52,12 @@ std::string WorkspaceFingerprint(const MapBuilderOptions& options,
   } else {
     text << "camera estimated\n";
   }
-  text << "matcher " << MatcherTypeName(matcher) << " overlap " << options.colmap.sequential_overlap
-       << " features " << options.colmap.max_num_features << "\n";
+  text << "matcher " << MatcherTypeName(matcher) << " overlap "
+       << options.colmap.sequential_overlap;
+  if (matcher == MatcherType::kRetrieval) {
+    text << " neighbours " << options.colmap.retrieval_neighbours;
+  }
+  text << " features " << options.colmap.max_num_features << "\n";
   text << (options.colmap.deterministic ? "matching evloc deterministic v2\n"
                                         : "matching colmap\n");
   return text.str();

@@ -4,9 +4,11 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cassert>
 #include <cmath>
 #include <fstream>
 #include <iomanip>
+#include <limits>
 #include <mutex>
 #include <numeric>
 #include <queue>
@@ -19,17 +21,21 @@
 #include <Eigen/Geometry>
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "core/common/error.h"
 #include "core/common/file_util.h"
 #include "core/common/provenance.h"
 #include "core/common/text_lines.h"
 #include "core/dataset/pose_text.h"
+#include "core/features/features.h"
+#include "core/features/vocabulary.h"
 #include "core/geometry/rigid3.h"
 #include "mapper/build_stages.h"
 #include "mapper/build_workspace.h"
 #include "mapper/colmap_runner.h"
 #include "mapper/map_preview.h"
+#include "mapper/parallel_for.h"
 #include "mapper/pose_alignment.h"
 #include "maps/crc32c.h"
 #include "maps/site.h"
@@ -43,6 +49,7 @@ constexpr const char* kChunkMapFile = "map.evmap";
 constexpr const char* kChunkPosesFile = "poses.txt";
 constexpr const char* kChunkInputsFile = "inputs.txt";
 constexpr const char* kChunkReportFile = "report.json";
+constexpr const char* kPlanFile = "plan.json";
 
 // Splits `indices` (into positions) recursively at the median of the widest axis.
 void SplitByPosition(std::vector<size_t> indices, const std::vector<Eigen::Vector3d>& positions,
@@ -130,9 +137,19 @@ std::string ChunkFingerprint(const MapBuilderOptions& chunk_options,
 
 // The chunk's own build options: no alignment, no geo-reference, no relocalization data (those
 // are made once on the merged map), its own COLMAP workspace.
-MapBuilderOptions ChunkBuildOptions(const ChunkedBuildOptions& options, const fs::path& workspace,
-                                    size_t index) {
+MapBuilderOptions ChunkBuildOptions(const ChunkedBuildOptions& options, const ChunkPlan& plan,
+                                    const fs::path& workspace, size_t index) {
   MapBuilderOptions chunk = options.build;
+  // A chunk cut by retrieval is unordered: each photo is matched with its most similar ones (the
+  // automatic choice would match neighbours in name order). COLMAP's own matchers
+  // (--fast-nondeterministic) keep theirs. Chunks cut by position keep the automatic choice
+  // (sequential for a timed list): on the car park's walking survey, retrieval pairs (which
+  // favour look-alike parked cars) did not mend a 305-photo chunk that sequential pairs left
+  // 7.4 m from the truth (13.4 m; docs/mapper.md, "Estimated poses").
+  if (plan.method == "retrieval" && chunk.colmap.matcher == MatcherType::kAuto &&
+      chunk.colmap.deterministic) {
+    chunk.colmap.matcher = MatcherType::kRetrieval;
+  }
   chunk.align_to.reset();
   chunk.geo = {};
   chunk.relocalization = false;
@@ -192,7 +209,7 @@ void KeepCoreKeyframes(const std::set<std::string>& core_names, LiftedKeyframes*
 void ComputeChunk(const ChunkedBuildOptions& options, const BuildInputs& all, const ChunkPlan& plan,
                   size_t index, const fs::path& workspace, const std::string& fingerprint,
                   ProgressListener* progress) {
-  const MapBuilderOptions chunk_options = ChunkBuildOptions(options, workspace, index);
+  const MapBuilderOptions chunk_options = ChunkBuildOptions(options, plan, workspace, index);
   const ChunkInputs chunk = SelectChunkInputs(all, plan.chunks[index], chunk_options.output_dir);
   MapBuildReport report;
   report.num_images = chunk.inputs.images.size();
@@ -398,6 +415,75 @@ std::optional<std::vector<Eigen::Vector3d>> PlanPositions(const BuildInputs& inp
   return positions;
 }
 
+// Photos wider than this are halved (repeatedly) before their retrieval features are taken.
+constexpr int kRetrievalMaxWidth = 800;
+
+// One global descriptor per photo for PlanChunksByRetrieval: the VLAD vector (core/features) of
+// its SIFT features over a vocabulary trained on the photos themselves. Deterministic: the same
+// photos give the same descriptors in every process (a worker recomputes the plan).
+std::vector<std::vector<float>> RetrievalDescriptors(const ChunkedBuildOptions& options,
+                                                     const BuildInputs& inputs) {
+  features::FeatureOptions feature_options;
+  feature_options.max_features = 1000;
+  std::vector<features::Features> photo_features(inputs.images.size());
+  ParallelFor(
+      inputs.images.size(), options.build.colmap.num_threads,
+      [&](size_t begin, size_t end) {
+        for (size_t i = begin; i < end; ++i) {
+          cv::Mat image =
+              ReadImage(options.build.image_dir / inputs.images[i].name, cv::IMREAD_GRAYSCALE);
+          while (image.cols > kRetrievalMaxWidth) {
+            cv::Mat half;
+            cv::resize(image, half, cv::Size(), 0.5, 0.5, cv::INTER_AREA);
+            image = half;
+          }
+          photo_features[i] = features::ExtractFeatures(image, feature_options);
+        }
+      },
+      1);
+  const features::Vocabulary vocabulary =
+      features::Vocabulary::Train(photo_features, features::VocabularyOptions{});
+  std::vector<std::vector<float>> descriptors(inputs.images.size());
+  for (size_t i = 0; i < inputs.images.size(); ++i) {
+    descriptors[i] = vocabulary.EncodeVlad(photo_features[i]);
+  }
+  return descriptors;
+}
+
+// What a plan is cut from, as plan.json records it: the photos (names and file sizes, in input
+// order) and the chunking options. A photo whose content changes at the same size keeps its plan
+// (any plan is valid; the chunks' own fingerprints cover the content).
+std::string PlanInputsFingerprint(const ChunkedBuildOptions& options, const BuildInputs& inputs) {
+  std::ostringstream text;
+  text << "plan-v1 " << ChunkMethodName(options.chunking.method) << " "
+       << options.chunking.chunk_size << " " << options.chunking.overlap_m << " "
+       << options.chunking.overlap_photos << " " << options.chunking.retrieval_neighbours << "\n";
+  for (const InputImage& image : inputs.images) {
+    std::error_code error;
+    const uintmax_t size = fs::file_size(options.build.image_dir / image.name, error);
+    text << image.name << " " << (error ? 0 : size) << "\n";
+  }
+  std::ostringstream hex;
+  hex << std::hex << std::setw(8) << std::setfill('0') << Crc32c(text.str());
+  return hex.str();
+}
+
+// The retrieval plan stored at `path` when it records `inputs`; nullopt when there is none, it is
+// broken, or it was cut from other photos or options.
+std::optional<ChunkPlan> StoredRetrievalPlan(const fs::path& path,
+                                             const std::vector<std::string>& names,
+                                             const std::string& inputs) {
+  std::error_code error;
+  if (!fs::is_regular_file(path, error)) return std::nullopt;
+  try {
+    StoredChunkPlan stored = ParseChunkPlan(ReadFileToString(path), names, path.string());
+    if (stored.inputs != inputs || stored.plan.method != "retrieval") return std::nullopt;
+    return std::move(stored.plan);
+  } catch (const Error&) {
+    return std::nullopt;  // computed again, and written over
+  }
+}
+
 std::string FormatGigabytes(uint64_t bytes) {
   std::ostringstream text;
   text << std::fixed << std::setprecision(2) << static_cast<double>(bytes) / (1ull << 30) << " GB";
@@ -411,6 +497,32 @@ void ChunkingOptions::Check() const {
   if (!(std::isfinite(overlap_m) && overlap_m >= 0.0)) {
     throw InvalidArgumentError("the chunk overlap must be a finite distance >= 0 metres");
   }
+  if (retrieval_neighbours < 1) {
+    throw InvalidArgumentError("the retrieval neighbours per photo must be at least 1");
+  }
+}
+
+std::string ChunkMethodName(ChunkMethod method) {
+  switch (method) {
+    case ChunkMethod::kAuto:
+      return "auto";
+    case ChunkMethod::kPosition:
+      return "position";
+    case ChunkMethod::kSequence:
+      return "sequence";
+    case ChunkMethod::kRetrieval:
+      return "retrieval";
+  }
+  return "auto";
+}
+
+ChunkMethod ParseChunkMethod(const std::string& name) {
+  for (const ChunkMethod method : {ChunkMethod::kAuto, ChunkMethod::kPosition,
+                                   ChunkMethod::kSequence, ChunkMethod::kRetrieval}) {
+    if (ChunkMethodName(method) == name) return method;
+  }
+  throw InvalidArgumentError("unknown chunk method '" + name +
+                             "' (expected auto, position, sequence or retrieval)");
 }
 
 void ChunkedBuildOptions::Check() const {
@@ -486,6 +598,175 @@ ChunkPlan PlanChunks(size_t num_images, const std::vector<Eigen::Vector3d>* posi
   return plan;
 }
 
+ChunkPlan PlanChunksByRetrieval(const std::vector<std::vector<float>>& descriptors,
+                                const ChunkingOptions& options) {
+  options.Check();
+  const size_t n = descriptors.size();
+  if (n == 0) throw InvalidArgumentError("no photos to cut into chunks");
+  // Cosine similarities of every pair (a zero descriptor, a photo without features, is similar
+  // to nothing).
+  Eigen::MatrixXf similarity;
+  try {
+    similarity = features::CosineSimilarities(descriptors);
+  } catch (const InvalidArgumentError& error) {
+    throw InvalidArgumentError(std::string("PlanChunksByRetrieval: ") + error.what());
+  }
+  const auto sim = [&](size_t a, size_t b) {
+    return similarity(static_cast<Eigen::Index>(a), static_cast<Eigen::Index>(b));
+  };
+
+  // Seeds by farthest-point sampling; the growth's room: 0.85 of the chunk size on average.
+  const size_t num_chunks =
+      std::min(n, static_cast<size_t>(std::ceil(static_cast<double>(n) /
+                                                (0.85 * static_cast<double>(options.chunk_size)))));
+  std::vector<size_t> seeds;
+  std::vector<float> closest_seed(n, -std::numeric_limits<float>::infinity());
+  {
+    size_t first = 0;
+    double lowest = std::numeric_limits<double>::infinity();
+    for (size_t i = 0; i < n; ++i) {
+      const double total = similarity.col(static_cast<Eigen::Index>(i)).cast<double>().sum();
+      if (total < lowest) {
+        lowest = total;
+        first = i;
+      }
+    }
+    seeds.push_back(first);
+  }
+  std::vector<char> is_seed(n, 0);
+  is_seed[seeds[0]] = 1;
+  while (seeds.size() < num_chunks) {
+    for (size_t i = 0; i < n; ++i)
+      closest_seed[i] = std::max(closest_seed[i], sim(i, seeds.back()));
+    size_t next = n;
+    for (size_t i = 0; i < n; ++i) {
+      if (!is_seed[i] && (next == n || closest_seed[i] < closest_seed[next])) next = i;
+    }
+    seeds.push_back(next);
+    is_seed[next] = 1;
+  }
+
+  // Each photo's links: its most similar photos.
+  std::vector<std::vector<size_t>> links =
+      features::MostSimilar(similarity, options.retrieval_neighbours);
+  // Only mutual links are followed: a photo that merely resembles another (repeated parked cars,
+  // façades) is rarely among that photo's most similar ones in turn.
+  std::vector<std::vector<size_t>> mutual(n);
+  for (size_t i = 0; i < n; ++i) {
+    for (const size_t j : links[i]) {
+      if (std::find(links[j].begin(), links[j].end(), i) != links[j].end()) mutual[i].push_back(j);
+    }
+  }
+  links = std::move(mutual);
+
+  // Balanced growth along the links from the seeds: the smallest chunk that can still grow takes
+  // its most similar linked photo (so that the chunks grow like the cells around their seeds, and
+  // none runs ahead into the others' ground). Photos no link reaches (a group of photos similar
+  // only among themselves, or whose links all lead into full chunks) join the chunk with room
+  // that holds their most similar photo.
+  constexpr size_t kNone = std::numeric_limits<size_t>::max();
+  using Candidate = std::pair<float, size_t>;  // similarity, photo
+  const auto later = [](const Candidate& a, const Candidate& b) {
+    return a.first != b.first ? a.first < b.first : a.second > b.second;
+  };
+  using Queue = std::priority_queue<Candidate, std::vector<Candidate>, decltype(later)>;
+  const auto grow_from = [&](const std::vector<size_t>& from) {
+    std::vector<size_t> owner(n, kNone);
+    std::vector<size_t> sizes(num_chunks, 0);
+    std::vector<Queue> queues(num_chunks, Queue(later));
+    const auto take = [&](size_t photo, size_t chunk) {
+      owner[photo] = chunk;
+      ++sizes[chunk];
+      for (const size_t next : links[photo]) {
+        if (owner[next] == kNone) queues[chunk].push({sim(photo, next), next});
+      }
+    };
+    for (size_t c = 0; c < num_chunks; ++c) take(from[c], c);
+    while (true) {
+      size_t grow = kNone;
+      for (size_t c = 0; c < num_chunks; ++c) {
+        while (!queues[c].empty() && owner[queues[c].top().second] != kNone) queues[c].pop();
+        if (queues[c].empty() || sizes[c] >= options.chunk_size) continue;
+        if (grow == kNone || sizes[c] < sizes[grow]) grow = c;
+      }
+      if (grow == kNone) break;
+      const size_t photo = queues[grow].top().second;
+      queues[grow].pop();
+      take(photo, grow);
+    }
+    for (size_t i = 0; i < n; ++i) {
+      if (owner[i] != kNone) continue;
+      size_t best_chunk = kNone;
+      float best = -std::numeric_limits<float>::infinity();
+      for (size_t j = 0; j < n; ++j) {
+        if (owner[j] == kNone || sizes[owner[j]] >= options.chunk_size) continue;
+        if (sim(i, j) > best) {
+          best = sim(i, j);
+          best_chunk = owner[j];
+        }
+      }
+      // The chunks have room for more than n photos together (num_chunks * chunk_size > n).
+      assert(best_chunk != kNone);
+      owner[i] = best_chunk;
+      ++sizes[best_chunk];
+    }
+    return owner;
+  };
+  // Farthest-point seeds lie at the edges of the set, so the first cells are lopsided; each chunk
+  // is then grown again from its medoid (the photo most similar to the rest of its chunk), a few
+  // times, as Lloyd's iterations centre k-means cells.
+  constexpr int kRecentring = 4;
+  std::vector<size_t> owner = grow_from(seeds);
+  for (int round = 0; round < kRecentring; ++round) {
+    std::vector<std::vector<size_t>> cells(num_chunks);
+    for (size_t i = 0; i < n; ++i) cells[owner[i]].push_back(i);
+    std::vector<size_t> medoids(num_chunks);
+    for (size_t c = 0; c < num_chunks; ++c) {
+      double best = -std::numeric_limits<double>::infinity();
+      for (const size_t i : cells[c]) {
+        double total = 0.0;
+        for (const size_t j : cells[c]) total += sim(i, j);
+        if (total > best) {
+          best = total;
+          medoids[c] = i;
+        }
+      }
+    }
+    if (medoids == seeds) break;
+    seeds = medoids;
+    owner = grow_from(seeds);
+  }
+
+  ChunkPlan plan;
+  plan.method = "retrieval";
+  const size_t overlap = std::min(2 * options.overlap_photos, n);
+  for (size_t c = 0; c < num_chunks; ++c) {
+    ChunkPlanEntry entry;
+    for (size_t i = 0; i < n; ++i) {
+      if (owner[i] == c) entry.core.push_back(i);
+    }
+    if (entry.core.empty()) continue;
+    std::vector<std::pair<float, size_t>> outside;
+    for (size_t j = 0; j < n; ++j) {
+      if (owner[j] == c) continue;
+      float best = -std::numeric_limits<float>::infinity();
+      for (const size_t i : entry.core) best = std::max(best, sim(i, j));
+      outside.emplace_back(-best, j);
+    }
+    const size_t joining = std::min(overlap, outside.size());
+    std::partial_sort(outside.begin(), outside.begin() + static_cast<std::ptrdiff_t>(joining),
+                      outside.end());
+    entry.members = entry.core;
+    for (size_t m = 0; m < joining; ++m) entry.members.push_back(outside[m].second);
+    std::sort(entry.members.begin(), entry.members.end());
+    plan.chunks.push_back(std::move(entry));
+  }
+  // Deterministic order: by the first photo.
+  std::sort(plan.chunks.begin(), plan.chunks.end(),
+            [](const auto& a, const auto& b) { return a.core.front() < b.core.front(); });
+  return plan;
+}
+
 uint64_t EstimatedChunkPeakBytes(size_t num_photos, int width, int height) {
   // Fitted to the peak RSS of chunk builds of car-park survey photos (docs/mapper.md, "Memory"):
   // at 640 x 480, 27 photos peaked at 226 MB and 146 photos at 839 MB, 5.2 MB (17 bytes per pixel)
@@ -516,6 +797,88 @@ std::map<std::string, Rigid3d> ParseChunkPoses(std::string_view text, const std:
     }
   });
   return poses;
+}
+
+std::string ChunkPlanToJson(const ChunkPlan& plan, const std::vector<std::string>& names,
+                            const std::string& inputs) {
+  nlohmann::json json;
+  json["method"] = plan.method;
+  json["inputs"] = inputs;
+  json["chunks"] = nlohmann::json::array();
+  for (const ChunkPlanEntry& entry : plan.chunks) {
+    std::vector<std::string> core;
+    std::vector<std::string> members;
+    for (const size_t i : entry.core) core.push_back(names.at(i));
+    for (const size_t i : entry.members) members.push_back(names.at(i));
+    json["chunks"].push_back({{"core", core}, {"members", members}});
+  }
+  return json.dump(1) + "\n";
+}
+
+StoredChunkPlan ParseChunkPlan(std::string_view text, const std::vector<std::string>& names,
+                               const std::string& source) {
+  const auto fail = [&](const std::string& what) { return ParseError(source, "plan", what); };
+  nlohmann::json json;
+  try {
+    json = nlohmann::json::parse(text);
+  } catch (const nlohmann::json::parse_error& error) {
+    throw ParseError(source, "byte " + std::to_string(error.byte), "not JSON");
+  }
+  if (!json.is_object() || !json.contains("method") || !json["method"].is_string() ||
+      !json.contains("inputs") || !json["inputs"].is_string() || !json.contains("chunks") ||
+      !json["chunks"].is_array()) {
+    throw fail("expected an object with the strings method and inputs and the array chunks");
+  }
+  std::map<std::string, size_t> index;
+  for (size_t i = 0; i < names.size(); ++i) index.emplace(names[i], i);
+  StoredChunkPlan stored;
+  stored.plan.method = json["method"].get<std::string>();
+  stored.inputs = json["inputs"].get<std::string>();
+  std::vector<int> owners(names.size(), 0);
+  const auto indices = [&](const nlohmann::json& list, size_t chunk, const char* field) {
+    if (!list.is_array()) {
+      throw fail("chunk " + std::to_string(chunk) + ": " + field + " is not an array");
+    }
+    std::vector<size_t> result;
+    for (const nlohmann::json& name : list) {
+      if (!name.is_string()) {
+        throw fail("chunk " + std::to_string(chunk) + ": " + field + " holds a non-string");
+      }
+      const auto found = index.find(name.get<std::string>());
+      if (found == index.end()) {
+        throw fail("chunk " + std::to_string(chunk) + ": " + name.get<std::string>() +
+                   " is not an input photo");
+      }
+      result.push_back(found->second);
+    }
+    std::sort(result.begin(), result.end());
+    if (std::adjacent_find(result.begin(), result.end()) != result.end()) {
+      throw fail("chunk " + std::to_string(chunk) + ": a photo appears twice in " + field);
+    }
+    return result;
+  };
+  for (const nlohmann::json& chunk : json["chunks"]) {
+    const size_t number = stored.plan.chunks.size();
+    if (!chunk.is_object() || !chunk.contains("core") || !chunk.contains("members")) {
+      throw fail("chunk " + std::to_string(number) + ": expected core and members");
+    }
+    ChunkPlanEntry entry;
+    entry.core = indices(chunk["core"], number, "core");
+    entry.members = indices(chunk["members"], number, "members");
+    if (entry.core.empty()) throw fail("chunk " + std::to_string(number) + " has no core photo");
+    if (!std::includes(entry.members.begin(), entry.members.end(), entry.core.begin(),
+                       entry.core.end())) {
+      throw fail("chunk " + std::to_string(number) + ": a core photo is not a member");
+    }
+    for (const size_t i : entry.core) {
+      if (++owners[i] > 1) throw fail(names[i] + " is in two chunks' cores");
+    }
+    stored.plan.chunks.push_back(std::move(entry));
+  }
+  for (size_t i = 0; i < names.size(); ++i) {
+    if (owners[i] == 0) throw fail(names[i] + " is in no chunk's core");
+  }
+  return stored;
 }
 
 std::string ChunkFolderName(size_t index) {
@@ -689,19 +1052,42 @@ ChunkedBuildReport BuildChunkedSite(const ChunkedBuildOptions& options,
 
   // The plan.
   ChunkPlan plan;
+  const fs::path workspace = ChunkWorkspace(options);
+  std::vector<std::string> names;
+  for (const InputImage& image : inputs.images) names.push_back(image.name);
+  const std::string plan_inputs = PlanInputsFingerprint(options, inputs);
   clock.Run("chunk_plan", [&] {
     const std::optional<std::vector<Eigen::Vector3d>> positions = PlanPositions(inputs);
-    if (!positions) {
-      const bool timed = std::all_of(inputs.images.begin(), inputs.images.end(),
-                                     [](const InputImage& image) { return image.has_time; });
-      if (!timed) {
-        throw InvalidArgumentError(
-            "a chunked build needs the photos' positions (--known-poses, or --align-to "
-            "reference poses) or a timed sequence (--images-list with times) to cut them into "
-            "chunks");
-      }
+    const bool timed = std::all_of(inputs.images.begin(), inputs.images.end(),
+                                   [](const InputImage& image) { return image.has_time; });
+    ChunkMethod method = options.chunking.method;
+    if (method == ChunkMethod::kAuto) {
+      method = positions ? ChunkMethod::kPosition
+                         : (timed ? ChunkMethod::kSequence : ChunkMethod::kRetrieval);
     }
-    plan = PlanChunks(inputs.images.size(), positions ? &*positions : nullptr, options.chunking);
+    if (method == ChunkMethod::kPosition && !positions) {
+      throw InvalidArgumentError(
+          "--chunk-by position needs every photo's position (--known-poses, or --align-to "
+          "reference poses naming every photo)");
+    }
+    if (method == ChunkMethod::kSequence && !timed) {
+      throw InvalidArgumentError(
+          "--chunk-by sequence needs a timed sequence (--images-list with a time per photo)");
+    }
+    if (method == ChunkMethod::kRetrieval) {
+      // The descriptors cost a feature extraction per photo: a plan this workspace already holds
+      // for the same photos and options (written by the process that started the build, read by
+      // its workers, a restart and an Indexed Job's pods) is taken as it is.
+      const std::optional<ChunkPlan> stored =
+          StoredRetrievalPlan(workspace / kPlanFile, names, plan_inputs);
+      plan = stored
+                 ? *stored
+                 : PlanChunksByRetrieval(RetrievalDescriptors(options, inputs), options.chunking);
+      return stored.has_value();
+    } else {
+      plan = PlanChunks(inputs.images.size(),
+                        method == ChunkMethod::kPosition ? &*positions : nullptr, options.chunking);
+    }
     return false;
   });
   report.method = plan.method;
@@ -746,25 +1132,12 @@ ChunkedBuildReport BuildChunkedSite(const ChunkedBuildOptions& options,
   }
 
   // The chunks.
-  const fs::path workspace = ChunkWorkspace(options);
   std::error_code error;
   fs::create_directories(workspace, error);
   if (error)
     throw IoError("cannot create the chunk workspace " + workspace.string() + ": " +
                   error.message());
-  WriteFileAtomically(workspace / "plan.json", [&] {
-    nlohmann::json json;
-    json["method"] = plan.method;
-    json["chunks"] = nlohmann::json::array();
-    for (const ChunkPlanEntry& entry : plan.chunks) {
-      std::vector<std::string> core;
-      std::vector<std::string> members;
-      for (const size_t i : entry.core) core.push_back(inputs.images[i].name);
-      for (const size_t i : entry.members) members.push_back(inputs.images[i].name);
-      json["chunks"].push_back({{"core", core}, {"members", members}});
-    }
-    return json.dump(1) + "\n";
-  }());
+  WriteFileAtomically(workspace / kPlanFile, ChunkPlanToJson(plan, names, plan_inputs));
   if (options.plan_only) return report;
   std::string colmap_version;
   clock.Run("chunk_fingerprints", [&] {
@@ -774,7 +1147,7 @@ ChunkedBuildReport BuildChunkedSite(const ChunkedBuildOptions& options,
   std::vector<std::string> fingerprints(plan.chunks.size());
   const auto fingerprint_of = [&](size_t c) -> const std::string& {
     if (fingerprints[c].empty()) {
-      const MapBuilderOptions chunk_options = ChunkBuildOptions(options, workspace, c);
+      const MapBuilderOptions chunk_options = ChunkBuildOptions(options, plan, workspace, c);
       const ChunkInputs chunk = SelectChunkInputs(inputs, plan.chunks[c], chunk_options.output_dir);
       fingerprints[c] = ChunkFingerprint(chunk_options, chunk.inputs.images, chunk.core,
                                          inputs.camera, colmap_version);

@@ -1,9 +1,9 @@
 // The chunked build of `evloc-mapper build --chunked` (docs/mapper.md, "Chunked build"): a large
 // photo set is split into overlapping chunks (by camera position when poses are known or given as
-// a reference, by input order for a timed sequence), each chunk is reconstructed (COLMAP, or the
-// known poses triangulated) and turned into a semi-dense map of its core keyframes, the chunks are
-// aligned by Sim(3) from the images they share and adjusted together (Ceres), merged, and written
-// as a site of tiles (maps/site.h).
+// a reference, by input order for a timed sequence, by image retrieval otherwise), each chunk is
+// reconstructed (COLMAP, or the known poses triangulated) and turned into a semi-dense map of its
+// core keyframes, the chunks are aligned by Sim(3) from the images they share and adjusted together
+// (Ceres), merged, and written as a site of tiles (maps/site.h).
 //
 // Each finished chunk is a folder `chunk_NNNN/` of the chunk workspace (map.evmap, poses.txt,
 // inputs.txt, report.json), staged and renamed into place: a killed build restarts from its
@@ -31,17 +31,33 @@
 
 namespace evloc::mapper {
 
+// How the photos are cut: kAuto takes the first that applies of position (every photo has a
+// known or reference pose), sequence (every photo has a time) and retrieval.
+enum class ChunkMethod { kAuto, kPosition, kSequence, kRetrieval };
+
+// "auto", "position", "sequence", "retrieval"; ParseChunkMethod throws InvalidArgumentError for
+// another name.
+std::string ChunkMethodName(ChunkMethod method);
+ChunkMethod ParseChunkMethod(const std::string& name);
+
 // How the photo set is cut into chunks.
 struct ChunkingOptions {
+  // The cut; a method the inputs cannot serve (position without poses, sequence without times)
+  // is refused by BuildChunkedSite.
+  ChunkMethod method = ChunkMethod::kAuto;
   // Largest number of core photos of a chunk (photos the chunk owns; the overlap comes on top).
   size_t chunk_size = 250;
   // By position: the photos of other chunks whose camera centre lies within this distance of one
   // of the chunk's core centres join it as overlap, metres (reference units).
   double overlap_m = 6.0;
-  // By input order: the photos before and after the chunk's core that join it as overlap.
+  // By input order: the photos before and after the chunk's core that join it as overlap. By
+  // retrieval: twice as many, the photos outside the core most similar to one of its photos.
   size_t overlap_photos = 20;
+  // By retrieval: the most similar photos each photo links to; a chunk grows along these links.
+  size_t retrieval_neighbours = 10;
 
-  // Throws InvalidArgumentError for chunk_size < 8, a negative or non-finite overlap_m.
+  // Throws InvalidArgumentError for chunk_size < 8, a negative or non-finite overlap_m,
+  // retrieval_neighbours < 1.
   void Check() const;
 };
 
@@ -55,7 +71,8 @@ struct ChunkPlanEntry {
 
 // The chunks of a build.
 struct ChunkPlan {
-  // "position" (camera centres of the known or reference poses) or "sequence" (input order).
+  // "position" (camera centres of the known or reference poses), "sequence" (input order) or
+  // "retrieval" (image similarity).
   std::string method;
   // The chunks; every input photo is in the core of exactly one.
   std::vector<ChunkPlanEntry> chunks;
@@ -69,6 +86,38 @@ struct ChunkPlan {
 // of another count or not finite.
 ChunkPlan PlanChunks(size_t num_images, const std::vector<Eigen::Vector3d>* positions,
                      const ChunkingOptions& options);
+
+// Cuts photos without positions or times by their image similarity: `descriptors` holds one
+// global descriptor per photo (VLAD, compared by cosine similarity). Seeds, one per chunk
+// (ceil(N / (0.85 chunk_size)) of them, so that the chunks' growth has room), are chosen by
+// farthest-point sampling (each next seed the photo least similar to every seed so far, the
+// first the photo least similar to all); the chunks then grow best-first along the links of each
+// photo to its options.retrieval_neighbours most similar photos, the most similar link first,
+// each chunk up to options.chunk_size core photos; a photo no link reaches joins the chunk with
+// room that holds its most similar photo. Each chunk's overlap is the 2 * overlap_photos photos
+// outside its core most similar to one of its core photos. Deterministic (ties: lower index).
+// Throws InvalidArgumentError for bad options, no photos, or descriptors of unequal lengths or
+// not finite.
+ChunkPlan PlanChunksByRetrieval(const std::vector<std::vector<float>>& descriptors,
+                                const ChunkingOptions& options);
+
+// plan.json of the chunk workspace: the method, `inputs` (a fingerprint of what the plan was cut
+// from, see BuildChunkedSite) and each chunk's core and member photos by name (`names`: the input
+// photos, in input order).
+std::string ChunkPlanToJson(const ChunkPlan& plan, const std::vector<std::string>& names,
+                            const std::string& inputs);
+
+// A plan read back from plan.json, and the fingerprint it records.
+struct StoredChunkPlan {
+  ChunkPlan plan;
+  std::string inputs;
+};
+
+// Reads plan.json back over the input photos `names`. Throws ParseError naming `source` for
+// malformed JSON, a missing or mistyped field, a name that is not an input photo, a photo in no
+// core or in two, a core photo that is not a member, or a chunk without core photos.
+StoredChunkPlan ParseChunkPlan(std::string_view text, const std::vector<std::string>& names,
+                               const std::string& source);
 
 // Options of the chunked build.
 struct ChunkedBuildOptions {

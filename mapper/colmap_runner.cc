@@ -59,8 +59,9 @@ MatcherType ParseMatcherType(const std::string& name) {
   if (name == "auto") return MatcherType::kAuto;
   if (name == "sequential") return MatcherType::kSequential;
   if (name == "exhaustive") return MatcherType::kExhaustive;
+  if (name == "retrieval") return MatcherType::kRetrieval;
   throw InvalidArgumentError("unknown matcher '" + name +
-                             "' (expected sequential, exhaustive or auto)");
+                             "' (expected sequential, exhaustive, retrieval or auto)");
 }
 
 std::string MatcherTypeName(MatcherType type) {
@@ -71,6 +72,8 @@ std::string MatcherTypeName(MatcherType type) {
       return "sequential";
     case MatcherType::kExhaustive:
       return "exhaustive";
+    case MatcherType::kRetrieval:
+      return "retrieval";
   }
   return "auto";
 }
@@ -84,6 +87,14 @@ void ColmapOptions::Check() const {
   }
   if (sequential_overlap < 1) {
     throw InvalidArgumentError("COLMAP sequential_overlap must be at least 1");
+  }
+  if (retrieval_neighbours < 1) {
+    throw InvalidArgumentError("the retrieval matcher's neighbours must be at least 1");
+  }
+  if (matcher == MatcherType::kRetrieval && !deterministic) {
+    throw InvalidArgumentError(
+        "--matcher retrieval is evloc's matcher (COLMAP's vocab_tree_matcher needs a vocabulary "
+        "file Debian does not ship): drop --fast-nondeterministic");
   }
   if (max_num_features < 100) {
     throw InvalidArgumentError("COLMAP max_num_features must be at least 100");
@@ -314,15 +325,22 @@ MatcherType ColmapRunner::EffectiveMatcher(size_t num_images) const {
 }
 
 void ColmapRunner::MatchFeatures(size_t num_images) const {
-  const bool exhaustive = EffectiveMatcher(num_images) == MatcherType::kExhaustive;
+  const MatcherType matcher = EffectiveMatcher(num_images);
+  const bool exhaustive = matcher == MatcherType::kExhaustive;
   if (options_.deterministic) {
     CreateDirectories(LogDir());
     FeatureMatchingOptions matching;
     matching.num_threads = options_.num_threads;
-    const DatabaseMatchingSummary summary = MatchDatabase(
-        DatabasePath(), exhaustive ? 0 : options_.sequential_overlap, options_.camera, matching);
+    PairChoice choice;
+    if (matcher == MatcherType::kSequential)
+      choice.sequential_overlap = options_.sequential_overlap;
+    if (matcher == MatcherType::kRetrieval) {
+      choice.retrieval_neighbours = options_.retrieval_neighbours;
+    }
+    const DatabaseMatchingSummary summary =
+        MatchDatabase(DatabasePath(), choice, options_.camera, matching);
     std::ofstream log(LogDir() / "evloc_matcher.log", std::ios::app);
-    log << "evloc matcher (" << (exhaustive ? "exhaustive" : "sequential") << ", "
+    log << "evloc matcher (" << MatcherTypeName(matcher) << ", "
         << (options_.camera ? "E, F and H" : "F and H") << "): " << summary.num_images
         << " images, " << summary.num_pairs << " pairs, " << summary.num_matches << " matches, "
         << summary.num_verified_pairs << " verified pairs, " << summary.num_inlier_matches

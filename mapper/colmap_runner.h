@@ -28,9 +28,12 @@ enum class MatcherType {
   kSequential,
   // Every pair (small unordered sets).
   kExhaustive,
+  // Each image with its most similar images by image retrieval (RetrievalPairs; large unordered
+  // sets, and chunks whose photos' order does not follow their places); evloc's matcher only.
+  kRetrieval,
 };
 
-// Parses "auto", "sequential" or "exhaustive"; throws InvalidArgumentError otherwise.
+// Parses "auto", "sequential", "exhaustive" or "retrieval"; throws InvalidArgumentError otherwise.
 MatcherType ParseMatcherType(const std::string& name);
 
 // The name ParseMatcherType accepts for `type`.
@@ -57,6 +60,8 @@ struct ColmapOptions {
   int exhaustive_max_images = 50;
   // Sequential matching: how many following images each image is matched with.
   int sequential_overlap = 10;
+  // Retrieval matching: how many most similar images each image is matched with.
+  int retrieval_neighbours = 25;
   // Maximum number of SIFT features per image.
   int max_num_features = 8192;
   // mapper: minimum inliers to register an image (COLMAP's default 30 leaves images of weakly

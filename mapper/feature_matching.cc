@@ -12,6 +12,7 @@
 #include <opencv2/core.hpp>
 
 #include "core/common/error.h"
+#include "core/features/vocabulary.h"
 #include "mapper/colmap_model.h"
 #include "mapper/parallel_for.h"
 
@@ -182,6 +183,56 @@ std::vector<std::pair<size_t, size_t>> SequentialPairs(size_t num_images, int ov
         const size_t quadratic = i + (size_t{1} << k);
         if (quadratic < num_images) pairs.emplace(i, quadratic);
       }
+    }
+  }
+  return {pairs.begin(), pairs.end()};
+}
+
+std::vector<std::pair<size_t, size_t>> RetrievalPairs(const std::vector<ImageFeatures>& images,
+                                                      int neighbours) {
+  if (neighbours < 1) throw InvalidArgumentError("retrieval neighbours must be >= 1");
+  const features::VocabularyOptions vocabulary_options;
+  size_t total = 0;
+  for (const ImageFeatures& image : images) total += image.keypoints.size();
+  if (total < static_cast<size_t>(vocabulary_options.num_words)) return {};
+  // The training sample, taken at an even stride over all descriptors (never all of them in
+  // float: a chunk holds millions).
+  const size_t stride =
+      std::max<size_t>(1, total / static_cast<size_t>(vocabulary_options.max_training_descriptors));
+  cv::Mat sample;
+  size_t index = 0;
+  for (const ImageFeatures& image : images) {
+    for (size_t k = 0; k < image.keypoints.size(); ++k, ++index) {
+      if (index % stride != 0) continue;
+      cv::Mat row(1, kSiftDescriptorSize, CV_32F);
+      for (int d = 0; d < kSiftDescriptorSize; ++d) {
+        row.at<float>(0, d) = image.descriptors[k * kSiftDescriptorSize + d];
+      }
+      sample.push_back(row);
+    }
+  }
+  const features::Vocabulary vocabulary = features::Vocabulary::Train(sample, vocabulary_options);
+  std::vector<std::vector<float>> vlad(images.size());
+  for (size_t i = 0; i < images.size(); ++i) {
+    const ImageFeatures& image = images[i];
+    if (image.keypoints.empty()) {
+      vlad[i].assign(static_cast<size_t>(vocabulary.vlad_size()), 0.0f);
+      continue;
+    }
+    cv::Mat descriptors(static_cast<int>(image.keypoints.size()), kSiftDescriptorSize, CV_8U,
+                        const_cast<uint8_t*>(image.descriptors.data()));
+    cv::Mat as_float;
+    descriptors.convertTo(as_float, CV_32F);
+    vlad[i] = vocabulary.EncodeVlad(as_float);
+  }
+  const Eigen::MatrixXf similarity = features::CosineSimilarities(vlad);
+  const std::vector<std::vector<size_t>> nearest =
+      features::MostSimilar(similarity, static_cast<size_t>(neighbours));
+  std::set<std::pair<size_t, size_t>> pairs;
+  for (size_t i = 0; i < images.size(); ++i) {
+    if (images[i].keypoints.empty()) continue;
+    for (const size_t j : nearest[i]) {
+      if (!images[j].keypoints.empty()) pairs.emplace(std::min(i, j), std::max(i, j));
     }
   }
   return {pairs.begin(), pairs.end()};
@@ -373,16 +424,31 @@ std::vector<PairGeometry> MatchImagePairs(const std::vector<ImageFeatures>& imag
 }
 
 DatabaseMatchingSummary MatchDatabase(const std::filesystem::path& database_path,
-                                      int sequential_overlap, const std::optional<Camera>& camera,
+                                      const PairChoice& choice, const std::optional<Camera>& camera,
                                       const FeatureMatchingOptions& options) {
   options.Check();
-  if (sequential_overlap < 0) {
-    throw InvalidArgumentError("sequential_overlap must be >= 0 (0: exhaustive)");
+  if (choice.sequential_overlap < 0 || choice.retrieval_neighbours < 0) {
+    throw InvalidArgumentError(
+        "the sequential overlap and the retrieval neighbours must be >= 0 (both 0: exhaustive)");
   }
   const std::vector<ImageFeatures> images = ReadImageFeatures(database_path);
-  std::vector<std::pair<size_t, size_t>> pairs =
-      sequential_overlap == 0 ? ExhaustivePairs(images.size())
-                              : SequentialPairs(images.size(), sequential_overlap);
+  std::vector<std::pair<size_t, size_t>> pairs;
+  if (choice.sequential_overlap == 0 && choice.retrieval_neighbours == 0) {
+    pairs = ExhaustivePairs(images.size());
+  } else {
+    std::set<std::pair<size_t, size_t>> chosen;
+    if (choice.sequential_overlap > 0) {
+      for (const auto& pair : SequentialPairs(images.size(), choice.sequential_overlap)) {
+        chosen.insert(pair);
+      }
+    }
+    if (choice.retrieval_neighbours > 0) {
+      for (const auto& pair : RetrievalPairs(images, choice.retrieval_neighbours)) {
+        chosen.insert(pair);
+      }
+    }
+    pairs.assign(chosen.begin(), chosen.end());
+  }
   for (auto& [first, second] : pairs) {
     if (images[first].image_id > images[second].image_id) std::swap(first, second);
   }

@@ -54,6 +54,22 @@ std::vector<std::pair<size_t, size_t>> ExhaustivePairs(size_t num_images);
 // k < overlap while i + k is in range; duplicates removed, sorted.
 std::vector<std::pair<size_t, size_t>> SequentialPairs(size_t num_images, int overlap);
 
+// Pairs of each image with its `neighbours` most similar images by image retrieval, as COLMAP's
+// vocab_tree_matcher chooses them (which needs a vocabulary file Debian does not ship): a VLAD
+// vector per image (core/features: a 32-word vocabulary trained by k-means on at most 50,000 of
+// the images' own SIFT descriptors, taken at an even stride) and their cosine similarities.
+// Indices into `images`, each pair (i, j) with i < j, duplicates removed, sorted. Deterministic.
+// Images without features pair with nothing.
+std::vector<std::pair<size_t, size_t>> RetrievalPairs(const std::vector<ImageFeatures>& images,
+                                                      int neighbours);
+
+// Which pairs MatchDatabase matches: every pair (both zero), or the union of SequentialPairs with
+// sequential_overlap (when > 0) and RetrievalPairs with retrieval_neighbours (when > 0).
+struct PairChoice {
+  int sequential_overlap = 0;
+  int retrieval_neighbours = 0;
+};
+
 // Brute-force descriptor matching of two images (rows x 128 SIFT bytes, COLMAP's normalisation
 // to a norm of about 512), as COLMAP 3.8's CPU matcher does it without FLANN's approximation:
 // each descriptor's two nearest neighbours by L2 distance; of these, the larger dot product is
@@ -101,11 +117,12 @@ struct DatabaseMatchingSummary {
   size_t num_inlier_matches = 0;
 };
 
-// Reads the features of `database_path`, matches the pairs chosen by `sequential_overlap` (0:
-// exhaustive, else SequentialPairs with that overlap) and replaces its matches and two-view
-// geometries, ordered by pair id. Throws like ReadImageFeatures and WritePairGeometries.
+// Reads the features of `database_path`, matches the pairs `choice` names (in the database's
+// image order, by name) and replaces its matches and two-view geometries, ordered by pair id.
+// Throws InvalidArgumentError for a negative count, and like ReadImageFeatures and
+// WritePairGeometries.
 DatabaseMatchingSummary MatchDatabase(const std::filesystem::path& database_path,
-                                      int sequential_overlap, const std::optional<Camera>& camera,
+                                      const PairChoice& choice, const std::optional<Camera>& camera,
                                       const FeatureMatchingOptions& options);
 
 }  // namespace evloc::mapper

@@ -78,6 +78,53 @@ TEST(FeatureMatching, SequentialPairsAreColmapsLinearAndQuadraticWindow) {
   EXPECT_EQ(SequentialPairs(87, 10).size(), 887u);
 }
 
+TEST(FeatureMatching, RetrievalPairsLinkTheImagesOfOnePlace) {
+  // Three places, five images each (given in a shuffled order): the images of one place share
+  // most of their descriptors (each seen with noise), the places none.
+  std::mt19937 random(11);
+  std::vector<std::vector<std::vector<uint8_t>>> places(3);
+  for (auto& place : places) {
+    for (int k = 0; k < 200; ++k) place.push_back(RandomDescriptor(&random));
+  }
+  std::vector<size_t> place_of;
+  for (size_t p = 0; p < places.size(); ++p) place_of.insert(place_of.end(), 5, p);
+  std::shuffle(place_of.begin(), place_of.end(), random);
+  std::vector<ImageFeatures> images;
+  std::bernoulli_distribution seen(0.7);
+  for (size_t i = 0; i < place_of.size(); ++i) {
+    ImageFeatures image;
+    image.image_id = static_cast<uint32_t>(i + 1);
+    image.name = "image" + std::to_string(i) + ".png";
+    for (const std::vector<uint8_t>& descriptor : places[place_of[i]]) {
+      if (!seen(random)) continue;
+      const std::vector<uint8_t> observed = Perturbed(descriptor, 6, &random);
+      image.descriptors.insert(image.descriptors.end(), observed.begin(), observed.end());
+      image.keypoints.emplace_back(static_cast<float>(image.keypoints.size()), 10.0f);
+    }
+    images.push_back(std::move(image));
+  }
+  images.push_back(ImageFeatures{99, "blank.png", {}, {}});  // no features: no pair
+  const std::vector<std::pair<size_t, size_t>> pairs = RetrievalPairs(images, 4);
+  // Each image with its 4 most similar: the other four images of its place, and no other.
+  EXPECT_EQ(pairs.size(), 3u * 10u);
+  EXPECT_TRUE(std::is_sorted(pairs.begin(), pairs.end()));
+  for (const auto& [a, b] : pairs) {
+    EXPECT_LT(a, b);
+    ASSERT_LT(b, place_of.size());
+    EXPECT_EQ(place_of[a], place_of[b]) << a << " " << b;
+  }
+  EXPECT_EQ(RetrievalPairs(images, 4), pairs);  // deterministic
+  EXPECT_THROW(RetrievalPairs(images, 0), InvalidArgumentError);
+  EXPECT_TRUE(RetrievalPairs({ImageFeatures{1, "a.png", {}, {}}}, 3).empty());
+  EXPECT_EQ(ParseMatcherType("retrieval"), MatcherType::kRetrieval);
+  EXPECT_EQ(MatcherTypeName(MatcherType::kRetrieval), "retrieval");
+  ColmapOptions colmap;
+  colmap.matcher = MatcherType::kRetrieval;
+  colmap.Check();
+  colmap.deterministic = false;  // COLMAP's vocab_tree_matcher needs a vocabulary file
+  EXPECT_THROW(colmap.Check(), InvalidArgumentError);
+}
+
 TEST(FeatureMatching, RatioTestAndCrossCheck) {
   std::mt19937 random(3);
   const std::vector<uint8_t> a = RandomDescriptor(&random);
@@ -261,9 +308,9 @@ TEST(FeatureMatching, TempleMatchesAreDeterministicAndAgreeWithTheKnownPoses) {
   const fs::path copy = directory / "copy.db";
   fs::copy_file(database, copy);
   options.num_threads = 1;
-  MatchDatabase(database, 0, camera, options);
+  MatchDatabase(database, PairChoice{}, camera, options);
   options.num_threads = 2;
-  MatchDatabase(copy, 0, camera, options);
+  MatchDatabase(copy, PairChoice{}, camera, options);
   const std::vector<PairGeometry> written = ReadPairGeometries(database);
   const std::vector<PairGeometry> written_copy = ReadPairGeometries(copy);
   ASSERT_EQ(written.size(), 3u);

@@ -56,3 +56,5 @@ evloc_add_test(NAME evloc_mapper_accuracy_test
 
 evloc_add_fuzzer(NAME evloc_chunk_poses_fuzzer SOURCES ${CMAKE_CURRENT_LIST_DIR}/fuzz/chunk_poses_fuzzer.cc
   LIBS evloc_mapper_pipeline)
+evloc_add_fuzzer(NAME evloc_chunk_plan_fuzzer SOURCES ${CMAKE_CURRENT_LIST_DIR}/fuzz/chunk_plan_fuzzer.cc
+  LIBS evloc_mapper_pipeline)

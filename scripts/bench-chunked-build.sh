@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # Time and memory of the chunked build against the photo count (docs/mapper.md, "Chunked build";
 # docs/benchmarks.md): the first N photos of one car-park survey (evloc-sim survey, exact poses)
-# built with --known-poses into a site, for each N. Per run: wall seconds, the build's CPU seconds
+# built into a site, for each N: with --known-poses, or with POSES=estimated by COLMAP's mapping
+# per chunk and --align-to the survey's poses (the merged camera centres' RMS after that Sim(3) is
+# the centre_rms_m column). Per run: wall seconds, the build's CPU seconds
 # (report.json: mapper and COLMAP), the peak RSS of the largest process (/usr/bin/time) and of the
 # whole process tree (sum over the mapper, its workers and COLMAP, sampled every 0.5 s).
 #
@@ -25,7 +27,13 @@ tree_rss() {
                            if (q == root) total += rss[p] } print total + 0 }'
 }
 
-printf "photos\tchunks\twall_s\tcpu_s\tpeak_process_mb\tpeak_tree_mb\tpoints\ttiles\n" >"$out/results.tsv"
+poses=${POSES:-known}
+case "$poses" in
+  known) pose_flag=--known-poses ;;
+  estimated) pose_flag=--align-to ;;
+  *) echo "POSES must be known or estimated, not '$poses'" >&2; exit 2 ;;
+esac
+printf "photos\tchunks\twall_s\tcpu_s\tpeak_process_mb\tpeak_tree_mb\tpoints\ttiles\tcentre_rms_m\n" >"$out/results.tsv"
 for n in $counts; do
   rm -rf "${out:?}/$n" "$out/$n.chunks"
   # In the survey folder: its lines name images relative to the list.
@@ -34,7 +42,7 @@ for n in $counts; do
   start=$(date +%s.%N)
   /usr/bin/time -v -o "$out/$n.time" "$build_dir/mapper/evloc-mapper" build \
     --images "$survey/images" --images-list "$survey/images_first_$n.txt" --calib "$survey/calib.yaml" \
-    --known-poses "$survey/groundtruth.txt" --out "$out/$n" --chunked --quiet "$@" \
+    "$pose_flag" "$survey/groundtruth.txt" --out "$out/$n" --chunked --quiet "$@" \
     >"$out/$n.out" 2>"$out/$n.err" &
   pid=$!
   peak=0
@@ -52,9 +60,11 @@ import json, sys
 report = json.load(open(sys.argv[1]))
 cpu = sum(t["cpu_seconds"] for t in report["timings"])
 chunks = report["chunking"]["chunks"]
+alignment = report.get("alignment")
 print("\t".join([sys.argv[2], str(len(chunks)), "%.0f" % float(sys.argv[3]), "%.0f" % cpu,
                  "%.0f" % (int(sys.argv[4]) / 1024), "%.0f" % (int(sys.argv[5]) / 1024),
-                 str(report["points"]), str(report["site"]["tiles"])]))
+                 str(report["points"]), str(report["site"]["tiles"]),
+                 "%.4f" % alignment["rms_m"] if alignment else "-"]))
 PY
   tail -n 1 "$out/results.tsv"
   echo "uptime after $n: $(uptime)"

@@ -4,6 +4,9 @@
 # one go with two worker processes, once in this process killed (SIGKILL) as soon as its first
 # chunk is finished and then run again. The second run must reuse the finished chunks, and both
 # sites must have the same version (the CRC32C of every tile's content checksum, maps/site.h).
+# Then the same photos unordered (no image list, poses by name) cut by image retrieval, once with
+# two worker processes (which read the plan the first process wrote) and once in one process:
+# the same site.
 #
 # Usage: tests/chunked_resume_test.sh BUILD_DIR   (ctest: evloc_chunked_resume_test)
 # Exit codes: 0 pass, 1 fail, 77 skipped (COLMAP not installed).
@@ -68,5 +71,24 @@ reused=$(sed -n 's/.* computed, \([0-9]*\) reused.*/\1/p' "$out/B2.txt")
 version_b=$(sed -n 's/.*(version \([0-9a-f]*\)).*/\1/p' "$out/B2.txt")
 echo "site versions: $version_a $version_b"
 [[ "$version_a" == "$version_b" ]] || fail "the resumed site differs from the one built in one go"
+# C and D: unordered photos cut by retrieval; C with two workers, D in one process.
+awk 'NR == FNR { if ($1 !~ /^#/) pose[$1] = $2 " " $3 " " $4 " " $5 " " $6 " " $7 " " $8; next }
+     { name = $2; sub(/^images\//, "", name); print name, pose[$1] }' \
+  "$photos/groundtruth.txt" "$photos/images.txt" >"$out/poses_by_name.txt"
+retrieval_args=(build --images "$photos/images" --calib "$photos/calib.yaml"
+  --known-poses "$out/poses_by_name.txt" --chunked --chunk-by retrieval --chunk-size 12
+  --chunk-overlap-photos 3 --no-relocalization --max-features 1024 --tile-size 20 --tile-overlap 4
+  --quiet)
+"$mapper" "${retrieval_args[@]}" --out "$out/C" --workers 2 >"$out/C.txt" || fail "build C"
+echo "C: $(cat "$out/C.txt")"
+"$mapper" "${retrieval_args[@]}" --out "$out/D" >"$out/D.txt" || fail "build D"
+echo "D: $(cat "$out/D.txt")"
+retrieval_chunks=$(sed -n 's/.* \([0-9]*\) chunks by retrieval.*/\1/p' "$out/C.txt")
+[[ -n "$retrieval_chunks" && "$retrieval_chunks" -ge 3 ]] || fail "build C wrote no site of >= 3 chunks by retrieval"
+grep -q '"method": "retrieval"' "$out/C.chunks/plan.json" || fail "build C's plan.json is not by retrieval"
+version_c=$(sed -n 's/.*(version \([0-9a-f]*\)).*/\1/p' "$out/C.txt")
+version_d=$(sed -n 's/.*(version \([0-9a-f]*\)).*/\1/p' "$out/D.txt")
+echo "retrieval site versions: $version_c $version_d"
+[[ -n "$version_c" && "$version_c" == "$version_d" ]] || fail "the retrieval sites built with and without workers differ"
 rm -rf "$out"
 echo "PASS"

@@ -162,6 +162,53 @@ std::vector<float> Vocabulary::EncodeVlad(const Features& features) const {
   return EncodeVlad(features.DescriptorsAsFloat());
 }
 
+Eigen::MatrixXf CosineSimilarities(const std::vector<std::vector<float>>& vectors) {
+  const size_t n = vectors.size();
+  const size_t dimension = n == 0 ? 0 : vectors[0].size();
+  Eigen::MatrixXf unit(dimension, n);
+  for (size_t i = 0; i < n; ++i) {
+    if (vectors[i].size() != dimension) {
+      throw InvalidArgumentError("CosineSimilarities: vectors of " + std::to_string(dimension) +
+                                 " and " + std::to_string(vectors[i].size()) + " values");
+    }
+    const Eigen::Map<const Eigen::VectorXf> v(vectors[i].data(),
+                                              static_cast<Eigen::Index>(dimension));
+    if (!v.allFinite()) {
+      throw InvalidArgumentError("CosineSimilarities: vector " + std::to_string(i) +
+                                 " holds a value that is not finite");
+    }
+    const float norm = v.norm();
+    if (norm > 0.0f) {
+      unit.col(static_cast<Eigen::Index>(i)) = v / norm;
+    } else {
+      unit.col(static_cast<Eigen::Index>(i)).setZero();
+    }
+  }
+  return unit.transpose() * unit;
+}
+
+std::vector<std::vector<size_t>> MostSimilar(const Eigen::MatrixXf& similarity, size_t k) {
+  const size_t n = static_cast<size_t>(similarity.rows());
+  const size_t count = n == 0 ? 0 : std::min(k, n - 1);
+  std::vector<std::vector<size_t>> result(n);
+  std::vector<size_t> others;
+  for (size_t i = 0; i < n; ++i) {
+    others.clear();
+    for (size_t j = 0; j < n; ++j) {
+      if (j != i) others.push_back(j);
+    }
+    const auto row = similarity.row(static_cast<Eigen::Index>(i));
+    std::partial_sort(others.begin(), others.begin() + static_cast<std::ptrdiff_t>(count),
+                      others.end(), [&](size_t a, size_t b) {
+                        const float sa = row(static_cast<Eigen::Index>(a));
+                        const float sb = row(static_cast<Eigen::Index>(b));
+                        return sa != sb ? sa > sb : a < b;
+                      });
+    result[i].assign(others.begin(), others.begin() + static_cast<std::ptrdiff_t>(count));
+  }
+  return result;
+}
+
 float CosineSimilarity(const std::vector<float>& a, const std::vector<float>& b) {
   if (a.size() != b.size()) {
     throw InvalidArgumentError("CosineSimilarity: vectors of " + std::to_string(a.size()) +

@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <vector>
 
+#include <Eigen/Core>
 #include <opencv2/core/mat.hpp>
 
 #include "core/features/features.h"
@@ -82,6 +83,16 @@ class Vocabulary {
 // Cosine similarity of two vectors of equal length; 0 when either is zero. Throws
 // InvalidArgumentError when the lengths differ.
 float CosineSimilarity(const std::vector<float>& a, const std::vector<float>& b);
+
+// Cosine similarities of every pair of `vectors` (all of one length) as an N x N matrix, from one
+// matrix product of the unit vectors; 0 against a zero vector. Throws InvalidArgumentError for
+// vectors of unequal lengths or a value that is not finite.
+Eigen::MatrixXf CosineSimilarities(const std::vector<std::vector<float>>& vectors);
+
+// For each of the N entries of an N x N similarity matrix (CosineSimilarities), the indices of
+// its k most similar other entries, most similar first (ties: lower index first); fewer when
+// N - 1 < k.
+std::vector<std::vector<size_t>> MostSimilar(const Eigen::MatrixXf& similarity, size_t k);
 
 // The k database entries most similar to the query, most similar first (ties: lower index
 // first); fewer when the database is smaller. Throws InvalidArgumentError when k < 1 or a

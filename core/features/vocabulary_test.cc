@@ -101,6 +101,27 @@ TEST(RelocVocabulary, RetrieveRanksByCosineSimilarity) {
   EXPECT_EQ(Retrieve({2, 1, 0}, database, 10).size(), database.size());
 }
 
+TEST(RelocVocabulary, CosineSimilaritiesAndMostSimilar) {
+  const std::vector<std::vector<float>> vectors = {
+      {1, 0, 0}, {0, 2, 0}, {0.8f, 0.6f, 0}, {0, 0, 0}, {0.8f, 0.6f, 0}};
+  const Eigen::MatrixXf similarity = CosineSimilarities(vectors);
+  ASSERT_EQ(similarity.rows(), 5);
+  for (int i = 0; i < 5; ++i) {
+    for (int j = 0; j < 5; ++j) {
+      EXPECT_NEAR(similarity(i, j), CosineSimilarity(vectors[i], vectors[j]), 1e-6) << i << j;
+    }
+  }
+  const std::vector<std::vector<size_t>> nearest = MostSimilar(similarity, 2);
+  ASSERT_EQ(nearest.size(), 5u);
+  EXPECT_EQ(nearest[0], (std::vector<size_t>{2, 4}));  // ties: the lower index first
+  EXPECT_EQ(nearest[2], (std::vector<size_t>{4, 0}));
+  EXPECT_EQ(nearest[3], (std::vector<size_t>{0, 1}));  // a zero vector: all 0, by index
+  EXPECT_EQ(MostSimilar(similarity, 10)[1].size(), 4u);
+  EXPECT_TRUE(MostSimilar(CosineSimilarities({}), 3).empty());
+  EXPECT_THROW(CosineSimilarities({{1, 0}, {1}}), InvalidArgumentError);
+  EXPECT_THROW(CosineSimilarities({{1, std::nanf("")}}), InvalidArgumentError);
+}
+
 // Features of every image.
 std::vector<Features> ExtractAll(const std::vector<cv::Mat>& images) {
   std::vector<Features> features;
