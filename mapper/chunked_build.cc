@@ -823,6 +823,9 @@ StoredChunkPlan ParseChunkPlan(std::string_view text, const std::vector<std::str
     json = nlohmann::json::parse(text);
   } catch (const nlohmann::json::parse_error& error) {
     throw ParseError(source, "byte " + std::to_string(error.byte), "not JSON");
+  } catch (const nlohmann::json::exception& error) {
+    // A number beyond double's range throws out_of_range (found by evloc_chunk_plan_fuzzer).
+    throw ParseError(source, "plan", std::string("not JSON: ") + error.what());
   }
   if (!json.is_object() || !json.contains("method") || !json["method"].is_string() ||
       !json.contains("inputs") || !json["inputs"].is_string() || !json.contains("chunks") ||
@@ -1008,6 +1011,34 @@ ChunkAlignment AlignChunks(const std::vector<std::map<std::string, Rigid3d>>& ch
   return result;
 }
 
+std::vector<ChunkReferenceFit> FitChunksToReference(
+    const std::vector<std::map<std::string, Rigid3d>>& chunk_poses,
+    const std::map<std::string, Rigid3d>& reference, const AlignmentLimits& limits) {
+  std::vector<ChunkReferenceFit> fits;
+  for (const std::map<std::string, Rigid3d>& poses : chunk_poses) {
+    std::vector<Rigid3d> model;
+    std::vector<Rigid3d> matching;
+    for (const auto& [name, pose] : poses) {
+      const auto found = reference.find(name);
+      if (found == reference.end()) continue;
+      model.push_back(pose);
+      matching.push_back(found->second);
+    }
+    ChunkReferenceFit fit;
+    if (model.size() >= 3) {
+      try {
+        const PoseAlignment alignment = AlignPoses(model, matching);
+        fit.centre_rms = alignment.centre_rms;
+        fit.fits = !AlignmentLimitViolation(alignment, limits);
+      } catch (const InvalidArgumentError&) {
+        // Coincident centres: no scale, no figure.
+      }
+    }
+    fits.push_back(fit);
+  }
+  return fits;
+}
+
 std::string ChunkedBuildReportToJson(const ChunkedBuildReport& report) {
   nlohmann::json json = nlohmann::json::parse(MapBuildReportToJson(report.build));
   nlohmann::json chunks = nlohmann::json::array();
@@ -1020,6 +1051,10 @@ std::string ChunkedBuildReportToJson(const ChunkedBuildReport& report) {
                              ? static_cast<double>(report.chunk_peak_rss_bytes[c]) / (1 << 20)
                              : 0.0},
          {"seconds", c < report.chunk_seconds.size() ? report.chunk_seconds[c] : 0.0}});
+    if (c < report.chunk_reference_rms_m.size() && std::isfinite(report.chunk_reference_rms_m[c])) {
+      chunks.back()["reference_rms_m"] = report.chunk_reference_rms_m[c];
+      chunks.back()["fits_reference"] = report.chunk_fits_reference[c] != 0;
+    }
   }
   json["chunking"] = {{"method", report.method},
                       {"chunks", chunks},
@@ -1282,6 +1317,28 @@ ChunkedBuildReport BuildChunkedSite(const ChunkedBuildOptions& options,
   Sim3d world_from_common;
   if (options.build.align_to) {
     clock.Run("alignment", [&] {
+      // Each chunk on its own against the reference: which reconstructions are wrong.
+      std::vector<std::map<std::string, Rigid3d>> poses;
+      for (const ChunkResult& chunk : chunks) poses.push_back(chunk.world_from_cams);
+      std::string misfits;
+      const std::vector<ChunkReferenceFit> fits = FitChunksToReference(
+          poses, inputs.reference_world_from_cams, options.build.alignment_limits);
+      for (size_t c = 0; c < fits.size(); ++c) {
+        report.chunk_reference_rms_m.push_back(fits[c].centre_rms);
+        report.chunk_fits_reference.push_back(fits[c].fits ? 1 : 0);
+        if (std::isfinite(fits[c].centre_rms) && !fits[c].fits) {
+          std::ostringstream text;
+          text << (misfits.empty() ? "" : ", ") << c << " (" << std::setprecision(3)
+               << fits[c].centre_rms << " m RMS)";
+          misfits += text.str();
+        }
+      }
+      std::string likely_cause = "The chunks' models or their alignment are probably wrong";
+      if (!misfits.empty()) {
+        likely_cause += " (these chunks do not fit the reference on their own either: " + misfits +
+                        "; COLMAP reconstructed them wrongly: smaller chunks (--chunk-size), more "
+                        "overlapping photos or more texture help)";
+      }
       std::vector<Rigid3d> model;
       std::vector<Rigid3d> reference;
       for (const auto& [name, pose] : common_from_cams) {
@@ -1295,9 +1352,8 @@ ChunkedBuildReport BuildChunkedSite(const ChunkedBuildOptions& options,
                                    " registered photos have a reference pose in " +
                                    options.build.align_to->string() + "; the alignment needs 3");
       }
-      world_from_common = FitAlignmentToReference(
-          options.build, model, reference,
-          "The chunks' models or their alignment are probably wrong", &build);
+      world_from_common =
+          FitAlignmentToReference(options.build, model, reference, likely_cause, &build);
       return false;
     });
   }

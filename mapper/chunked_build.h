@@ -15,6 +15,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
+#include <limits>
 #include <map>
 #include <optional>
 #include <string>
@@ -27,6 +28,7 @@
 #include "mapper/build_inputs.h"
 #include "mapper/build_report.h"
 #include "mapper/map_builder.h"
+#include "mapper/pose_alignment.h"
 #include "maps/map.h"
 
 namespace evloc::mapper {
@@ -118,6 +120,22 @@ struct StoredChunkPlan {
 // core or in two, a core photo that is not a member, or a chunk without core photos.
 StoredChunkPlan ParseChunkPlan(std::string_view text, const std::vector<std::string>& names,
                                const std::string& source);
+
+// One chunk against the reference poses on its own.
+struct ChunkReferenceFit {
+  // Centre RMS of the chunk's registered photos after their own Sim(3) onto the reference
+  // (AlignPoses), reference units; NaN when fewer than 3 have a reference pose or their centres
+  // coincide.
+  double centre_rms = std::numeric_limits<double>::quiet_NaN();
+  // Whether that fit is within `limits` (false without a figure).
+  bool fits = false;
+};
+
+// Fits each chunk's poses (world_from_cam by image name, in the chunk's frame) to the reference
+// poses of the same names on its own.
+std::vector<ChunkReferenceFit> FitChunksToReference(
+    const std::vector<std::map<std::string, Rigid3d>>& chunk_poses,
+    const std::map<std::string, Rigid3d>& reference, const AlignmentLimits& limits);
 
 // Options of the chunked build.
 struct ChunkedBuildOptions {
@@ -215,6 +233,10 @@ struct ChunkedBuildReport {
   // without a report.
   std::vector<uint64_t> chunk_peak_rss_bytes;
   std::vector<double> chunk_seconds;
+  // With --align-to, per chunk: FitChunksToReference (a chunk that does not fit on its own is a
+  // wrong reconstruction, which the merged alignment's error names).
+  std::vector<double> chunk_reference_rms_m;
+  std::vector<char> chunk_fits_reference;
   // The chunks' alignment (estimated poses), or nullopt (known poses: the chunks share the
   // world frame).
   std::optional<ChunkAlignment> alignment;

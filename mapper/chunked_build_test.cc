@@ -255,6 +255,7 @@ TEST(ChunkedBuild, APlanReadsBackAndABrokenOneIsRefused) {
   };
   refused(text.substr(0, text.size() / 2), "not JSON");
   refused("[]", "expected an object");
+  refused(R"({"method":4e+44444444444444444444444444446444})", "not JSON");  // the fuzzer's find
   // Another photo set: a name that is not an input, a photo left out.
   std::vector<std::string> fewer(names.begin(), names.end() - 1);
   EXPECT_THROW(ParseChunkPlan(text, fewer, "plan.json"), ParseError);
@@ -364,6 +365,37 @@ TEST(ChunkedBuild, AlignChunksRecoversTheChunksFramesFromSharedPhotos) {
   EXPECT_LT(to_truth.centre_max, 0.08);
   EXPECT_LT(alignment.adjusted_rms, 0.04);
   EXPECT_LE(alignment.adjusted_rms, alignment.initial_rms + 1e-9);
+}
+
+TEST(ChunkedBuild, AChunkThatDoesNotFitTheReferenceOnItsOwnIsFound) {
+  const std::vector<Rigid3d> truth = CurvedPath(90);
+  std::mt19937 random(5);
+  std::map<std::string, Rigid3d> reference;
+  for (size_t i = 0; i < truth.size(); ++i) reference["photo_" + std::to_string(i)] = truth[i];
+  // Three chunks of 30 photos, each in its own frame; chunk 1 is a wrong reconstruction (its
+  // second half folded back onto its first, as a repeated structure folds a COLMAP model);
+  // chunk 2 has only 2 photos with a reference pose.
+  std::vector<std::map<std::string, Rigid3d>> chunks(3);
+  for (size_t c = 0; c < 3; ++c) {
+    const Sim3d frame = RandomSim(&random);
+    for (size_t i = c * 30; i < c * 30 + 30; ++i) {
+      Rigid3d pose = truth[i];
+      if (c == 1 && i >= 45) pose = truth[90 - i];
+      chunks[c]["photo_" + std::to_string(i)] = frame.TransformPose(pose);
+    }
+  }
+  std::map<std::string, Rigid3d> few = reference;
+  for (size_t i = 62; i < 90; ++i) few.erase("photo_" + std::to_string(i));
+  const std::vector<ChunkReferenceFit> fits = FitChunksToReference(chunks, few, AlignmentLimits());
+  ASSERT_EQ(fits.size(), 3u);
+  EXPECT_TRUE(fits[0].fits);
+  EXPECT_LT(fits[0].centre_rms, 1e-6);
+  EXPECT_FALSE(fits[1].fits);
+  EXPECT_GT(fits[1].centre_rms, 1.0);
+  EXPECT_FALSE(fits[2].fits);
+  EXPECT_TRUE(std::isnan(fits[2].centre_rms));
+  // With every reference pose, chunk 2 fits.
+  EXPECT_TRUE(FitChunksToReference(chunks, reference, AlignmentLimits())[2].fits);
 }
 
 TEST(ChunkedBuild, AlignChunksNamesAChunkWithoutSharedPhotos) {

@@ -426,6 +426,9 @@ Dataset ReadDataset(const fs::path& root, const DatasetReaderOptions& options) {
     } catch (const nlohmann::json::parse_error& parse_error) {
       throw ParseError(info_path.string(), "byte " + std::to_string(parse_error.byte),
                        "malformed JSON");
+    } catch (const nlohmann::json::exception& error) {
+      // A number beyond double's range throws out_of_range, not parse_error.
+      throw ParseError(info_path.string(), "JSON", std::string("malformed JSON: ") + error.what());
     }
   }
   return dataset;

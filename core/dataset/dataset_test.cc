@@ -186,17 +186,18 @@ TEST(Dataset, ReadsARealEcdFolder) {
   EXPECT_EQ(gray.rows, 180);
 }
 
+// A 240x180 camera in ROS camera_info YAML.
+constexpr const char* kRosCameraInfo =
+    "image_width: 240\nimage_height: 180\n"
+    "camera_matrix: {rows: 3, cols: 3, data: [199, 0, 132, 0, 198, 110, 0, 0, 1]}\n"
+    "distortion_model: plumb_bob\n"
+    "distortion_coefficients: {rows: 1, cols: 5, data: [-0.3, 0.1, 0, 0, 0]}\n";
+
 // A calib.yaml in another tool's format is read through the detection; what its reader ignored
 // comes back with the dataset (the tools print it), naming the file.
 TEST(Dataset, CalibrationNotesOfTheReaderComeWithTheDataset) {
   const fs::path root = evloc::testing::MakeTempDir("dataset_calibration_notes");
-  std::ofstream(root / "calib.yaml") << "image_width: 240\nimage_height: 180\n"
-                                        "camera_matrix: {rows: 3, cols: 3, data: [199, 0, 132, 0, "
-                                        "198, 110, 0, 0, 1]}\n"
-                                        "distortion_model: plumb_bob\n"
-                                        "distortion_coefficients: {rows: 1, cols: 5, data: [-0.3, "
-                                        "0.1, 0, 0, 0]}\n"
-                                        "lens_serial: 42\n";
+  std::ofstream(root / "calib.yaml") << kRosCameraInfo << "lens_serial: 42\n";
   const Dataset dataset = ReadDataset(root);
   EXPECT_EQ(dataset.camera.width, 240);
   ASSERT_EQ(dataset.calibration_notes.size(), 1u);
@@ -207,6 +208,24 @@ TEST(Dataset, CalibrationNotesOfTheReaderComeWithTheDataset) {
   writer.WriteCamera(dataset.camera);
   writer.Commit();
   EXPECT_TRUE(ReadDataset(root / "own").calibration_notes.empty());
+  fs::remove_all(root);
+}
+
+// A malformed info.json is a ParseError naming the file, also where nlohmann's parser throws
+// out_of_range rather than parse_error (a number beyond double's range).
+TEST(Dataset, AMalformedInfoJsonIsAParseErrorNamingTheFile) {
+  const fs::path root = evloc::testing::MakeTempDir("dataset_info_json");
+  std::ofstream(root / "calib.yaml") << kRosCameraInfo;
+  EXPECT_NO_THROW(ReadDataset(root));
+  for (const std::string& text : {std::string("{\"a\": "), std::string("{\"a\": 4e+4444}")}) {
+    std::ofstream(root / "info.json", std::ios::trunc) << text;
+    try {
+      ReadDataset(root);
+      ADD_FAILURE() << "accepted " << text;
+    } catch (const ParseError& error) {
+      EXPECT_NE(std::string(error.what()).find("info.json"), std::string::npos) << error.what();
+    }
+  }
   fs::remove_all(root);
 }
 
