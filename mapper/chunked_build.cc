@@ -420,7 +420,8 @@ constexpr int kRetrievalMaxWidth = 800;
 
 // One global descriptor per photo for PlanChunksByRetrieval: the VLAD vector (core/features) of
 // its SIFT features over a vocabulary trained on the photos themselves. Deterministic: the same
-// photos give the same descriptors in every process (a worker recomputes the plan).
+// photos give the same descriptors in every process that has no stored plan to read. Throws
+// InvalidArgumentError when the photos hold too few features to train the vocabulary.
 std::vector<std::vector<float>> RetrievalDescriptors(const ChunkedBuildOptions& options,
                                                      const BuildInputs& inputs) {
   features::FeatureOptions feature_options;
@@ -441,8 +442,15 @@ std::vector<std::vector<float>> RetrievalDescriptors(const ChunkedBuildOptions& 
         }
       },
       1);
-  const features::Vocabulary vocabulary =
-      features::Vocabulary::Train(photo_features, features::VocabularyOptions{});
+  features::Vocabulary vocabulary;
+  try {
+    vocabulary = features::Vocabulary::Train(photo_features, features::VocabularyOptions{});
+  } catch (const InvalidArgumentError& error) {
+    throw InvalidArgumentError(
+        std::string("cannot cut the photos into chunks by image retrieval: ") + error.what() +
+        " (photos without texture?); give their positions (--known-poses or --align-to) or "
+        "times (--images-list)");
+  }
   std::vector<std::vector<float>> descriptors(inputs.images.size());
   for (size_t i = 0; i < inputs.images.size(); ++i) {
     descriptors[i] = vocabulary.EncodeVlad(photo_features[i]);
