@@ -162,8 +162,8 @@ Chunked build (docs/mapper.md, "Chunked build"; automatic above 1000 photos):
                            tiles
   --chunk-by METHOD        auto (default: position with --known-poses or --align-to, else
                            sequence for a timed --images-list, else retrieval) | position |
-                           sequence (input order) | retrieval (image similarity; each chunk's
-                           photos are matched exhaustively)
+                           sequence (input order) | retrieval (image similarity; each photo
+                           of a chunk matched with its 25 most similar)
   --chunk-size N           core photos per chunk (default 250)
   --chunk-overlap M        photos within M metres of a chunk join it (default 6)
   --chunk-overlap-photos N by input order: N photos on each side join a chunk; by retrieval
