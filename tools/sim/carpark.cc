@@ -265,6 +265,9 @@ void CarParkOptions::Check() const {
   if (!(ground_tile_m > 0) || !std::isfinite(ground_tile_m)) {
     throw InvalidArgumentError("CarParkOptions.ground_tile_m must be positive");
   }
+  if (!(ground_marks_per_m2 >= 0 && ground_marks_per_m2 <= 20)) {
+    throw InvalidArgumentError("the ground marks per square metre must lie within [0, 20]");
+  }
 }
 
 std::vector<Eigen::Vector2d> ResamplePolyline(const std::vector<Eigen::Vector2d>& points,
@@ -307,6 +310,24 @@ CarPark MakeCarPark(const CarParkOptions& options) {
                           random.Uniform(-kSiteHalf + 2, kSiteHalf - 8));
     paint.push_back(TextureLayer::Rectangle(
         corner, corner + Vector2d(random.Uniform(0.8, 4), random.Uniform(0.8, 3)), kPatch));
+  }
+  // Marks on the asphalt (opt-in), from their own random sequence.
+  if (options.ground_marks_per_m2 > 0) {
+    LayoutRandom marks(options.seed * 104729 + 31);
+    const double side = 2 * kSiteHalf;
+    const int count = static_cast<int>(std::lround(options.ground_marks_per_m2 * side * side));
+    for (int k = 0; k < count; ++k) {
+      const Vector2d centre(marks.Uniform(-kSiteHalf + 0.5, kSiteHalf - 0.5),
+                            marks.Uniform(-kSiteHalf + 0.5, kSiteHalf - 0.5));
+      const float grey = static_cast<float>(marks.Uniform(0.05, 0.17));
+      const double size = marks.Uniform(0.05, 0.5);
+      if (marks.Uniform(0, 1) < 0.6) {
+        paint.push_back(TextureLayer::Disc(centre, size / 2, Gray(grey)));
+      } else {
+        const Vector2d half(size / 2, size * marks.Uniform(0.2, 0.6));
+        paint.push_back(TextureLayer::Rectangle(centre - half, centre + half, Gray(grey)));
+      }
+    }
   }
   std::vector<BoxSpec> islands;
   for (int m = 0; m < options.modules; ++m) {

@@ -29,9 +29,15 @@ struct CarParkOptions {
   // Side of the square asphalt tiles the ground is split into, metres (bounds the renderer's
   // texture indices and the map sampling per surface).
   double ground_tile_m = 20;
+  // Marks on the asphalt per square metre: stains, oil spots and small repairs (discs and
+  // rectangles of 0.05-0.5 m, a little darker or lighter than the asphalt), the fine texture of
+  // real asphalt that structure from motion matches on. 0 (the default) leaves the ground as it
+  // has always been rendered; any value leaves the rest of the layout unchanged (the marks draw
+  // from a random sequence of their own).
+  double ground_marks_per_m2 = 0;
 
-  // Throws InvalidArgumentError for fewer than 1 module or 4 bays, occupancy outside [0, 1] or a
-  // non-positive tile size.
+  // Throws InvalidArgumentError for fewer than 1 module or 4 bays, occupancy outside [0, 1], a
+  // non-positive tile size, or a negative or non-finite mark density (or above 20 per m^2).
   void Check() const;
 };
 

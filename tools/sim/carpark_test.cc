@@ -70,6 +70,36 @@ void ExpectRouteIsClear(const CarPark& park, const std::vector<Eigen::Vector2d>&
   EXPECT_GT(checked, 50);
 }
 
+// Marks on the asphalt add texture to the ground tiles only: every other surface, and the ground's
+// paint, stay as without them (the marks draw from a random sequence of their own).
+TEST(CarPark, GroundMarksTextureTheAsphaltAndChangeNothingElse) {
+  const CarPark plain = MakeCarPark();
+  CarParkOptions options;
+  options.ground_marks_per_m2 = 0.5;
+  const CarPark marked = MakeCarPark(options);
+  ASSERT_EQ(marked.scene.surfaces.size(), plain.scene.surfaces.size());
+  size_t plain_layers = 0;
+  size_t marked_layers = 0;
+  for (size_t i = 0; i < plain.scene.surfaces.size(); ++i) {
+    const Surface& a = plain.scene.surfaces[i];
+    const Surface& b = marked.scene.surfaces[i];
+    ASSERT_EQ(a.name, b.name);
+    if (a.name.rfind("ground_", 0) != 0) {
+      EXPECT_EQ(a.texture.layers.size(), b.texture.layers.size()) << a.name;
+      continue;
+    }
+    plain_layers += a.texture.layers.size();
+    marked_layers += b.texture.layers.size();
+    // The paint (lines, patches) is drawn over the marks, in the same order.
+    ASSERT_GE(b.texture.layers.size(), a.texture.layers.size());
+  }
+  // 0.5 per m^2 over 200 m x 200 m: 20,000 marks (a few counted twice across tile borders).
+  EXPECT_GE(marked_layers - plain_layers, 20'000u);
+  EXPECT_LT(marked_layers - plain_layers, 21'000u);
+  EXPECT_EQ(marked.drive_route, plain.drive_route);
+  EXPECT_EQ(marked.survey_walk_route, plain.survey_walk_route);
+}
+
 TEST(CarPark, RoutesRunThroughFreeSpaceOverTheGround) {
   const CarPark park = MakeCarPark();
   // The serpentine through 8 lanes: 8 straights of ~165 m and 7 half turns.
@@ -94,6 +124,11 @@ TEST(CarPark, RejectsBadOptions) {
   EXPECT_THROW(MakeCarPark(options), InvalidArgumentError);
   options = {};
   options.ground_tile_m = 0;
+  EXPECT_THROW(MakeCarPark(options), InvalidArgumentError);
+  options = {};
+  options.ground_marks_per_m2 = -1;
+  EXPECT_THROW(MakeCarPark(options), InvalidArgumentError);
+  options.ground_marks_per_m2 = std::nan("");
   EXPECT_THROW(MakeCarPark(options), InvalidArgumentError);
   EXPECT_THROW(ParseTimeOfDay("noon"), InvalidArgumentError);
   EXPECT_EQ(ParseTimeOfDay(TimeOfDayName(TimeOfDay::kDusk)), TimeOfDay::kDusk);

@@ -333,6 +333,7 @@ nlohmann::json RunRenderCommand(const RenderCommandOptions& options) {
                   : options.scene_json ? options.scene_json->string()
                                        : "default room"},
         {"site_seed", options.site.seed},
+        {"ground_marks_per_m2", options.site.ground_marks_per_m2},
         {"time_of_day", options.time_of_day ? TimeOfDayName(*options.time_of_day) : ""},
         {"motion", options.path              ? *options.path
                    : options.trajectory_file ? "trajectory"
@@ -475,6 +476,7 @@ nlohmann::json RunSurveyCommand(const SurveyCommandOptions& options) {
        {{"survey", options.survey},
         {"camera", options.camera_yaml ? options.camera_yaml->string() : options.camera_preset},
         {"site_seed", options.site.seed},
+        {"ground_marks_per_m2", options.site.ground_marks_per_m2},
         {"time_of_day", options.time_of_day ? TimeOfDayName(*options.time_of_day) : "day"},
         {"spacing_m", options.spacing_m},
         {"path_start_m", options.start_m},

@@ -34,6 +34,10 @@ void DeclareCameraAndSiteFlags(CommandLine& line, std::string* camera_preset,
            "--camera",
            camera_yaml)
       .Add("--site-seed", "N", "seed of the car park's layout; default 1", &site->seed)
+      .Add("--ground-marks", "D",
+           "stains and small repairs on the car park's asphalt per square metre (the fine texture "
+           "of real asphalt), 0-20; default 0",
+           &site->ground_marks_per_m2)
       .Add("--time-of-day", "NAME",
            "car park lighting: day | dusk | night (street lamps on at dusk and night); default: "
            "day",
