@@ -492,6 +492,24 @@ std::optional<ChunkPlan> StoredRetrievalPlan(const fs::path& path,
   }
 }
 
+// The poses of `poses` that have a reference pose of the same name, and those reference poses, in
+// name order.
+struct PosesWithReference {
+  std::vector<Rigid3d> model;
+  std::vector<Rigid3d> reference;
+};
+PosesWithReference MatchReference(const std::map<std::string, Rigid3d>& poses,
+                                  const std::map<std::string, Rigid3d>& reference) {
+  PosesWithReference matched;
+  for (const auto& [name, pose] : poses) {
+    const auto found = reference.find(name);
+    if (found == reference.end()) continue;
+    matched.model.push_back(pose);
+    matched.reference.push_back(found->second);
+  }
+  return matched;
+}
+
 std::string FormatGigabytes(uint64_t bytes) {
   std::ostringstream text;
   text << std::fixed << std::setprecision(2) << static_cast<double>(bytes) / (1ull << 30) << " GB";
@@ -1024,18 +1042,11 @@ std::vector<ChunkReferenceFit> FitChunksToReference(
     const std::map<std::string, Rigid3d>& reference, const AlignmentLimits& limits) {
   std::vector<ChunkReferenceFit> fits;
   for (const std::map<std::string, Rigid3d>& poses : chunk_poses) {
-    std::vector<Rigid3d> model;
-    std::vector<Rigid3d> matching;
-    for (const auto& [name, pose] : poses) {
-      const auto found = reference.find(name);
-      if (found == reference.end()) continue;
-      model.push_back(pose);
-      matching.push_back(found->second);
-    }
+    const PosesWithReference matched = MatchReference(poses, reference);
     ChunkReferenceFit fit;
-    if (model.size() >= 3) {
+    if (matched.model.size() >= 3) {
       try {
-        const PoseAlignment alignment = AlignPoses(model, matching);
+        const PoseAlignment alignment = AlignPoses(matched.model, matched.reference);
         fit.centre_rms = alignment.centre_rms;
         fit.fits = !AlignmentLimitViolation(alignment, limits);
       } catch (const InvalidArgumentError&) {
@@ -1127,10 +1138,9 @@ ChunkedBuildReport BuildChunkedSite(const ChunkedBuildOptions& options,
                  ? *stored
                  : PlanChunksByRetrieval(RetrievalDescriptors(options, inputs), options.chunking);
       return stored.has_value();
-    } else {
-      plan = PlanChunks(inputs.images.size(),
-                        method == ChunkMethod::kPosition ? &*positions : nullptr, options.chunking);
     }
+    plan = PlanChunks(inputs.images.size(),
+                      method == ChunkMethod::kPosition ? &*positions : nullptr, options.chunking);
     return false;
   });
   report.method = plan.method;
@@ -1347,21 +1357,15 @@ ChunkedBuildReport BuildChunkedSite(const ChunkedBuildOptions& options,
                         "; COLMAP reconstructed them wrongly: smaller chunks (--chunk-size), more "
                         "overlapping photos or more texture help)";
       }
-      std::vector<Rigid3d> model;
-      std::vector<Rigid3d> reference;
-      for (const auto& [name, pose] : common_from_cams) {
-        const auto found = inputs.reference_world_from_cams.find(name);
-        if (found == inputs.reference_world_from_cams.end()) continue;
-        model.push_back(pose);
-        reference.push_back(found->second);
-      }
-      if (model.size() < 3) {
-        throw InvalidArgumentError("only " + std::to_string(model.size()) +
+      const PosesWithReference matched =
+          MatchReference(common_from_cams, inputs.reference_world_from_cams);
+      if (matched.model.size() < 3) {
+        throw InvalidArgumentError("only " + std::to_string(matched.model.size()) +
                                    " registered photos have a reference pose in " +
                                    options.build.align_to->string() + "; the alignment needs 3");
       }
-      world_from_common =
-          FitAlignmentToReference(options.build, model, reference, likely_cause, &build);
+      world_from_common = FitAlignmentToReference(options.build, matched.model, matched.reference,
+                                                  likely_cause, &build);
       return false;
     });
   }
