@@ -11,6 +11,7 @@
 #include <string>
 
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 
 #include "core/dataset/dataset.h"
@@ -193,6 +194,32 @@ TEST_F(SimulatedOdometry, CannyDevoTracksOneSecondAndSwitchesReferenceFrames) {
   std::cout << "Canny-DEVO: ATE " << scores.ate_translation_cm.rmse << " cm, "
             << scores.ate_rotation_deg.rmse << " deg, " << run.reference_frames.size()
             << " reference frames, " << run.lost_steps << " LOST steps\n";
+}
+
+TEST_F(SimulatedOdometry, EvlocTrackDevoStatsListItsReferenceFrames) {
+  const std::filesystem::path dataset = *folder_ / "dataset";
+  const std::filesystem::path stats_path = *folder_ / "devo_stats.json";
+  TrackCommandOptions track = ParseTrackCommandLine(
+      {"--mode", "devo", "--dataset", dataset.string(), "--out",
+       (*folder_ / "devo_cli.txt").string(), "--stats", stats_path.string(), "--quiet"});
+  std::ostringstream log;
+  const OfflineTrackingResult result = RunTrackCommand(track, log);
+  ASSERT_GE(result.reference_frames.size(), 2u);
+  std::ifstream stats_file(stats_path);
+  const nlohmann::json stats = nlohmann::json::parse(stats_file);
+  ASSERT_TRUE(stats.contains("reference_frames"));
+  const nlohmann::json& frames = stats["reference_frames"];
+  ASSERT_EQ(frames.size(), result.reference_frames.size());
+  double previous_t_s = -1;
+  for (size_t i = 0; i < frames.size(); ++i) {
+    EXPECT_EQ(frames[i]["points"].get<int>(), result.reference_frames[i].points);
+    EXPECT_GT(frames[i]["points"].get<int>(), 1000);
+    EXPECT_GE(frames[i]["semi_dense_pixels"].get<int>(), frames[i]["points"].get<int>());
+    EXPECT_GT(frames[i]["build_cpu_ms"].get<double>(), 0);
+    EXPECT_GT(frames[i]["median_depth_m"].get<double>(), 0.5);
+    EXPECT_GT(frames[i]["t_s"].get<double>(), previous_t_s);
+    previous_t_s = frames[i]["t_s"].get<double>();
+  }
 }
 
 }  // namespace

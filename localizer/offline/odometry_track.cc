@@ -68,6 +68,16 @@ OfflineTrackingResult RunOdometryTrack(const Dataset& dataset, odometry::Odometr
   result.measurements = run.events;
   result.lost_steps = run.lost_steps;
   result.wall_s = run.wall_s;
+  for (const odometry::ReferenceFrameInfo& reference : run.reference_frames) {
+    ReferenceFrameRecord record;
+    record.t_s = static_cast<double>(reference.t_ns - initial_t_ns) * 1e-9;
+    record.points = reference.points;
+    record.semi_dense_pixels = reference.stats.semi_dense_pixels;
+    record.median_depth_m = reference.median_depth_m;
+    record.build_ms = reference.build_ms;
+    record.build_cpu_ms = reference.build_cpu_ms;
+    result.reference_frames.push_back(record);
+  }
   if (!quiet) {
     double build_ms = 0;
     for (const odometry::ReferenceFrameInfo& reference : run.reference_frames) {

@@ -73,6 +73,20 @@ struct RelocalizationEpisode {
   double max_step_ms = 0;
 };
 
+// A reference frame (Canny-DEVO) or keyframe that a mapless run built, for the statistics.
+struct ReferenceFrameRecord {
+  // Its time since the run's start, seconds.
+  double t_s = 0;
+  // Points it kept, and the semi-dense pixels they were chosen from.
+  int points = 0;
+  int semi_dense_pixels = 0;
+  // Median depth of its points, metres.
+  double median_depth_m = 0;
+  // Time its build took: wall clock, and CPU time of the building thread, milliseconds.
+  double build_ms = 0;
+  double build_cpu_ms = 0;
+};
+
 // What an offline run produced.
 struct OfflineTrackingResult {
   // One pose per step that has one (TRACKING and LOST steps; INITIALIZING and RELOCALIZING steps
@@ -94,6 +108,8 @@ struct OfflineTrackingResult {
   // Where each step's pose came from, "map" or "odometry" (hand-over runs, handover_track.h;
   // empty otherwise).
   std::vector<std::string> pose_sources;
+  // The reference frames of a Canny-DEVO run, in order (empty otherwise).
+  std::vector<ReferenceFrameRecord> reference_frames;
   // Wall-clock time of the run (reading included), seconds.
   double wall_s = 0;
 };

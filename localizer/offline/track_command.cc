@@ -144,6 +144,18 @@ void WriteTrackOutputs(const TrackCommandOptions& options, const std::string& va
                             {"wall_s", result.wall_s},
                             {"median_step_ms", Median(step_ms)},
                             {"per_step", StepsToJson(result)}};
+    if (!result.reference_frames.empty()) {
+      nlohmann::json frames = nlohmann::json::array();
+      for (const ReferenceFrameRecord& frame : result.reference_frames) {
+        frames.push_back({{"t_s", frame.t_s},
+                          {"points", frame.points},
+                          {"semi_dense_pixels", frame.semi_dense_pixels},
+                          {"median_depth_m", frame.median_depth_m},
+                          {"build_ms", frame.build_ms},
+                          {"build_cpu_ms", frame.build_cpu_ms}});
+      }
+      stats["reference_frames"] = frames;
+    }
     WriteFileAtomically(*options.stats_path, stats.dump(1) + "\n");
   }
   if (!options.quiet) {
@@ -401,7 +413,8 @@ Options:
                          RELOCALIZING; points, quality, timings) and the search episodes
                          ("relocalizations": start_t_s, end_t_s, outcome found / not_found /
                          ended) and what the noise filters removed ("event_filter", and per
-                         step) as JSON
+                         step) as JSON; --mode devo adds its reference frames
+                         ("reference_frames": t_s, points, build_ms, build_cpu_ms, ...)
   --debug-dir DIR        write debug pictures (time surface with the map, ON/OFF surfaces,
                          predicted gradient and flow)
   --debug-every N        one debug picture every N steps (default 30)
