@@ -63,13 +63,13 @@ void ReferenceMapSource::VisibleCandidates(const Camera&, const Rigid3d&,
   for (size_t i = 0; i < positions_.size(); ++i) (*candidates)[i] = static_cast<uint32_t>(i);
 }
 
-void ReferenceMapSource::Replace(std::vector<Eigen::Vector3f> positions,
-                                 std::vector<Eigen::Vector3f> gradients) {
-  if (positions.size() != gradients.size()) {
+void ReferenceMapSource::Replace(std::vector<Eigen::Vector3f>* positions,
+                                 std::vector<Eigen::Vector3f>* gradients) {
+  if (positions->size() != gradients->size()) {
     throw InvalidArgumentError("ReferenceMapSource: one gradient per position needed");
   }
-  positions_ = std::move(positions);
-  gradients_ = std::move(gradients);
+  positions_.swap(*positions);
+  gradients_.swap(*gradients);
   ++generation_;
 }
 
@@ -97,14 +97,20 @@ void CannyDevo::UpdateLocalMap(const Rigid3d& world_from_cam) {
   std::sort(ids.begin(), ids.end());
   if (ids == local_map_ids_) return;
   local_map_ids_ = ids;
-  std::vector<Eigen::Vector3f> positions;
-  std::vector<Eigen::Vector3f> gradients;
+  size_t total = 0;
+  for (const auto& [nearness, index] : order) total += kept_frames_[index].positions.size();
+  std::vector<Eigen::Vector3f>& positions = spare_positions_;
+  std::vector<Eigen::Vector3f>& gradients = spare_gradients_;
+  positions.clear();
+  gradients.clear();
+  positions.reserve(total);
+  gradients.reserve(total);
   for (const auto& [nearness, index] : order) {
     const KeptFrame& frame = kept_frames_[index];
     positions.insert(positions.end(), frame.positions.begin(), frame.positions.end());
     gradients.insert(gradients.end(), frame.gradients.begin(), frame.gradients.end());
   }
-  source_.Replace(std::move(positions), std::move(gradients));
+  source_.Replace(&positions, &gradients);
 }
 
 CannyDevo::CannyDevo(const Camera& event_camera, const Camera& depth_camera,
@@ -145,11 +151,13 @@ ReferenceFrameInfo CannyDevo::BuildReference(const Rigid3d& world_from_cam, int6
   decay.decay_time_ns = decay_time_s * 1e9;
   decay.empty_threshold = options_.mapping_empty_threshold;
   // The surface's values, and its active pixels (T > delta) as the semi-dense region.
-  const cv::Mat values = mapping_surface_.Values(tracking::SurfaceChannel::kAll, t_ns, decay);
-  cv::Mat semi_dense;
+  // (The images are members so that each build reuses their memory.)
+  cv::Mat& values = build_values_;
+  mapping_surface_.Values(tracking::SurfaceChannel::kAll, t_ns, decay, &values);
+  cv::Mat& semi_dense = build_semi_dense_;
   cv::compare(values, 0.0, semi_dense, cv::CMP_GT);
-  cv::Mat gradient_x;
-  cv::Mat gradient_y;
+  cv::Mat& gradient_x = build_gradient_x_;
+  cv::Mat& gradient_y = build_gradient_y_;
   cv::Sobel(values, gradient_x, CV_32F, 1, 0, 3);
   cv::Sobel(values, gradient_y, CV_32F, 0, 1, 3);
   if (options_.thin_to_front) {
@@ -181,8 +189,9 @@ ReferenceFrameInfo CannyDevo::BuildReference(const Rigid3d& world_from_cam, int6
   info.t_ns = t_ns;
   info.world_from_cam = world_from_cam;
   info.decay_time_s = decay_time_s;
-  std::vector<ReferencePoint> points = BuildReferenceMap(
-      ideal, semi_dense, depth_camera_, depth_m, event_from_depth, options_.reference, &info.stats);
+  std::vector<ReferencePoint>& points = build_points_;
+  BuildReferenceMap(ideal, semi_dense, depth_camera_, depth_m, event_from_depth, options_.reference,
+                    &points, &info.stats);
   // Even subsampling to the budget.
   std::vector<Eigen::Vector3f> positions_in_cam;
   positions_in_cam.reserve(points.size());
@@ -205,6 +214,10 @@ ReferenceFrameInfo CannyDevo::BuildReference(const Rigid3d& world_from_cam, int6
   std::vector<Eigen::Vector3f> gradients;
   std::vector<ReferencePoint> kept;
   std::vector<double> depths;
+  positions.reserve(chosen.size());
+  gradients.reserve(chosen.size());
+  kept.reserve(chosen.size());
+  depths.reserve(chosen.size());
   const Eigen::Matrix3d rotation = world_from_cam.RotationMatrix();
   for (const uint32_t index : chosen) {
     const ReferencePoint& point = points[index];

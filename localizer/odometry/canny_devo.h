@@ -85,8 +85,9 @@ class ReferenceMapSource final : public tracking::MapSource {
                          const VisibilityQueryOptions& options,
                          std::vector<uint32_t>* candidates) const override;
   // Replaces the points (world positions and unit gradients, one per position) and changes the
-  // generation. Throws InvalidArgumentError when the sizes differ.
-  void Replace(std::vector<Eigen::Vector3f> positions, std::vector<Eigen::Vector3f> gradients);
+  // generation. The previous points are swapped into the arguments, so that a caller can fill
+  // the same memory next time. Throws InvalidArgumentError when the sizes differ.
+  void Replace(std::vector<Eigen::Vector3f>* positions, std::vector<Eigen::Vector3f>* gradients);
 
  private:
   uint64_t generation_ = 0;
@@ -186,6 +187,13 @@ class CannyDevo {
   tracking::PoseEstimate last_step_;
   bool has_step_ = false;
   std::vector<ReferencePoint> reference_points_;
+  // The points of the last build before selection, the mapping surface's values, its semi-dense
+  // mask and gradients: kept to reuse their memory (megabytes at VGA) in the next build.
+  std::vector<ReferencePoint> build_points_;
+  cv::Mat build_values_;
+  cv::Mat build_semi_dense_;
+  cv::Mat build_gradient_x_;
+  cv::Mat build_gradient_y_;
   std::vector<ReferenceFrameInfo> references_;
   // A reference frame kept for the local map: its pose, median depth and world points.
   struct KeptFrame {
@@ -205,6 +213,10 @@ class CannyDevo {
   uint64_t next_frame_id_ = 0;
   // The ids of the frames in the local map, sorted.
   std::vector<uint64_t> local_map_ids_;
+  // The local map's previous points, whose memory the next UpdateLocalMap fills (a VGA local map
+  // is megabytes: fresh allocations cost page faults on every reference frame).
+  std::vector<Eigen::Vector3f> spare_positions_;
+  std::vector<Eigen::Vector3f> spare_gradients_;
 };
 
 }  // namespace evloc::odometry

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstddef>
 #include <limits>
 #include <string>
 #include <utility>
@@ -37,19 +38,28 @@ void ForEachWarpedDepthPixel(const Camera& depth_camera, const cv::Mat& depth_m,
                              const Project& project, int width, int height, const Visit& visit) {
   const Eigen::Matrix3d rotation = target_from_depth.RotationMatrix();
   const bool pinhole = depth_camera.model == CameraModel::kPinhole;
+  // A pinhole's ray (x', y', 1) per column and per row, computed once per frame.
+  std::vector<double> column_ray;
+  if (pinhole) {
+    column_ray.resize(static_cast<size_t>(depth_m.cols));
+    for (int x = 0; x < depth_m.cols; ++x) column_ray[x] = (x - depth_camera.cx) / depth_camera.fx;
+  }
   for (int y = 0; y < depth_m.rows; ++y) {
     const float* row = depth_m.ptr<float>(y);
+    const double row_ray = (y - depth_camera.cy) / depth_camera.fy;
     for (int x = 0; x < depth_m.cols; ++x) {
       const float z = row[x];
       if (!(z >= options.min_depth_m && z <= options.max_depth_m)) continue;
-      Eigen::Vector3d ray;
+      // The point at depth z on the pixel's ray (for a pinhole the ray's z is 1).
+      Eigen::Vector3d ray_point;
       if (pinhole) {
-        ray << (x - depth_camera.cx) / depth_camera.fx, (y - depth_camera.cy) / depth_camera.fy, 1;
-      } else if (!depth_camera.Unproject(Eigen::Vector2d(x, y), &ray)) {
-        continue;
+        ray_point << column_ray[x] * z, row_ray * z, z;
+      } else {
+        Eigen::Vector3d ray;
+        if (!depth_camera.Unproject(Eigen::Vector2d(x, y), &ray)) continue;
+        ray_point = ray * (z / ray.z());
       }
-      const Eigen::Vector3d point =
-          rotation * (ray * (z / ray.z())) + target_from_depth.translation;
+      const Eigen::Vector3d point = rotation * ray_point + target_from_depth.translation;
       if (!(point.z() > options.min_depth_m)) continue;
       Eigen::Vector2d pixel;
       if (!project(point, &pixel)) continue;
@@ -85,11 +95,50 @@ void ReferenceMapOptions::Check() const {
   }
 }
 
+namespace {
+
+// A depth point warped into the event image: its position, depth and nearest pixel (row-major).
+struct WarpedDepthPoint {
+  float u;
+  float v;
+  float z;
+  int32_t cell;
+};
+
+// A warped point near a semi-dense pixel: its offset from the pixel centre and its depth.
+struct NeighbourPoint {
+  double du;
+  double dv;
+  float z;
+};
+
+// The buffers of a build, kept for the next one: each build fills megabytes of them, and fresh
+// allocations of that size cost page faults (measured: up to a third of a VGA build).
+struct BuildWorkspace {
+  cv::Mat near_semi_dense;
+  std::vector<int32_t> cell_count;
+  std::vector<WarpedDepthPoint> warped;
+  std::vector<WarpedDepthPoint> sorted;
+  std::vector<NeighbourPoint> neighbours;
+};
+
+}  // namespace
+
 std::vector<ReferencePoint> BuildReferenceMap(const Camera& event_camera, const cv::Mat& semi_dense,
                                               const Camera& depth_camera, const cv::Mat& depth_m,
                                               const Rigid3d& event_from_depth,
                                               const ReferenceMapOptions& options,
                                               ReferenceMapStats* stats) {
+  std::vector<ReferencePoint> points;
+  BuildReferenceMap(event_camera, semi_dense, depth_camera, depth_m, event_from_depth, options,
+                    &points, stats);
+  return points;
+}
+
+void BuildReferenceMap(const Camera& event_camera, const cv::Mat& semi_dense,
+                       const Camera& depth_camera, const cv::Mat& depth_m,
+                       const Rigid3d& event_from_depth, const ReferenceMapOptions& options,
+                       std::vector<ReferencePoint>* points, ReferenceMapStats* stats) {
   options.Check();
   if (semi_dense.type() != CV_8UC1 || semi_dense.cols != event_camera.width ||
       semi_dense.rows != event_camera.height) {
@@ -98,6 +147,9 @@ std::vector<ReferencePoint> BuildReferenceMap(const Camera& event_camera, const 
                                std::to_string(event_camera.height));
   }
   CheckDepthFrame("BuildReferenceMap", depth_camera, depth_m);
+  if (points == nullptr) throw InvalidArgumentError("BuildReferenceMap: no output for the points");
+  points->clear();
+  thread_local BuildWorkspace workspace;
   ReferenceMapStats local_stats;
   const int width = event_camera.width;
   const int height = event_camera.height;
@@ -105,18 +157,13 @@ std::vector<ReferencePoint> BuildReferenceMap(const Camera& event_camera, const 
   // the points whose pixel lies within `reach` cells of a semi-dense pixel can be anyone's
   // neighbour: the others are not kept (most of a VGA depth frame).
   const int reach = static_cast<int>(std::ceil(options.neighbour_radius_px));
-  cv::Mat near_semi_dense;
+  cv::Mat& near_semi_dense = workspace.near_semi_dense;
   cv::dilate(semi_dense, near_semi_dense,
              cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * reach + 1, 2 * reach + 1)));
-  struct Warped {
-    float u;
-    float v;
-    float z;
-    int32_t cell;
-  };
-  std::vector<Warped> warped;
-  warped.reserve(static_cast<size_t>(cv::countNonZero(near_semi_dense)) * 2);
-  std::vector<int32_t> cell_count(static_cast<size_t>(width) * height + 1, 0);
+  std::vector<WarpedDepthPoint>& warped = workspace.warped;
+  warped.clear();
+  std::vector<int32_t>& cell_count = workspace.cell_count;
+  cell_count.assign(static_cast<size_t>(width) * height + 1, 0);
   ForEachWarpedDepthPixel(
       depth_camera, depth_m, event_from_depth, options,
       [&](const Eigen::Vector3d& point, Eigen::Vector2d* pixel) {
@@ -133,29 +180,34 @@ std::vector<ReferencePoint> BuildReferenceMap(const Camera& event_camera, const 
         ++cell_count[static_cast<size_t>(cell) + 1];
       });
   local_stats.warped_points = static_cast<int>(warped.size());
-  // Counting sort of the points by cell.
+  // Counting sort of the points by cell, into a copy: the pixels below visit the cells in raster
+  // order, so the points they read lie (nearly) in sequence in memory. cell_count[c] becomes the
+  // first point of cell c.
   for (size_t i = 1; i < cell_count.size(); ++i) cell_count[i] += cell_count[i - 1];
-  std::vector<int32_t> cell_start(cell_count.begin(), cell_count.end());
-  std::vector<int32_t> order(warped.size());
-  for (size_t i = 0; i < warped.size(); ++i) {
-    order[cell_start[static_cast<size_t>(warped[i].cell)]++] = static_cast<int32_t>(i);
+  std::vector<WarpedDepthPoint>& sorted = workspace.sorted;
+  sorted.resize(warped.size());
+  for (const WarpedDepthPoint& point : warped) {
+    sorted[static_cast<size_t>(cell_count[static_cast<size_t>(point.cell)]++)] = point;
   }
+  // Each cell's count moved its start to the next cell's: shift back.
+  for (size_t i = cell_count.size() - 1; i > 0; --i) cell_count[i] = cell_count[i - 1];
+  cell_count[0] = 0;
   const double radius_squared = options.neighbour_radius_px * options.neighbour_radius_px;
   // The cells within `reach` that can hold a neighbour: a point of the cell at offset (dx, dy)
   // lies at least |dx| - 0.5 and |dy| - 0.5 pixels away along each axis (its nearest pixel is the
   // cell), so a cell whose nearest corner is beyond the radius (with a margin far above the
-  // float rounding of a position) holds none: 13 of the 25 cells at the default 1.5 px.
-  std::vector<std::pair<int, int>> cell_offsets;
+  // float rounding of a position) holds none: 13 of the 25 cells at the default 1.5 px. Those of
+  // one row form a run |dx| <= half_width[dy + reach], whose points are contiguous in `sorted`.
+  std::vector<int> half_width(static_cast<size_t>(2 * reach + 1), -1);
   for (int dy = -reach; dy <= reach; ++dy) {
-    for (int dx = -reach; dx <= reach; ++dx) {
-      const double gap_x = std::max(0.0, std::abs(dx) - 0.5);
+    for (int dx = 0; dx <= reach; ++dx) {
+      const double gap_x = std::max(0.0, dx - 0.5);
       const double gap_y = std::max(0.0, std::abs(dy) - 0.5);
-      if (gap_x * gap_x + gap_y * gap_y <= radius_squared + 1e-3) cell_offsets.emplace_back(dx, dy);
+      if (gap_x * gap_x + gap_y * gap_y <= radius_squared + 1e-3) half_width[dy + reach] = dx;
     }
   }
   const double tolerance = options.surround_tolerance_px;
-  std::vector<ReferencePoint> points;
-  std::vector<const Warped*> neighbours;
+  std::vector<NeighbourPoint>& neighbours = workspace.neighbours;
   for (int y = 0; y < height; ++y) {
     const uint8_t* mask_row = semi_dense.ptr<uint8_t>(y);
     for (int x = 0; x < width; ++x) {
@@ -163,38 +215,50 @@ std::vector<ReferencePoint> BuildReferenceMap(const Camera& event_camera, const 
       ++local_stats.semi_dense_pixels;
       neighbours.clear();
       float nearest = std::numeric_limits<float>::max();
-      for (const auto& [dx, dy] : cell_offsets) {
-        const int cx = x + dx;
+      for (int dy = -reach; dy <= reach; ++dy) {
         const int cy = y + dy;
-        if (cx < 0 || cy < 0 || cx >= width || cy >= height) continue;
-        const size_t cell = static_cast<size_t>(cy) * width + cx;
-        for (int32_t k = cell_count[cell]; k < cell_count[cell + 1]; ++k) {
-          const Warped& point = warped[order[k]];
-          const double du = point.u - x;
-          const double dv = point.v - y;
+        const int half = half_width[dy + reach];
+        if (cy < 0 || cy >= height || half < 0) continue;
+        const size_t row_cell = static_cast<size_t>(cy) * width;
+        const WarpedDepthPoint* point =
+            sorted.data() + cell_count[row_cell + std::max(0, x - half)];
+        const WarpedDepthPoint* end =
+            sorted.data() + cell_count[row_cell + std::min(width - 1, x + half) + 1];
+        for (; point != end; ++point) {
+          const double du = point->u - x;
+          const double dv = point->v - y;
           if (du * du + dv * dv > radius_squared) continue;
-          neighbours.push_back(&point);
-          nearest = std::min(nearest, point.z);
+          neighbours.push_back({du, dv, point->z});
+          nearest = std::min(nearest, point->z);
         }
       }
       // The foreground cluster: the neighbours within the fraction of the nearest depth.
       const float limit = nearest * static_cast<float>(1 + options.foreground_depth_fraction);
       int count = 0;
       bool left = false, right = false, above = false, below = false;
-      Eigen::Matrix3d normal_matrix = Eigen::Matrix3d::Zero();
-      Eigen::Vector3d right_side = Eigen::Vector3d::Zero();
-      for (const Warped* point : neighbours) {
-        if (point->z > limit) continue;
-        const double du = point->u - x;
-        const double dv = point->v - y;
+      // The normal equations of the plane below, J^T J and J^T b for the rows (du, dv, 1) and
+      // b = 1/z: the upper triangle, each entry summed in neighbour order.
+      double uu = 0, uv = 0, u1 = 0, vv = 0, v1 = 0, ones = 0;
+      double bu = 0, bv = 0, b1 = 0;
+      for (const NeighbourPoint& point : neighbours) {
+        if (point.z > limit) continue;
+        const double du = point.du;
+        const double dv = point.dv;
         left |= du <= tolerance;
         right |= du >= -tolerance;
         above |= dv <= tolerance;
         below |= dv >= -tolerance;
         // Inverse depth as a plane over the image: 1/z = a du + b dv + c.
-        const Eigen::Vector3d row(du, dv, 1);
-        normal_matrix += row * row.transpose();
-        right_side += row / point->z;
+        const double z = point.z;
+        uu += du * du;
+        uv += du * dv;
+        u1 += du;
+        vv += dv * dv;
+        v1 += dv;
+        ones += 1;
+        bu += du / z;
+        bv += dv / z;
+        b1 += 1 / z;
         ++count;
       }
       if (count < options.min_cluster_points) {
@@ -205,6 +269,9 @@ std::vector<ReferencePoint> BuildReferenceMap(const Camera& event_camera, const 
         ++local_stats.not_surrounded;
         continue;
       }
+      Eigen::Matrix3d normal_matrix;
+      normal_matrix << uu, uv, u1, uv, vv, v1, u1, v1, ones;
+      const Eigen::Vector3d right_side(bu, bv, b1);
       // The ray through the pixel centre meets the plane at 1/z = c; with too few or collinear
       // points, the mean inverse depth.
       double inverse_depth = right_side(2) / count;
@@ -225,11 +292,10 @@ std::vector<ReferencePoint> BuildReferenceMap(const Camera& event_camera, const 
       reference.position = Eigen::Vector3d((x - event_camera.cx) / event_camera.fx * depth,
                                            (y - event_camera.cy) / event_camera.fy * depth, depth);
       reference.support = count;
-      points.push_back(reference);
+      points->push_back(reference);
     }
   }
   if (stats != nullptr) *stats = local_stats;
-  return points;
 }
 
 cv::Mat RegisterDepth(const Camera& camera, const Camera& depth_camera, const cv::Mat& depth_m,

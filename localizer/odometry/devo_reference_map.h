@@ -73,6 +73,12 @@ std::vector<ReferencePoint> BuildReferenceMap(const Camera& event_camera, const 
                                               const Rigid3d& event_from_depth,
                                               const ReferenceMapOptions& options,
                                               ReferenceMapStats* stats = nullptr);
+// The same into `points` (cleared first; its capacity is reused, so a caller that builds again
+// and again keeps one vector). Scratch buffers are kept per thread between builds.
+void BuildReferenceMap(const Camera& event_camera, const cv::Mat& semi_dense,
+                       const Camera& depth_camera, const cv::Mat& depth_m,
+                       const Rigid3d& event_from_depth, const ReferenceMapOptions& options,
+                       std::vector<ReferencePoint>* points, ReferenceMapStats* stats = nullptr);
 
 // The depth frame `depth_m` (CV_32FC1 metres of `depth_camera`, 0 = none) seen from `camera`:
 // every depth pixel within the options' depth range warped through `camera_from_depth` and

@@ -2,6 +2,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <vector>
 
 #include "core/common/error.h"
 
@@ -16,6 +19,22 @@ uint32_t Mix(uint32_t value) {
   value *= 0xc2b2ae35u;
   value ^= value >> 16;
   return value;
+}
+
+// Sorts `indices` (each < `size`) ascending: by marking them when they are many and distinct (a
+// selection keeps thousands of a map's points; a comparison sort of them cost a millisecond).
+void SortIndices(size_t size, std::vector<uint32_t>* indices) {
+  const auto compare_sort = [indices] { std::sort(indices->begin(), indices->end()); };
+  if (indices->size() < 64 || indices->size() * 8 < size) return compare_sort();
+  std::vector<uint8_t> marked(size, 0);
+  for (const uint32_t index : *indices) {
+    if (marked[index]) return compare_sort();  // a repeated candidate
+    marked[index] = 1;
+  }
+  size_t next = 0;
+  for (size_t index = 0; index < size; ++index) {
+    if (marked[index]) (*indices)[next++] = static_cast<uint32_t>(index);
+  }
 }
 
 }  // namespace
@@ -64,14 +83,32 @@ std::vector<uint32_t> SelectEvenly(std::span<const Eigen::Vector3f> positions,
   if (visible.size() <= static_cast<size_t>(options.max_points)) {
     selected.reserve(visible.size());
     for (const Candidate& candidate : visible) selected.push_back(candidate.index);
-    std::sort(selected.begin(), selected.end());
+    SortIndices(positions.size(), &selected);
     return selected;
   }
-  std::sort(visible.begin(), visible.end(), [](const Candidate& a, const Candidate& b) {
-    if (a.bucket != b.bucket) return a.bucket < b.bucket;
-    if (a.order != b.order) return a.order < b.order;
-    return a.index < b.index;
-  });
+  // Sorted by (bucket, order, index): a counting sort by bucket, then each bucket's few points
+  // by their order (a comparison sort of the whole list took most of a selection's time).
+  {
+    std::vector<uint32_t> bucket_start(static_cast<size_t>(buckets_x) * buckets_y + 1, 0);
+    for (const Candidate& candidate : visible) ++bucket_start[candidate.bucket + 1];
+    for (size_t b = 1; b < bucket_start.size(); ++b) bucket_start[b] += bucket_start[b - 1];
+    std::vector<Candidate> by_bucket(visible.size());
+    for (const Candidate& candidate : visible)
+      by_bucket[bucket_start[candidate.bucket]++] = candidate;
+    visible.swap(by_bucket);
+    size_t begin = 0;
+    for (size_t end = 1; end <= visible.size(); ++end) {
+      if (end == visible.size() || visible[end].bucket != visible[begin].bucket) {
+        std::sort(visible.begin() + static_cast<std::ptrdiff_t>(begin),
+                  visible.begin() + static_cast<std::ptrdiff_t>(end),
+                  [](const Candidate& a, const Candidate& b) {
+                    if (a.order != b.order) return a.order < b.order;
+                    return a.index < b.index;
+                  });
+        begin = end;
+      }
+    }
+  }
   // Bucket ranges in `visible`.
   std::vector<size_t> bucket_begin;
   for (size_t i = 0; i < visible.size(); ++i) {
@@ -110,7 +147,7 @@ std::vector<uint32_t> SelectEvenly(std::span<const Eigen::Vector3f> positions,
       selected.push_back(visible[bucket_begin[b] + level].index);
     }
   }
-  std::sort(selected.begin(), selected.end());
+  SortIndices(positions.size(), &selected);
   return selected;
 }
 

@@ -100,7 +100,16 @@ void TimeSurface::Insert(const EventBuffer& events, size_t begin, size_t end) {
 }
 
 cv::Mat TimeSurface::Values(SurfaceChannel channel, int64_t t_ns, const SurfaceDecay& decay) const {
-  cv::Mat values(height_, width_, CV_32FC1, cv::Scalar(0));
+  cv::Mat values;
+  Values(channel, t_ns, decay, &values);
+  return values;
+}
+
+void TimeSurface::Values(SurfaceChannel channel, int64_t t_ns, const SurfaceDecay& decay,
+                         cv::Mat* values_out) const {
+  values_out->create(height_, width_, CV_32FC1);
+  values_out->setTo(cv::Scalar(0));
+  cv::Mat& values = *values_out;
   const int64_t* last = last_t_ns_[static_cast<int>(channel)].data();
   // The age test rejects most pixels without a logarithm and an exp each (Value's own bound).
   const int64_t max_age_ns = decay.MaxActiveAgeNs();
@@ -113,7 +122,6 @@ cv::Mat TimeSurface::Values(SurfaceChannel channel, int64_t t_ns, const SurfaceD
       row[x] = static_cast<float>(decay.Value(last_t, t_ns));
     }
   }
-  return values;
 }
 
 cv::Mat TimeSurface::ActiveMask(SurfaceChannel channel, int64_t t_ns,

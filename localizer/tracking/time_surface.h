@@ -122,6 +122,9 @@ class TimeSurface {
 
   // T(x, t_ns) of every ideal pixel of `channel` (CV_32FC1, SurfaceDecay::Value: 0 when empty).
   cv::Mat Values(SurfaceChannel channel, int64_t t_ns, const SurfaceDecay& decay) const;
+  // The same into `values` (its memory reused when it already has the surface's size and type).
+  void Values(SurfaceChannel channel, int64_t t_ns, const SurfaceDecay& decay,
+              cv::Mat* values) const;
   // The binary mask (CV_8UC1, 255 = active) of pixels of `channel` with T(x, t_ns) > threshold:
   // Values > 0.
   cv::Mat ActiveMask(SurfaceChannel channel, int64_t t_ns, const SurfaceDecay& decay) const;
