@@ -88,6 +88,9 @@ class ReferenceMapSource final : public tracking::MapSource {
   // generation. The previous points are swapped into the arguments, so that a caller can fill
   // the same memory next time. Throws InvalidArgumentError when the sizes differ.
   void Replace(std::vector<Eigen::Vector3f>* positions, std::vector<Eigen::Vector3f>* gradients);
+  // Gives its point vectors room for `points` and touches that memory, so that filling them later
+  // costs no page faults; the points and the generation stay as they are.
+  void Reserve(size_t points);
 
  private:
   uint64_t generation_ = 0;
@@ -187,13 +190,23 @@ class CannyDevo {
   tracking::PoseEstimate last_step_;
   bool has_step_ = false;
   std::vector<ReferencePoint> reference_points_;
-  // The points of the last build before selection, the mapping surface's values, its semi-dense
-  // mask and gradients: kept to reuse their memory (megabytes at VGA) in the next build.
-  std::vector<ReferencePoint> build_points_;
-  cv::Mat build_values_;
-  cv::Mat build_semi_dense_;
-  cv::Mat build_gradient_x_;
-  cv::Mat build_gradient_y_;
+  // The buffers of BuildReference, kept to reuse their memory in the next build (megabytes at VGA;
+  // fresh allocations cost page faults on every reference frame).
+  struct BuildBuffers {
+    // The mapping surface's values, its semi-dense mask and its gradients.
+    cv::Mat values;
+    cv::Mat semi_dense;
+    cv::Mat gradient_x;
+    cv::Mat gradient_y;
+    // The points with depth before selection, their camera positions and indices.
+    std::vector<ReferencePoint> points;
+    std::vector<Eigen::Vector3f> positions_in_cam;
+    std::vector<uint32_t> candidates;
+    // The points kept (swapped with reference_points_ when the frame is taken), their depths.
+    std::vector<ReferencePoint> kept;
+    std::vector<double> depths;
+  };
+  BuildBuffers build_;
   std::vector<ReferenceFrameInfo> references_;
   // A reference frame kept for the local map: its pose, median depth and world points.
   struct KeptFrame {

@@ -269,21 +269,20 @@ void BuildReferenceMap(const Camera& event_camera, const cv::Mat& semi_dense,
         ++local_stats.not_surrounded;
         continue;
       }
-      Eigen::Matrix3d normal_matrix;
-      normal_matrix << uu, uv, u1, uv, vv, v1, u1, v1, ones;
-      const Eigen::Vector3d right_side(bu, bv, b1);
-      // The ray through the pixel centre meets the plane at 1/z = c; with too few or collinear
-      // points, the mean inverse depth.
-      double inverse_depth = right_side(2) / count;
-      const Eigen::LDLT<Eigen::Matrix3d> ldlt(normal_matrix);
-      if (count >= 3 && ldlt.info() == Eigen::Success && ldlt.isPositive() &&
-          std::abs(normal_matrix.determinant()) > 1e-6 * count * count * count) {
-        const Eigen::Vector3d plane = ldlt.solve(right_side);
+      // The ray through the pixel centre meets the plane at 1/z = c, by Cramer's rule (the
+      // normal matrix is symmetric positive semi-definite; a determinant near zero means too few
+      // or collinear points, and then the mean inverse depth is taken).
+      double inverse_depth = b1 / count;
+      const double minor_uv = uv * v1 - vv * u1;
+      const double determinant =
+          uu * (vv * ones - v1 * v1) - uv * (uv * ones - v1 * u1) + u1 * minor_uv;
+      if (count >= 3 && std::abs(determinant) > 1e-6 * count * count * count) {
+        const double c =
+            (uu * (vv * b1 - bv * v1) - uv * (uv * b1 - bv * u1) + bu * minor_uv) / determinant;
         // Keep the plane only when it stays within the cluster's depths (a fit across a fold
         // would extrapolate).
-        if (plane.allFinite() && plane(2) > 0 && plane(2) >= 1.0 / limit * 0.999 &&
-            plane(2) <= 1.0 / nearest * 1.001) {
-          inverse_depth = plane(2);
+        if (std::isfinite(c) && c > 0 && c >= 1.0 / limit * 0.999 && c <= 1.0 / nearest * 1.001) {
+          inverse_depth = c;
         }
       }
       const double depth = 1.0 / inverse_depth;

@@ -21,21 +21,39 @@ uint32_t Mix(uint32_t value) {
   return value;
 }
 
-// Sorts `indices` (each < `size`) ascending: by marking them when they are many and distinct (a
-// selection keeps thousands of a map's points; a comparison sort of them cost a millisecond).
-void SortIndices(size_t size, std::vector<uint32_t>* indices) {
+// Sorts `indices` (each < `size`) ascending: by marking them (in `marked`, scratch) when they are
+// many and distinct (a selection keeps thousands of a map's points; a comparison sort of them
+// cost a millisecond).
+void SortIndices(size_t size, std::vector<uint32_t>* indices, std::vector<uint8_t>* marked) {
   const auto compare_sort = [indices] { std::sort(indices->begin(), indices->end()); };
   if (indices->size() < 64 || indices->size() * 8 < size) return compare_sort();
-  std::vector<uint8_t> marked(size, 0);
+  marked->assign(size, 0);
   for (const uint32_t index : *indices) {
-    if (marked[index]) return compare_sort();  // a repeated candidate
-    marked[index] = 1;
+    if ((*marked)[index]) return compare_sort();  // a repeated candidate
+    (*marked)[index] = 1;
   }
   size_t next = 0;
   for (size_t index = 0; index < size; ++index) {
-    if (marked[index]) (*indices)[next++] = static_cast<uint32_t>(index);
+    if ((*marked)[index]) (*indices)[next++] = static_cast<uint32_t>(index);
   }
 }
+
+// A point of SelectEvenly that projects into the image: its bucket, its order in the bucket
+// (Mix of its index) and its index.
+struct SelectionCandidate {
+  uint32_t bucket;
+  uint32_t order;
+  uint32_t index;
+};
+
+// SelectEvenly's buffers, kept per thread between calls (a selection of tens of thousands of
+// candidates fills a megabyte; fresh allocations of that size cost page faults).
+struct SelectionScratch {
+  std::vector<SelectionCandidate> visible;
+  std::vector<SelectionCandidate> by_bucket;
+  std::vector<uint32_t> bucket_start;
+  std::vector<uint8_t> marked;
+};
 
 }  // namespace
 
@@ -50,13 +68,10 @@ std::vector<uint32_t> SelectEvenly(std::span<const Eigen::Vector3f> positions,
   }
   const int buckets_x = (width + options.bucket_size_px - 1) / options.bucket_size_px;
   const int buckets_y = (height + options.bucket_size_px - 1) / options.bucket_size_px;
-  struct Candidate {
-    uint32_t bucket;
-    uint32_t order;
-    uint32_t index;
-  };
-  std::vector<Candidate> visible;
-  visible.reserve(candidates.size());
+  using Candidate = SelectionCandidate;
+  thread_local SelectionScratch scratch;
+  std::vector<Candidate>& visible = scratch.visible;
+  visible.clear();
   const Eigen::Matrix3d rotation = cam_from_world.RotationMatrix();
   for (const uint32_t index : candidates) {
     if (index >= positions.size())
@@ -83,16 +98,18 @@ std::vector<uint32_t> SelectEvenly(std::span<const Eigen::Vector3f> positions,
   if (visible.size() <= static_cast<size_t>(options.max_points)) {
     selected.reserve(visible.size());
     for (const Candidate& candidate : visible) selected.push_back(candidate.index);
-    SortIndices(positions.size(), &selected);
+    SortIndices(positions.size(), &selected, &scratch.marked);
     return selected;
   }
   // Sorted by (bucket, order, index): a counting sort by bucket, then each bucket's few points
   // by their order (a comparison sort of the whole list took most of a selection's time).
   {
-    std::vector<uint32_t> bucket_start(static_cast<size_t>(buckets_x) * buckets_y + 1, 0);
+    std::vector<uint32_t>& bucket_start = scratch.bucket_start;
+    bucket_start.assign(static_cast<size_t>(buckets_x) * buckets_y + 1, 0);
     for (const Candidate& candidate : visible) ++bucket_start[candidate.bucket + 1];
     for (size_t b = 1; b < bucket_start.size(); ++b) bucket_start[b] += bucket_start[b - 1];
-    std::vector<Candidate> by_bucket(visible.size());
+    std::vector<Candidate>& by_bucket = scratch.by_bucket;
+    by_bucket.resize(visible.size());
     for (const Candidate& candidate : visible)
       by_bucket[bucket_start[candidate.bucket]++] = candidate;
     visible.swap(by_bucket);
@@ -147,7 +164,7 @@ std::vector<uint32_t> SelectEvenly(std::span<const Eigen::Vector3f> positions,
       selected.push_back(visible[bucket_begin[b] + level].index);
     }
   }
-  SortIndices(positions.size(), &selected);
+  SortIndices(positions.size(), &selected, &scratch.marked);
   return selected;
 }
 
