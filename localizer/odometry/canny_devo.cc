@@ -21,12 +21,12 @@ namespace {
 // The CPU time of the calling thread, milliseconds.
 double ThreadCpuMilliseconds() { return static_cast<double>(ThreadCpuTimeNs()) * 1e-6; }
 
-// Room for `points` more than `vector` holds, its memory touched (resized, then shrunk back: the
-// capacity stays).
+// Room for `points` more than `vector` holds, its memory touched: filled with zeros (Eigen's
+// default constructor writes nothing), then shrunk back; the capacity stays.
 void ReserveTouched(size_t points, std::vector<Eigen::Vector3f>* vector) {
   const size_t size = vector->size();
   if (vector->capacity() >= size + points) return;
-  vector->resize(size + points);
+  vector->resize(size + points, Eigen::Vector3f::Zero());
   vector->resize(size);
 }
 
