@@ -22,6 +22,7 @@
 #include <optional>
 #include <random>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "core/common/error.h"
@@ -221,6 +222,154 @@ BENCHMARK(BM_TrackingStep)
     ->Args({0, 1, 1, 1, 1})
     ->Args({1, 1, 1, 1, 1})
     ->Args({0, 1, 1, 0, 0})
+    ->Unit(benchmark::kMicrosecond);
+
+// How a step's cost grows with the map and with the event rate (issue 16, target 6;
+// docs/benchmarks.md, "Tracking: cost growth"). The synthetic scene's motion and steps; what
+// changes is one of:
+// - the map: the rectangles' outlines sampled densely enough for `state.range(0)` points (all of
+//   them in view), tracked with evloc-track's budget of 2500 points (`state.range(1)` == 0) or
+//   with every point selected (1); the events stay those of the usual scene;
+// - the event rate: the usual scene's events, each repeated (or a share of them kept) so that
+//   they arrive at `state.range(0)` million events per second, the usual map and budget.
+// One step per iteration as BM_TrackingStep; the CPU time per iteration includes the ingestion
+// of the step's packet, step_median_ms does not.
+struct GrowthScene {
+  Map map;
+  EventBuffer warm_up;
+  std::vector<EventBuffer> packets;
+  double events_per_s = 0;
+};
+
+// The usual scene's events over its whole span, in one buffer.
+EventBuffer AllSceneEvents() {
+  EventBuffer events;
+  events.Append(GetScene().warm_up);
+  for (const EventBuffer& packet : GetScene().packets) events.Append(packet);
+  return events;
+}
+
+std::unique_ptr<GrowthScene> MakeGrowthScene(int64_t map_points, double million_events_per_s) {
+  auto growth = std::make_unique<GrowthScene>();
+  const Scene& usual = GetScene();
+  if (map_points > 0) {
+    // Spacing for the asked count: the outlines' length from the usual map (3 mm spacing).
+    const double length_m = static_cast<double>(usual.map.size()) * 0.003;
+    growth->map = testing::MakeRectangleMap(testing::DefaultRectangles(),
+                                            length_m / static_cast<double>(map_points));
+  } else {
+    growth->map = usual.map;
+  }
+  const EventBuffer events = AllSceneEvents();
+  const double span_s = static_cast<double>(events.t_ns.back() - events.t_ns.front()) * 1e-9;
+  const double usual_rate = static_cast<double>(events.size()) / span_s;
+  EventBuffer scaled;
+  if (million_events_per_s > 0) {
+    // Each event repeated floor or ceil of the factor times (a running remainder), or kept with
+    // that probability below 1: the same edges at the asked rate.
+    const double factor = million_events_per_s * 1e6 / usual_rate;
+    double owed = 0;
+    for (size_t i = 0; i < events.size(); ++i) {
+      owed += factor;
+      for (; owed >= 1; owed -= 1) scaled.push_back(events[i]);
+    }
+  } else {
+    scaled = events;
+  }
+  growth->events_per_s = static_cast<double>(scaled.size()) / span_s;
+  Scene cut;
+  CutIntoSteps(nullptr, &scaled, std::numeric_limits<int64_t>::max(), &cut);
+  growth->warm_up = std::move(cut.warm_up);
+  growth->packets = std::move(cut.packets);
+  return growth;
+}
+
+void RunGrowthSteps(benchmark::State& state, const GrowthScene& scene,
+                    const TrackerOptions& options) {
+  std::unique_ptr<Tracker> tracker;
+  size_t next_packet = 0;
+  auto restart = [&] {
+    tracker = std::make_unique<Tracker>(scene.map, nullptr, GetScene().camera, options);
+    tracker->AddEvents(scene.warm_up);
+    tracker->Reset(testing::SmoothMotion(kStartNs), kStartNs);
+    next_packet = 0;
+  };
+  restart();
+  std::vector<double> step_ms, selection_ms, solve_ms, points;
+  int64_t events = 0;
+  int64_t lost = 0;
+  for (auto _ : state) {
+    if (next_packet == scene.packets.size()) {
+      state.PauseTiming();
+      restart();
+      state.ResumeTiming();
+    }
+    const EventBuffer& packet = scene.packets[next_packet++];
+    events += static_cast<int64_t>(packet.size());
+    for (const PoseEstimate& estimate : tracker->AddEvents(packet)) {
+      step_ms.push_back(estimate.timings.total_ms);
+      selection_ms.push_back(estimate.timings.selection_ms);
+      solve_ms.push_back(estimate.timings.solve_ms);
+      points.push_back(estimate.quality.points_used);
+      lost += estimate.status == TrackingStatus::kLost ? 1 : 0;
+    }
+  }
+  auto median = [](std::vector<double> values) {
+    if (values.empty()) return 0.0;
+    std::nth_element(values.begin(), values.begin() + values.size() / 2, values.end());
+    return values[values.size() / 2];
+  };
+  double selection_sum = 0;
+  for (const double value : selection_ms) selection_sum += value;
+  double points_sum = 0;
+  for (const double value : points) points_sum += value;
+  state.counters["map_points"] = static_cast<double>(scene.map.size());
+  state.counters["events_per_s"] = scene.events_per_s;
+  state.counters["events_per_step"] =
+      static_cast<double>(events) / static_cast<double>(std::max<int64_t>(1, state.iterations()));
+  state.counters["step_median_ms"] = median(step_ms);
+  state.counters["selection_mean_ms"] =
+      selection_ms.empty() ? 0.0 : selection_sum / static_cast<double>(selection_ms.size());
+  state.counters["solve_median_ms"] = median(solve_ms);
+  state.counters["points_used"] =
+      points.empty() ? 0.0 : points_sum / static_cast<double>(points.size());
+  state.counters["lost_steps"] = static_cast<double>(lost);
+}
+
+// The scene for (map points, events per second), kept while the next run asks for the same.
+const GrowthScene& GetGrowthScene(int64_t map_points, double million_events_per_s) {
+  static std::pair<int64_t, double> key{-1, -1};
+  static std::unique_ptr<GrowthScene> scene;
+  if (!scene || key != std::make_pair(map_points, million_events_per_s)) {
+    scene.reset();
+    scene = MakeGrowthScene(map_points, million_events_per_s);
+    key = {map_points, million_events_per_s};
+  }
+  return *scene;
+}
+
+void BM_StepCostMapPoints(benchmark::State& state) {
+  const GrowthScene& scene = GetGrowthScene(state.range(0), 0);
+  TrackerOptions options;
+  if (state.range(1) != 0) options.max_points = static_cast<int>(scene.map.size());
+  RunGrowthSteps(state, scene, options);
+  state.SetLabel(state.range(1) != 0 ? "every point selected" : "budget 2500");
+}
+BENCHMARK(BM_StepCostMapPoints)
+    ->ArgsProduct({{1000, 3000, 10000, 30000, 100000}, {0, 1}})
+    ->Unit(benchmark::kMicrosecond);
+
+void BM_StepCostEventRate(benchmark::State& state) {
+  RunGrowthSteps(state, GetGrowthScene(0, static_cast<double>(state.range(0))), TrackerOptions());
+  state.SetLabel("budget 2500");
+}
+BENCHMARK(BM_StepCostEventRate)
+    ->Arg(1)
+    ->Arg(2)
+    ->Arg(5)
+    ->Arg(10)
+    ->Arg(20)
+    ->Arg(50)
     ->Unit(benchmark::kMicrosecond);
 
 // The whole 400 ms sequence (120 steps) per iteration, from a fresh tracker: a fixed amount of
