@@ -123,6 +123,24 @@ TEST(CannyDevo, TheLocalMapIsTheUnionOfTheNearestKeptFrames) {
   EXPECT_LE(four.local_map_points, static_cast<size_t>(sizes[0] + sizes[1] + sizes[2] + sizes[3]));
 }
 
+TEST(ReferenceMapSource, ReplaceSwapsThePointsAndReserveKeepsThem) {
+  ReferenceMapSource source;
+  std::vector<Eigen::Vector3f> positions = {Eigen::Vector3f(1, 2, 3), Eigen::Vector3f(4, 5, 6)};
+  std::vector<Eigen::Vector3f> gradients = {Eigen::Vector3f::UnitX(), Eigen::Vector3f::UnitY()};
+  const uint64_t generation = source.generation();
+  source.Replace(&positions, &gradients);
+  EXPECT_EQ(source.generation(), generation + 1);
+  EXPECT_TRUE(positions.empty()) << "the previous (empty) points come back for reuse";
+  ASSERT_EQ(source.points().positions.size(), 2u);
+  source.Reserve(1000);
+  EXPECT_EQ(source.generation(), generation + 1);
+  ASSERT_EQ(source.points().positions.size(), 2u);
+  EXPECT_EQ(source.points().positions[1], Eigen::Vector3f(4, 5, 6));
+  EXPECT_EQ(source.points().gradients[0], Eigen::Vector3f::UnitX());
+  std::vector<Eigen::Vector3f> one_position(1);
+  EXPECT_THROW(source.Replace(&one_position, &gradients), InvalidArgumentError);
+}
+
 TEST(CannyDevo, RefusesBadKeptFrameOptions) {
   CannyDevoOptions options;
   options.local_map_frames = 0;

@@ -169,6 +169,42 @@ TEST(BuildReferenceMap, APixelsDepthDependsOnlyOnTheDepthAroundIt) {
   EXPECT_GE(compared, 60);
 }
 
+TEST(BuildReferenceMap, ABuildDoesNotDependOnTheBuildsBeforeIt) {
+  // The buffers kept between builds (per thread) and the output vector reused: a build after a
+  // larger image's and after another mask's gives what it gives alone.
+  const OcclusionScene scene;
+  const cv::Mat depth = scene.RenderDepth();
+  const cv::Mat semi_dense = scene.SemiDense();
+  const std::vector<ReferencePoint> first =
+      BuildReferenceMap(scene.event_camera, semi_dense, scene.depth_camera, depth,
+                        scene.event_from_depth, ReferenceMapOptions());
+  ASSERT_GT(first.size(), 500u);
+  // A build twice the size, every pixel semi-dense, a flat wall at 2 m.
+  const Camera large = Camera::Pinhole(320, 240, 240, 240, 159.5, 119.5);
+  const cv::Mat large_depth(240, 320, CV_32FC1, cv::Scalar(2.0f));
+  const cv::Mat large_mask(240, 320, CV_8UC1, cv::Scalar(255));
+  std::vector<ReferencePoint> reused;
+  BuildReferenceMap(large, large_mask, large, large_depth, Rigid3d(), ReferenceMapOptions(),
+                    &reused);
+  EXPECT_GT(reused.size(), 70000u);
+  // Half the mask, then the whole one again, into the same vector.
+  cv::Mat half = semi_dense.clone();
+  half(cv::Rect(0, 0, half.cols / 2, half.rows)).setTo(0);
+  BuildReferenceMap(scene.event_camera, half, scene.depth_camera, depth, scene.event_from_depth,
+                    ReferenceMapOptions(), &reused);
+  EXPECT_LT(reused.size(), first.size());
+  ReferenceMapStats stats;
+  BuildReferenceMap(scene.event_camera, semi_dense, scene.depth_camera, depth,
+                    scene.event_from_depth, ReferenceMapOptions(), &reused, &stats);
+  ASSERT_EQ(reused.size(), first.size());
+  for (size_t i = 0; i < first.size(); ++i) {
+    EXPECT_EQ(reused[i].pixel, first[i].pixel) << i;
+    EXPECT_EQ(reused[i].position, first[i].position) << i;
+    EXPECT_EQ(reused[i].support, first[i].support) << i;
+  }
+  EXPECT_EQ(stats.semi_dense_pixels, cv::countNonZero(semi_dense));
+}
+
 TEST(RegisterDepth, KeepsTheNearestSurfaceAndNeverTheOneBehindIt) {
   // The depth camera's frame seen from the event camera, 8 cm to the side: every pixel that
   // receives depth gets its own surface's (panel or wall), except a thin seam beside the panel's
