@@ -242,8 +242,9 @@ ReferenceFrameInfo CannyDevo::BuildReference(const Rigid3d& world_from_cam, int6
   positions.reserve(chosen.size());
   gradients.reserve(chosen.size());
   const Eigen::Matrix3d rotation = world_from_cam.RotationMatrix();
+  const Vector6d& velocity = tracker_->velocity();
   for (const uint32_t index : chosen) {
-    const ReferencePoint& point = points[index];
+    ReferencePoint point = points[index];
     const int x = point.pixel.x();
     const int y = point.pixel.y();
     Eigen::Vector2d direction(gradient_x.at<float>(y, x), gradient_y.at<float>(y, x));
@@ -252,6 +253,12 @@ ReferenceFrameInfo CannyDevo::BuildReference(const Rigid3d& world_from_cam, int6
     if (!ComputeGradient3d(ideal, point.pixel.cast<double>(), direction.normalized(),
                            point.position, &gradient)) {
       continue;
+    }
+    const int64_t last_t_ns = mapping_surface_.LastTimestamp(tracking::SurfaceChannel::kAll, x, y);
+    if (options_.edges_at_reference_time && last_t_ns != tracking::kNeverFired &&
+        last_t_ns <= t_ns) {
+      point.position = EdgeAfter(ideal, point.pixel, point.position, velocity,
+                                 static_cast<double>(t_ns - last_t_ns) * 1e-9);
     }
     positions.push_back((world_from_cam * point.position).cast<float>());
     gradients.push_back((rotation * gradient).cast<float>());

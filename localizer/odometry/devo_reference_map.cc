@@ -297,6 +297,18 @@ void BuildReferenceMap(const Camera& event_camera, const cv::Mat& semi_dense,
   if (stats != nullptr) *stats = local_stats;
 }
 
+Eigen::Vector3d EdgeAfter(const Camera& camera, const Eigen::Vector2i& pixel,
+                          const Eigen::Vector3d& position,
+                          const Eigen::Matrix<double, 6, 1>& velocity, double age_s) {
+  const Eigen::Vector3d rate = -(velocity.tail<3>().cross(position) + velocity.head<3>());
+  const double z = position.z();
+  const double u =
+      pixel.x() + camera.fx * (rate.x() * z - position.x() * rate.z()) / (z * z) * age_s;
+  const double v =
+      pixel.y() + camera.fy * (rate.y() * z - position.y() * rate.z()) / (z * z) * age_s;
+  return Eigen::Vector3d((u - camera.cx) / camera.fx * z, (v - camera.cy) / camera.fy * z, z);
+}
+
 cv::Mat RegisterDepth(const Camera& camera, const Camera& depth_camera, const cv::Mat& depth_m,
                       const Rigid3d& camera_from_depth, const ReferenceMapOptions& options) {
   options.Check();

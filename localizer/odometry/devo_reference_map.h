@@ -80,6 +80,16 @@ void BuildReferenceMap(const Camera& event_camera, const cv::Mat& semi_dense,
                        const Rigid3d& event_from_depth, const ReferenceMapOptions& options,
                        std::vector<ReferencePoint>* points, ReferenceMapStats* stats = nullptr);
 
+// Where an edge point is `age_s` seconds after it was seen at `pixel` (ideal pinhole `camera`)
+// at `position` (camera frame), for a camera moving with `velocity` (body-frame twist (v, omega)
+// per second, world_from_cam(t + dt) = world_from_cam(t) * ExpSE3(velocity * dt)): the pixel
+// moved along its image flow (a static point: dP/dt = -(omega x P + v)) by age_s, at the same
+// depth, in the camera frame at the later time. Canny-DEVO's reference points
+// (CannyDevoOptions::edges_at_reference_time).
+Eigen::Vector3d EdgeAfter(const Camera& camera, const Eigen::Vector2i& pixel,
+                          const Eigen::Vector3d& position,
+                          const Eigen::Matrix<double, 6, 1>& velocity, double age_s);
+
 // The depth frame `depth_m` (CV_32FC1 metres of `depth_camera`, 0 = none) seen from `camera`:
 // every depth pixel within the options' depth range warped through `camera_from_depth` and
 // projected with `camera`'s model; each pixel of the result (CV_32FC1 metres, camera's size) keeps

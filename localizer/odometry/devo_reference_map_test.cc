@@ -205,6 +205,33 @@ TEST(BuildReferenceMap, ABuildDoesNotDependOnTheBuildsBeforeIt) {
   EXPECT_EQ(stats.semi_dense_pixels, cv::countNonZero(semi_dense));
 }
 
+TEST(EdgeAfter, MovesAnEdgeAlongItsImageFlowByItsAge) {
+  const Camera camera = Camera::Pinhole(160, 120, 100, 100, 80, 60);
+  const Eigen::Vector2i pixel(100, 40);
+  const double z = 2.0;
+  const Eigen::Vector3d position((pixel.x() - camera.cx) / camera.fx * z,
+                                 (pixel.y() - camera.cy) / camera.fy * z, z);
+  Eigen::Matrix<double, 6, 1> velocity = Eigen::Matrix<double, 6, 1>::Zero();
+  // The camera moves 1 m/s along its x: a static point moves 1 cm along -x in 10 ms.
+  velocity(0) = 1.0;
+  Eigen::Vector3d moved = EdgeAfter(camera, pixel, position, velocity, 0.01);
+  EXPECT_NEAR(moved.x(), position.x() - 0.01, 1e-12);
+  EXPECT_NEAR(moved.y(), position.y(), 1e-12);
+  EXPECT_EQ(moved.z(), z);
+  // Turning about its y at 0.5 rad/s: a point on the optical axis moves by -omega x P, here
+  // along -x by z * 0.5 * dt = 1 cm in 10 ms.
+  velocity.setZero();
+  velocity(4) = 0.5;
+  const Eigen::Vector2i centre(80, 60);
+  const Eigen::Vector3d on_axis((centre.x() - camera.cx) / camera.fx * z,
+                                (centre.y() - camera.cy) / camera.fy * z, z);
+  moved = EdgeAfter(camera, centre, on_axis, velocity, 0.01);
+  EXPECT_NEAR(moved.x() - on_axis.x(), -0.01, 1e-9);
+  EXPECT_NEAR(moved.y() - on_axis.y(), 0.0, 1e-12);
+  // No age, no motion.
+  EXPECT_EQ(EdgeAfter(camera, pixel, position, velocity, 0.0), position);
+}
+
 TEST(RegisterDepth, KeepsTheNearestSurfaceAndNeverTheOneBehindIt) {
   // The depth camera's frame seen from the event camera, 8 cm to the side: every pixel that
   // receives depth gets its own surface's (panel or wall), except a thin seam beside the panel's
