@@ -144,6 +144,71 @@ const Scene& GetStepScene() {
   return scene ? *scene : GetScene();
 }
 
+// Steps a tracker (`scene`'s map, visibility index and camera, `options`, warmed up and started as
+// evloc-track starts it) through the scene's packets, one per iteration, and starts again
+// (untimed) after the last; `on_step(packet, estimates)` after each.
+template <typename OnStep>
+void StepThrough(benchmark::State& state, const Scene& scene, const TrackerOptions& options,
+                 const OnStep& on_step) {
+  std::unique_ptr<Tracker> tracker;
+  size_t next_packet = 0;
+  auto restart = [&] {
+    tracker = std::make_unique<Tracker>(scene.map, scene.visibility.get(), scene.camera, options);
+    tracker->AddEvents(scene.warm_up);
+    tracker->Reset(scene.start_world_from_cam, scene.start_t_ns);
+    next_packet = 0;
+  };
+  restart();
+  for (auto _ : state) {
+    if (next_packet == scene.packets.size()) {
+      state.PauseTiming();
+      restart();
+      state.ResumeTiming();
+    }
+    const EventBuffer& packet = scene.packets[next_packet++];
+    on_step(packet, tracker->AddEvents(packet));
+  }
+}
+
+double Median(std::vector<double> values) {
+  if (values.empty()) return 0.0;
+  std::nth_element(values.begin(), values.begin() + values.size() / 2, values.end());
+  return values[values.size() / 2];
+}
+
+double Mean(const std::vector<double>& values) {
+  double sum = 0;
+  for (const double value : values) sum += value;
+  return values.empty() ? 0.0 : sum / static_cast<double>(values.size());
+}
+
+// The per-step figures of a benchmark's steps, as its counters.
+struct StepFigures {
+  std::vector<double> step_ms, surface_ms, selection_ms, solve_ms, points, iterations;
+  int64_t lost = 0;
+
+  void Add(const std::vector<PoseEstimate>& estimates) {
+    for (const PoseEstimate& estimate : estimates) {
+      step_ms.push_back(estimate.timings.total_ms);
+      surface_ms.push_back(estimate.timings.surface_ms);
+      selection_ms.push_back(estimate.timings.selection_ms);
+      solve_ms.push_back(estimate.timings.solve_ms);
+      points.push_back(estimate.quality.points_used);
+      iterations.push_back(estimate.quality.iterations);
+      lost += estimate.status == TrackingStatus::kLost ? 1 : 0;
+    }
+  }
+  void SetCounters(benchmark::State& state) const {
+    state.counters["step_median_ms"] = Median(step_ms);
+    state.counters["surface_median_ms"] = Median(surface_ms);
+    state.counters["selection_mean_ms"] = Mean(selection_ms);
+    state.counters["solve_median_ms"] = Median(solve_ms);
+    state.counters["points_used"] = Mean(points);
+    state.counters["lm_iterations"] = Mean(iterations);
+    state.counters["lost_steps"] = static_cast<double>(lost);
+  }
+};
+
 // One tracking step per iteration: the packet of one step period (the step itself runs when the
 // next packet's first event arrives, so each AddEvents call runs exactly one step).
 void BM_TrackingStep(benchmark::State& state) {
@@ -156,51 +221,12 @@ void BM_TrackingStep(benchmark::State& state) {
   options.use_occlusion_culling = state.range(2) != 0;
   options.smooth_field = state.range(3) != 0;
   options.polarity_after_unsigned_solve = state.range(4) != 0;
-  std::unique_ptr<Tracker> tracker;
-  size_t next_packet = 0;
-  auto restart = [&] {
-    tracker = std::make_unique<Tracker>(scene.map, scene.visibility.get(), scene.camera, options);
-    tracker->AddEvents(scene.warm_up);
-    tracker->Reset(scene.start_world_from_cam, scene.start_t_ns);
-    next_packet = 0;
-  };
-  restart();
-  std::vector<double> step_ms, surface_ms, selection_ms, solve_ms, points, iterations;
-  int64_t lost = 0;
-  for (auto _ : state) {
-    if (next_packet == scene.packets.size()) {
-      state.PauseTiming();
-      restart();
-      state.ResumeTiming();
-    }
-    const std::vector<PoseEstimate> estimates = tracker->AddEvents(scene.packets[next_packet++]);
-    for (const PoseEstimate& estimate : estimates) {
-      step_ms.push_back(estimate.timings.total_ms);
-      surface_ms.push_back(estimate.timings.surface_ms);
-      selection_ms.push_back(estimate.timings.selection_ms);
-      solve_ms.push_back(estimate.timings.solve_ms);
-      points.push_back(estimate.quality.points_used);
-      iterations.push_back(estimate.quality.iterations);
-      lost += estimate.status == TrackingStatus::kLost ? 1 : 0;
-    }
-  }
-  auto median = [](std::vector<double> values) {
-    if (values.empty()) return 0.0;
-    std::nth_element(values.begin(), values.begin() + values.size() / 2, values.end());
-    return values[values.size() / 2];
-  };
-  auto mean = [](const std::vector<double>& values) {
-    double sum = 0;
-    for (const double value : values) sum += value;
-    return values.empty() ? 0.0 : sum / values.size();
-  };
-  state.counters["step_median_ms"] = median(step_ms);
-  state.counters["surface_median_ms"] = median(surface_ms);
-  state.counters["selection_mean_ms"] = mean(selection_ms);
-  state.counters["solve_median_ms"] = median(solve_ms);
-  state.counters["points_used"] = mean(points);
-  state.counters["lm_iterations"] = mean(iterations);
-  state.counters["lost_steps"] = static_cast<double>(lost);
+  StepFigures figures;
+  StepThrough(state, scene, options,
+              [&](const EventBuffer&, const std::vector<PoseEstimate>& estimates) {
+                figures.Add(estimates);
+              });
+  figures.SetCounters(state);
   state.SetLabel(
       (scene.replayed.empty()
            ? std::string("synthetic ")
@@ -234,13 +260,6 @@ BENCHMARK(BM_TrackingStep)
 //   they arrive at `state.range(0)` million events per second, the usual map and budget.
 // One step per iteration as BM_TrackingStep; the CPU time per iteration includes the ingestion
 // of the step's packet, step_median_ms does not.
-struct GrowthScene {
-  Map map;
-  EventBuffer warm_up;
-  std::vector<EventBuffer> packets;
-  double events_per_s = 0;
-};
-
 // The usual scene's events over its whole span, in one buffer.
 EventBuffer AllSceneEvents() {
   EventBuffer events;
@@ -249,9 +268,17 @@ EventBuffer AllSceneEvents() {
   return events;
 }
 
-std::unique_ptr<GrowthScene> MakeGrowthScene(int64_t map_points, double million_events_per_s) {
-  auto growth = std::make_unique<GrowthScene>();
+// Events per second over the span of `events` (time-sorted, at least two time stamps).
+double EventsPerSecond(const EventBuffer& events) {
+  return static_cast<double>(events.size()) /
+         (static_cast<double>(events.t_ns.back() - events.t_ns.front()) * 1e-9);
+}
+
+// The usual scene with its map or its event rate changed (0: as usual).
+std::unique_ptr<Scene> MakeGrowthScene(int64_t map_points, double million_events_per_s) {
+  auto growth = std::make_unique<Scene>();
   const Scene& usual = GetScene();
+  growth->start_world_from_cam = usual.start_world_from_cam;
   if (map_points > 0) {
     // Spacing for the asked count: the outlines' length from the usual map (3 mm spacing).
     const double length_m = static_cast<double>(usual.map.size()) * 0.003;
@@ -261,13 +288,11 @@ std::unique_ptr<GrowthScene> MakeGrowthScene(int64_t map_points, double million_
     growth->map = usual.map;
   }
   const EventBuffer events = AllSceneEvents();
-  const double span_s = static_cast<double>(events.t_ns.back() - events.t_ns.front()) * 1e-9;
-  const double usual_rate = static_cast<double>(events.size()) / span_s;
   EventBuffer scaled;
   if (million_events_per_s > 0) {
     // Each event repeated floor or ceil of the factor times (a running remainder), or kept with
     // that probability below 1: the same edges at the asked rate.
-    const double factor = million_events_per_s * 1e6 / usual_rate;
+    const double factor = million_events_per_s * 1e6 / EventsPerSecond(events);
     double owed = 0;
     for (size_t i = 0; i < events.size(); ++i) {
       owed += factor;
@@ -276,70 +301,33 @@ std::unique_ptr<GrowthScene> MakeGrowthScene(int64_t map_points, double million_
   } else {
     scaled = events;
   }
-  growth->events_per_s = static_cast<double>(scaled.size()) / span_s;
-  Scene cut;
-  CutIntoSteps(nullptr, &scaled, std::numeric_limits<int64_t>::max(), &cut);
-  growth->warm_up = std::move(cut.warm_up);
-  growth->packets = std::move(cut.packets);
+  CutIntoSteps(nullptr, &scaled, std::numeric_limits<int64_t>::max(), growth.get());
   return growth;
 }
 
-void RunGrowthSteps(benchmark::State& state, const GrowthScene& scene,
-                    const TrackerOptions& options) {
-  std::unique_ptr<Tracker> tracker;
-  size_t next_packet = 0;
-  auto restart = [&] {
-    tracker = std::make_unique<Tracker>(scene.map, nullptr, GetScene().camera, options);
-    tracker->AddEvents(scene.warm_up);
-    tracker->Reset(testing::SmoothMotion(kStartNs), kStartNs);
-    next_packet = 0;
-  };
-  restart();
-  std::vector<double> step_ms, selection_ms, solve_ms, points;
+void RunGrowthSteps(benchmark::State& state, const Scene& scene, const TrackerOptions& options) {
+  StepFigures figures;
   int64_t events = 0;
-  int64_t lost = 0;
-  for (auto _ : state) {
-    if (next_packet == scene.packets.size()) {
-      state.PauseTiming();
-      restart();
-      state.ResumeTiming();
-    }
-    const EventBuffer& packet = scene.packets[next_packet++];
-    events += static_cast<int64_t>(packet.size());
-    for (const PoseEstimate& estimate : tracker->AddEvents(packet)) {
-      step_ms.push_back(estimate.timings.total_ms);
-      selection_ms.push_back(estimate.timings.selection_ms);
-      solve_ms.push_back(estimate.timings.solve_ms);
-      points.push_back(estimate.quality.points_used);
-      lost += estimate.status == TrackingStatus::kLost ? 1 : 0;
-    }
-  }
-  auto median = [](std::vector<double> values) {
-    if (values.empty()) return 0.0;
-    std::nth_element(values.begin(), values.begin() + values.size() / 2, values.end());
-    return values[values.size() / 2];
-  };
-  double selection_sum = 0;
-  for (const double value : selection_ms) selection_sum += value;
-  double points_sum = 0;
-  for (const double value : points) points_sum += value;
+  StepThrough(state, scene, options,
+              [&](const EventBuffer& packet, const std::vector<PoseEstimate>& estimates) {
+                events += static_cast<int64_t>(packet.size());
+                figures.Add(estimates);
+              });
+  figures.SetCounters(state);
+  size_t scene_events = scene.warm_up.size();
+  for (const EventBuffer& packet : scene.packets) scene_events += packet.size();
+  const int64_t span_ns = scene.packets.back().t_ns.back() - scene.warm_up.t_ns.front();
   state.counters["map_points"] = static_cast<double>(scene.map.size());
-  state.counters["events_per_s"] = scene.events_per_s;
+  state.counters["events_per_s"] =
+      static_cast<double>(scene_events) / (static_cast<double>(span_ns) * 1e-9);
   state.counters["events_per_step"] =
       static_cast<double>(events) / static_cast<double>(std::max<int64_t>(1, state.iterations()));
-  state.counters["step_median_ms"] = median(step_ms);
-  state.counters["selection_mean_ms"] =
-      selection_ms.empty() ? 0.0 : selection_sum / static_cast<double>(selection_ms.size());
-  state.counters["solve_median_ms"] = median(solve_ms);
-  state.counters["points_used"] =
-      points.empty() ? 0.0 : points_sum / static_cast<double>(points.size());
-  state.counters["lost_steps"] = static_cast<double>(lost);
 }
 
 // The scene for (map points, events per second), kept while the next run asks for the same.
-const GrowthScene& GetGrowthScene(int64_t map_points, double million_events_per_s) {
+const Scene& GetGrowthScene(int64_t map_points, double million_events_per_s) {
   static std::pair<int64_t, double> key{-1, -1};
-  static std::unique_ptr<GrowthScene> scene;
+  static std::unique_ptr<Scene> scene;
   if (!scene || key != std::make_pair(map_points, million_events_per_s)) {
     scene.reset();
     scene = MakeGrowthScene(map_points, million_events_per_s);
@@ -349,7 +337,7 @@ const GrowthScene& GetGrowthScene(int64_t map_points, double million_events_per_
 }
 
 void BM_StepCostMapPoints(benchmark::State& state) {
-  const GrowthScene& scene = GetGrowthScene(state.range(0), 0);
+  const Scene& scene = GetGrowthScene(state.range(0), 0);
   TrackerOptions options;
   if (state.range(1) != 0) options.max_points = static_cast<int>(scene.map.size());
   RunGrowthSteps(state, scene, options);
@@ -436,8 +424,7 @@ void BM_EventFilter(benchmark::State& state) {
   const int filters = static_cast<int>(state.range(0));
   EventBuffer events;
   if (state.range(1) == 0) {
-    events.Append(GetScene().warm_up);
-    for (const EventBuffer& packet : GetScene().packets) events.Append(packet);
+    events = AllSceneEvents();
   } else {
     std::mt19937 random(5);
     std::uniform_int_distribution<int> x(0, 639), y(0, 479);
