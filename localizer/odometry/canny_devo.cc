@@ -254,11 +254,13 @@ ReferenceFrameInfo CannyDevo::BuildReference(const Rigid3d& world_from_cam, int6
                            point.position, &gradient)) {
       continue;
     }
-    const int64_t last_t_ns = mapping_surface_.LastTimestamp(tracking::SurfaceChannel::kAll, x, y);
-    if (options_.edges_at_reference_time && last_t_ns != tracking::kNeverFired &&
-        last_t_ns <= t_ns) {
-      point.position = EdgeAfter(ideal, point.pixel, point.position, velocity,
-                                 static_cast<double>(t_ns - last_t_ns) * 1e-9);
+    if (options_.edges_at_reference_time) {
+      const int64_t last_t_ns =
+          mapping_surface_.LastTimestamp(tracking::SurfaceChannel::kAll, x, y);
+      if (last_t_ns != tracking::kNeverFired && last_t_ns <= t_ns) {
+        point.position = EdgeAfter(ideal, point.pixel, point.position, velocity,
+                                   static_cast<double>(t_ns - last_t_ns) * 1e-9);
+      }
     }
     positions.push_back((world_from_cam * point.position).cast<float>());
     gradients.push_back((rotation * gradient).cast<float>());

@@ -38,28 +38,19 @@ void ForEachWarpedDepthPixel(const Camera& depth_camera, const cv::Mat& depth_m,
                              const Project& project, int width, int height, const Visit& visit) {
   const Eigen::Matrix3d rotation = target_from_depth.RotationMatrix();
   const bool pinhole = depth_camera.model == CameraModel::kPinhole;
-  // A pinhole's ray (x', y', 1) per column and per row, computed once per frame.
-  std::vector<double> column_ray;
-  if (pinhole) {
-    column_ray.resize(static_cast<size_t>(depth_m.cols));
-    for (int x = 0; x < depth_m.cols; ++x) column_ray[x] = (x - depth_camera.cx) / depth_camera.fx;
-  }
   for (int y = 0; y < depth_m.rows; ++y) {
     const float* row = depth_m.ptr<float>(y);
-    const double row_ray = (y - depth_camera.cy) / depth_camera.fy;
     for (int x = 0; x < depth_m.cols; ++x) {
       const float z = row[x];
       if (!(z >= options.min_depth_m && z <= options.max_depth_m)) continue;
-      // The point at depth z on the pixel's ray (for a pinhole the ray's z is 1).
-      Eigen::Vector3d ray_point;
+      Eigen::Vector3d ray;
       if (pinhole) {
-        ray_point << column_ray[x] * z, row_ray * z, z;
-      } else {
-        Eigen::Vector3d ray;
-        if (!depth_camera.Unproject(Eigen::Vector2d(x, y), &ray)) continue;
-        ray_point = ray * (z / ray.z());
+        ray << (x - depth_camera.cx) / depth_camera.fx, (y - depth_camera.cy) / depth_camera.fy, 1;
+      } else if (!depth_camera.Unproject(Eigen::Vector2d(x, y), &ray)) {
+        continue;
       }
-      const Eigen::Vector3d point = rotation * ray_point + target_from_depth.translation;
+      const Eigen::Vector3d point =
+          rotation * (ray * (z / ray.z())) + target_from_depth.translation;
       if (!(point.z() > options.min_depth_m)) continue;
       Eigen::Vector2d pixel;
       if (!project(point, &pixel)) continue;
