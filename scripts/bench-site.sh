@@ -4,7 +4,7 @@
 #   scripts/bench-site.sh --maps DIR --dataset DIR [--build DIR] [--out DIR] [--sessions N]
 #                         [--spread CxR:P | --stagger N:S] [--session-s S] [--duration S]
 #                         [--rate HZ] [--speed S] [--map-memory SIZE] [--server-args "ARGS"]
-#                         [--taskset CPUS]
+#                         [--load-args "ARGS"] [--taskset CPUS]
 #
 # DIR (--maps) holds `whole` (a map) and `site` (the same map tiled), e.g. as written by
 # build/bench/evloc_replicated_site. For each of the two, starts evloc-localizer on 127.0.0.1
@@ -14,7 +14,8 @@
 # writes the load report (server latency p50/p95/p99, step time p50/p99, the TRACKING poses'
 # error against the ground truth) and the final metrics (tile loads,
 # evictions, resident bytes) to OUT/{whole,site}.{json,metrics}, and one summary line per run to
-# OUT/summary.txt. Prints `uptime` before each run: the figures need a quiet machine.
+# OUT/summary.txt. --server-args go to evloc-localizer serve, --load-args to evloc-load (e.g.
+# "--initial-velocity truth"). Prints `uptime` before each run: the figures need a quiet machine.
 set -euo pipefail
 BUILD=build
 MAPS=""
@@ -29,6 +30,7 @@ DURATION=30
 RATE=100
 MAP_MEMORY=2G
 SERVER_ARGS=""
+LOAD_ARGS=""
 TASKSET=""
 while [[ $# -gt 0 ]]; do
   case "$1" in
@@ -45,8 +47,9 @@ while [[ $# -gt 0 ]]; do
     --rate) RATE="$2"; shift 2 ;;
     --map-memory) MAP_MEMORY="$2"; shift 2 ;;
     --server-args) SERVER_ARGS="$2"; shift 2 ;;
+    --load-args) LOAD_ARGS="$2"; shift 2 ;;
     --taskset) TASKSET="$2"; shift 2 ;;
-    -h|--help) sed -n '2,17p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    -h|--help) sed -n '2,18p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
     *) echo "bench-site: unknown argument '$1' (see --help)" >&2; exit 2 ;;
   esac
 done
@@ -84,10 +87,11 @@ for name in whole site; do
   done
   echo "bench-site: $name: $(uptime)" | tee -a "$OUT/summary.txt"
   status=0
+  # shellcheck disable=SC2086
   "$BUILD/tools/load/evloc-load" --server "127.0.0.1:$port" --map "$name" --dataset "$DATASET" \
     --sessions "$SESSIONS" "${PLACES[@]}" --session-s "$SESSION_S" --duration "$DURATION" \
-    --rate "$RATE" --speed "$SPEED" --report "$OUT/$name.json" > "$OUT/$name.load.txt" 2>&1 ||
-    status=$?
+    --rate "$RATE" --speed "$SPEED" --report "$OUT/$name.json" $LOAD_ARGS \
+    > "$OUT/$name.load.txt" 2>&1 || status=$?
   /usr/bin/python3 -c "import urllib.request,sys; sys.stdout.write(urllib.request.urlopen('http://127.0.0.1:$metrics_port/metrics').read().decode())" > "$OUT/$name.metrics" || true
   kill "$server"
   wait "$server" || true

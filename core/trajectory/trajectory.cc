@@ -74,4 +74,18 @@ std::optional<Rigid3d> Trajectory::Lookup(int64_t t_ns) const {
   return Interpolate(a.world_from_cam, b.world_from_cam, alpha);
 }
 
+std::optional<Vector6d> Trajectory::Velocity(int64_t t_ns, int64_t window_ns) const {
+  if (window_ns <= 0) {
+    throw InvalidArgumentError("Trajectory::Velocity: the window must be positive, got " +
+                               std::to_string(window_ns) + " ns");
+  }
+  if (poses_.empty()) return std::nullopt;
+  // The window before t_ns, or after it near the start (a session that starts with the data).
+  const int64_t begin_ns = t_ns - window_ns >= poses_.front().t_ns ? t_ns - window_ns : t_ns;
+  const std::optional<Rigid3d> begin = Lookup(begin_ns);
+  const std::optional<Rigid3d> end = Lookup(begin_ns + window_ns);
+  if (!begin || !end) return std::nullopt;
+  return LogSE3(begin->Inverse() * *end) / (static_cast<double>(window_ns) * 1e-9);
+}
+
 }  // namespace evloc

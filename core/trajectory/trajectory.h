@@ -48,6 +48,14 @@ class Trajectory {
   // its time); std::nullopt outside [start_ns(), end_ns()] or when empty.
   std::optional<Rigid3d> Lookup(int64_t t_ns) const;
 
+  // The velocity at t_ns as a constant-velocity motion model measures it: the body-frame twist
+  // per second (linear m/s, angular rad/s) of world_from_cam over the `window_ns` before t_ns,
+  // world_from_cam(t) = world_from_cam(t - window) * ExpSE3(window * twist); over the window
+  // after t_ns when the trajectory starts less than a window before it. std::nullopt when the
+  // trajectory does not span a window around t_ns; throws InvalidArgumentError unless
+  // window_ns > 0.
+  std::optional<Vector6d> Velocity(int64_t t_ns, int64_t window_ns) const;
+
   // Index of the last sample with time <= t_ns; std::nullopt when t_ns < start_ns() or empty.
   std::optional<size_t> IndexAtOrBefore(int64_t t_ns) const;
 

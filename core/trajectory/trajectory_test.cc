@@ -98,5 +98,35 @@ TEST(Trajectory, IndexAtOrBefore) {
   EXPECT_EQ(*trajectory.IndexAtOrBefore(1000), 2u);
 }
 
+// A constant body twist sampled every 10 ms: Velocity gives it back over any window inside the
+// trajectory (the window after t near the start), and nothing outside it.
+TEST(Trajectory, VelocityIsTheBodyTwistOverTheWindow) {
+  Vector6d twist;
+  twist << 5.0, -0.5, 0.2, 0.1, -0.3, 0.4;  // m/s, rad/s in the camera frame
+  const Rigid3d start(
+      Eigen::Quaterniond(Eigen::AngleAxisd(0.7, Eigen::Vector3d(1, 2, 3).normalized())),
+      Eigen::Vector3d(10, -4, 2));
+  std::vector<TimedPose> poses;
+  for (int i = 0; i <= 100; ++i) {
+    poses.push_back({i * 10'000'000LL, start * ExpSE3(twist * (i * 0.01))});
+  }
+  const Trajectory trajectory(std::move(poses));
+  // At samples (0 and 10 ms: the window after t) exactly ...
+  for (const int64_t t_ns : {0LL, 10'000'000LL, 500'000'000LL, 1'000'000'000LL}) {
+    const std::optional<Vector6d> velocity = trajectory.Velocity(t_ns, 20'000'000);
+    ASSERT_TRUE(velocity.has_value()) << t_ns;
+    EXPECT_LT((*velocity - twist).norm(), 1e-9) << t_ns;
+  }
+  // ... and between them up to the interpolation (linear translation, not the screw motion).
+  const std::optional<Vector6d> between = trajectory.Velocity(505'000'000, 20'000'000);
+  ASSERT_TRUE(between.has_value());
+  EXPECT_LT((*between - twist).norm(), 1e-4);
+  EXPECT_FALSE(trajectory.Velocity(1'000'000'001LL, 20'000'000).has_value());
+  EXPECT_FALSE(trajectory.Velocity(-1, 20'000'000).has_value());
+  EXPECT_FALSE(trajectory.Velocity(0, 2'000'000'000LL).has_value());
+  EXPECT_FALSE(Trajectory().Velocity(0, 1).has_value());
+  EXPECT_THROW(trajectory.Velocity(0, 0), InvalidArgumentError);
+}
+
 }  // namespace
 }  // namespace evloc

@@ -23,6 +23,7 @@
 #include "localizer/wire/packed_events.h"
 #include "localizer/wire/percentile.h"
 #include "localizer/wire/status_name.h"
+#include "localizer/wire/twist.h"
 #include "proto/convert/proto_convert.h"
 
 namespace evloc::load {
@@ -53,6 +54,10 @@ struct Workload {
 // The events of the 50 ms before a staggered session's start prime its surfaces (the decay
 // times are 5-30 ms).
 constexpr int64_t kStaggerPrimeNs = 50'000'000;
+
+// The window of the ground truth's velocity that --initial-velocity truth sends: the tracker's
+// constant-velocity window (TrackerOptions::velocity_window_s).
+constexpr int64_t kTruthVelocityWindowNs = 20'000'000;
 
 // The workloads of a run: one at the dataset's start, or one per --stagger start.
 std::vector<Workload> MakeWorkloads(const LoadOptions& options) {
@@ -127,6 +132,18 @@ std::vector<Workload> MakeWorkloads(const LoadOptions& options) {
     *start->mutable_camera() = CameraToProto(dataset.camera);
     *start->mutable_initial_world_from_cam() = RigidToProto(initial.world_from_cam);
     start->set_initial_t_ns(initial.t_ns);
+    if (options.initial_velocity_from_truth) {
+      const std::optional<Vector6d> velocity =
+          ground_truth ? ground_truth->Velocity(initial.t_ns, kTruthVelocityWindowNs)
+                       : std::nullopt;
+      if (!velocity) {
+        throw InvalidArgumentError("dataset '" + options.dataset.string() +
+                                   "' has no ground truth around " +
+                                   std::to_string(k * options.stagger_s) +
+                                   " s after its start for --initial-velocity truth");
+      }
+      *start->mutable_initial_velocity() = wire::TwistToProto(*velocity);
+    }
     if (options.step_rate_hz) start->mutable_options()->set_step_rate_hz(*options.step_rate_hz);
     start->set_client_name("evloc-load " + options.dataset.filename().string());
   }
@@ -517,6 +534,16 @@ std::unique_ptr<CommandLine> DeclareLoadCommandLine(LoadArguments* arguments) {
            "(docs/benchmarks.md, \"Sites\")",
            [options](const std::string& flag, const std::string& value) {
              ApplyStagger(flag, value, options);
+           })
+      .Add("--initial-velocity", "rest|truth",
+           "how each session starts: at rest (default), or moving with the ground truth's "
+           "velocity at its start (SessionStart.initial_velocity), as a vehicle client that knows "
+           "its speed can",
+           [options](const std::string& flag, const std::string& value) {
+             if (value != "rest" && value != "truth") {
+               throw InvalidArgumentError(flag + " expects rest or truth, got '" + value + "'");
+             }
+             options->initial_velocity_from_truth = value == "truth";
            })
       .Add("--seed", "N", "seed of those random choices (default 1)",
            [options](const std::string& flag, const std::string& value) {

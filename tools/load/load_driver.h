@@ -57,6 +57,11 @@ struct LoadOptions {
   // (--stagger COUNT:SECONDS); 0: every session at the dataset's start.
   int stagger_count = 0;
   double stagger_s = 0;
+  // Each session sends the ground truth's velocity at its start (SessionStart.initial_velocity,
+  // over the tracker's 20 ms velocity window) instead of starting at rest, as a vehicle client
+  // that knows its speed from its wheels or its last session can (--initial-velocity truth).
+  // Needs ground truth.
+  bool initial_velocity_from_truth = false;
   // Seed of the random choices (--seed).
   uint32_t seed = 1;
   // Write the result as JSON here (--report).

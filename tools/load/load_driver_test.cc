@@ -54,7 +54,8 @@ TEST(LoadDriver, SessionsEndAsPlannedAndTheServerIsClean) {
 }
 
 // --stagger: the sessions start along the dataset from its ground truth there (a wrong start
-// pose would be LOST on the moving test scene), and a stagger beyond the dataset is refused.
+// pose would be LOST on the moving test scene), with its velocity there on request, and a
+// stagger beyond the dataset is refused.
 TEST(LoadDriver, StaggeredSessionsStartAlongTheDatasetFromItsGroundTruth) {
   fixture::TemporaryFolder folder;
   fixture::WriteTestMap(folder.path() / "maps", fixture::kTestMapName, fixture::TestMap());
@@ -78,6 +79,14 @@ TEST(LoadDriver, StaggeredSessionsStartAlongTheDatasetFromItsGroundTruth) {
   EXPECT_GE(result.poses, 3 * 18);
   EXPECT_EQ(server.counters().lost_poses, 0);
   EXPECT_LT(result.error_max_m, 0.02);  // every session tracked from its own start
+
+  // --initial-velocity truth: the sessions start moving with the scene's camera instead of at
+  // rest, so their first steps do not fall behind it (largest error 8.4 mm against 12.8 mm).
+  options.initial_velocity_from_truth = true;
+  const LoadResult moving = RunLoad(options, log);
+  EXPECT_EQ(moving.sessions_as_planned, 3) << log.str();
+  EXPECT_LT(moving.error_max_m, result.error_max_m);
+  options.initial_velocity_from_truth = false;
 
   options.stagger_s = 0.3;  // the last session would end at 0.7 s
   try {
@@ -116,6 +125,8 @@ TEST(LoadDriver, CommandLineMapsToOptions) {
                                                     "500",
                                                     "--stagger",
                                                     "20:2.5",
+                                                    "--initial-velocity",
+                                                    "truth",
                                                     "--report",
                                                     "r.json"},
                                                    &help);
@@ -127,6 +138,13 @@ TEST(LoadDriver, CommandLineMapsToOptions) {
   EXPECT_EQ(options.packet_us, 500);
   EXPECT_EQ(options.stagger_count, 20);
   EXPECT_EQ(options.stagger_s, 2.5);
+  EXPECT_TRUE(options.initial_velocity_from_truth);
+  EXPECT_FALSE(ParseLoadCommandLine({"--server", "h:1", "--map", "m", "--dataset", "d"}, &help)
+                   .initial_velocity_from_truth);
+  EXPECT_THROW(ParseLoadCommandLine({"--server", "h:1", "--map", "m", "--dataset", "d",
+                                     "--initial-velocity", "wheels"},
+                                    &help),
+               InvalidArgumentError);
   EXPECT_THROW(ParseLoadCommandLine(
                    {"--server", "h:1", "--map", "m", "--dataset", "d", "--stagger", "20"}, &help),
                InvalidArgumentError);
