@@ -9,11 +9,13 @@
 #include <random>
 #include <sstream>
 #include <string>
+#include <vector>
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 
+#include "core/common/error.h"
 #include "core/dataset/dataset.h"
 #include "core/trajectory/tum_io.h"
 #include "localizer/odometry/odometry_run.h"
@@ -221,6 +223,28 @@ TEST_F(SimulatedOdometry, EvlocTrackDevoStatsListItsReferenceFrames) {
     EXPECT_GT(frames[i]["t_s"].get<double>(), previous_t_s);
     previous_t_s = frames[i]["t_s"].get<double>();
   }
+}
+
+// The tracker's flags reach DEVO's tracker (they were silently ignored before): --rate 100 gives
+// a third of the default 300 Hz steps; flags of the map search are refused.
+TEST_F(SimulatedOdometry, EvlocTrackDevoTakesTheTrackersFlags) {
+  const std::filesystem::path dataset = *folder_ / "dataset";
+  const auto run = [&](std::vector<std::string> extra) {
+    std::vector<std::string> arguments = {"--mode",    "devo",
+                                          "--dataset", dataset.string(),
+                                          "--out",     (*folder_ / "devo_flags.txt").string(),
+                                          "--quiet"};
+    arguments.insert(arguments.end(), extra.begin(), extra.end());
+    std::ostringstream log;
+    return RunTrackCommand(ParseTrackCommandLine(arguments), log);
+  };
+  const OfflineTrackingResult at_default = run({});
+  const OfflineTrackingResult at_100 = run({"--rate", "100"});
+  ASSERT_GT(at_default.steps.size(), 200u);
+  EXPECT_NEAR(static_cast<double>(at_100.steps.size()),
+              static_cast<double>(at_default.steps.size()) / 3.0, 2.0);
+  EXPECT_THROW(run({"--relocalize-after", "5"}), InvalidArgumentError);
+  EXPECT_THROW(run({"--events-per-step", "1000"}), InvalidArgumentError);
 }
 
 }  // namespace

@@ -5,6 +5,7 @@
 namespace evloc::tracking {
 
 OfflineTrackingResult RunOdometryTrack(const Dataset& dataset, odometry::OdometryMode mode,
+                                       const odometry::DevoRunOptions& devo,
                                        const std::optional<Rigid3d>& initial_world_from_cam,
                                        int64_t initial_t_ns, bool quiet, std::ostream& log) {
   OfflineTrackingResult result;
@@ -54,8 +55,7 @@ OfflineTrackingResult RunOdometryTrack(const Dataset& dataset, odometry::Odometr
   }
   int64_t step_index = 0;
   const odometry::DevoRunResult run = odometry::RunCannyDevo(
-      dataset, initial_world_from_cam, initial_t_ns, odometry::DevoRunOptions(),
-      [&](const PoseEstimate& step) {
+      dataset, initial_world_from_cam, initial_t_ns, devo, [&](const PoseEstimate& step) {
         if (!quiet && step_index % 300 == 0) {
           log << "  t=" << static_cast<double>(step.t_ns - initial_t_ns) * 1e-9 << " s  "
               << TrackingStatusName(step.status) << "  points " << step.quality.points_used

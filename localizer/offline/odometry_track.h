@@ -17,8 +17,10 @@ namespace evloc::tracking {
 // Runs `mode` over `dataset` from its first frame at or after `initial_t_ns` (DEVO: after a
 // warm-up), which starts at `initial_world_from_cam` when given, else at the ground truth there;
 // progress goes to `log` unless `quiet`. A frame (or step) that was not tracked is a LOST step
-// whose pose is the prediction. Throws what the odometry throws.
+// whose pose is the prediction. `devo` holds DEVO's options (unused by VO). Throws what the
+// odometry throws.
 OfflineTrackingResult RunOdometryTrack(const Dataset& dataset, odometry::OdometryMode mode,
+                                       const odometry::DevoRunOptions& devo,
                                        const std::optional<Rigid3d>& initial_world_from_cam,
                                        int64_t initial_t_ns, bool quiet, std::ostream& log);
 

@@ -287,6 +287,34 @@ TEST(TrackCommandLine, ParsesFlagsAndRejectsBadValues) {
       InvalidArgumentError);
 }
 
+// The tracker's flags are kept with their values for DEVO's tracker; odometry refuses the map
+// search's flags, and VO (no event tracker) the tracker's.
+TEST(TrackCommandLine, KeepsTheTrackersFlagsForOdometry) {
+  const TrackCommandOptions devo =
+      ParseTrackCommandLine({"--mode", "devo", "--dataset", "d", "--out", "o", "--rate", "150",
+                             "--stamp-at-step-time", "on"});
+  ASSERT_EQ(devo.tracker_flags.size(), 2u);
+  EXPECT_EQ(devo.tracker_flags[0], std::make_pair(std::string("--rate"), std::string("150")));
+  EXPECT_EQ(devo.tracker_flags[1].first, "--stamp-at-step-time");
+  EXPECT_TRUE(devo.search_flags.empty());
+  const std::vector<std::string> vo = {"--mode", "vo", "--dataset", "d", "--out", "o"};
+  EXPECT_NO_THROW(ParseTrackCommandLine(vo));
+  std::vector<std::string> vo_rate = vo;
+  vo_rate.insert(vo_rate.end(), {"--rate", "100"});
+  EXPECT_THROW(ParseTrackCommandLine(vo_rate), InvalidArgumentError);
+  for (const std::string mode : {"vo", "devo"}) {
+    EXPECT_THROW(ParseTrackCommandLine(
+                     {"--mode", mode, "--dataset", "d", "--out", "o", "--search-grid", "2"}),
+                 InvalidArgumentError)
+        << mode;
+  }
+  // With a map, the search's flags are the map tracker's as before.
+  EXPECT_EQ(
+      ParseTrackCommandLine({"--map", "m", "--dataset", "d", "--out", "o", "--search-grid", "2"})
+          .tracking.tracker.relocalization_grid_radius_m,
+      2);
+}
+
 TEST(TrackCommandLine, ParsesStartingWithoutAPoseAndTheBlackout) {
   const TrackCommandOptions options = ParseTrackCommandLine({"--map",
                                                              "m",

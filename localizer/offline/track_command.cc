@@ -279,6 +279,21 @@ void TrackCommandOptions::Check() const {
         "--handover needs map tracking of events at a fixed rate (--mode events, no "
         "--events-per-step) from an initial pose");
   }
+  if (odometry && !search_flags.empty()) {
+    throw InvalidArgumentError(search_flags.front() +
+                               " sets the map search; --mode vo and devo search no map");
+  }
+  if (odometry == odometry::OdometryMode::kVo && !tracker_flags.empty()) {
+    throw InvalidArgumentError(
+        tracker_flags.front().first +
+        " sets the event tracker; --mode vo tracks images and depth with its own settings "
+        "(docs/tracking.md, \"Canny-VO\")");
+  }
+  for (const auto& [flag, value] : tracker_flags) {
+    if (odometry == odometry::OdometryMode::kDevo && flag == "--events-per-step") {
+      throw InvalidArgumentError("--events-per-step: --mode devo steps at a fixed rate (--rate)");
+    }
+  }
   if (geo_path && odometry) {
     throw InvalidArgumentError("--geo needs a map with a geo anchor; --mode vo and devo have none");
   }
@@ -366,7 +381,9 @@ Options:
                          events (Canny-EVT, default), frames (Canny-VT on the images: a folder's
                          images.txt, a bag's --image-topic, an AEDAT4 file's frames stream), or the
                          mapless odometry without --map: vo (Canny-VO on images and depth) or
-                         devo (Canny-DEVO on events and depth) (docs/tracking.md)
+                         devo (Canny-DEVO on events and depth) (docs/tracking.md); the tracker's
+                         flags below (--rate ... --max-mean-residual) reach DEVO's tracker too,
+                         over its own defaults (no polarity, no occlusion culling)
   --handover             with a map and a dataset with depth: where the map is not seen, continue
                          by Canny-DEVO from the last good pose and come back to the map once it is
                          seen again and verified; --stats gives each step's source (map, odometry)
@@ -427,6 +444,99 @@ Exit codes: 0 success, 1 bad input or failure, 2 bad command line.
 )";
 }
 
+namespace {
+
+// Applies a flag of the map search (--relocalize-after, --give-up, --search-*) to `tracker`;
+// false when `flag` is not one.
+bool ApplySearchFlag(const std::string& flag, const std::string& value, TrackerOptions* tracker) {
+  if (flag == "--relocalize-after") {
+    tracker->lost_steps_before_relocalization = static_cast<int>(ParseIntegerFlag(flag, value));
+  } else if (flag == "--give-up") {
+    tracker->relocalization_give_up_s = ParseDoubleFlag(flag, value);
+  } else if (flag == "--search-cpu-share") {
+    tracker->relocalization_cpu_share = ParseDoubleFlag(flag, value);
+  } else if (flag == "--search-probe") {
+    tracker->relocalization_probe_depth_fraction = ParseDoubleFlag(flag, value);
+  } else if (flag == "--search-distinct-depth") {
+    tracker->relocalization_distinct_depth_fraction = ParseDoubleFlag(flag, value);
+  } else if (flag == "--search-verify-s-per-m") {
+    tracker->relocalization_verify_s_per_depth_m = ParseDoubleFlag(flag, value);
+  } else if (flag == "--search-image-blur") {
+    tracker->relocalization_image_blur_px = ParseDoubleFlag(flag, value);
+  } else if (flag == "--search-active-fraction") {
+    tracker->relocalization_active_fraction = ParseDoubleFlag(flag, value);
+  } else if (flag == "--search-grid") {
+    tracker->relocalization_grid_radius_m = ParseDoubleFlag(flag, value);
+  } else if (flag == "--search-grid-step") {
+    tracker->relocalization_grid_step_m = ParseDoubleFlag(flag, value);
+  } else if (flag == "--search-candidates") {
+    tracker->relocalization_candidates = static_cast<int>(ParseIntegerFlag(flag, value));
+  } else if (flag == "--search-margin") {
+    tracker->relocalization_min_alignment_margin = ParseDoubleFlag(flag, value);
+  } else {
+    return false;
+  }
+  return true;
+}
+
+// Applies a flag of the event tracker (--rate ... --max-mean-residual, the noise filters) to
+// `tracker`; false when `flag` is not one. --mode devo applies the same flags to its own tracker.
+bool ApplyTrackerFlag(const std::string& flag, const std::string& value, TrackerOptions* tracker) {
+  if (flag == "--rate") {
+    tracker->step_rate_hz = ParseDoubleFlag(flag, value);
+  } else if (flag == "--events-per-step") {
+    tracker->events_per_step = ParseIntegerFlag(flag, value);
+  } else if (flag == "--variant") {
+    tracker->SetVariant(value);
+  } else if (flag == "--polarity") {
+    tracker->use_polarity = ParseSwitchFlag(flag, value);
+  } else if (flag == "--occlusion") {
+    tracker->use_occlusion_culling = ParseSwitchFlag(flag, value);
+  } else if (flag == "--max-points") {
+    tracker->max_points = static_cast<int>(ParseIntegerFlag(flag, value));
+  } else if (flag == "--tau") {
+    tracker->decay_time_s = ParseDoubleFlag(flag, value);
+  } else if (flag == "--decay-trail") {
+    tracker->decay_trail_px = ParseDoubleFlag(flag, value);
+  } else if (flag == "--min-tau") {
+    tracker->min_decay_time_s = ParseDoubleFlag(flag, value);
+  } else if (flag == "--decay-quantile") {
+    tracker->decay_speed_quantile = ParseDoubleFlag(flag, value);
+  } else if (flag == "--reselect-translation") {
+    tracker->reselect_translation_m = ParseDoubleFlag(flag, value);
+  } else if (flag == "--min-depth") {
+    tracker->min_depth_m = ParseDoubleFlag(flag, value);
+  } else if (flag == "--max-depth") {
+    tracker->max_depth_m = ParseDoubleFlag(flag, value);
+  } else if (flag == "--velocity-window") {
+    tracker->velocity_window_s = ParseDoubleFlag(flag, value);
+  } else if (flag == "--motion-prior") {
+    ParseMotionPriorFlag(flag, value, tracker);
+  } else if (flag == "--polarity-band") {
+    tracker->polarity_neutral_band_deg = ParseDoubleFlag(flag, value);
+  } else if (flag == "--min-flow") {
+    tracker->min_flow_px = ParseDoubleFlag(flag, value);
+  } else if (flag == "--stamp-at-step-time") {
+    tracker->stamp_at_step_time = ParseSwitchFlag(flag, value);
+  } else if (flag == "--stamp-velocity-window") {
+    tracker->stamp_velocity_window_s = ParseDoubleFlag(flag, value);
+  } else if (flag == "--two-stage") {
+    tracker->polarity_after_unsigned_solve = ParseSwitchFlag(flag, value);
+  } else if (flag == "--polarity-culling") {
+    tracker->polarity_aware_culling = ParseSwitchFlag(flag, value);
+  } else if (ApplyEventFilterFlag(flag, value, &tracker->event_filter)) {
+  } else if (flag == "--min-alignment") {
+    tracker->min_alignment = ParseDoubleFlag(flag, value);
+  } else if (flag == "--max-mean-residual") {
+    tracker->max_mean_residual = ParseDoubleFlag(flag, value);
+  } else {
+    return false;
+  }
+  return true;
+}
+
+}  // namespace
+
 TrackCommandOptions ParseTrackCommandLine(const std::vector<std::string>& arguments) {
   TrackCommandOptions options;
   TrackerOptions& tracker = options.tracking.tracker;
@@ -476,32 +586,11 @@ TrackCommandOptions ParseTrackCommandLine(const std::vector<std::string>& argume
       options.blackout_end_s = ParseDoubleFlag(flag, value.substr(colon + 1));
     } else if (flag == "--start") {
       options.start_s = ParseDoubleFlag(flag, value);
-    } else if (flag == "--relocalize-after") {
-      tracker.lost_steps_before_relocalization = static_cast<int>(ParseIntegerFlag(flag, value));
-    } else if (flag == "--give-up") {
-      tracker.relocalization_give_up_s = ParseDoubleFlag(flag, value);
-    } else if (flag == "--search-cpu-share") {
-      tracker.relocalization_cpu_share = ParseDoubleFlag(flag, value);
     } else if (flag == "--search-images") {
       options.search_images = ParseSwitchFlag(flag, value);
-    } else if (flag == "--search-probe") {
-      tracker.relocalization_probe_depth_fraction = ParseDoubleFlag(flag, value);
-    } else if (flag == "--search-distinct-depth") {
-      tracker.relocalization_distinct_depth_fraction = ParseDoubleFlag(flag, value);
-    } else if (flag == "--search-verify-s-per-m") {
-      tracker.relocalization_verify_s_per_depth_m = ParseDoubleFlag(flag, value);
-    } else if (flag == "--search-image-blur") {
-      tracker.relocalization_image_blur_px = ParseDoubleFlag(flag, value);
-    } else if (flag == "--search-active-fraction") {
-      tracker.relocalization_active_fraction = ParseDoubleFlag(flag, value);
-    } else if (flag == "--search-grid") {
-      tracker.relocalization_grid_radius_m = ParseDoubleFlag(flag, value);
-    } else if (flag == "--search-grid-step") {
-      tracker.relocalization_grid_step_m = ParseDoubleFlag(flag, value);
-    } else if (flag == "--search-candidates") {
-      tracker.relocalization_candidates = static_cast<int>(ParseIntegerFlag(flag, value));
-    } else if (flag == "--search-margin") {
-      tracker.relocalization_min_alignment_margin = ParseDoubleFlag(flag, value);
+      options.search_flags.push_back(flag);
+    } else if (ApplySearchFlag(flag, value, &tracker)) {
+      options.search_flags.push_back(flag);
     } else if (flag == "--mode") {
       if (value == "events") {
         tracker.input = TrackerInput::kEvents;
@@ -515,53 +604,8 @@ TrackCommandOptions ParseTrackCommandLine(const std::vector<std::string>& argume
         throw InvalidArgumentError("--mode expects events, frames, vo or devo, got '" + value +
                                    "'");
       }
-    } else if (flag == "--rate") {
-      tracker.step_rate_hz = ParseDoubleFlag(flag, value);
-    } else if (flag == "--events-per-step") {
-      tracker.events_per_step = ParseIntegerFlag(flag, value);
-    } else if (flag == "--variant") {
-      tracker.SetVariant(value);
-    } else if (flag == "--polarity") {
-      tracker.use_polarity = ParseSwitchFlag(flag, value);
-    } else if (flag == "--occlusion") {
-      tracker.use_occlusion_culling = ParseSwitchFlag(flag, value);
-    } else if (flag == "--max-points") {
-      tracker.max_points = static_cast<int>(ParseIntegerFlag(flag, value));
-    } else if (flag == "--tau") {
-      tracker.decay_time_s = ParseDoubleFlag(flag, value);
-    } else if (flag == "--decay-trail") {
-      tracker.decay_trail_px = ParseDoubleFlag(flag, value);
-    } else if (flag == "--min-tau") {
-      tracker.min_decay_time_s = ParseDoubleFlag(flag, value);
-    } else if (flag == "--decay-quantile") {
-      tracker.decay_speed_quantile = ParseDoubleFlag(flag, value);
-    } else if (flag == "--reselect-translation") {
-      tracker.reselect_translation_m = ParseDoubleFlag(flag, value);
-    } else if (flag == "--min-depth") {
-      tracker.min_depth_m = ParseDoubleFlag(flag, value);
-    } else if (flag == "--max-depth") {
-      tracker.max_depth_m = ParseDoubleFlag(flag, value);
-    } else if (flag == "--velocity-window") {
-      tracker.velocity_window_s = ParseDoubleFlag(flag, value);
-    } else if (flag == "--motion-prior") {
-      ParseMotionPriorFlag(flag, value, &tracker);
-    } else if (flag == "--polarity-band") {
-      tracker.polarity_neutral_band_deg = ParseDoubleFlag(flag, value);
-    } else if (flag == "--min-flow") {
-      tracker.min_flow_px = ParseDoubleFlag(flag, value);
-    } else if (flag == "--stamp-at-step-time") {
-      tracker.stamp_at_step_time = ParseSwitchFlag(flag, value);
-    } else if (flag == "--stamp-velocity-window") {
-      tracker.stamp_velocity_window_s = ParseDoubleFlag(flag, value);
-    } else if (flag == "--two-stage") {
-      tracker.polarity_after_unsigned_solve = ParseSwitchFlag(flag, value);
-    } else if (flag == "--polarity-culling") {
-      tracker.polarity_aware_culling = ParseSwitchFlag(flag, value);
-    } else if (ApplyEventFilterFlag(flag, value, &tracker.event_filter)) {
-    } else if (flag == "--min-alignment") {
-      tracker.min_alignment = ParseDoubleFlag(flag, value);
-    } else if (flag == "--max-mean-residual") {
-      tracker.max_mean_residual = ParseDoubleFlag(flag, value);
+    } else if (ApplyTrackerFlag(flag, value, &tracker)) {
+      options.tracker_flags.emplace_back(flag, value);
     } else if (flag == "--stats") {
       options.stats_path = value;
     } else if (flag == "--geo") {
@@ -632,9 +676,14 @@ OfflineTrackingResult RunTrackCommand(const TrackCommandOptions& options, std::o
   }
 
   if (options.odometry) {
+    // DEVO's tracker: its own defaults with the tracker flags given.
+    odometry::DevoRunOptions devo;
+    for (const auto& [flag, value] : options.tracker_flags) {
+      ApplyTrackerFlag(flag, value, &devo.devo.tracker);
+    }
     const OfflineTrackingResult result =
-        RunOdometryTrack(dataset, *options.odometry, options.initial_world_from_cam, initial_t_ns,
-                         options.quiet, log);
+        RunOdometryTrack(dataset, *options.odometry, devo, options.initial_world_from_cam,
+                         initial_t_ns, options.quiet, log);
     WriteTrackOutputs(options, odometry::OdometryModeName(*options.odometry),
                       odometry::OdometryModeName(*options.odometry), result, log);
     return result;

@@ -5,6 +5,7 @@
 #include <optional>
 #include <ostream>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "core/dataset/dataset.h"
@@ -79,6 +80,13 @@ struct TrackCommandOptions {
   // The offline run's options (--mode, --rate, --events-per-step, --polarity, --occlusion,
   // --variant, --max-points, --tau).
   OfflineTrackingOptions tracking;
+  // The event tracker's flags given (--rate ... --max-mean-residual, the noise filters), with
+  // their values, in order: --mode devo applies them to its own tracker, over its defaults
+  // (CannyDevoOptions::DefaultTrackerOptions); --mode vo, which has no event tracker, refuses them.
+  std::vector<std::pair<std::string, std::string>> tracker_flags;
+  // The map search's flags given (--relocalize-after, --give-up, --search-*): odometry, which
+  // searches no map, refuses them.
+  std::vector<std::string> search_flags;
 
   // Throws InvalidArgumentError when a required flag is missing or a value is out of range.
   void Check() const;
