@@ -9,13 +9,15 @@
 #   RUN         MODE-LIGHT with MODE devo or vo and LIGHT bright, dark or hdr (240x180, the
 #               DAVIS240 preset), or devo-vga (640x480, bright) (default: all seven)
 # The trajectory file comes from the shared data folder (EVLOC_TUM_TRAJECTORY overrides it).
+# TRACK_FLAGS adds flags to evloc-track (e.g. "--stamp-at-step-time on"; DEVO's tracker takes
+# the tracker's flags) and TAG names the results (OUT_DIR/results/RUN$TAG).
 # A dataset already in OUT_DIR is reused (4-7 min each to render at 240x180 on this VM, 20 min
 # at 640x480). Prints one table row per run: ATE and RPE (evloc-eval, no alignment, delta 1 s;
 # RPE also as a percentage of the path's 30.5 cm/s), the first time beyond 10 cm, LOST steps,
 # and for DEVO its reference frames and their build CPU time (pin the script with taskset -c N
 # for comparable times).
 set -euo pipefail
-if [ $# -lt 2 ]; then sed -n 2,16p "$0"; exit 2; fi
+if [ $# -lt 2 ]; then sed -n 2,18p "$0"; exit 2; fi
 BUILD=$(realpath "$1"); OUT=$2; shift 2
 RUNS=("$@")
 [ ${#RUNS[@]} -gt 0 ] || RUNS=(devo-bright devo-dark devo-hdr devo-vga vo-bright vo-dark vo-hdr)
@@ -51,10 +53,11 @@ for run in "${RUNS[@]}"; do
       dataset=$(generate vga-fr1-30s default bright) ;;
     *) echo "odometry_30s: unknown run '$run'" >&2; exit 2 ;;
   esac
-  result=$OUT/results/$run
+  result=$OUT/results/$run${TAG:-}
   mkdir -p "$result"
+  # shellcheck disable=SC2086
   "$TRACK" --mode "$mode" --dataset "$dataset" --out "$result/estimate.txt" \
-    --stats "$result/stats.json" > "$result/track.log" 2>&1
+    --stats "$result/stats.json" ${TRACK_FLAGS:-} > "$result/track.log" 2>&1
   "$EVAL" --gt "$dataset/groundtruth.txt" --est "$result/estimate.txt" \
     --json "$result/eval.json" --plot "$result/plot.png" > /dev/null
   /usr/bin/python3 - "$run" "$result" "$dataset/groundtruth.txt" <<'EOF'
