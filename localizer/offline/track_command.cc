@@ -651,6 +651,8 @@ OfflineTrackingResult RunTrackCommand(const TrackCommandOptions& options, std::o
   std::optional<Rigid3d> initial_world_from_cam;
   int64_t initial_t_ns = first_t_ns;
   OfflineTrackingOptions tracking = options.tracking;
+  // The statistics report each step's surface age (a diagnostic the tracker skips otherwise).
+  if (options.stats_path) tracking.tracker.measure_surface_age = true;
   if (options.blackout_begin_s) {
     tracking.blackout_begin_ns = first_t_ns + std::llround(*options.blackout_begin_s * 1e9);
     tracking.blackout_end_ns = first_t_ns + std::llround(*options.blackout_end_s * 1e9);
@@ -681,6 +683,7 @@ OfflineTrackingResult RunTrackCommand(const TrackCommandOptions& options, std::o
     for (const auto& [flag, value] : options.tracker_flags) {
       ApplyTrackerFlag(flag, value, &devo.devo.tracker);
     }
+    devo.devo.tracker.measure_surface_age = tracking.tracker.measure_surface_age;
     const OfflineTrackingResult result =
         RunOdometryTrack(dataset, *options.odometry, devo, options.initial_world_from_cam,
                          initial_t_ns, options.quiet, log);

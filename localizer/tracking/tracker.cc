@@ -645,7 +645,8 @@ PoseEstimate Tracker::Step(int64_t t_ns) {
     // Only once the smooth velocity spans its whole window since the last Reset: right after a
     // Reset (a pose hint, a return from LOST) it is the difference of a few poses, one of them
     // possibly centimetres off, and moving a pose forward by it would add that error.
-    if (options_.input == TrackerInput::kEvents && motion_.smooth_velocity_span_ns() > 0 &&
+    if ((options_.stamp_at_step_time || options_.measure_surface_age) &&
+        options_.input == TrackerInput::kEvents && motion_.smooth_velocity_span_ns() > 0 &&
         motion_.smooth_velocity_span_ns() >= motion_.smooth_window_ns()) {
       const SurfaceAge age =
           MeasureSurfaceAge(surface_, SurfaceChannel::kAll, decay_, t_ns, intrinsics_,

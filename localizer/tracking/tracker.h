@@ -129,7 +129,8 @@ struct TrackingQuality {
   double decay_time_ms = 0;
   // The age of the events the estimate was registered to (MeasureSurfaceAge), milliseconds; with
   // stamp_at_step_time the reported pose was moved forward by it to the step time. 0 when not
-  // measured (frames, no velocity yet, a step that is no estimate).
+  // measured (neither stamp_at_step_time nor measure_surface_age, frames, no velocity yet, a step
+  // that is no estimate).
   double surface_age_ms = 0;
 };
 

@@ -314,7 +314,10 @@ tracking::OfflineTrackingOptions TrackingOptionsFromFlags(const std::vector<std:
         "tracker options: --start, --blackout, --stats, --debug-dir, --mode vo/devo and "
         "--init-pose belong to evloc.track_dataset, not to a tracker");
   }
-  return options.tracking;
+  tracking::OfflineTrackingOptions tracking = options.tracking;
+  // The per-step columns include the surface age, which the tracker measures only on request.
+  tracking.tracker.measure_surface_age = true;
+  return tracking;
 }
 
 // Per-step results as NumPy arrays: the columns of evloc-track --stats.
