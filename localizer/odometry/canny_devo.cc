@@ -133,8 +133,7 @@ CannyDevo::CannyDevo(const Camera& event_camera, const Camera& depth_camera,
       depth_camera_(depth_camera),
       event_from_depth_(event_from_depth),
       options_(options),
-      table_(event_camera),
-      mapping_surface_(table_) {
+      table_(event_camera) {
   options_.Check();
   depth_camera_.Check();
   if (!event_from_depth_.IsFinite()) {
@@ -154,7 +153,6 @@ CannyDevo::CannyDevo(const Camera& event_camera, const Camera& depth_camera,
 std::vector<tracking::PoseEstimate> CannyDevo::AddEvents(const EventBuffer& events) {
   if (events.empty()) return {};
   std::vector<tracking::PoseEstimate> steps = tracker_->AddEvents(events);
-  mapping_surface_.Insert(events, 0, events.size());
   last_event_t_ns_ = events.t_ns.back();
   if (!steps.empty()) {
     last_step_ = steps.back();
@@ -174,8 +172,11 @@ ReferenceFrameInfo CannyDevo::BuildReference(const Rigid3d& world_from_cam, int6
   decay.empty_threshold = options_.mapping_empty_threshold;
   // The surface's values, and its active pixels (T > delta) as the semi-dense region.
   // (The images are members so that each build reuses their memory.)
+  // The tracker's surface: every event given so far (after the noise filters, when they are on),
+  // as a surface of the reference's own would hold (it was one: every event inserted twice).
+  const tracking::TimeSurface& surface = tracker_->time_surface();
   cv::Mat& values = build_.values;
-  mapping_surface_.Values(tracking::SurfaceChannel::kAll, t_ns, decay, &values);
+  surface.Values(tracking::SurfaceChannel::kAll, t_ns, decay, &values);
   cv::Mat& semi_dense = build_.semi_dense;
   cv::compare(values, 0.0, semi_dense, cv::CMP_GT);
   cv::Mat& gradient_x = build_.gradient_x;
@@ -255,8 +256,7 @@ ReferenceFrameInfo CannyDevo::BuildReference(const Rigid3d& world_from_cam, int6
       continue;
     }
     if (options_.edges_at_reference_time) {
-      const int64_t last_t_ns =
-          mapping_surface_.LastTimestamp(tracking::SurfaceChannel::kAll, x, y);
+      const int64_t last_t_ns = surface.LastTimestamp(tracking::SurfaceChannel::kAll, x, y);
       if (last_t_ns != tracking::kNeverFired && last_t_ns <= t_ns) {
         point.position = EdgeAfter(ideal, point.pixel, point.position, velocity,
                                    static_cast<double>(t_ns - last_t_ns) * 1e-9);

@@ -190,7 +190,6 @@ class CannyDevo {
   Rigid3d event_from_depth_;
   CannyDevoOptions options_;
   UndistortionTable table_;
-  tracking::TimeSurface mapping_surface_;
   ReferenceMapSource source_;
   std::unique_ptr<tracking::Tracker> tracker_;
   bool started_ = false;
@@ -201,7 +200,7 @@ class CannyDevo {
   // The buffers of BuildReference, kept to reuse their memory in the next build (megabytes at VGA;
   // fresh allocations cost page faults on every reference frame).
   struct BuildBuffers {
-    // The mapping surface's values, its semi-dense mask and its gradients.
+    // The time surface's values, its semi-dense mask and its gradients.
     cv::Mat values;
     cv::Mat semi_dense;
     cv::Mat gradient_x;
