@@ -226,7 +226,8 @@ TEST_F(SimulatedOdometry, EvlocTrackDevoStatsListItsReferenceFrames) {
 }
 
 // The tracker's flags reach DEVO's tracker (they were silently ignored before): --rate 100 gives
-// a third of the default 300 Hz steps; flags of the map search are refused.
+// a third of the default 300 Hz steps, the noise filters work; flags of the map search are
+// refused.
 TEST_F(SimulatedOdometry, EvlocTrackDevoTakesTheTrackersFlags) {
   const std::filesystem::path dataset = *folder_ / "dataset";
   const auto run = [&](std::vector<std::string> extra) {
@@ -243,6 +244,12 @@ TEST_F(SimulatedOdometry, EvlocTrackDevoTakesTheTrackersFlags) {
   ASSERT_GT(at_default.steps.size(), 200u);
   EXPECT_NEAR(static_cast<double>(at_100.steps.size()),
               static_cast<double>(at_default.steps.size()) / 3.0, 2.0);
+  // The noise filters too: the first reference frame waits for the hot-pixel filter's learning
+  // period, which holds the events back (it was built from an empty surface and refused).
+  const OfflineTrackingResult filtered = run({"--hot-pixels", "on"});
+  ASSERT_GE(filtered.reference_frames.size(), 1u);
+  EXPECT_GT(filtered.reference_frames.front().t_s, at_default.reference_frames.front().t_s);
+  EXPECT_GT(filtered.steps.size(), at_default.steps.size() / 2);
   EXPECT_THROW(run({"--relocalize-after", "5"}), InvalidArgumentError);
   EXPECT_THROW(run({"--events-per-step", "1000"}), InvalidArgumentError);
 }

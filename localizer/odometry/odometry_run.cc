@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <memory>
 #include <string>
 
@@ -149,9 +150,14 @@ DevoRunResult RunCannyDevo(const Dataset& dataset,
       if (on_step) on_step(step);
     }
   };
+  // The first reference frame needs events on the tracker's surface: with the hot-pixel filter
+  // on, its learning period holds them back for the first counting window (event_filter.h).
+  int64_t warm_up_ns = options.warm_up_ns;
+  const tracking::EventFilterOptions& filter = options.devo.tracker.event_filter;
+  if (filter.hot_pixels) warm_up_ns += std::llround(filter.hot_pixel_window_s * 1e9);
   size_t next_depth = 0;
   while (next_depth < depth_frames.size() &&
-         depth_frames[next_depth].t_ns < initial_t_ns + options.warm_up_ns) {
+         depth_frames[next_depth].t_ns < initial_t_ns + warm_up_ns) {
     ++next_depth;
   }
   // Handles the depth frame `next_depth` (every event up to its time has been given).
