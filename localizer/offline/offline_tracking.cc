@@ -157,6 +157,9 @@ void OfflineTrackingOptions::Check() const {
     CheckSearchRegion(*search_prior_center, search_prior_radius_m,
                       "offline tracking: the search prior");
   }
+  if (initial_velocity && !initial_velocity->allFinite()) {
+    throw InvalidArgumentError("offline tracking: the initial velocity is not finite");
+  }
 }
 
 EventStreamTracker::EventStreamTracker(const MapSource& source, const Camera& camera,
@@ -186,7 +189,9 @@ std::vector<PoseEstimate> EventStreamTracker::AddEvents(
   EventBuffer tail;
   for (size_t i = 0; i < events.size(); ++i) (i < split ? head : tail).push_back(events[i]);
   if (!head.empty() && !discard_events_before_start_) tracker_.AddEvents(head);
-  if (initial_world_from_cam_) {
+  if (initial_world_from_cam_ && initial_velocity_) {
+    tracker_.Reset(*initial_world_from_cam_, initial_t_ns_, *initial_velocity_);
+  } else if (initial_world_from_cam_) {
     tracker_.Reset(*initial_world_from_cam_, initial_t_ns_);
   } else {
     tracker_.StartWithoutPose(initial_t_ns_);
@@ -222,8 +227,12 @@ OfflineTrackingResult TrackEventStream(EventReader& reader, const MapSource& sou
     throw InvalidArgumentError("offline tracking: event streams need the events input mode");
   }
   const auto start = std::chrono::steady_clock::now();
+  if (options.initial_velocity && !initial_world_from_cam) {
+    throw InvalidArgumentError("offline tracking: an initial velocity needs an initial pose");
+  }
   EventStreamTracker stream(source, camera, options.tracker, initial_world_from_cam, initial_t_ns,
                             options.discard_events_before_start);
+  if (options.initial_velocity) stream.set_initial_velocity(*options.initial_velocity);
   if (options.image_hypotheses) {
     stream.mutable_tracker().SetImageHypothesisSource(options.image_hypotheses);
   }

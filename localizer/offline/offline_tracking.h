@@ -34,6 +34,10 @@ struct OfflineTrackingOptions {
   // Events before the start time are dropped instead of priming the time surfaces (evloc-track
   // --start: the run ignores what comes before it).
   bool discard_events_before_start = false;
+  // The camera's velocity at the start (the body-frame twist per second of world_from_cam,
+  // Tracker::Reset), so that a run that starts at speed does not start at rest (evloc-track
+  // --initial-velocity); nullopt: at rest. Needs an initial pose.
+  std::optional<Vector6d> initial_velocity;
   // Events with begin <= t_ns < end of this range are dropped before the tracker sees them (a
   // blackout of the sensor, for recovery tests; evloc-track --blackout); empty when begin >= end.
   int64_t blackout_begin_ns = 0;
@@ -128,6 +132,9 @@ class EventStreamTracker {
   EventStreamTracker(const MapSource& source, const Camera& camera, const TrackerOptions& options,
                      const std::optional<Rigid3d>& initial_world_from_cam, int64_t initial_t_ns,
                      bool discard_events_before_start = false);
+  // The velocity the tracker starts with at the initial pose (at rest without it). Call before
+  // the first events.
+  void set_initial_velocity(const Vector6d& velocity) { initial_velocity_ = velocity; }
 
   // Adds the next events (time-ordered, also across calls) and returns the steps that became
   // due. `before_tracking`, when set, runs once the tracker has started, just before the events
@@ -147,6 +154,7 @@ class EventStreamTracker {
  private:
   Tracker tracker_;
   std::optional<Rigid3d> initial_world_from_cam_;
+  std::optional<Vector6d> initial_velocity_;
   int64_t initial_t_ns_ = 0;
   bool discard_events_before_start_ = false;
   bool started_ = false;

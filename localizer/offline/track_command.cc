@@ -279,6 +279,13 @@ void TrackCommandOptions::Check() const {
         "--handover needs map tracking of events at a fixed rate (--mode events, no "
         "--events-per-step) from an initial pose");
   }
+  if ((initial_velocity || initial_velocity_from_truth) &&
+      (no_initial_pose || odometry || handover ||
+       tracking.tracker.input != TrackerInput::kEvents)) {
+    throw InvalidArgumentError(
+        "--initial-velocity starts map tracking of events from its initial pose: not with "
+        "--init-pose none, --mode frames, vo or devo, or --handover");
+  }
   if (odometry && !search_flags.empty()) {
     throw InvalidArgumentError(search_flags.front() +
                                " sets the map search; --mode vo and devo search no map");
@@ -348,6 +355,10 @@ Options:
                          map until a hypothesis is verified (docs/relocalization.md, "Events")
   --start S              start S seconds after the dataset's first event (or frame) and ignore
                          everything before it (the first step is at that time)
+  --initial-velocity truth | "vx vy vz wx wy wz"
+                         start moving instead of at rest: the ground truth's velocity at the
+                         start, or this body-frame twist of world_from_cam (m/s, rad/s, camera
+                         frame), as a vehicle that knows its speed can (events, with a pose)
   --blackout T0:T1       drop the events from T0 to T1 seconds after the first event (a sensor
                          blackout, to measure the recovery)
   --relocalize-after N   LOST steps before a global search (RELOCALIZING; default 30, 0 never)
@@ -577,6 +588,22 @@ TrackCommandOptions ParseTrackCommandLine(const std::vector<std::string>& argume
         options.no_initial_pose = false;
         options.initial_world_from_cam = ParsePoseText(flag, value);
       }
+    } else if (flag == "--initial-velocity") {
+      options.initial_velocity.reset();
+      options.initial_velocity_from_truth = value == "truth";
+      if (!options.initial_velocity_from_truth) {
+        std::istringstream in(value);
+        Vector6d twist;
+        for (int i = 0; i < 6; ++i) in >> twist[i];
+        std::string rest;
+        if (in.fail() || (in >> rest) || !twist.allFinite()) {
+          throw InvalidArgumentError(
+              "--initial-velocity expects truth or six numbers \"vx vy vz wx wy wz\" (m/s, "
+              "rad/s, camera frame), got '" +
+              value + "'");
+        }
+        options.initial_velocity = twist;
+      }
     } else if (flag == "--blackout") {
       const size_t colon = value.find(':');
       if (colon == std::string::npos) {
@@ -653,6 +680,7 @@ OfflineTrackingResult RunTrackCommand(const TrackCommandOptions& options, std::o
   OfflineTrackingOptions tracking = options.tracking;
   // The statistics report each step's surface age (a diagnostic the tracker skips otherwise).
   if (options.stats_path) tracking.tracker.measure_surface_age = true;
+  tracking.initial_velocity = options.initial_velocity;
   if (options.blackout_begin_s) {
     tracking.blackout_begin_ns = first_t_ns + std::llround(*options.blackout_begin_s * 1e9);
     tracking.blackout_end_ns = first_t_ns + std::llround(*options.blackout_end_s * 1e9);
@@ -675,6 +703,20 @@ OfflineTrackingResult RunTrackCommand(const TrackCommandOptions& options, std::o
         ResolveInitialPose(dataset, options.initial_world_from_cam, first_t_ns);
     initial_world_from_cam = initial.world_from_cam;
     initial_t_ns = initial.t_ns;
+  }
+  if (options.initial_velocity_from_truth) {
+    // Over the tracker's velocity window, as its constant-velocity model measures it.
+    const std::optional<Vector6d> velocity =
+        dataset.ground_truth
+            ? dataset.ground_truth->Velocity(
+                  initial_t_ns, std::llround(options.tracking.tracker.velocity_window_s * 1e9))
+            : std::nullopt;
+    if (!velocity) {
+      throw InvalidArgumentError(
+          "--initial-velocity truth: the dataset has no ground truth around the start time; "
+          "give the velocity as six numbers");
+    }
+    tracking.initial_velocity = velocity;
   }
 
   if (options.odometry) {

@@ -42,6 +42,11 @@ struct TrackCommandOptions {
   std::optional<Rigid3d> initial_world_from_cam;
   // Start without a pose and search the map (--init-pose none).
   bool no_initial_pose = false;
+  // Start moving (--initial-velocity "vx vy vz wx wy wz": the body-frame twist of world_from_cam,
+  // m/s and rad/s in the camera frame) instead of at rest...
+  std::optional<Vector6d> initial_velocity;
+  // ... or with the ground truth's velocity at the start (--initial-velocity truth).
+  bool initial_velocity_from_truth = false;
   // A GNSS fix where the run starts (--gnss LAT,LON,ALT,SIGMA[,SIGMA_V]): with --init-pose none
   // the search looks only near it (on a site, in the tiles near it) until the first TRACKING
   // step. Needs a map or site with a geo anchor.
