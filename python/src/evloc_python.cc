@@ -309,10 +309,11 @@ tracking::OfflineTrackingOptions TrackingOptionsFromFlags(const std::vector<std:
   arguments.insert(arguments.end(), flags.begin(), flags.end());
   const tracking::TrackCommandOptions options = tracking::ParseTrackCommandLine(arguments);
   if (options.start_s || options.blackout_begin_s || options.stats_path || options.debug_dir ||
-      options.odometry || options.initial_world_from_cam || options.no_initial_pose) {
+      options.odometry || options.initial_world_from_cam || options.no_initial_pose ||
+      options.initial_velocity || options.initial_velocity_from_truth) {
     throw InvalidArgumentError(
-        "tracker options: --start, --blackout, --stats, --debug-dir, --mode vo/devo and "
-        "--init-pose belong to evloc.track_dataset, not to a tracker");
+        "tracker options: --start, --blackout, --stats, --debug-dir, --mode vo/devo, "
+        "--init-pose and --initial-velocity belong to evloc.track_dataset, not to a tracker");
   }
   tracking::OfflineTrackingOptions tracking = options.tracking;
   // The per-step columns include the surface age, which the tracker measures only on request.
