@@ -278,6 +278,17 @@ class Replayer {
     initial_ = options.start_without_pose
                    ? TimedPose{SessionTime(first_t_ns), Rigid3d()}
                    : ResolveInitialPose(dataset_, options.initial_world_from_cam, first_t_ns);
+    if (options.initial_velocity_from_truth) {
+      // Over the tracker's velocity window (TrackerOptions::velocity_window_s).
+      initial_velocity_ = dataset_.ground_truth
+                              ? dataset_.ground_truth->Velocity(initial_.t_ns, 20'000'000)
+                              : std::nullopt;
+      if (!initial_velocity_) {
+        throw InvalidArgumentError("--initial-velocity truth: dataset '" +
+                                   options.dataset.string() +
+                                   "' has no ground truth around its start");
+      }
+    }
     next_window_start_ns_ = SessionTime(first_t_ns) - 1;
     dataset_start_ns_ = next_window_start_ns_;
     packet_ns_ = options.packet_us * 1000;
@@ -316,6 +327,8 @@ class Replayer {
   std::unique_ptr<EventSource> source_;
   bool evt3_ = false;
   TimedPose initial_;
+  // The first session's velocity (--initial-velocity truth); nullopt: at rest.
+  std::optional<Vector6d> initial_velocity_;
   int64_t next_window_start_ns_ = 0;
   // Start of the first window: real-time pacing counts from it.
   int64_t dataset_start_ns_ = 0;
@@ -427,6 +440,9 @@ grpc::Status Replayer::RunSession(const TimedPose& start, bool resumed, SessionO
   // Until a first pose arrives, a session --init-pose none starts without one again.
   if (!options_.start_without_pose || resumed) {
     *session_start->mutable_initial_world_from_cam() = RigidToProto(start.world_from_cam);
+  }
+  if (!resumed && initial_velocity_) {
+    *session_start->mutable_initial_velocity() = TwistToProto(*initial_velocity_);
   }
   if (resumed && options_.resume_velocity_ms > 0) {
     std::optional<Vector6d> velocity;
@@ -857,6 +873,9 @@ void ReplayOptions::Check() const {
   if (start_without_pose && initial_world_from_cam) {
     throw InvalidArgumentError("--init-pose none and a pose exclude each other");
   }
+  if (start_without_pose && initial_velocity_from_truth) {
+    throw InvalidArgumentError("--initial-velocity needs a pose: not with --init-pose none");
+  }
   if (dataset.empty()) throw InvalidArgumentError("--dataset is required: a dataset folder");
   if (output.empty()) throw InvalidArgumentError("--out is required: the TUM trajectory to write");
   if (speed && !(*speed > 0)) throw InvalidArgumentError("--speed must be positive or 'max'");
@@ -1062,6 +1081,16 @@ std::unique_ptr<CommandLine> DeclareReplayCommandLine(ReplayCommand* command) {
              } else {
                options->initial_world_from_cam = ParsePoseText(flag, value);
              }
+           })
+      .Add("--initial-velocity", "rest|truth",
+           "how the session starts: at rest (default), or moving with the ground truth's "
+           "velocity at its start (SessionStart.initial_velocity), as a vehicle client that knows "
+           "its speed can",
+           [options](const std::string& flag, const std::string& value) {
+             if (value != "rest" && value != "truth") {
+               throw InvalidArgumentError(flag + " expects rest or truth, got '" + value + "'");
+             }
+             options->initial_velocity_from_truth = value == "truth";
            })
       .Add("--rate", "HZ", "tracking steps per second (default: the server's)",
            &options->step_rate_hz)

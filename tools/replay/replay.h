@@ -69,6 +69,11 @@ struct ReplayOptions {
   // Start without a pose: the server searches the map (PoseUpdates INITIALIZING, without a pose,
   // until it verifies one); the dataset needs no ground truth (--init-pose none).
   bool start_without_pose = false;
+  // The first session starts moving with the ground truth's velocity at the initial pose
+  // (SessionStart.initial_velocity, over the tracker's 20 ms velocity window), as a vehicle client
+  // that knows its speed can, instead of at rest (--initial-velocity truth). Needs a pose and
+  // ground truth there.
+  bool initial_velocity_from_truth = false;
   // A simulated GNSS receiver (--gnss-sigma M): right after the session starts and then every
   // gnss_period_s of session time (before the packet that reaches it), a GnssFix at the
   // ground-truth position moved by Gaussian noise of this one-sigma on each axis (seed

@@ -50,12 +50,14 @@ class ReplayTest : public ::testing::Test {
 
   // The offline reference: TrackEventStream over the same event file (with the motion prior
   // trusting the velocity to `prior_sigma_mps`, 0: none).
-  tracking::OfflineTrackingResult Offline(double prior_sigma_mps = 0) const {
+  tracking::OfflineTrackingResult Offline(
+      double prior_sigma_mps = 0, const std::optional<Vector6d>& initial_velocity = {}) const {
     const Dataset dataset = ReadDataset(dataset_);
     const auto reader = OpenEventFile(*dataset.events_path);
     tracking::OfflineTrackingOptions options;
     options.tracker.step_rate_hz = 200;
     options.tracker.motion_prior_velocity_sigma_mps = prior_sigma_mps;
+    options.initial_velocity = initial_velocity;
     const Map map = fixture::TestMap();
     const VisibilityIndex visibility(map);
     return tracking::TrackEventStream(*reader, map, &visibility, dataset.camera,
@@ -120,6 +122,33 @@ TEST_F(ReplayTest, ASessionsMotionPriorReachesItsTracker) {
                                            .norm());
   }
   EXPECT_GT(largest_difference_m, 1e-6);
+}
+
+// --initial-velocity truth reaches the session's tracker: the poses are offline tracking's
+// started with the ground truth's velocity, and not those started at rest.
+TEST_F(ReplayTest, TheInitialVelocityReachesTheTracker) {
+  ReplayOptions options = Options();
+  options.initial_velocity_from_truth = true;
+  std::ostringstream log;
+  const ReplayResult result = RunReplay(options, log);
+  const Trajectory ground_truth = *ReadDataset(dataset_).ground_truth;
+  const std::optional<Vector6d> velocity =
+      ground_truth.Velocity(ground_truth.start_ns(), 20'000'000);
+  ASSERT_TRUE(velocity.has_value());
+  const Trajectory moving = Offline(0, velocity).trajectory;
+  ExpectSameTrajectory(result.trajectory, moving);
+  const Trajectory at_rest = Offline().trajectory;
+  ASSERT_EQ(at_rest.size(), moving.size());
+  double largest_difference_m = 0;
+  for (size_t i = 0; i < at_rest.size(); ++i) {
+    largest_difference_m =
+        std::max(largest_difference_m, (at_rest.poses()[i].world_from_cam.translation -
+                                        moving.poses()[i].world_from_cam.translation)
+                                           .norm());
+  }
+  EXPECT_GT(largest_difference_m, 1e-6);
+  options.start_without_pose = true;
+  EXPECT_THROW(options.Check(), InvalidArgumentError);
 }
 
 TEST_F(ReplayTest, Evt3ReplayOfWholeMicrosecondEventsReproducesOfflineTracking) {
@@ -358,6 +387,12 @@ TEST(ReplayCommandLine, FlagsMapToOptions) {
   std::vector<std::string> whole = required;
   whole.insert(whole.end(), {"--thin-while-searching", "off"});
   EXPECT_FALSE(ParseReplayCommandLine(whole).options.thin_while_searching);
+  std::vector<std::string> moving = required;
+  moving.insert(moving.end(), {"--initial-velocity", "truth"});
+  EXPECT_TRUE(ParseReplayCommandLine(moving).options.initial_velocity_from_truth);
+  EXPECT_FALSE(ParseReplayCommandLine(required).options.initial_velocity_from_truth);
+  moving.back() = "fast";
+  EXPECT_THROW(ParseReplayCommandLine(moving), InvalidArgumentError);
   no_pose.insert(no_pose.end(), {"--init-pose", "0 0 0 0 0 0 1"});
   EXPECT_THROW(ParseReplayCommandLine(no_pose), InvalidArgumentError);
   EXPECT_THROW(ParseReplayCommandLine({"--server", "x", "--map", "m", "--dataset", "d", "--out",
