@@ -151,4 +151,12 @@ bool ParseSwitchFlag(std::string_view flag, std::string_view text) {
   throw UsageError(std::string(flag) + " expects on or off, got '" + std::string(text) + "'");
 }
 
+bool ParseTwoWordFlag(std::string_view flag, std::string_view text, std::string_view no,
+                      std::string_view yes) {
+  if (text == yes) return true;
+  if (text == no) return false;
+  throw UsageError(std::string(flag) + " expects " + std::string(no) + " or " + std::string(yes) +
+                   ", got '" + std::string(text) + "'");
+}
+
 }  // namespace evloc

@@ -111,4 +111,9 @@ void ParseSizeFlag(std::string_view flag, std::string_view text, int* width, int
 // Parses "on"/"off" (also "true"/"false", "1"/"0"). Throws UsageError.
 bool ParseSwitchFlag(std::string_view flag, std::string_view text);
 
+// Parses one of two words: false for `no`, true for `yes` (e.g. "rest" / "truth"). Throws
+// UsageError naming both.
+bool ParseTwoWordFlag(std::string_view flag, std::string_view text, std::string_view no,
+                      std::string_view yes);
+
 }  // namespace evloc

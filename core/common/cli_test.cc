@@ -105,6 +105,19 @@ TEST(ParseSizeFlag, WidthByHeight) {
   EXPECT_THROW(ParseSizeFlag("--ecd-size", "0x180", &width, &height), UsageError);
 }
 
+TEST(ParseTwoWordFlag, OneOfTwoWords) {
+  EXPECT_TRUE(ParseTwoWordFlag("--initial-velocity", "truth", "rest", "truth"));
+  EXPECT_FALSE(ParseTwoWordFlag("--initial-velocity", "rest", "rest", "truth"));
+  try {
+    ParseTwoWordFlag("--initial-velocity", "fast", "rest", "truth");
+    ADD_FAILURE() << "a third word was accepted";
+  } catch (const UsageError& error) {
+    EXPECT_NE(std::string(error.what()).find("expects rest or truth, got 'fast'"),
+              std::string::npos)
+        << error.what();
+  }
+}
+
 TEST(ParseSwitchFlag, OnOff) {
   EXPECT_TRUE(ParseSwitchFlag("--polarity", "on"));
   EXPECT_FALSE(ParseSwitchFlag("--polarity", "off"));

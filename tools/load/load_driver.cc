@@ -540,10 +540,7 @@ std::unique_ptr<CommandLine> DeclareLoadCommandLine(LoadArguments* arguments) {
            "velocity at its start (SessionStart.initial_velocity), as a vehicle client that knows "
            "its speed can",
            [options](const std::string& flag, const std::string& value) {
-             if (value != "rest" && value != "truth") {
-               throw InvalidArgumentError(flag + " expects rest or truth, got '" + value + "'");
-             }
-             options->initial_velocity_from_truth = value == "truth";
+             options->initial_velocity_from_truth = ParseTwoWordFlag(flag, value, "rest", "truth");
            })
       .Add("--seed", "N", "seed of those random choices (default 1)",
            [options](const std::string& flag, const std::string& value) {

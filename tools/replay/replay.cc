@@ -1087,10 +1087,7 @@ std::unique_ptr<CommandLine> DeclareReplayCommandLine(ReplayCommand* command) {
            "velocity at its start (SessionStart.initial_velocity), as a vehicle client that knows "
            "its speed can",
            [options](const std::string& flag, const std::string& value) {
-             if (value != "rest" && value != "truth") {
-               throw InvalidArgumentError(flag + " expects rest or truth, got '" + value + "'");
-             }
-             options->initial_velocity_from_truth = value == "truth";
+             options->initial_velocity_from_truth = ParseTwoWordFlag(flag, value, "rest", "truth");
            })
       .Add("--rate", "HZ", "tracking steps per second (default: the server's)",
            &options->step_rate_hz)
