@@ -28,12 +28,33 @@ Rigid3d ParsePoseTokens(std::string_view what, std::span<const std::string> toke
   return Rigid3d(rotation.normalized(), Eigen::Vector3d(values[0], values[1], values[2]));
 }
 
-Rigid3d ParsePoseText(std::string_view what, std::string_view text) {
+namespace {
+
+// The tokens of `text`, separated by white space.
+std::vector<std::string> Tokens(std::string_view text) {
   std::istringstream stream{std::string(text)};
   std::vector<std::string> tokens;
   std::string token;
   while (stream >> token) tokens.push_back(token);
-  return ParsePoseTokens(what, tokens);
+  return tokens;
+}
+
+}  // namespace
+
+Rigid3d ParsePoseText(std::string_view what, std::string_view text) {
+  return ParsePoseTokens(what, Tokens(text));
+}
+
+Vector6d ParseTwistText(std::string_view what, std::string_view text) {
+  const std::vector<std::string> tokens = Tokens(text);
+  if (tokens.size() != 6) {
+    throw InvalidArgumentError(std::string(what) +
+                               " expects 6 numbers \"vx vy vz wx wy wz\", got " +
+                               std::to_string(tokens.size()));
+  }
+  Vector6d twist;
+  for (int i = 0; i < 6; ++i) twist[i] = ParseDoubleFlag(what, tokens[i]);
+  return twist;
 }
 
 }  // namespace evloc

@@ -58,5 +58,18 @@ TEST(PoseText, TokensAndTextFollowTheSameRule) {
   EXPECT_THROW(ParsePoseTokens("pose", std::vector<std::string>{"1", "2"}), InvalidArgumentError);
 }
 
+TEST(PoseText, ATwistIsSixNumbersByTheSameRule) {
+  const Vector6d twist = ParseTwistText("--initial-velocity", " 5 0 0.1  0 0.2 -0.3 ");
+  EXPECT_EQ(twist, (Vector6d() << 5, 0, 0.1, 0, 0.2, -0.3).finished());
+  for (const std::string bad : {"", "1 2 3", "1 2 3 4 5 6 7", "1 2 3 4 5 nan", "1 2 3 4 5 1m"}) {
+    try {
+      ParseTwistText("--initial-velocity", bad);
+      ADD_FAILURE() << "accepted '" << bad << "'";
+    } catch (const InvalidArgumentError& error) {
+      EXPECT_EQ(std::string(error.what()).rfind("--initial-velocity", 0), 0u) << error.what();
+    }
+  }
+}
+
 }  // namespace
 }  // namespace evloc

@@ -296,10 +296,8 @@ void TrackCommandOptions::Check() const {
         " sets the event tracker; --mode vo tracks images and depth with its own settings "
         "(docs/tracking.md, \"Canny-VO\")");
   }
-  for (const auto& [flag, value] : tracker_flags) {
-    if (odometry == odometry::OdometryMode::kDevo && flag == "--events-per-step") {
-      throw InvalidArgumentError("--events-per-step: --mode devo steps at a fixed rate (--rate)");
-    }
+  if (odometry == odometry::OdometryMode::kDevo && tracking.tracker.events_per_step) {
+    throw InvalidArgumentError("--events-per-step: --mode devo steps at a fixed rate (--rate)");
   }
   if (geo_path && odometry) {
     throw InvalidArgumentError("--geo needs a map with a geo anchor; --mode vo and devo have none");
@@ -592,17 +590,7 @@ TrackCommandOptions ParseTrackCommandLine(const std::vector<std::string>& argume
       options.initial_velocity.reset();
       options.initial_velocity_from_truth = value == "truth";
       if (!options.initial_velocity_from_truth) {
-        std::istringstream in(value);
-        Vector6d twist;
-        for (int i = 0; i < 6; ++i) in >> twist[i];
-        std::string rest;
-        if (in.fail() || (in >> rest) || !twist.allFinite()) {
-          throw InvalidArgumentError(
-              "--initial-velocity expects truth or six numbers \"vx vy vz wx wy wz\" (m/s, "
-              "rad/s, camera frame), got '" +
-              value + "'");
-        }
-        options.initial_velocity = twist;
+        options.initial_velocity = ParseTwistText("--initial-velocity (truth or a twist)", value);
       }
     } else if (flag == "--blackout") {
       const size_t colon = value.find(':');
