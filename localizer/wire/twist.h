@@ -2,12 +2,18 @@
 // and velocity its client last received (docs/api.md, "Reconnecting").
 #pragma once
 
+#include <cstdint>
 #include <string_view>
 
 #include "core/geometry/rigid3.h"
 #include "evloc/localizer.pb.h"
 
 namespace evloc::wire {
+
+// The window over which a client measures the velocity it sends from a trajectory (evloc-load and
+// evloc-replay --initial-velocity truth): the tracker's constant-velocity window
+// (TrackerOptions::velocity_window_s, 20 ms), so that the session starts as it would measure it.
+inline constexpr int64_t kClientVelocityWindowNs = 20'000'000;
 
 // Largest |linear| (m/s) and |angular| (rad/s) a Twist may carry.
 inline constexpr double kMaxTwistLinear = 1000;

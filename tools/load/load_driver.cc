@@ -55,10 +55,6 @@ struct Workload {
 // times are 5-30 ms).
 constexpr int64_t kStaggerPrimeNs = 50'000'000;
 
-// The window of the ground truth's velocity that --initial-velocity truth sends: the tracker's
-// constant-velocity window (TrackerOptions::velocity_window_s).
-constexpr int64_t kTruthVelocityWindowNs = 20'000'000;
-
 // The workloads of a run: one at the dataset's start, or one per --stagger start.
 std::vector<Workload> MakeWorkloads(const LoadOptions& options) {
   const Dataset dataset = ReadDataset(options.dataset);
@@ -134,7 +130,7 @@ std::vector<Workload> MakeWorkloads(const LoadOptions& options) {
     start->set_initial_t_ns(initial.t_ns);
     if (options.initial_velocity_from_truth) {
       const std::optional<Vector6d> velocity =
-          ground_truth ? ground_truth->Velocity(initial.t_ns, kTruthVelocityWindowNs)
+          ground_truth ? ground_truth->Velocity(initial.t_ns, wire::kClientVelocityWindowNs)
                        : std::nullopt;
       if (!velocity) {
         throw InvalidArgumentError("dataset '" + options.dataset.string() +

@@ -279,10 +279,9 @@ class Replayer {
                    ? TimedPose{SessionTime(first_t_ns), Rigid3d()}
                    : ResolveInitialPose(dataset_, options.initial_world_from_cam, first_t_ns);
     if (options.initial_velocity_from_truth) {
-      // Over the tracker's velocity window (TrackerOptions::velocity_window_s).
-      initial_velocity_ = dataset_.ground_truth
-                              ? dataset_.ground_truth->Velocity(initial_.t_ns, 20'000'000)
-                              : std::nullopt;
+      initial_velocity_ = dataset_.ground_truth ? dataset_.ground_truth->Velocity(
+                                                      initial_.t_ns, wire::kClientVelocityWindowNs)
+                                                : std::nullopt;
       if (!initial_velocity_) {
         throw InvalidArgumentError("--initial-velocity truth: dataset '" +
                                    options.dataset.string() +
