@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <chrono>
-#include <cmath>
 #include <memory>
 #include <string>
 
@@ -150,19 +149,20 @@ DevoRunResult RunCannyDevo(const Dataset& dataset,
       if (on_step) on_step(step);
     }
   };
-  // The first reference frame needs events on the tracker's surface: with the hot-pixel filter
-  // on, its learning period holds them back for the first counting window (event_filter.h).
-  int64_t warm_up_ns = options.warm_up_ns;
-  const tracking::EventFilterOptions& filter = options.devo.tracker.event_filter;
-  if (filter.hot_pixels) warm_up_ns += std::llround(filter.hot_pixel_window_s * 1e9);
   size_t next_depth = 0;
   while (next_depth < depth_frames.size() &&
-         depth_frames[next_depth].t_ns < initial_t_ns + warm_up_ns) {
+         depth_frames[next_depth].t_ns < initial_t_ns + options.warm_up_ns) {
     ++next_depth;
   }
   // Handles the depth frame `next_depth` (every event up to its time has been given).
   auto handle_depth = [&]() {
     const TimedFile& file = depth_frames[next_depth];
+    // The first reference frame needs the events on the tracker's surface: while the hot-pixel
+    // filter learns, it holds them back (event_filter.h), so the start waits for a later frame.
+    if (!devo.started() && devo.tracker().event_filter().holding()) {
+      ++next_depth;
+      return;
+    }
     const cv::Mat depth = ReadDepthPng(file.path, depth_stream.units_per_metre);
     if (!devo.started()) {
       devo.Start(OdometryStartPose(dataset, initial_world_from_cam, file.t_ns), file.t_ns, depth);

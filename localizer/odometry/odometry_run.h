@@ -75,8 +75,8 @@ struct DevoRunOptions {
   // The odometry's options.
   CannyDevoOptions devo;
   // The first reference frame is the first depth frame at least this long after the start time,
-  // so that the events before it fill the time surface, nanoseconds (plus the hot-pixel filter's
-  // learning window when that filter is on: it holds the events back until then).
+  // so that the events before it fill the time surface, nanoseconds (and once the hot-pixel
+  // filter, when on, no longer holds the events of its learning period back).
   int64_t warm_up_ns = 30'000'000;
   // Events read per batch (any value gives the same poses).
   size_t read_batch_events = 1 << 16;
