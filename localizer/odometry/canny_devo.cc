@@ -170,11 +170,10 @@ ReferenceFrameInfo CannyDevo::BuildReference(const Rigid3d& world_from_cam, int6
   tracking::SurfaceDecay decay;
   decay.decay_time_ns = decay_time_s * 1e9;
   decay.empty_threshold = options_.mapping_empty_threshold;
-  // The surface's values, and its active pixels (T > delta) as the semi-dense region.
-  // (The images are members so that each build reuses their memory.)
-  // The tracker's surface: every event given so far (after the noise filters, when they are on),
-  // as a surface of the reference's own would hold (it was one: every event inserted twice).
+  // The tracker's surface: every event given so far (after the noise filters, when they are on).
   const tracking::TimeSurface& surface = tracker_->time_surface();
+  // Its values, and its active pixels (T > delta) as the semi-dense region. (The images are
+  // members so that each build reuses their memory.)
   cv::Mat& values = build_.values;
   surface.Values(tracking::SurfaceChannel::kAll, t_ns, decay, &values);
   cv::Mat& semi_dense = build_.semi_dense;
