@@ -429,8 +429,9 @@ Options:
 )" + std::string(kEventFilterFlagsUsage) +
          R"(  --stamp-at-step-time on|off
                          move each pose forward by the age of the events it was registered to,
-                         to its step time (default off: the registered pose, which lags by
-                         1.5-5.5 ms; docs/tracking.md, "Pose time")
+                         to its step time (default on, off in --mode devo; off: the
+                         registered pose, which lags by 1.5-5.5 ms; docs/tracking.md,
+                         "Pose time")
   --stamp-velocity-window S
                          the velocity window of that move, seconds (default 0.1)
   --min-alignment A      a step is bad below this chance-corrected alignment (docs/tracking.md)

@@ -108,8 +108,9 @@ Options:
                              session time (default 0.5; 0: unbounded; docs/relocalization.md)
   --stamp-at-step-time on|off
                              move each pose forward by the age of the events it was registered
-                             to, to its step time (default off; on for vehicles: 11.5 -> 7.6 cm
-                             at 10 m/s; docs/tracking.md, "Pose time")
+                             to, to its step time (default on; off: the registered pose, which
+                             lags by 1.5-5.5 ms, 11.5 against 7.6 cm at 10 m/s; docs/tracking.md,
+                             "Pose time")
   --motion-prior V,W          each session's constant-velocity prediction as a prior in its
                              tracking solves, the velocity trusted to V m/s and W deg/s (default
                              0,0: none; docs/tracking.md, "Motion prior")

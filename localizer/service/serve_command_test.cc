@@ -28,7 +28,7 @@ TEST(ServeCommand, EveryFlagReachesItsOption) {
                                               "--tile-loader-priority",
                                               "idle",
                                               "--stamp-at-step-time",
-                                              "on",
+                                              "off",
                                               "--motion-prior",
                                               "2,0",
                                               "--max-message-bytes",
@@ -116,8 +116,9 @@ TEST(ServeCommand, EveryFlagReachesItsOption) {
   EXPECT_NE(server.Describe().find("search-priority: low"), std::string::npos);
   EXPECT_EQ(server.tile_loader_priority, ThreadPriority::kIdle);
   EXPECT_NE(server.Describe().find("tile-loader-priority: idle"), std::string::npos);
-  EXPECT_TRUE(server.tracker.stamp_at_step_time);
-  EXPECT_NE(server.Describe().find("stamp-at-step-time: on"), std::string::npos);
+  // On by default: the flag turns it off.
+  EXPECT_FALSE(server.tracker.stamp_at_step_time);
+  EXPECT_NE(server.Describe().find("stamp-at-step-time: off"), std::string::npos);
   EXPECT_EQ(server.tracker.motion_prior_velocity_sigma_mps, 2.0);
   EXPECT_EQ(server.tracker.motion_prior_angular_velocity_sigma_dps, 0.0);
   EXPECT_NE(server.Describe().find("motion-prior: 2 m/s, 0 deg/s\n"), std::string::npos);

@@ -88,6 +88,7 @@ void Tracker::StartTrackingAt(const Rigid3d& world_from_cam, int64_t t_ns) {
   status_ = TrackingStatus::kTracking;
   started_ = true;
   has_pose_ = true;
+  last_pose_given_ = true;
   lost_steps_ = 0;
   next_step_t_ns_ = t_ns + period_ns_;
   last_step_t_ns_ = t_ns;
@@ -525,8 +526,18 @@ PoseEstimate Tracker::Step(int64_t t_ns) {
     if (searching()) RestartSearchRound();
   }
 
+  // The adaptive decay time comes from the selected points' image speeds. Right after a Reset
+  // with a velocity the tracker has a velocity but no selection yet: it selects first, so that
+  // its first surfaces are built with the decay time of that velocity instead of the longest.
+  if (last_pose_given_ && !has_selection_ && !searching() && status_ == TrackingStatus::kTracking &&
+      motion_.velocity_span_ns() > 0) {
+    const Clock::time_point selection_start = Clock::now();
+    SelectPoints(motion_.Predict(t_ns));
+    estimate.timings.selection_ms = MillisecondsSince(selection_start);
+  }
+  const Clock::time_point surface_start = Clock::now();
   UpdateSurfaces(t_ns);
-  estimate.timings.surface_ms = MillisecondsSince(step_start);
+  estimate.timings.surface_ms = MillisecondsSince(surface_start);
   estimate.search.episode = search_progress_.episode;
 
   if (searching()) {
@@ -549,7 +560,7 @@ PoseEstimate Tracker::Step(int64_t t_ns) {
                              options_.reselect_rotation_deg * kRadiansPerDegree);
   if (!has_selection_ || moved || steps_since_selection_ >= options_.reselect_every_steps) {
     SelectPoints(predicted);
-    estimate.timings.selection_ms = MillisecondsSince(selection_start);
+    estimate.timings.selection_ms += MillisecondsSince(selection_start);
   }
 
   const Clock::time_point solve_start = Clock::now();
@@ -573,7 +584,18 @@ PoseEstimate Tracker::Step(int64_t t_ns) {
     // The unsigned result's quality only matters when the signed one is bad: assessed then.
     Attempt coarse = Solve(predicted, nullptr, /*assess=*/false, prior);
     solved_unsigned_from_prediction = true;
-    best = Solve(coarse.registration.cam_from_world.Inverse(), &previous, /*assess=*/true, prior);
+    const Rigid3d coarse_world_from_cam = coarse.registration.cam_from_world.Inverse();
+    // Right after a Reset with a velocity the last pose is the given one, at its own time, while
+    // the unsigned optimum lags the step by the events' age (milliseconds): it can lie behind the
+    // given pose, and the polarities predicted from that backward motion would all be wrong
+    // (measured on the test scene: 3 of 469 right, a first pose 30 mm off). The motion over
+    // the step comes from the velocity then.
+    const Rigid3d polarity_previous =
+        last_pose_given_ ? coarse_world_from_cam *
+                               ExpSE3(-motion_.velocity() *
+                                      (static_cast<double>(t_ns - motion_.last_t_ns()) * 1e-9))
+                         : previous;
+    best = Solve(coarse_world_from_cam, &polarity_previous, /*assess=*/true, prior);
     best.quality.iterations += coarse.quality.iterations;
     if (!best.good) {
       Assess(/*predicted_polarity=*/false, &coarse);
@@ -635,6 +657,7 @@ PoseEstimate Tracker::Step(int64_t t_ns) {
     } else {
       motion_.Reset(estimate.world_from_cam, t_ns);
     }
+    last_pose_given_ = false;
     last_good_world_from_cam_ = estimate.world_from_cam;
     last_residual_variance_ = best.registration.residual_variance;
     status_ = TrackingStatus::kTracking;
@@ -667,6 +690,7 @@ PoseEstimate Tracker::Step(int64_t t_ns) {
     // covariance that says it carries no information.
     status_ = TrackingStatus::kLost;
     motion_.Reset(last_good_world_from_cam_, t_ns);
+    last_pose_given_ = false;
     // The pose last reported as good (at its step time when stamped).
     estimate.world_from_cam = last_good_reported_world_from_cam_;
     estimate.covariance = Matrix6d::Identity() * kUnconstrainedVariance;

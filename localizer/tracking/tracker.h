@@ -461,6 +461,9 @@ class Tracker {
   bool started_ = false;
   // True once a pose was set or verified.
   bool has_pose_ = false;
+  // True while the motion model's last pose is one given to Reset (at its own time) rather than
+  // a registered one (which shows the camera when the events under its points fired).
+  bool last_pose_given_ = false;
   // Consecutive LOST steps (reset by a good step).
   int lost_steps_ = 0;
 

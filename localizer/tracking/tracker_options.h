@@ -130,10 +130,9 @@ struct TrackerOptions {
   // newest events fired, a little before the step, so the registered pose is the camera's pose
   // at t - age (MeasureSurfaceAge). The tracker moves it forward by that age along the smoothed
   // constant-velocity motion (docs/tracking.md, "Pose time"). Off: the registered pose as is
-  // (it lagged the ground truth by 1.5-8 ms on the simulated sequences). Off by default: a
-  // session resumed after a reconnect differs from the uninterrupted one by up to 15.8 mm with
-  // it on (docs/tracking.md, "Pose time").
-  bool stamp_at_step_time = false;
+  // (it lagged the ground truth by 1.5-8 ms on the simulated sequences and 5.5 ms on a real
+  // one). Canny-DEVO keeps it off (CannyDevoOptions::DefaultTrackerOptions).
+  bool stamp_at_step_time = true;
   // Measure each good step's surface age (TrackingQuality::surface_age_ms) also when the poses
   // are not stamped: a diagnostic, which evloc-track --stats turns on. Stamping measures it
   // anyway; otherwise it is skipped (it took 4 % of an evloc-track run at 640x480).

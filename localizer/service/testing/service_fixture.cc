@@ -35,10 +35,10 @@ Map TestMapWithKeyframesBesideThePath() {
 
 Camera TestCamera() { return Camera::Pinhole(320, 240, 250, 250, 159.5, 119.5); }
 
-EventBuffer TestEvents(int64_t duration_ns) {
+EventBuffer TestEvents(int64_t duration_ns, tracking::testing::EdgeEventTiming timing) {
   return tracking::testing::SimulateEdgeEvents(
       TestMap(), TestCamera(), [](int64_t t) { return tracking::testing::SmoothMotion(t); }, 0,
-      duration_ns);
+      duration_ns, 100'000, timing);
 }
 
 void WriteTestMap(const std::filesystem::path& maps_dir, const std::string& name, const Map& map) {
@@ -48,7 +48,8 @@ void WriteTestMap(const std::filesystem::path& maps_dir, const std::string& name
   WriteMapDirectory(maps_dir / name, map, options);
 }
 
-std::filesystem::path WriteTestDataset(const std::filesystem::path& root, int64_t duration_ns) {
+std::filesystem::path WriteTestDataset(const std::filesystem::path& root, int64_t duration_ns,
+                                       tracking::testing::EdgeEventTiming timing) {
   const std::filesystem::path out = root / "dataset";
   DatasetWriter writer(out, {});
   writer.WriteCamera(TestCamera());
@@ -58,7 +59,7 @@ std::filesystem::path WriteTestDataset(const std::filesystem::path& root, int64_
   }
   writer.WriteGroundTruth(Trajectory(poses));
   EvbWriter events(writer.staging_dir() / dataset_files::kEventsEvb, SensorSize{320, 240});
-  events.Write(TestEvents(duration_ns));
+  events.Write(TestEvents(duration_ns, timing));
   events.Close();
   writer.Commit();
   return out;

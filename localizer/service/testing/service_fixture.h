@@ -18,6 +18,7 @@
 #include "core/events/event_reader.h"
 #include "evloc/localizer.grpc.pb.h"
 #include "localizer/service/localizer_server.h"
+#include "localizer/tracking/testing/synthetic_scene.h"
 #include "maps/map.h"
 
 namespace evloc::service::testing {
@@ -35,8 +36,10 @@ Map TestMap();
 Map TestMapWithKeyframesBesideThePath();
 // The 320x240 pinhole camera of the synthetic scene.
 Camera TestCamera();
-// Ideal edge events of TestMap() seen along testing::SmoothMotion over [0, duration_ns].
-EventBuffer TestEvents(int64_t duration_ns);
+// Ideal edge events of TestMap() seen along testing::SmoothMotion over [0, duration_ns], fired
+// as `timing` says.
+EventBuffer TestEvents(int64_t duration_ns, tracking::testing::EdgeEventTiming timing =
+                                                tracking::testing::EdgeEventTiming::kEnterPixel);
 
 // The reader of in-memory events (core/events).
 using evloc::BufferEventReader;
@@ -52,8 +55,11 @@ class TemporaryFolder : public PrivateTempFolder {
 void WriteTestMap(const std::filesystem::path& maps_dir, const std::string& name, const Map& map);
 
 // Writes a dataset folder root/dataset (calib.yaml, events.evb, groundtruth.txt) of the test
-// scene over [kInitialTimeNs, duration_ns] and returns its path.
-std::filesystem::path WriteTestDataset(const std::filesystem::path& root, int64_t duration_ns);
+// scene over [kInitialTimeNs, duration_ns], its events fired as `timing` says, and returns its
+// path.
+std::filesystem::path WriteTestDataset(
+    const std::filesystem::path& root, int64_t duration_ns,
+    tracking::testing::EdgeEventTiming timing = tracking::testing::EdgeEventTiming::kEnterPixel);
 
 // Server options for tests: the given map folder, 127.0.0.1 port 0, short idle timeout, the
 // search workers at normal priority.

@@ -72,12 +72,13 @@ double RotationErrorToSmoothMotion(const Rigid3d& world_from_cam, int64_t t_ns) 
 
 EventBuffer SimulateEdgeEvents(const Map& map, const Camera& camera,
                                const TrajectoryFunction& trajectory, int64_t t_begin_ns,
-                               int64_t t_end_ns, int64_t render_period_ns) {
+                               int64_t t_end_ns, int64_t render_period_ns, EdgeEventTiming timing) {
   std::vector<Event> events;
   const size_t num_points = map.size();
   std::vector<Eigen::Vector2d> last_pixel(num_points);
   std::vector<int> last_x(num_points, -1), last_y(num_points, -1);
   std::vector<bool> seen(num_points, false);
+  const bool at_centre = timing == EdgeEventTiming::kCrossCentre;
   for (int64_t t_ns = t_begin_ns; t_ns <= t_end_ns; t_ns += render_period_ns) {
     const Rigid3d cam_from_world = trajectory(t_ns).Inverse();
     for (size_t i = 0; i < num_points; ++i) {
@@ -87,9 +88,23 @@ EventBuffer SimulateEdgeEvents(const Map& map, const Camera& camera,
         seen[i] = false;
         continue;
       }
-      const int x = static_cast<int>(std::lround(pixel.x()));
-      const int y = static_cast<int>(std::lround(pixel.y()));
-      if (seen[i] && (x != last_x[i] || y != last_y[i])) {
+      int x = static_cast<int>(std::lround(pixel.x()));
+      int y = static_cast<int>(std::lround(pixel.y()));
+      bool fires = seen[i] && (x != last_x[i] || y != last_y[i]);
+      if (at_centre) {
+        // Along each axis whose line of pixel centres the point crossed since the last render,
+        // the pixel of the crossed centre; along the other, the nearest.
+        const bool crossed_x = seen[i] && std::floor(pixel.x()) != std::floor(last_pixel[i].x());
+        const bool crossed_y = seen[i] && std::floor(pixel.y()) != std::floor(last_pixel[i].y());
+        if (crossed_x) {
+          x = static_cast<int>(std::max(std::floor(pixel.x()), std::floor(last_pixel[i].x())));
+        }
+        if (crossed_y) {
+          y = static_cast<int>(std::max(std::floor(pixel.y()), std::floor(last_pixel[i].y())));
+        }
+        fires = (crossed_x || crossed_y) && x < camera.width && y < camera.height;
+      }
+      if (fires) {
         Eigen::Vector2d probe;
         const Eigen::Vector3d gradient_in_cam =
             cam_from_world.rotation * map.gradients[i].cast<double>();

@@ -60,13 +60,27 @@ double PositionErrorToSmoothMotion(const Rigid3d& world_from_cam, int64_t t_ns);
 // Angle between the orientation of `world_from_cam` and SmoothMotion(t_ns), radians.
 double RotationErrorToSmoothMotion(const Rigid3d& world_from_cam, int64_t t_ns);
 
+// When SimulateEdgeEvents fires a pixel.
+enum class EdgeEventTiming {
+  // When the point enters the pixel (its rounded pixel changes), half a pixel of motion before
+  // the edge reaches the pixel's centre. The freshest pixels then lie where the edge is at the
+  // step time on average: the registered pose has no lag, and moving it forward by the surface's
+  // age (TrackerOptions::stamp_at_step_time) overshoots.
+  kEnterPixel,
+  // When the point crosses the pixel's centre, as an area-sampled pixel whose contrast threshold
+  // is half the edge's step fires (and as evloc-sim's rendered events do): the freshest pixels
+  // trail the edge by up to a pixel, and the registered pose lags the step time by their age.
+  kCrossCentre,
+};
+
 // Ideal edge events of the map points seen by a pinhole `camera` moving along `trajectory`:
-// rendered every `render_period_ns` in [t_begin_ns, t_end_ns]; a point emits an event at its
-// rounded pixel whenever that pixel changes, with polarity sign(-d . f) (brightness constancy,
-// d the projected gradient, f the pixel motion). Sorted by time.
+// rendered every `render_period_ns` in [t_begin_ns, t_end_ns]; a point emits an event at a
+// pixel as `timing` says, with polarity sign(-d . f) (brightness constancy, d the projected
+// gradient, f the pixel motion). Sorted by time.
 EventBuffer SimulateEdgeEvents(const Map& map, const Camera& camera,
                                const TrajectoryFunction& trajectory, int64_t t_begin_ns,
-                               int64_t t_end_ns, int64_t render_period_ns = 100'000);
+                               int64_t t_end_ns, int64_t render_period_ns = 100'000,
+                               EdgeEventTiming timing = EdgeEventTiming::kEnterPixel);
 
 // A grey frame (CV_8UC1) of the bright rectangles (200) on a dark background (40), seen from
 // `world_from_cam` by a pinhole `camera`, painted far to near.
