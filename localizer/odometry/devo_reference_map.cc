@@ -6,6 +6,7 @@
 #include <limits>
 #include <string>
 #include <utility>
+#include <vector>
 
 #include <Eigen/Dense>
 #include <opencv2/imgproc.hpp>
@@ -38,19 +39,31 @@ void ForEachWarpedDepthPixel(const Camera& depth_camera, const cv::Mat& depth_m,
                              const Project& project, int width, int height, const Visit& visit) {
   const Eigen::Matrix3d rotation = target_from_depth.RotationMatrix();
   const bool pinhole = depth_camera.model == CameraModel::kPinhole;
+  // A pinhole ray's x depends on the column alone and its z is 1: the per-column values are
+  // computed once (the same divisions, so the same values), and z / 1 is z.
+  thread_local std::vector<double> column_ray_x;
+  if (pinhole) {
+    column_ray_x.resize(static_cast<size_t>(depth_m.cols));
+    for (int x = 0; x < depth_m.cols; ++x) {
+      column_ray_x[static_cast<size_t>(x)] = (x - depth_camera.cx) / depth_camera.fx;
+    }
+  }
   for (int y = 0; y < depth_m.rows; ++y) {
     const float* row = depth_m.ptr<float>(y);
+    const double row_ray_y = (y - depth_camera.cy) / depth_camera.fy;
     for (int x = 0; x < depth_m.cols; ++x) {
       const float z = row[x];
       if (!(z >= options.min_depth_m && z <= options.max_depth_m)) continue;
-      Eigen::Vector3d ray;
+      Eigen::Vector3d scaled_ray;
       if (pinhole) {
-        ray << (x - depth_camera.cx) / depth_camera.fx, (y - depth_camera.cy) / depth_camera.fy, 1;
-      } else if (!depth_camera.Unproject(Eigen::Vector2d(x, y), &ray)) {
-        continue;
+        const double depth = z;
+        scaled_ray << column_ray_x[static_cast<size_t>(x)] * depth, row_ray_y * depth, depth;
+      } else {
+        Eigen::Vector3d ray;
+        if (!depth_camera.Unproject(Eigen::Vector2d(x, y), &ray)) continue;
+        scaled_ray = ray * (z / ray.z());
       }
-      const Eigen::Vector3d point =
-          rotation * (ray * (z / ray.z())) + target_from_depth.translation;
+      const Eigen::Vector3d point = rotation * scaled_ray + target_from_depth.translation;
       if (!(point.z() > options.min_depth_m)) continue;
       Eigen::Vector2d pixel;
       if (!project(point, &pixel)) continue;
