@@ -44,6 +44,9 @@ tracking::TrackerOptions CannyDevoOptions::DefaultTrackerOptions() {
   // 0.94 %), worse at 240x180 (bright 3.3 -> 3.4 %, dark 2.9 -> 4.1 %, hdr 5.3 -> 16.1 %;
   // docs/accuracy.md, "DEVO with poses at their step time"). Off unless asked.
   options.stamp_at_step_time = false;
+  // Every reference frame is a new point set; the decay time of its first step stays the longest
+  // (TrackerOptions::select_first_on_new_points says what was measured).
+  options.select_first_on_new_points = false;
   return options;
 }
 

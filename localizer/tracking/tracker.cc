@@ -518,18 +518,22 @@ PoseEstimate Tracker::Step(int64_t t_ns) {
   PoseEstimate estimate;
   estimate.t_ns = t_ns;
   step_t_ns_ = t_ns;
+  bool new_point_set = false;
   if (source_->generation() != source_generation_) {
     // A new point set: the selected indices (which the adaptive decay reads too) are stale, and
     // so are the search's.
     ReadSourcePoints();
     has_selection_ = false;
+    new_point_set = true;
     if (searching()) RestartSearchRound();
   }
 
   // The adaptive decay time comes from the selected points' image speeds. Right after a Reset
-  // with a velocity the tracker has a velocity but no selection yet: it selects first, so that
-  // its first surfaces are built with the decay time of that velocity instead of the longest.
-  if (last_pose_given_ && !has_selection_ && !searching() && status_ == TrackingStatus::kTracking &&
+  // with a velocity, or a new point set while tracking (select_first_on_new_points), the tracker
+  // has a velocity but no selection: it selects first, so that the step's surfaces are built
+  // with the decay time of that velocity instead of the longest.
+  if ((last_pose_given_ || (new_point_set && options_.select_first_on_new_points)) &&
+      !has_selection_ && !searching() && status_ == TrackingStatus::kTracking &&
       motion_.velocity_span_ns() > 0) {
     const Clock::time_point selection_start = Clock::now();
     SelectPoints(motion_.Predict(t_ns));
