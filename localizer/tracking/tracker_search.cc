@@ -44,6 +44,8 @@ void Tracker::StartWithoutPose(int64_t t_ns) {
   }
   started_ = true;
   has_pose_ = false;
+  // The search's poses are registered ones (a Reset's given pose before this one is gone).
+  last_pose_given_ = false;
   last_good_world_from_cam_ = Rigid3d();
   last_good_reported_world_from_cam_ = Rigid3d();
   motion_.Reset(Rigid3d(), t_ns);
