@@ -19,6 +19,7 @@
 #include "localizer/service/localizer_server.h"
 #include "localizer/service/testing/service_fixture.h"
 #include "localizer/tracking/testing/synthetic_scene.h"
+#include "localizer/wire/twist.h"
 
 namespace evloc::replay {
 namespace {
@@ -70,6 +71,18 @@ class ReplayTest : public ::testing::Test {
   std::unique_ptr<service::LocalizerServer> server_;
 };
 
+// The largest distance between the camera centres of two trajectories of the same steps.
+double LargestPositionDifference(const Trajectory& a, const Trajectory& b) {
+  EXPECT_EQ(a.size(), b.size());
+  double largest_m = 0;
+  for (size_t i = 0; i < std::min(a.size(), b.size()); ++i) {
+    largest_m = std::max(
+        largest_m,
+        (a.poses()[i].world_from_cam.translation - b.poses()[i].world_from_cam.translation).norm());
+  }
+  return largest_m;
+}
+
 // Bit-identical poses. The server also runs the steps up to the last packet's end_t_ns
 // (Tracker::AdvanceTo), after the last event, where offline tracking has no later event to
 // trigger them: with 1 ms packets and 200 Hz steps at most one more pose, after the others.
@@ -114,14 +127,7 @@ TEST_F(ReplayTest, ASessionsMotionPriorReachesItsTracker) {
   ExpectSameTrajectory(result.trajectory, with_prior);
   const Trajectory without = Offline().trajectory;
   ASSERT_EQ(without.size(), with_prior.size());
-  double largest_difference_m = 0;
-  for (size_t i = 0; i < without.size(); ++i) {
-    largest_difference_m =
-        std::max(largest_difference_m, (without.poses()[i].world_from_cam.translation -
-                                        with_prior.poses()[i].world_from_cam.translation)
-                                           .norm());
-  }
-  EXPECT_GT(largest_difference_m, 1e-6);
+  EXPECT_GT(LargestPositionDifference(without, with_prior), 1e-6);
 }
 
 // --initial-velocity truth reaches the session's tracker: the poses are offline tracking's
@@ -133,20 +139,13 @@ TEST_F(ReplayTest, TheInitialVelocityReachesTheTracker) {
   const ReplayResult result = RunReplay(options, log);
   const Trajectory ground_truth = *ReadDataset(dataset_).ground_truth;
   const std::optional<Vector6d> velocity =
-      ground_truth.Velocity(ground_truth.start_ns(), 20'000'000);
+      ground_truth.Velocity(ground_truth.start_ns(), wire::kClientVelocityWindowNs);
   ASSERT_TRUE(velocity.has_value());
   const Trajectory moving = Offline(0, velocity).trajectory;
   ExpectSameTrajectory(result.trajectory, moving);
   const Trajectory at_rest = Offline().trajectory;
   ASSERT_EQ(at_rest.size(), moving.size());
-  double largest_difference_m = 0;
-  for (size_t i = 0; i < at_rest.size(); ++i) {
-    largest_difference_m =
-        std::max(largest_difference_m, (at_rest.poses()[i].world_from_cam.translation -
-                                        moving.poses()[i].world_from_cam.translation)
-                                           .norm());
-  }
-  EXPECT_GT(largest_difference_m, 1e-6);
+  EXPECT_GT(LargestPositionDifference(at_rest, moving), 1e-6);
   options.start_without_pose = true;
   EXPECT_THROW(options.Check(), InvalidArgumentError);
 }
