@@ -403,6 +403,10 @@ Options:
   --polarity on|off      polarity-aware registration (default on)
   --occlusion on|off     ANNF occlusion culling (default on)
   --max-points N         map points registered per step (default 2500)
+  --informative-points N events: of the --max-points evenly selected, register only the N
+                         that constrain the pose most (default 0: all of them;
+                         docs/tracking.md, "Point selection")
+  --informative-seed-fraction F  share of those N taken evenly, the rest by leverage (default 0.5)
   --tau SECONDS          time-surface decay time (default 0.03); with --decay-trail the longest
   --decay-trail PX       adaptive decay: tau = PX / the median image speed of the map points,
                          within [--min-tau, --tau] (default 1; 0: a fixed tau; docs/tracking.md)
@@ -504,6 +508,10 @@ bool ApplyTrackerFlag(const std::string& flag, const std::string& value, Tracker
     tracker->use_occlusion_culling = ParseSwitchFlag(flag, value);
   } else if (flag == "--max-points") {
     tracker->max_points = static_cast<int>(ParseIntegerFlag(flag, value));
+  } else if (flag == "--informative-points") {
+    tracker->informative_points = static_cast<int>(ParseIntegerFlag(flag, value));
+  } else if (flag == "--informative-seed-fraction") {
+    tracker->informative_seed_fraction = ParseDoubleFlag(flag, value);
   } else if (flag == "--tau") {
     tracker->decay_time_s = ParseDoubleFlag(flag, value);
   } else if (flag == "--decay-trail") {

@@ -101,6 +101,8 @@ Options:
   --rate HZ                  default tracking steps per second (default 300)
   --variant NAME             default variant: EVT, EVT-PR, EVT-OH or EVT-- (default EVT)
   --max-points N             default map points per step (default 2500)
+  --informative-points N     default: of those, register only the N that constrain the pose
+                             most (default 0: all; docs/tracking.md, "Point selection")
   --tau SECONDS              default time-surface decay time (default 0.03)
   --decay-trail PX           default adaptive decay trail, pixels (default 1; 0: a fixed decay time;
                              docs/tracking.md)
@@ -258,6 +260,8 @@ ServeCommand ParseServeCommandLine(const std::vector<std::string>& arguments) {
       server.tracker.SetVariant(value);
     } else if (flag == "--max-points") {
       server.tracker.max_points = static_cast<int>(ParseIntegerFlag(flag, value));
+    } else if (flag == "--informative-points") {
+      server.tracker.informative_points = static_cast<int>(ParseIntegerFlag(flag, value));
     } else if (flag == "--tau") {
       server.tracker.decay_time_s = ParseDoubleFlag(flag, value);
     } else if (flag == "--decay-trail") {

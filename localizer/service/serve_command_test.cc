@@ -51,6 +51,8 @@ TEST(ServeCommand, EveryFlagReachesItsOption) {
                                               "EVT-PR",
                                               "--max-points",
                                               "1000",
+                                              "--informative-points",
+                                              "400",
                                               "--tau",
                                               "0.02",
                                               "--decay-trail",
@@ -132,6 +134,7 @@ TEST(ServeCommand, EveryFlagReachesItsOption) {
   EXPECT_EQ(server.tracker.step_rate_hz, 250);
   EXPECT_EQ(server.tracker.VariantName(), "EVT-PR");
   EXPECT_EQ(server.tracker.max_points, 1000);
+  EXPECT_EQ(server.tracker.informative_points, 400);
   EXPECT_EQ(server.tracker.decay_time_s, 0.02);
   EXPECT_EQ(server.tracker.decay_trail_px, 2);
   EXPECT_TRUE(server.tracker.event_filter.hot_pixels);

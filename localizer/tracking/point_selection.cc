@@ -4,7 +4,10 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <utility>
 #include <vector>
+
+#include <Eigen/Cholesky>
 
 #include "core/common/error.h"
 
@@ -54,6 +57,10 @@ struct SelectionScratch {
   std::vector<uint32_t> bucket_start;
   std::vector<uint8_t> marked;
 };
+
+// SelectInformative's gradient probe, as the polarity prediction's: P + s g with s this fraction
+// of the depth.
+constexpr double kProbeFraction = 0.01;
 
 }  // namespace
 
@@ -168,6 +175,86 @@ std::vector<uint32_t> SelectEvenly(std::span<const Eigen::Vector3f> positions,
   }
   SortIndices(positions.size(), &selected, &scratch.marked);
   return selected;
+}
+
+std::vector<uint32_t> SelectInformative(std::span<const Eigen::Vector3f> positions,
+                                        std::span<const Eigen::Vector3f> gradients,
+                                        const std::vector<uint32_t>& selected,
+                                        const PinholeIntrinsics& intrinsics,
+                                        const Rigid3d& cam_from_world, int count,
+                                        double seed_fraction) {
+  if (count < 1 || !(seed_fraction > 0 && seed_fraction <= 1)) {
+    throw InvalidArgumentError(
+        "SelectInformative: count must be >= 1 and seed_fraction in (0, 1].");
+  }
+  if (positions.size() != gradients.size()) {
+    throw InvalidArgumentError("SelectInformative: one gradient per position is needed.");
+  }
+  if (selected.size() <= static_cast<size_t>(count)) return selected;
+  const size_t n = selected.size();
+  // Each point's predicted Jacobian row: the unit edge normal in the image times the derivative of
+  // the projection (translation part), and the point in the camera crossed with it (rotation).
+  thread_local std::vector<Vector6d> rows;
+  rows.assign(n, Vector6d::Zero());
+  const Eigen::Matrix3d rotation = cam_from_world.RotationMatrix();
+  for (size_t i = 0; i < n; ++i) {
+    const uint32_t index = selected[i];
+    if (index >= positions.size()) {
+      throw InvalidArgumentError("SelectInformative: point index out of range.");
+    }
+    const Eigen::Vector3d point =
+        rotation * positions[index].cast<double>() + cam_from_world.translation;
+    Eigen::Vector2d pixel;
+    Eigen::Vector2d probe_pixel;
+    Eigen::Matrix<double, 2, 3> d_pixel_d_point;
+    const Eigen::Vector3d probe =
+        point + kProbeFraction * point.z() * (rotation * gradients[index].cast<double>());
+    if (!intrinsics.Project(point, &pixel, &d_pixel_d_point) ||
+        !intrinsics.Project(probe, &probe_pixel)) {
+      continue;
+    }
+    const Eigen::Vector2d normal = probe_pixel - pixel;
+    const double length = normal.norm();
+    // A gradient within ~6 degrees of the viewing ray (its probe moves under a tenth of the
+    // f * 1 % it would across the ray) has no meaningful edge normal in the image.
+    if (!(length > 0.1 * kProbeFraction * intrinsics.fx)) continue;
+    const Eigen::Vector3d translation_part = d_pixel_d_point.transpose() * (normal / length);
+    rows[i].head<3>() = translation_part;
+    rows[i].tail<3>() = point.cross(translation_part);
+  }
+  // The seeds: seed_fraction of the count, at even intervals over `selected` (spread as it is).
+  const size_t seeds = std::min<size_t>(
+      count, static_cast<size_t>(std::llround(seed_fraction * static_cast<double>(count))));
+  thread_local std::vector<uint8_t> taken;
+  taken.assign(n, 0);
+  std::vector<uint32_t> result;
+  result.reserve(count);
+  for (size_t k = 0; k < seeds; ++k) {
+    const size_t i = k * n / seeds;
+    taken[i] = 1;
+    result.push_back(selected[i]);
+  }
+  // The rest by leverage j^T H^-1 j, H the information of all of `selected`: the share of H a
+  // point's row carries. A point whose direction many others share (one long straight edge) has
+  // a low leverage however strong it is; one that alone fixes a direction (the rare edge at
+  // another angle, a near point for the translation) a high one. The small regularisation keeps
+  // H invertible when the points leave a direction unconstrained.
+  Matrix6d information = Matrix6d::Zero();
+  for (size_t i = 0; i < n; ++i) information.selfadjointView<Eigen::Lower>().rankUpdate(rows[i]);
+  information = information.selfadjointView<Eigen::Lower>();
+  information.diagonal().array() += 1e-9 * information.trace() / 6 + 1e-300;
+  const Matrix6d inverse = information.ldlt().solve(Matrix6d::Identity());
+  thread_local std::vector<std::pair<double, uint32_t>> ranked;  // (-leverage, position)
+  ranked.clear();
+  for (size_t i = 0; i < n; ++i) {
+    if (!taken[i]) ranked.push_back({-rows[i].dot(inverse * rows[i]), static_cast<uint32_t>(i)});
+  }
+  const size_t rest = std::min(static_cast<size_t>(count) - result.size(), ranked.size());
+  std::partial_sort(ranked.begin(), ranked.begin() + static_cast<std::ptrdiff_t>(rest),
+                    ranked.end());
+  for (size_t k = 0; k < rest; ++k) result.push_back(selected[ranked[k].second]);
+  std::sort(result.begin(), result.end());
+  return result;
 }
 
 }  // namespace evloc::tracking

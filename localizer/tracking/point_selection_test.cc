@@ -4,8 +4,11 @@
 #include <map>
 #include <numeric>
 
+#include <Eigen/Eigenvalues>
+
 #include <gtest/gtest.h>
 
+#include "core/common/error.h"
 #include "maps/map.h"
 
 namespace evloc::tracking {
@@ -84,6 +87,93 @@ TEST(PointSelection, KeepsMostOfTheCandidatesSortedAndRepeatedCandidatesTwice) {
   EXPECT_TRUE(std::is_sorted(all.begin(), all.end()));
   EXPECT_EQ(std::count(all.begin(), all.end(), 7u), 2);
   EXPECT_EQ(std::count(all.begin(), all.end(), 2000u), 1);
+}
+
+TEST(PointSelection, InformativeKeepsThePointsThatAloneFixADirection) {
+  // 900 points on vertical edges (image gradient along x) spread over a 320x240 image, then 100 on
+  // horizontal edges (gradient along y) and 20 whose gradient points along the viewing ray (no
+  // edge normal in the image), at 1.5-3 m.
+  const PinholeIntrinsics intrinsics{200.0, 200.0, 159.5, 119.5};
+  Map map;
+  auto add_at_pixel = [&](double u, double v, double z, const Eigen::Vector3f& gradient) {
+    map.AddPoint(Eigen::Vector3f((u - 159.5) * z / 200.0, (v - 119.5) * z / 200.0, z), gradient);
+  };
+  for (int i = 0; i < 900; ++i) {
+    add_at_pixel(10.0 + (i % 30) * 10.0, 10.0 + (i / 30) * 7.0, 1.5 + (i % 7) * 0.25,
+                 Eigen::Vector3f::UnitX());
+  }
+  for (int i = 0; i < 100; ++i) {
+    add_at_pixel(15.0 + (i % 10) * 29.0, 15.0 + (i / 10) * 21.0, 1.5 + (i % 5) * 0.3,
+                 Eigen::Vector3f::UnitY());
+  }
+  for (int i = 0; i < 20; ++i) {
+    const Eigen::Vector3f ray =
+        Eigen::Vector3f(20.0f + 13.0f * i - 159.5f, 80.0f, 200.0f).normalized();
+    add_at_pixel(20.0 + 13.0 * i, 199.5, 2.0, ray);
+  }
+  std::vector<uint32_t> all(map.size());
+  std::iota(all.begin(), all.end(), 0u);
+  const std::vector<uint32_t> chosen =
+      SelectInformative(map.positions, map.gradients, all, intrinsics, Rigid3d(), 200, 0.25);
+  ASSERT_EQ(chosen.size(), 200u);
+  EXPECT_TRUE(std::adjacent_find(chosen.begin(), chosen.end(),
+                                 [](uint32_t a, uint32_t b) { return a >= b; }) == chosen.end())
+      << "ascending, each index once";
+  // The even pick of as many points (all seeds) for comparison.
+  const std::vector<uint32_t> even =
+      SelectInformative(map.positions, map.gradients, all, intrinsics, Rigid3d(), 200, 1.0);
+  // The horizontal edges alone fix the vertical translation and the pitch: the choice keeps far
+  // more of them than their share, and its information is better conditioned than the even
+  // pick's. The information of a set: the sum of j j^T over its predicted rows (translation part
+  // n^T dpi/dp with n the unit edge normal, rotation part p x that).
+  const auto smallest_eigenvalue = [&](const std::vector<uint32_t>& set) {
+    Matrix6d information = Matrix6d::Zero();
+    for (const uint32_t i : set) {
+      const Eigen::Vector3d p = map.positions[i].cast<double>();
+      const Eigen::Vector3d g = map.gradients[i].cast<double>();
+      Eigen::Vector2d normal(g.x(), g.y());
+      if (normal.norm() < 0.5) continue;  // along the ray
+      normal.normalize();
+      Eigen::Matrix<double, 2, 3> d_pixel;
+      d_pixel << 200.0 / p.z(), 0, -200.0 * p.x() / (p.z() * p.z()), 0, 200.0 / p.z(),
+          -200.0 * p.y() / (p.z() * p.z());
+      Vector6d row;
+      row.head<3>() = d_pixel.transpose() * normal;
+      row.tail<3>() = p.cross(Eigen::Vector3d(row.head<3>()));
+      information += row * row.transpose();
+    }
+    return Eigen::SelfAdjointEigenSolver<Matrix6d>(information).eigenvalues()(0);
+  };
+  const auto horizontal = [](const std::vector<uint32_t>& set) {
+    return std::count_if(set.begin(), set.end(), [](uint32_t i) { return i >= 900 && i < 1000; });
+  };
+  EXPECT_LE(horizontal(even), 25);
+  EXPECT_GE(horizontal(chosen), 2 * horizontal(even) + 20);
+  EXPECT_GT(smallest_eigenvalue(chosen), 2.0 * smallest_eigenvalue(even));
+  // A point without an edge normal is taken only as a seed (50 seeds at even intervals over the
+  // 1020 points: positions 0, 20.4, ..., of which 1000 falls among them).
+  const auto no_normal =
+      std::count_if(chosen.begin(), chosen.end(), [](uint32_t i) { return i >= 1000; });
+  EXPECT_LE(no_normal, 1);
+  // All seeds: the even intervals alone.
+  const std::vector<uint32_t> seeds_only =
+      SelectInformative(map.positions, map.gradients, all, intrinsics, Rigid3d(), 100, 1.0);
+  ASSERT_EQ(seeds_only.size(), 100u);
+  for (size_t k = 0; k < 100; ++k) EXPECT_EQ(seeds_only[k], k * 1020 / 100) << k;
+  // Deterministic; everything when the budget covers it.
+  EXPECT_EQ(SelectInformative(map.positions, map.gradients, all, intrinsics, Rigid3d(), 200, 0.25),
+            chosen);
+  EXPECT_EQ(SelectInformative(map.positions, map.gradients, all, intrinsics, Rigid3d(), 5000, 0.25),
+            all);
+  EXPECT_THROW(SelectInformative(map.positions, map.gradients, all, intrinsics, Rigid3d(), 0, 0.25),
+               InvalidArgumentError);
+  EXPECT_THROW(SelectInformative(map.positions, map.gradients, all, intrinsics, Rigid3d(), 10, 0.0),
+               InvalidArgumentError);
+  std::vector<uint32_t> out_of_range = all;
+  out_of_range.push_back(5000);
+  EXPECT_THROW(SelectInformative(map.positions, map.gradients, out_of_range, intrinsics, Rigid3d(),
+                                 10, 0.25),
+               InvalidArgumentError);
 }
 
 }  // namespace

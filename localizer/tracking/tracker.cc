@@ -310,6 +310,11 @@ void Tracker::SelectPoints(const Rigid3d& predicted_world_from_cam) {
   source_->VisibleCandidates(ideal, predicted_world_from_cam, query, &candidates_);
   selected_ = SelectEvenly(points_.positions, candidates_, intrinsics_, ideal.width, ideal.height,
                            cam_from_world, selection);
+  if (options_.informative_points > 0 && options_.input == TrackerInput::kEvents) {
+    selected_ = SelectInformative(points_.positions, points_.gradients, selected_, intrinsics_,
+                                  cam_from_world, options_.informative_points,
+                                  options_.informative_seed_fraction);
+  }
   selection_world_from_cam_ = predicted_world_from_cam;
   steps_since_selection_ = 0;
   has_selection_ = true;

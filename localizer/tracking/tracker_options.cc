@@ -63,6 +63,10 @@ void TrackerOptions::Check() const {
   Require(std::isfinite(empty_threshold) && empty_threshold > 0 && empty_threshold < 1,
           "empty_threshold must be in (0, 1).");
   Require(max_points >= 6, "max_points must be at least 6.");
+  Require(informative_points == 0 || informative_points >= 6,
+          "informative_points must be 0 (off) or at least 6.");
+  Require(informative_seed_fraction > 0 && informative_seed_fraction <= 1,
+          "informative_seed_fraction must be in (0, 1].");
   Require(bucket_size_px >= 1, "bucket_size_px must be at least 1.");
   Require(Positive(min_depth_m) && Positive(max_depth_m) && min_depth_m < max_depth_m,
           "min_depth_m and max_depth_m must be positive with min_depth_m < max_depth_m.");

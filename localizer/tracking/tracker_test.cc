@@ -42,34 +42,54 @@ double RotationError(const PoseEstimate& estimate) {
 
 constexpr int64_t kStartNs = 50'000'000;
 
-class TrackerVariants : public ::testing::TestWithParam<std::string> {};
+// The worst errors and the most points selected of a run over the smooth sequence, every step of
+// which must be TRACKING with at least `min_points_used` points.
+struct SmoothRun {
+  size_t steps = 0;
+  double max_position_error = 0;
+  double max_rotation_error = 0;
+  int most_selected = 0;
+};
 
-TEST_P(TrackerVariants, TracksASyntheticSequenceFromEventsAlone) {
+SmoothRun TrackSmoothSequence(const TrackerOptions& options, Eigen::Vector3d* velocity,
+                              int min_points_used) {
   const Sequence& sequence = SmoothSequence();
-  TrackerOptions options;
-  options.SetVariant(GetParam());
   Tracker tracker(sequence.map, nullptr, sequence.camera, options);
   tracker.Reset(testing::SmoothMotion(kStartNs), kStartNs);
   const std::vector<PoseEstimate> estimates = tracker.AddEvents(sequence.events);
-  // 300 Hz from 50 ms to the last event at 400 ms.
-  ASSERT_GE(estimates.size(), 100u);
-  double max_position_error = 0;
-  double max_rotation_error = 0;
+  SmoothRun run;
+  run.steps = estimates.size();
   for (const PoseEstimate& estimate : estimates) {
     EXPECT_EQ(estimate.status, TrackingStatus::kTracking) << estimate.t_ns;
-    max_position_error = std::max(max_position_error, PositionError(estimate));
-    max_rotation_error = std::max(max_rotation_error, RotationError(estimate));
-    EXPECT_GT(estimate.quality.points_used, 300);
+    run.max_position_error = std::max(run.max_position_error, PositionError(estimate));
+    run.max_rotation_error = std::max(run.max_rotation_error, RotationError(estimate));
+    run.most_selected = std::max(run.most_selected, estimate.quality.points_selected);
+    EXPECT_GT(estimate.quality.points_used, min_points_used) << estimate.t_ns;
   }
+  *velocity = tracker.velocity().head<3>();
+  return run;
+}
+
+class TrackerVariants : public ::testing::TestWithParam<std::string> {};
+
+TEST_P(TrackerVariants, TracksASyntheticSequenceFromEventsAlone) {
+  TrackerOptions options;
+  options.SetVariant(GetParam());
+  Eigen::Vector3d velocity;
+  const SmoothRun run = TrackSmoothSequence(options, &velocity, 300);
+  // 300 Hz from 50 ms to the last event at 400 ms.
+  ASSERT_GE(run.steps, 100u);
+  const double max_position_error = run.max_position_error;
+  const double max_rotation_error = run.max_rotation_error;
   // Measured on this scene (240x180, 1 px ~ 1 cm at 2 m): 1.0-3.0 cm and 0.2-0.7 deg at worst
   // depending on the variant (docs/tracking.md); a diverging tracker is off by decimetres.
   EXPECT_LT(max_position_error, 0.04);
   EXPECT_LT(max_rotation_error, 1.0 * kDegree);
   // The motion prior has learnt the velocity: about 0.3 m/s along camera-ish x.
-  EXPECT_GT(tracker.velocity().head<3>().norm(), 0.1);
+  EXPECT_GT(velocity.norm(), 0.1);
   std::cout << GetParam() << ": max position error " << max_position_error * 100
             << " cm, max rotation error " << max_rotation_error / kDegree << " deg over "
-            << estimates.size() << " steps\n";
+            << run.steps << " steps\n";
 }
 
 INSTANTIATE_TEST_SUITE_P(Ablations, TrackerVariants,
@@ -90,6 +110,28 @@ void ExpectIdentical(const std::vector<PoseEstimate>& a, const std::vector<PoseE
     EXPECT_EQ(a[i].status, b[i].status);
     EXPECT_EQ(a[i].quality.points_used, b[i].quality.points_used);
     EXPECT_EQ(a[i].quality.iterations, b[i].quality.iterations);
+  }
+}
+
+TEST(Tracker, RegistersTheInformativeSubsetOfItsEvenSelection) {
+  // With events, of the max_points evenly selected points only informative_points are registered
+  // (SelectInformative); 0 registers them all. Both track the scene.
+  for (const int informative : {0, 300}) {
+    TrackerOptions options;
+    options.informative_points = informative;
+    options.max_points = 1200;
+    Eigen::Vector3d velocity;
+    const SmoothRun run = TrackSmoothSequence(options, &velocity, 100);
+    ASSERT_GE(run.steps, 100u);
+    if (informative == 0) {
+      EXPECT_GT(run.most_selected, 600) << "the even selection alone";
+    } else {
+      EXPECT_EQ(run.most_selected, informative);
+    }
+    EXPECT_LT(run.max_position_error, 0.04) << informative;
+    std::cout << "informative_points " << informative << ": max position error "
+              << run.max_position_error * 100 << " cm, up to " << run.most_selected
+              << " points registered\n";
   }
 }
 
@@ -357,6 +399,12 @@ TEST(TrackerOptions, CheckAndVariants) {
   EXPECT_THROW(options.Check(), InvalidArgumentError);
   options = TrackerOptions{};
   options.min_decay_time_s = 0.05;  // Longer than decay_time_s.
+  EXPECT_THROW(options.Check(), InvalidArgumentError);
+  options = TrackerOptions{};
+  options.informative_points = 5;  // Fewer than a pose needs.
+  EXPECT_THROW(options.Check(), InvalidArgumentError);
+  options = TrackerOptions{};
+  options.informative_seed_fraction = 0;
   EXPECT_THROW(options.Check(), InvalidArgumentError);
 }
 
