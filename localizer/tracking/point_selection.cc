@@ -58,10 +58,6 @@ struct SelectionScratch {
   std::vector<uint8_t> marked;
 };
 
-// SelectInformative's gradient probe, as the polarity prediction's: P + s g with s this fraction
-// of the depth.
-constexpr double kProbeFraction = 0.01;
-
 }  // namespace
 
 std::vector<uint32_t> SelectEvenly(std::span<const Eigen::Vector3f> positions,
@@ -181,11 +177,15 @@ std::vector<uint32_t> SelectInformative(std::span<const Eigen::Vector3f> positio
                                         std::span<const Eigen::Vector3f> gradients,
                                         const std::vector<uint32_t>& selected,
                                         const PinholeIntrinsics& intrinsics,
-                                        const Rigid3d& cam_from_world, int count,
-                                        double seed_fraction) {
-  if (count < 1 || !(seed_fraction > 0 && seed_fraction <= 1)) {
+                                        const Rigid3d& cam_from_world,
+                                        const InformativeSelectionOptions& options) {
+  const int count = options.count;
+  const double probe_fraction = options.gradient_probe_depth_fraction;
+  if (count < 1 || !(options.seed_fraction > 0 && options.seed_fraction <= 1) ||
+      !(probe_fraction > 0 && probe_fraction < 1)) {
     throw InvalidArgumentError(
-        "SelectInformative: count must be >= 1 and seed_fraction in (0, 1].");
+        "SelectInformative: count must be >= 1, seed_fraction in (0, 1] and "
+        "gradient_probe_depth_fraction in (0, 1).");
   }
   if (positions.size() != gradients.size()) {
     throw InvalidArgumentError("SelectInformative: one gradient per position is needed.");
@@ -208,7 +208,7 @@ std::vector<uint32_t> SelectInformative(std::span<const Eigen::Vector3f> positio
     Eigen::Vector2d probe_pixel;
     Eigen::Matrix<double, 2, 3> d_pixel_d_point;
     const Eigen::Vector3d probe =
-        point + kProbeFraction * point.z() * (rotation * gradients[index].cast<double>());
+        point + probe_fraction * point.z() * (rotation * gradients[index].cast<double>());
     if (!intrinsics.Project(point, &pixel, &d_pixel_d_point) ||
         !intrinsics.Project(probe, &probe_pixel)) {
       continue;
@@ -216,15 +216,15 @@ std::vector<uint32_t> SelectInformative(std::span<const Eigen::Vector3f> positio
     const Eigen::Vector2d normal = probe_pixel - pixel;
     const double length = normal.norm();
     // A gradient within ~6 degrees of the viewing ray (its probe moves under a tenth of the
-    // f * 1 % it would across the ray) has no meaningful edge normal in the image.
-    if (!(length > 0.1 * kProbeFraction * intrinsics.fx)) continue;
+    // f * probe_fraction it would across the ray) has no meaningful edge normal in the image.
+    if (!(length > 0.1 * probe_fraction * intrinsics.fx)) continue;
     const Eigen::Vector3d translation_part = d_pixel_d_point.transpose() * (normal / length);
     rows[i].head<3>() = translation_part;
     rows[i].tail<3>() = point.cross(translation_part);
   }
   // The seeds: seed_fraction of the count, at even intervals over `selected` (spread as it is).
   const size_t seeds = std::min<size_t>(
-      count, static_cast<size_t>(std::llround(seed_fraction * static_cast<double>(count))));
+      count, static_cast<size_t>(std::llround(options.seed_fraction * static_cast<double>(count))));
   thread_local std::vector<uint8_t> taken;
   taken.assign(n, 0);
   std::vector<uint32_t> result;

@@ -38,20 +38,32 @@ std::vector<uint32_t> SelectEvenly(std::span<const Eigen::Vector3f> positions,
                                    const Rigid3d& cam_from_world,
                                    const PointSelectionOptions& options);
 
+// Options of SelectInformative.
+struct InformativeSelectionOptions {
+  // Number of points returned.
+  int count = 1000;
+  // The share of `count` taken at even intervals before the rest by leverage, in (0, 1].
+  double seed_fraction = 0.5;
+  // The gradient probe P + s g that gives a point's edge normal in the image: s is this fraction
+  // of the point's depth (the polarity prediction's probe), in (0, 1).
+  double gradient_probe_depth_fraction = 0.01;
+};
+
 // From `selected` (indices into `positions` and `gradients`, p_world and its unit 3D gradient,
-// e.g. SelectEvenly's result), the `count` points that constrain the pose at `cam_from_world`
-// most (docs/tracking.md, "Point selection"). Each point's row j of the registration's Jacobian
-// is predicted from its edge normal in the image (the projected gradient; the field's slope taken
-// as the same for every point). seed_fraction of the count is taken first, at even intervals
-// over `selected` (even coverage, so that no part of the image is left to a few points), the
-// rest by leverage j^T H^-1 j (H: the information of all of `selected`), highest first. Points
-// whose gradient does not project have no leverage and come last. Deterministic; the result is
-// sorted ascending. All of `selected` when count >= its size.
+// e.g. SelectEvenly's result), the options.count points that constrain the pose at
+// `cam_from_world` most (docs/tracking.md, "Point selection"). Each point's row j of the
+// registration's Jacobian is predicted from its edge normal in the image (the projected gradient
+// probe; the field's slope taken as the same for every point). seed_fraction of the count is
+// taken first, at even intervals over `selected` (even coverage, so that no part of the image is
+// left to a few points), the rest by leverage j^T H^-1 j (H: the information of all of
+// `selected`), highest first. Points whose gradient does not project have no leverage and come
+// last. Deterministic; the result is sorted ascending. All of `selected` when the count covers
+// it.
 std::vector<uint32_t> SelectInformative(std::span<const Eigen::Vector3f> positions,
                                         std::span<const Eigen::Vector3f> gradients,
                                         const std::vector<uint32_t>& selected,
                                         const PinholeIntrinsics& intrinsics,
-                                        const Rigid3d& cam_from_world, int count,
-                                        double seed_fraction);
+                                        const Rigid3d& cam_from_world,
+                                        const InformativeSelectionOptions& options);
 
 }  // namespace evloc::tracking

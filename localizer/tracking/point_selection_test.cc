@@ -113,15 +113,21 @@ TEST(PointSelection, InformativeKeepsThePointsThatAloneFixADirection) {
   }
   std::vector<uint32_t> all(map.size());
   std::iota(all.begin(), all.end(), 0u);
-  const std::vector<uint32_t> chosen =
-      SelectInformative(map.positions, map.gradients, all, intrinsics, Rigid3d(), 200, 0.25);
+  const auto select = [&](const std::vector<uint32_t>& from, int count, double seed_fraction,
+                          double probe_fraction = 0.01) {
+    InformativeSelectionOptions options;
+    options.count = count;
+    options.seed_fraction = seed_fraction;
+    options.gradient_probe_depth_fraction = probe_fraction;
+    return SelectInformative(map.positions, map.gradients, from, intrinsics, Rigid3d(), options);
+  };
+  const std::vector<uint32_t> chosen = select(all, 200, 0.25);
   ASSERT_EQ(chosen.size(), 200u);
   EXPECT_TRUE(std::adjacent_find(chosen.begin(), chosen.end(),
                                  [](uint32_t a, uint32_t b) { return a >= b; }) == chosen.end())
       << "ascending, each index once";
   // The even pick of as many points (all seeds) for comparison.
-  const std::vector<uint32_t> even =
-      SelectInformative(map.positions, map.gradients, all, intrinsics, Rigid3d(), 200, 1.0);
+  const std::vector<uint32_t> even = select(all, 200, 1.0);
   // The horizontal edges alone fix the vertical translation and the pitch: the choice keeps far
   // more of them than their share, and its information is better conditioned than the even
   // pick's. The information of a set: the sum of j j^T over its predicted rows (translation part
@@ -150,30 +156,24 @@ TEST(PointSelection, InformativeKeepsThePointsThatAloneFixADirection) {
   EXPECT_LE(horizontal(even), 25);
   EXPECT_GE(horizontal(chosen), 2 * horizontal(even) + 20);
   EXPECT_GT(smallest_eigenvalue(chosen), 2.0 * smallest_eigenvalue(even));
-  // A point without an edge normal is taken only as a seed (50 seeds at even intervals over the
-  // 1020 points: positions 0, 20.4, ..., of which 1000 falls among them).
+  // A point without an edge normal is taken only as a seed; the 50 seeds at even intervals over
+  // the 1020 points (positions 0, 20.4, ..., 999.6) include none of them.
   const auto no_normal =
       std::count_if(chosen.begin(), chosen.end(), [](uint32_t i) { return i >= 1000; });
-  EXPECT_LE(no_normal, 1);
+  EXPECT_EQ(no_normal, 0);
   // All seeds: the even intervals alone.
-  const std::vector<uint32_t> seeds_only =
-      SelectInformative(map.positions, map.gradients, all, intrinsics, Rigid3d(), 100, 1.0);
+  const std::vector<uint32_t> seeds_only = select(all, 100, 1.0);
   ASSERT_EQ(seeds_only.size(), 100u);
   for (size_t k = 0; k < 100; ++k) EXPECT_EQ(seeds_only[k], k * 1020 / 100) << k;
   // Deterministic; everything when the budget covers it.
-  EXPECT_EQ(SelectInformative(map.positions, map.gradients, all, intrinsics, Rigid3d(), 200, 0.25),
-            chosen);
-  EXPECT_EQ(SelectInformative(map.positions, map.gradients, all, intrinsics, Rigid3d(), 5000, 0.25),
-            all);
-  EXPECT_THROW(SelectInformative(map.positions, map.gradients, all, intrinsics, Rigid3d(), 0, 0.25),
-               InvalidArgumentError);
-  EXPECT_THROW(SelectInformative(map.positions, map.gradients, all, intrinsics, Rigid3d(), 10, 0.0),
-               InvalidArgumentError);
+  EXPECT_EQ(select(all, 200, 0.25), chosen);
+  EXPECT_EQ(select(all, 5000, 0.25), all);
+  EXPECT_THROW(select(all, 0, 0.25), InvalidArgumentError);
+  EXPECT_THROW(select(all, 10, 0.0), InvalidArgumentError);
+  EXPECT_THROW(select(all, 10, 0.25, 0.0), InvalidArgumentError);
   std::vector<uint32_t> out_of_range = all;
   out_of_range.push_back(5000);
-  EXPECT_THROW(SelectInformative(map.positions, map.gradients, out_of_range, intrinsics, Rigid3d(),
-                                 10, 0.25),
-               InvalidArgumentError);
+  EXPECT_THROW(select(out_of_range, 10, 0.25), InvalidArgumentError);
 }
 
 }  // namespace

@@ -311,9 +311,12 @@ void Tracker::SelectPoints(const Rigid3d& predicted_world_from_cam) {
   selected_ = SelectEvenly(points_.positions, candidates_, intrinsics_, ideal.width, ideal.height,
                            cam_from_world, selection);
   if (options_.informative_points > 0 && options_.input == TrackerInput::kEvents) {
+    InformativeSelectionOptions informative;
+    informative.count = options_.informative_points;
+    informative.seed_fraction = options_.informative_seed_fraction;
+    informative.gradient_probe_depth_fraction = options_.gradient_probe_depth_fraction;
     selected_ = SelectInformative(points_.positions, points_.gradients, selected_, intrinsics_,
-                                  cam_from_world, options_.informative_points,
-                                  options_.informative_seed_fraction);
+                                  cam_from_world, informative);
   }
   selection_world_from_cam_ = predicted_world_from_cam;
   steps_since_selection_ = 0;
