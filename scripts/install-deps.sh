@@ -11,6 +11,8 @@ PACKAGES=(
   libeigen3-dev libopencv-dev libyaml-cpp-dev nlohmann-json3-dev libhdf5-dev libsqlite3-dev
   # ROS1 bag chunks (bz2, lz4); AEDAT4 packets (flatbuffers, lz4, zstd) and its schema compiler
   libbz2-dev liblz4-dev libflatbuffers-dev flatbuffers-compiler libzstd-dev
+  # the CRC-32 of evloc's own event files (.evb)
+  zlib1g-dev
   # mapping
   colmap libceres-dev libpcl-dev
   # geo-reference (core/geo: WGS84, ECEF, ENU) and the GNSS tags of photos (mapper --geo-exif;

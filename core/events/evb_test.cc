@@ -8,6 +8,7 @@
 
 #include "core/common/error.h"
 #include "core/common/test_data.h"
+#include "core/events/crc32.h"
 
 namespace evloc {
 namespace {
@@ -43,6 +44,24 @@ EventBuffer ReadAllEvents(EventReader& reader, size_t block) {
   while (reader.Read(block, &events) > 0) {
   }
   return events;
+}
+
+TEST(Crc32, MatchesTheStandardCheckValuesAndContinues) {
+  EXPECT_EQ(Crc32("123456789", 9), 0xCBF43926u);
+  EXPECT_EQ(Crc32("", 0), 0u);
+  // 32 zero bytes (the CRC-32 catalogue's second check value).
+  const std::string zeros(32, '\0');
+  EXPECT_EQ(Crc32(zeros.data(), zeros.size()), 0x190A55ADu);
+  // A CRC continued over the second part equals the CRC of the whole, at every split.
+  std::string bytes(1000, '\0');
+  std::mt19937 random(7);
+  for (char& byte : bytes) byte = static_cast<char>(random());
+  const uint32_t whole = Crc32(bytes.data(), bytes.size());
+  for (const size_t split :
+       {size_t{0}, size_t{1}, size_t{7}, size_t{8}, size_t{513}, size_t{1000}}) {
+    EXPECT_EQ(Crc32(bytes.data() + split, bytes.size() - split, Crc32(bytes.data(), split)), whole)
+        << "split at " << split;
+  }
 }
 
 TEST(Evb, RoundTripIsExactAcrossChunksJumpsAndRegressions) {
