@@ -1,11 +1,30 @@
 #include "core/camera/undistortion_table.h"
 
 #include <cassert>
+#include <string>
+
+#include "core/common/error.h"
 
 namespace evloc {
+namespace {
 
-UndistortionTable::UndistortionTable(const Camera& camera)
-    : camera_(camera), ideal_camera_(camera.IdealPinhole()) {
+// The ideal pinhole camera of `camera` binned `binning` x `binning` (UndistortionTable).
+Camera BinnedIdealPinhole(const Camera& camera, int binning) {
+  if (binning < 1 || binning > 8) {
+    throw InvalidArgumentError("UndistortionTable: binning must be 1 to 8, got " +
+                               std::to_string(binning) + ".");
+  }
+  if (binning == 1) return camera.IdealPinhole();
+  const double b = binning;
+  return Camera::Pinhole((camera.width + binning - 1) / binning,
+                         (camera.height + binning - 1) / binning, camera.fx / b, camera.fy / b,
+                         (camera.cx + 0.5) / b - 0.5, (camera.cy + 0.5) / b - 0.5);
+}
+
+}  // namespace
+
+UndistortionTable::UndistortionTable(const Camera& camera, int binning)
+    : camera_(camera), ideal_camera_(BinnedIdealPinhole(camera, binning)), binning_(binning) {
   camera_.Check();
   entries_.resize(static_cast<size_t>(camera_.width) * camera_.height);
   for (int y = 0; y < camera_.height; ++y) {
@@ -14,8 +33,9 @@ UndistortionTable::UndistortionTable(const Camera& camera)
       Eigen::Vector3d ray;
       if (!camera_.Unproject(Eigen::Vector2d(x, y), &ray)) continue;
       entry.normalized = Eigen::Vector2f(static_cast<float>(ray.x()), static_cast<float>(ray.y()));
-      entry.ideal_pixel = Eigen::Vector2f(static_cast<float>(camera_.fx * ray.x() + camera_.cx),
-                                          static_cast<float>(camera_.fy * ray.y() + camera_.cy));
+      entry.ideal_pixel =
+          Eigen::Vector2f(static_cast<float>(ideal_camera_.fx * ray.x() + ideal_camera_.cx),
+                          static_cast<float>(ideal_camera_.fy * ray.y() + ideal_camera_.cy));
       entry.valid = true;
       ++num_valid_;
     }

@@ -26,13 +26,19 @@ class UndistortionTable {
   };
 
   // Builds the table for every pixel of `camera` (which must pass Check(), else
-  // InvalidArgumentError). Costs width * height Newton undistortions.
-  explicit UndistortionTable(const Camera& camera);
+  // InvalidArgumentError). Costs width * height Newton undistortions. With `binning` b > 1 the
+  // ideal pinhole camera is the sensor's binned b x b: ceil(width / b) x ceil(height / b) pixels,
+  // focal lengths f / b and principal point (c + 0.5) / b - 0.5, so that each ideal pixel is the
+  // centre of a block of b x b sensor pixels (an HD sensor tracked on a coarser image,
+  // docs/tracking.md, "Binning"). InvalidArgumentError for b outside 1..8.
+  explicit UndistortionTable(const Camera& camera, int binning = 1);
 
   // The camera the table was built for.
   const Camera& camera() const { return camera_; }
-  // The ideal pinhole camera of ideal_pixel (same size, fx, fy, cx, cy).
+  // The ideal pinhole camera of ideal_pixel (same size, fx, fy, cx, cy; binned when binning > 1).
   const Camera& ideal_camera() const { return ideal_camera_; }
+  // The binning the table was built with (1: none).
+  int binning() const { return binning_; }
   // Sensor width, pixels.
   int width() const { return camera_.width; }
   // Sensor height, pixels.
@@ -59,6 +65,7 @@ class UndistortionTable {
  private:
   Camera camera_;
   Camera ideal_camera_;
+  int binning_ = 1;
   // Row-major, width * height entries.
   std::vector<Entry> entries_;
   int num_valid_ = 0;

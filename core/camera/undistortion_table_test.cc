@@ -116,6 +116,46 @@ TEST(UndistortionTable, PinholeTableIsTheIdentity) {
   }
 }
 
+TEST(UndistortionTable, BinnedTableMapsEachBlockOfSensorPixelsToOneIdealPixel) {
+  // 65 x 49: the last column and row form partial blocks.
+  const Camera sensor = Camera::Pinhole(65, 49, 50, 40, 31.5, 23.5);
+  const UndistortionTable table(sensor, 2);
+  EXPECT_EQ(table.binning(), 2);
+  const Camera& ideal = table.ideal_camera();
+  EXPECT_EQ(ideal.width, 33);
+  EXPECT_EQ(ideal.height, 25);
+  EXPECT_DOUBLE_EQ(ideal.fx, 25);
+  EXPECT_DOUBLE_EQ(ideal.fy, 20);
+  // The principal point (31.5, 23.5) lies between sensor pixels 31 and 32 (blocks 15 and 16).
+  EXPECT_DOUBLE_EQ(ideal.cx, 15.5);
+  EXPECT_DOUBLE_EQ(ideal.cy, 11.5);
+  for (int y = 0; y < 49; ++y) {
+    for (int x = 0; x < 65; ++x) {
+      const Eigen::Vector2f pixel = table.At(x, y).ideal_pixel;
+      // Sensor pixel x lies at (x + 0.5) / 2 - 0.5 in the binned image: its block x / 2 is the
+      // nearest ideal pixel.
+      EXPECT_NEAR(pixel.x(), (x + 0.5) / 2 - 0.5, 1e-5);
+      EXPECT_NEAR(pixel.y(), (y + 0.5) / 2 - 0.5, 1e-5);
+      EXPECT_EQ(std::lround(pixel.x()), x / 2);
+      EXPECT_EQ(std::lround(pixel.y()), y / 2);
+      // The ray is the sensor pixel's, whatever the binning.
+      EXPECT_NEAR(table.At(x, y).normalized.x(), (x - 31.5) / 50, 1e-7);
+    }
+  }
+  // A ray projects through the binned camera to where its sensor pixel lies in the binned image.
+  Eigen::Vector2d projected;
+  ASSERT_TRUE(ideal.Project(Eigen::Vector3d((40 - 31.5) / 50, (10 - 23.5) / 40, 1), &projected));
+  EXPECT_NEAR(projected.x(), 40.5 / 2 - 0.5, 1e-9);
+  EXPECT_NEAR(projected.y(), 10.5 / 2 - 0.5, 1e-9);
+}
+
+TEST(UndistortionTable, RejectsABinningOutsideOneToEight) {
+  const Camera sensor = Camera::Pinhole(64, 48, 50, 50, 31.5, 23.5);
+  EXPECT_THROW(UndistortionTable(sensor, 0), InvalidArgumentError);
+  EXPECT_THROW(UndistortionTable(sensor, 9), InvalidArgumentError);
+  EXPECT_NO_THROW(UndistortionTable(sensor, 8));
+}
+
 TEST(UndistortionTable, FindRejectsPixelsOutsideTheSensor) {
   const UndistortionTable table(MakeDavisRadialTangential());
   EXPECT_EQ(table.Find(-1, 0), nullptr);

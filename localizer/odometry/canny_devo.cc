@@ -55,6 +55,10 @@ void CannyDevoOptions::Check() const {
   if (tracker.input != tracking::TrackerInput::kEvents) {
     throw InvalidArgumentError("CannyDevoOptions: the tracker must take events");
   }
+  if (tracker.binning != 1) {
+    // The reference frames are built on the sensor's pixels from the tracker's surface.
+    throw InvalidArgumentError("CannyDevoOptions: the tracker's binning must be 1 (none)");
+  }
   reference.Check();
   if (!(mapping_decay_time_s > 0) || !(mapping_empty_threshold > 0) ||
       !(mapping_empty_threshold < 1)) {

@@ -370,6 +370,18 @@ TEST(TrackCommandLine, KeepsTheTrackersFlagsForOdometry) {
       2);
 }
 
+TEST(TrackCommandLine, ParsesTheBinningAndRefusesItForDevo) {
+  EXPECT_EQ(ParseTrackCommandLine({"--map", "m", "--dataset", "d", "--out", "o"})
+                .tracking.tracker.binning,
+            1);
+  EXPECT_EQ(ParseTrackCommandLine({"--map", "m", "--dataset", "d", "--out", "o", "--binning", "2"})
+                .tracking.tracker.binning,
+            2);
+  EXPECT_THROW(
+      ParseTrackCommandLine({"--mode", "devo", "--dataset", "d", "--out", "o", "--binning", "2"}),
+      InvalidArgumentError);
+}
+
 TEST(TrackCommandLine, ParsesTheInitialVelocity) {
   const std::vector<std::string> base = {"--map", "m", "--dataset", "d", "--out", "o"};
   const auto parse = [&](std::vector<std::string> extra) {

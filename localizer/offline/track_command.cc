@@ -296,6 +296,10 @@ void TrackCommandOptions::Check() const {
         " sets the event tracker; --mode vo tracks images and depth with its own settings "
         "(docs/tracking.md, \"Canny-VO\")");
   }
+  if (odometry == odometry::OdometryMode::kDevo && tracking.tracker.binning != 1) {
+    throw InvalidArgumentError(
+        "--binning: --mode devo builds its reference frames on the sensor's pixels (use 1)");
+  }
   if (odometry == odometry::OdometryMode::kDevo && tracking.tracker.events_per_step) {
     throw InvalidArgumentError("--events-per-step: --mode devo steps at a fixed rate (--rate)");
   }
@@ -403,6 +407,9 @@ Options:
   --polarity on|off      polarity-aware registration (default on)
   --occlusion on|off     ANNF occlusion culling (default on)
   --max-points N         map points registered per step (default 2500)
+  --binning B            events: track on time surfaces of B x B sensor pixels (default 1; 2
+                         makes a 1280x720 sensor track like a 640x360 one, in real time;
+                         docs/tracking.md, "Binning")
   --informative-points N events: of the --max-points evenly selected, register only the N
                          that constrain the pose most (default 0: all of them;
                          docs/tracking.md, "Point selection")
@@ -508,6 +515,8 @@ bool ApplyTrackerFlag(const std::string& flag, const std::string& value, Tracker
     tracker->use_occlusion_culling = ParseSwitchFlag(flag, value);
   } else if (flag == "--max-points") {
     tracker->max_points = static_cast<int>(ParseIntegerFlag(flag, value));
+  } else if (flag == "--binning") {
+    tracker->binning = static_cast<int>(ParseIntegerFlag(flag, value));
   } else if (flag == "--informative-points") {
     tracker->informative_points = static_cast<int>(ParseIntegerFlag(flag, value));
   } else if (flag == "--informative-seed-fraction") {

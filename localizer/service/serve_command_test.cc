@@ -53,6 +53,8 @@ TEST(ServeCommand, EveryFlagReachesItsOption) {
                                               "1000",
                                               "--informative-points",
                                               "400",
+                                              "--binning",
+                                              "2",
                                               "--tau",
                                               "0.02",
                                               "--decay-trail",
@@ -135,6 +137,7 @@ TEST(ServeCommand, EveryFlagReachesItsOption) {
   EXPECT_EQ(server.tracker.VariantName(), "EVT-PR");
   EXPECT_EQ(server.tracker.max_points, 1000);
   EXPECT_EQ(server.tracker.informative_points, 400);
+  EXPECT_EQ(server.tracker.binning, 2);
   EXPECT_EQ(server.tracker.decay_time_s, 0.02);
   EXPECT_EQ(server.tracker.decay_trail_px, 2);
   EXPECT_TRUE(server.tracker.event_filter.hot_pixels);

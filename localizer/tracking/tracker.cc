@@ -37,7 +37,7 @@ Tracker::Tracker(std::unique_ptr<const MapSource> owned, const MapSource* borrow
     : owned_source_(std::move(owned)),
       source_(borrowed != nullptr ? borrowed : owned_source_.get()),
       options_((options.Check(), options)),
-      table_(camera),
+      table_(camera, options.binning),
       intrinsics_(PinholeIntrinsics::FromCamera(table_.ideal_camera())),
       decay_{options.decay_time_s * 1e9, options.empty_threshold},
       polarity_options_{options.polarity_neutral_band_deg, options.gradient_probe_depth_fraction,

@@ -60,6 +60,9 @@ void TrackerOptions::Check() const {
           "decay_speed_quantile must lie within (0, 1] (0.5: the median image speed).");
   Require(!events_per_step || *events_per_step >= 1, "events_per_step must be at least 1.");
   Require(Positive(decay_time_s), "decay_time_s must be positive.");
+  Require(binning >= 1 && binning <= 8, "binning must be 1 (none) to 8.");
+  Require(binning == 1 || input == TrackerInput::kEvents,
+          "binning needs events: frames (Canny-VT) are tracked at the sensor's resolution.");
   Require(std::isfinite(empty_threshold) && empty_threshold > 0 && empty_threshold < 1,
           "empty_threshold must be in (0, 1).");
   Require(max_points >= 6, "max_points must be at least 6.");

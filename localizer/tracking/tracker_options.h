@@ -103,6 +103,12 @@ struct TrackerOptions {
   EventFilterOptions event_filter;
 
   // --- Time surfaces ---
+  // The surfaces' pixel: 1 = a sensor pixel; b > 1 = a block of b x b sensor pixels holding the
+  // newest of their events (the ideal camera binned, UndistortionTable; docs/tracking.md,
+  // "Binning"). Every pixel length of these options (radii, trails, margins) is then in binned
+  // pixels. 2 makes a 1280x720 sensor track like a 640x360 one: the step no longer pays for the
+  // HD image's cache misses. Events only (frames and odometry need 1).
+  int binning = 1;
   // Decay time tau of T = exp(-(t - t_last) / tau), seconds. With decay_trail_px > 0, the
   // longest decay time.
   double decay_time_s = 0.03;

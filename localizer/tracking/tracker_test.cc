@@ -135,6 +135,40 @@ TEST(Tracker, RegistersTheInformativeSubsetOfItsEvenSelection) {
   }
 }
 
+TEST(Tracker, TracksATwiceFinerSensorBinnedTwoAsTheCoarseSensor) {
+  // binning 2: a 480x360 sensor's events land in a 240x180 surface of the binned camera (f 200
+  // instead of 400); the registration, the radii and the decay trail work in binned pixels. The
+  // scene is tracked within the bounds of the 240x180 sensor (TrackerVariants).
+  Sequence fine;
+  fine.camera = Camera::Pinhole(480, 360, 400.0, 400.0, 239.5, 179.5);
+  fine.map = SmoothSequence().map;
+  fine.events = testing::SimulateEdgeEvents(
+      fine.map, fine.camera, [](int64_t t_ns) { return testing::SmoothMotion(t_ns); }, 0,
+      400'000'000);
+  TrackerOptions options;
+  options.binning = 2;
+  Tracker tracker(fine.map, nullptr, fine.camera, options);
+  EXPECT_EQ(tracker.ideal_camera().width, 240);
+  EXPECT_EQ(tracker.ideal_camera().height, 180);
+  EXPECT_DOUBLE_EQ(tracker.ideal_camera().fx, 200);
+  EXPECT_DOUBLE_EQ(tracker.ideal_camera().cx, 119.5);
+  tracker.Reset(testing::SmoothMotion(kStartNs), kStartNs);
+  const std::vector<PoseEstimate> estimates = tracker.AddEvents(fine.events);
+  ASSERT_GE(estimates.size(), 100u);
+  double max_position_error = 0;
+  double max_rotation_error = 0;
+  for (const PoseEstimate& estimate : estimates) {
+    EXPECT_EQ(estimate.status, TrackingStatus::kTracking) << estimate.t_ns;
+    max_position_error = std::max(max_position_error, PositionError(estimate));
+    max_rotation_error = std::max(max_rotation_error, RotationError(estimate));
+  }
+  EXPECT_LT(max_position_error, 0.04);
+  EXPECT_LT(max_rotation_error, 1.0 * kDegree);
+  std::cout << "480x360 binned 2: max position error " << max_position_error * 100
+            << " cm, max rotation error " << max_rotation_error / kDegree << " deg over "
+            << estimates.size() << " steps\n";
+}
+
 TEST(Tracker, OutputDoesNotDependOnHowEventsAreSplitIntoPackets) {
   const Sequence& sequence = SmoothSequence();
   for (const bool every_n_events : {false, true}) {
@@ -405,6 +439,16 @@ TEST(TrackerOptions, CheckAndVariants) {
   EXPECT_THROW(options.Check(), InvalidArgumentError);
   options = TrackerOptions{};
   options.informative_seed_fraction = 0;
+  EXPECT_THROW(options.Check(), InvalidArgumentError);
+  for (const int binning : {0, 9}) {
+    options = TrackerOptions{};
+    options.binning = binning;
+    EXPECT_THROW(options.Check(), InvalidArgumentError) << binning;
+  }
+  options = TrackerOptions{};
+  options.binning = 2;
+  EXPECT_NO_THROW(options.Check());
+  options.input = TrackerInput::kFrames;  // Frames are tracked at the sensor's resolution.
   EXPECT_THROW(options.Check(), InvalidArgumentError);
 }
 
