@@ -6,10 +6,8 @@
 #include "core/common/error.h"
 
 namespace evloc {
-namespace {
 
-// The ideal pinhole camera of `camera` binned `binning` x `binning` (UndistortionTable).
-Camera BinnedIdealPinhole(const Camera& camera, int binning) {
+Camera UndistortionTable::BinnedIdealCamera(const Camera& camera, int binning) {
   if (binning < 1 || binning > 8) {
     throw InvalidArgumentError("UndistortionTable: binning must be 1 to 8, got " +
                                std::to_string(binning) + ".");
@@ -21,10 +19,8 @@ Camera BinnedIdealPinhole(const Camera& camera, int binning) {
                          (camera.cx + 0.5) / b - 0.5, (camera.cy + 0.5) / b - 0.5);
 }
 
-}  // namespace
-
 UndistortionTable::UndistortionTable(const Camera& camera, int binning)
-    : camera_(camera), ideal_camera_(BinnedIdealPinhole(camera, binning)), binning_(binning) {
+    : camera_(camera), ideal_camera_(BinnedIdealCamera(camera, binning)), binning_(binning) {
   camera_.Check();
   entries_.resize(static_cast<size_t>(camera_.width) * camera_.height);
   for (int y = 0; y < camera_.height; ++y) {

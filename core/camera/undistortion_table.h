@@ -33,6 +33,10 @@ class UndistortionTable {
   // docs/tracking.md, "Binning"). InvalidArgumentError for b outside 1..8.
   explicit UndistortionTable(const Camera& camera, int binning = 1);
 
+  // The ideal pinhole camera of `camera` binned `binning` x `binning` (the constructor's;
+  // InvalidArgumentError for a binning outside 1..8). Without building a table.
+  static Camera BinnedIdealCamera(const Camera& camera, int binning);
+
   // The camera the table was built for.
   const Camera& camera() const { return camera_; }
   // The ideal pinhole camera of ideal_pixel (same size, fx, fy, cx, cy; binned when binning > 1).

@@ -37,16 +37,17 @@ Tracker::Tracker(std::unique_ptr<const MapSource> owned, const MapSource* borrow
     : owned_source_(std::move(owned)),
       source_(borrowed != nullptr ? borrowed : owned_source_.get()),
       options_((options.Check(), options)),
-      table_(camera, options.binning),
-      intrinsics_(PinholeIntrinsics::FromCamera(table_.ideal_camera())),
+      sensor_camera_(camera),
+      ideal_camera_(UndistortionTable::BinnedIdealCamera(camera, options.binning)),
+      intrinsics_(PinholeIntrinsics::FromCamera(ideal_camera_)),
       decay_{options.decay_time_s * 1e9, options.empty_threshold},
       polarity_options_{options.polarity_neutral_band_deg, options.gradient_probe_depth_fraction,
                         options.min_flow_px},
-      surface_(table_),
-      filter_(SensorSize{table_.width(), table_.height()}, options.event_filter),
+      surface_(UndistortionTable(camera, options.binning)),
+      filter_(SensorSize{camera.width, camera.height}, options.event_filter),
       motion_(std::llround(options.velocity_window_s * 1e9),
               std::llround(options.stamp_velocity_window_s * 1e9)) {
-  if (table_.ideal_camera().width < 8 || table_.ideal_camera().height < 8) {
+  if (ideal_camera_.width < 8 || ideal_camera_.height < 8) {
     throw InvalidArgumentError("Tracker: the camera image must be at least 8x8 pixels.");
   }
   for (int channel = 0; channel < 3; ++channel) {
@@ -197,10 +198,11 @@ std::optional<PoseEstimate> Tracker::AddFrame(int64_t t_ns, const cv::Mat& gray)
   if (options_.input != TrackerInput::kFrames) {
     throw InvalidArgumentError("Tracker::AddFrame: this tracker takes events (Canny-EVT).");
   }
-  if (gray.type() != CV_8UC1 || gray.cols != table_.width() || gray.rows != table_.height()) {
+  if (gray.type() != CV_8UC1 || gray.cols != sensor_camera_.width ||
+      gray.rows != sensor_camera_.height) {
     throw InvalidArgumentError("Tracker::AddFrame: the frame must be CV_8UC1 of " +
-                               std::to_string(table_.width()) + "x" +
-                               std::to_string(table_.height()) + " pixels.");
+                               std::to_string(sensor_camera_.width) + "x" +
+                               std::to_string(sensor_camera_.height) + " pixels.");
   }
   if (!initialized()) return std::nullopt;
   if (t_ns <= last_step_t_ns_) {
@@ -295,7 +297,7 @@ PotentialField* Tracker::Field(SurfaceChannel channel) {
 }
 
 void Tracker::SelectPoints(const Rigid3d& predicted_world_from_cam) {
-  const Camera& ideal = table_.ideal_camera();
+  const Camera& ideal = ideal_camera_;
   PointSelectionOptions selection;
   selection.max_points = options_.max_points;
   selection.bucket_size_px = options_.bucket_size_px;

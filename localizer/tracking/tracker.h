@@ -242,7 +242,7 @@ class Tracker {
   // The options in use.
   const TrackerOptions& options() const { return options_; }
   // The ideal pinhole camera the fields live in.
-  const Camera& ideal_camera() const { return table_.ideal_camera(); }
+  const Camera& ideal_camera() const { return ideal_camera_; }
   // The time surface (for inspection and tests).
   const TimeSurface& time_surface() const { return surface_; }
   // The noise filters before the surfaces (their counts, for statistics).
@@ -431,7 +431,11 @@ class Tracker {
   MapPoints points_;
   uint64_t source_generation_ = 0;
   TrackerOptions options_;
-  UndistortionTable table_;
+  // The sensor's camera and the ideal pinhole camera the surfaces live in (binned with
+  // options_.binning). The undistortion table itself is only needed to build the surface's
+  // sensor-to-pixel look-up: not kept (18 MB at 1280x720).
+  Camera sensor_camera_;
+  Camera ideal_camera_;
   PinholeIntrinsics intrinsics_;
   // The decay of the current step (options_.decay_time_s unless the decay is adaptive).
   SurfaceDecay decay_;

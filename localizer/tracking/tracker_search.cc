@@ -79,7 +79,7 @@ void Tracker::SetImageHypothesisSource(const ImageHypothesisSource* source) {
   image_source_ = source;
   event_image_ = source == nullptr
                      ? nullptr
-                     : std::make_unique<EventImage>(table_.width(), table_.height(),
+                     : std::make_unique<EventImage>(sensor_camera_.width, sensor_camera_.height,
                                                     options_.relocalization_image_tau_s);
   last_image_request_t_ns_.reset();
 }
@@ -298,7 +298,7 @@ double Tracker::MedianDepth(const std::vector<uint32_t>& indices,
 void Tracker::SampleViewpointPoints(size_t viewpoint) {
   if (viewpoint_sampled_[viewpoint]) return;
   viewpoint_sampled_[viewpoint] = 1;
-  const Camera& ideal = table_.ideal_camera();
+  const Camera& ideal = ideal_camera_;
   VisibilityQueryOptions query;
   query.min_depth_m = options_.min_depth_m;
   query.max_depth_m = options_.max_depth_m;
