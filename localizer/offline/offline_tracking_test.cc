@@ -377,9 +377,16 @@ TEST(TrackCommandLine, ParsesTheBinningAndRefusesItForDevo) {
   EXPECT_EQ(ParseTrackCommandLine({"--map", "m", "--dataset", "d", "--out", "o", "--binning", "2"})
                 .tracking.tracker.binning,
             2);
-  EXPECT_THROW(
-      ParseTrackCommandLine({"--mode", "devo", "--dataset", "d", "--out", "o", "--binning", "2"}),
-      InvalidArgumentError);
+  EXPECT_EQ(
+      ParseTrackCommandLine({"--map", "m", "--dataset", "d", "--out", "o", "--binning", "auto"})
+          .tracking.tracker.binning,
+      tracking::kAutoBinning);
+  for (const std::string binning : {"2", "auto"}) {
+    EXPECT_THROW(ParseTrackCommandLine(
+                     {"--mode", "devo", "--dataset", "d", "--out", "o", "--binning", binning}),
+                 InvalidArgumentError)
+        << binning;
+  }
 }
 
 TEST(TrackCommandLine, ParsesTheInitialVelocity) {

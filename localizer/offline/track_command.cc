@@ -298,7 +298,8 @@ void TrackCommandOptions::Check() const {
   }
   if (odometry == odometry::OdometryMode::kDevo && tracking.tracker.binning != 1) {
     throw InvalidArgumentError(
-        "--binning: --mode devo builds its reference frames on the sensor's pixels (use 1)");
+        "--binning: --mode devo builds its reference frames on the sensor's pixels (use 1, not "
+        "auto)");
   }
   if (odometry == odometry::OdometryMode::kDevo && tracking.tracker.events_per_step) {
     throw InvalidArgumentError("--events-per-step: --mode devo steps at a fixed rate (--rate)");
@@ -407,9 +408,10 @@ Options:
   --polarity on|off      polarity-aware registration (default on)
   --occlusion on|off     ANNF occlusion culling (default on)
   --max-points N         map points registered per step (default 2500)
-  --binning B            events: track on time surfaces of B x B sensor pixels (default 1; 2
-                         makes a 1280x720 sensor track like a 640x360 one, in real time;
-                         docs/tracking.md, "Binning")
+  --binning B|auto       events: track on time surfaces of B x B sensor pixels (default 1; 2
+                         makes a 1280x720 sensor track like a 640x360 one, in real time; auto:
+                         the smallest B that fits the image in 640x480; docs/tracking.md,
+                         "Binning")
   --informative-points N events: of the --max-points evenly selected, register only the N
                          that constrain the pose most (default 0: all of them;
                          docs/tracking.md, "Point selection")
@@ -516,7 +518,7 @@ bool ApplyTrackerFlag(const std::string& flag, const std::string& value, Tracker
   } else if (flag == "--max-points") {
     tracker->max_points = static_cast<int>(ParseIntegerFlag(flag, value));
   } else if (flag == "--binning") {
-    tracker->binning = static_cast<int>(ParseIntegerFlag(flag, value));
+    ParseBinningFlag(flag, value, tracker);
   } else if (flag == "--informative-points") {
     tracker->informative_points = static_cast<int>(ParseIntegerFlag(flag, value));
   } else if (flag == "--informative-seed-fraction") {

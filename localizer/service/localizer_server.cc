@@ -297,7 +297,10 @@ std::string LocalizerServerOptions::Describe() const {
        << "security: " << DescribeListenSecurity(listen_address, listen_security()) << "\n"
        << "tracker: variant " << tracker.VariantName() << ", " << tracker.step_rate_hz
        << " Hz, max-points " << tracker.max_points << ", tau " << tracker.decay_time_s
-       << " s, binning " << tracker.binning << "\n"
+       << " s, binning "
+       << (tracker.binning == tracking::kAutoBinning ? std::string("auto")
+                                                     : std::to_string(tracker.binning))
+       << "\n"
        << "stamp-at-step-time: " << (tracker.stamp_at_step_time ? "on" : "off") << "\n"
        << "motion-prior: " << tracker.motion_prior_velocity_sigma_mps << " m/s, "
        << tracker.motion_prior_angular_velocity_sigma_dps << " deg/s"

@@ -101,8 +101,9 @@ Options:
   --rate HZ                  default tracking steps per second (default 300)
   --variant NAME             default variant: EVT, EVT-PR, EVT-OH or EVT-- (default EVT)
   --max-points N             default map points per step (default 2500)
-  --binning B                track every session on time surfaces of B x B sensor pixels
+  --binning B|auto           track every session on time surfaces of B x B sensor pixels
                              (default 1; 2 tracks a 1280x720 sensor in real time on one core;
+                             auto: per session, the smallest B that fits its image in 640x480;
                              docs/tracking.md, "Binning")
   --informative-points N     default: of those, register only the N that constrain the pose
                              most (default 0: all; docs/tracking.md, "Point selection")
@@ -264,7 +265,7 @@ ServeCommand ParseServeCommandLine(const std::vector<std::string>& arguments) {
     } else if (flag == "--max-points") {
       server.tracker.max_points = static_cast<int>(ParseIntegerFlag(flag, value));
     } else if (flag == "--binning") {
-      server.tracker.binning = static_cast<int>(ParseIntegerFlag(flag, value));
+      ParseBinningFlag(flag, value, &server.tracker);
     } else if (flag == "--informative-points") {
       server.tracker.informative_points = static_cast<int>(ParseIntegerFlag(flag, value));
     } else if (flag == "--tau") {

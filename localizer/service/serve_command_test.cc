@@ -172,6 +172,11 @@ TEST(ServeCommand, EveryFlagReachesItsOption) {
   EXPECT_FALSE(
       ParseServeCommandLine({"serve", "--maps", folder.path().string(), "--map-keep-dir", "none"})
           .server.keep_maps);
+  EXPECT_NE(server.Describe().find("binning 2\n"), std::string::npos);
+  const ServeCommand auto_binning =
+      ParseServeCommandLine({"serve", "--maps", folder.path().string(), "--binning", "auto"});
+  EXPECT_EQ(auto_binning.server.tracker.binning, tracking::kAutoBinning);
+  EXPECT_NE(auto_binning.server.Describe().find("binning auto\n"), std::string::npos);
 }
 
 TEST(ServeCommand, BadCommandLinesAreRejectedWithTheFlag) {

@@ -60,8 +60,8 @@ void TrackerOptions::Check() const {
           "decay_speed_quantile must lie within (0, 1] (0.5: the median image speed).");
   Require(!events_per_step || *events_per_step >= 1, "events_per_step must be at least 1.");
   Require(Positive(decay_time_s), "decay_time_s must be positive.");
-  Require(binning >= 1 && binning <= 8, "binning must be 1 (none) to 8.");
-  Require(binning == 1 || input == TrackerInput::kEvents,
+  Require(binning >= kAutoBinning && binning <= 8, "binning must be 0 (auto) or 1 (none) to 8.");
+  Require(binning <= 1 || input == TrackerInput::kEvents,
           "binning needs events: frames (Canny-VT) are tracked at the sensor's resolution.");
   Require(std::isfinite(empty_threshold) && empty_threshold > 0 && empty_threshold < 1,
           "empty_threshold must be in (0, 1).");
@@ -211,6 +211,22 @@ std::string TrackerOptions::VariantName() const {
   if (use_polarity) return "EVT-PR";
   if (use_occlusion_culling) return "EVT-OH";
   return "EVT--";
+}
+
+int ResolveBinning(const TrackerOptions& options, int width, int height) {
+  if (options.binning != kAutoBinning) return options.binning;
+  if (options.input != TrackerInput::kEvents) return 1;
+  int binning = 1;
+  while (binning < 8 && ((width + binning - 1) / binning > kAutoBinningMaxWidth ||
+                         (height + binning - 1) / binning > kAutoBinningMaxHeight)) {
+    ++binning;
+  }
+  return binning;
+}
+
+void ParseBinningFlag(std::string_view flag, std::string_view value, TrackerOptions* options) {
+  options->binning =
+      value == "auto" ? kAutoBinning : static_cast<int>(ParseIntegerFlag(flag, value));
 }
 
 void ParseMotionPriorFlag(std::string_view flag, std::string_view value, TrackerOptions* options) {

@@ -107,7 +107,9 @@ struct TrackerOptions {
   // newest of their events (the ideal camera binned, UndistortionTable; docs/tracking.md,
   // "Binning"). Every pixel length of these options (radii, trails, margins) is then in binned
   // pixels. 2 makes a 1280x720 sensor track like a 640x360 one: the step no longer pays for the
-  // HD image's cache misses. Events only (frames and odometry need 1).
+  // HD image's cache misses. Events only (frames and odometry need 1). 0 = auto
+  // (kAutoBinning): the smallest binning that fits the image in 640x480 (ResolveBinning), 1 for
+  // frames.
   int binning = 1;
   // Decay time tau of T = exp(-(t - t_last) / tau), seconds. With decay_trail_px > 0, the
   // longest decay time.
@@ -379,6 +381,21 @@ struct TrackerOptions {
   // The variant name of the current switches.
   std::string VariantName() const;
 };
+
+// TrackerOptions::binning's "auto".
+inline constexpr int kAutoBinning = 0;
+// The largest image (width, height) "auto" binning tracks on, pixels.
+inline constexpr int kAutoBinningMaxWidth = 640;
+inline constexpr int kAutoBinningMaxHeight = 480;
+
+// The binning a tracker of `options` uses on a `width` x `height` sensor: options.binning, or
+// for auto the smallest B with ceil(width / B) <= 640 and ceil(height / B) <= 480 (at most 8; 1
+// for frames): 1280x720 -> 2, 1920x1080 -> 3, 640x480 and smaller -> 1.
+int ResolveBinning(const TrackerOptions& options, int width, int height);
+
+// Sets options->binning from a command-line value of `flag`: "auto" or an integer (Check judges
+// its range). Throws UsageError naming the flag for anything else.
+void ParseBinningFlag(std::string_view flag, std::string_view value, TrackerOptions* options);
 
 // Sets the two motion prior sigmas from a command-line value "V,W" (m/s, deg/s) of `flag`.
 // Throws UsageError naming the flag for any other form (TrackerOptions::Check judges the values).

@@ -440,7 +440,7 @@ TEST(TrackerOptions, CheckAndVariants) {
   options = TrackerOptions{};
   options.informative_seed_fraction = 0;
   EXPECT_THROW(options.Check(), InvalidArgumentError);
-  for (const int binning : {0, 9}) {
+  for (const int binning : {-1, 9}) {
     options = TrackerOptions{};
     options.binning = binning;
     EXPECT_THROW(options.Check(), InvalidArgumentError) << binning;
@@ -450,6 +450,37 @@ TEST(TrackerOptions, CheckAndVariants) {
   EXPECT_NO_THROW(options.Check());
   options.input = TrackerInput::kFrames;  // Frames are tracked at the sensor's resolution.
   EXPECT_THROW(options.Check(), InvalidArgumentError);
+  options.binning = kAutoBinning;  // Auto is 1 for frames.
+  EXPECT_NO_THROW(options.Check());
+}
+
+TEST(TrackerOptions, AutoBinningFitsTheImageIn640x480) {
+  TrackerOptions options;
+  options.binning = kAutoBinning;
+  EXPECT_EQ(ResolveBinning(options, 1280, 720), 2);
+  EXPECT_EQ(ResolveBinning(options, 1280, 800), 2);
+  EXPECT_EQ(ResolveBinning(options, 1920, 1080), 3);
+  EXPECT_EQ(ResolveBinning(options, 1024, 768), 2);
+  EXPECT_EQ(ResolveBinning(options, 640, 480), 1);
+  EXPECT_EQ(ResolveBinning(options, 641, 480), 2);
+  EXPECT_EQ(ResolveBinning(options, 346, 260), 1);
+  EXPECT_EQ(ResolveBinning(options, 100000, 10), 8);  // At most 8.
+  options.input = TrackerInput::kFrames;
+  EXPECT_EQ(ResolveBinning(options, 1280, 720), 1);
+  options.input = TrackerInput::kEvents;
+  options.binning = 3;  // Given: as given.
+  EXPECT_EQ(ResolveBinning(options, 640, 480), 3);
+  options.binning = kAutoBinning;
+  const Camera hd = Camera::Pinhole(1280, 720, 1000, 1000, 639.5, 359.5);
+  const Tracker tracker(SmoothSequence().map, nullptr, hd, options);
+  EXPECT_EQ(tracker.ideal_camera().width, 640);
+  EXPECT_EQ(tracker.ideal_camera().height, 360);
+  TrackerOptions parsed;
+  ParseBinningFlag("--binning", "auto", &parsed);
+  EXPECT_EQ(parsed.binning, kAutoBinning);
+  ParseBinningFlag("--binning", "2", &parsed);
+  EXPECT_EQ(parsed.binning, 2);
+  EXPECT_ANY_THROW(ParseBinningFlag("--binning", "half", &parsed));
 }
 
 // Events fired when an edge crosses a pixel's centre (as rendered ones are) trail the edge, so
