@@ -23,19 +23,15 @@ UndistortionTable::UndistortionTable(const Camera& camera, int binning)
     : camera_(camera), ideal_camera_(BinnedIdealCamera(camera, binning)), binning_(binning) {
   camera_.Check();
   entries_.resize(static_cast<size_t>(camera_.width) * camera_.height);
-  for (int y = 0; y < camera_.height; ++y) {
-    for (int x = 0; x < camera_.width; ++x) {
-      Entry& entry = entries_[static_cast<size_t>(y) * camera_.width + x];
-      Eigen::Vector3d ray;
-      if (!camera_.Unproject(Eigen::Vector2d(x, y), &ray)) continue;
-      entry.normalized = Eigen::Vector2f(static_cast<float>(ray.x()), static_cast<float>(ray.y()));
-      entry.ideal_pixel =
-          Eigen::Vector2f(static_cast<float>(ideal_camera_.fx * ray.x() + ideal_camera_.cx),
-                          static_cast<float>(ideal_camera_.fy * ray.y() + ideal_camera_.cy));
-      entry.valid = true;
-      ++num_valid_;
-    }
-  }
+  ForEachPixel(
+      camera_, ideal_camera_,
+      [this](int x, int y, const Eigen::Vector2f& normalized, const Eigen::Vector2f& ideal_pixel) {
+        Entry& entry = entries_[static_cast<size_t>(y) * camera_.width + x];
+        entry.normalized = normalized;
+        entry.ideal_pixel = ideal_pixel;
+        entry.valid = true;
+        ++num_valid_;
+      });
 }
 
 const UndistortionTable::Entry& UndistortionTable::At(int x, int y) const {

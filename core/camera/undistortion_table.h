@@ -37,6 +37,24 @@ class UndistortionTable {
   // InvalidArgumentError for a binning outside 1..8). Without building a table.
   static Camera BinnedIdealCamera(const Camera& camera, int binning);
 
+  // Calls visit(x, y, normalized, ideal_pixel) for every sensor pixel of `camera` whose ray
+  // Camera::Unproject finds, in row-major order, with the float values an Entry of a table of
+  // `camera` and ideal camera `ideal` holds (Eigen::Vector2f each), without storing them (the
+  // tracker's surface needs one look-up per pixel, not the 20-byte entries). `camera` must pass
+  // Check().
+  template <typename Visit>
+  static void ForEachPixel(const Camera& camera, const Camera& ideal, Visit&& visit) {
+    for (int y = 0; y < camera.height; ++y) {
+      for (int x = 0; x < camera.width; ++x) {
+        Eigen::Vector3d ray;
+        if (!camera.Unproject(Eigen::Vector2d(x, y), &ray)) continue;
+        visit(x, y, Eigen::Vector2f(static_cast<float>(ray.x()), static_cast<float>(ray.y())),
+              Eigen::Vector2f(static_cast<float>(ideal.fx * ray.x() + ideal.cx),
+                              static_cast<float>(ideal.fy * ray.y() + ideal.cy)));
+      }
+    }
+  }
+
   // The camera the table was built for.
   const Camera& camera() const { return camera_; }
   // The ideal pinhole camera of ideal_pixel (same size, fx, fy, cx, cy; binned when binning > 1).

@@ -36,24 +36,42 @@ int64_t SurfaceDecay::MaxActiveAgeExactNs() const {
   return age_ns;
 }
 
-TimeSurface::TimeSurface(const UndistortionTable& table)
-    : width_(table.ideal_camera().width),
-      height_(table.ideal_camera().height),
-      sensor_width_(table.width()),
-      sensor_height_(table.height()) {
-  const size_t num_sensor_pixels = static_cast<size_t>(sensor_width_) * sensor_height_;
-  sensor_to_pixel_.assign(num_sensor_pixels, -1);
+TimeSurface::TimeSurface(const UndistortionTable& table) {
+  StartLookup(table.camera(), table.ideal_camera());
   for (int y = 0; y < sensor_height_; ++y) {
     for (int x = 0; x < sensor_width_; ++x) {
       const UndistortionTable::Entry* entry = table.Find(x, y);
-      if (entry == nullptr) continue;
-      const int ideal_x = static_cast<int>(std::lround(entry->ideal_pixel.x()));
-      const int ideal_y = static_cast<int>(std::lround(entry->ideal_pixel.y()));
-      if (ideal_x < 0 || ideal_y < 0 || ideal_x >= width_ || ideal_y >= height_) continue;
-      sensor_to_pixel_[static_cast<size_t>(y) * sensor_width_ + x] = ideal_y * width_ + ideal_x;
+      if (entry != nullptr) SetIdealPixel(x, y, entry->ideal_pixel);
     }
   }
   Clear();
+}
+
+TimeSurface::TimeSurface(const Camera& camera, int binning) {
+  camera.Check();
+  const Camera ideal = UndistortionTable::BinnedIdealCamera(camera, binning);
+  StartLookup(camera, ideal);
+  UndistortionTable::ForEachPixel(
+      camera, ideal,
+      [this](int x, int y, const Eigen::Vector2f&, const Eigen::Vector2f& ideal_pixel) {
+        SetIdealPixel(x, y, ideal_pixel);
+      });
+  Clear();
+}
+
+void TimeSurface::StartLookup(const Camera& sensor, const Camera& ideal) {
+  width_ = ideal.width;
+  height_ = ideal.height;
+  sensor_width_ = sensor.width;
+  sensor_height_ = sensor.height;
+  sensor_to_pixel_.assign(static_cast<size_t>(sensor_width_) * sensor_height_, -1);
+}
+
+void TimeSurface::SetIdealPixel(int x, int y, const Eigen::Vector2f& ideal_pixel) {
+  const int ideal_x = static_cast<int>(std::lround(ideal_pixel.x()));
+  const int ideal_y = static_cast<int>(std::lround(ideal_pixel.y()));
+  if (ideal_x < 0 || ideal_y < 0 || ideal_x >= width_ || ideal_y >= height_) return;
+  sensor_to_pixel_[static_cast<size_t>(y) * sensor_width_ + x] = ideal_y * width_ + ideal_x;
 }
 
 void TimeSurface::Clear() {

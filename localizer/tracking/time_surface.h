@@ -85,6 +85,9 @@ class TimeSurface {
   // Builds the sensor-pixel to ideal-pixel look-up (nearest integer pixel) from `table`. Sensor
   // pixels whose undistorted position falls outside the image are dropped on insertion.
   explicit TimeSurface(const UndistortionTable& table);
+  // The same look-up for `camera` binned `binning` x `binning` (UndistortionTable(camera,
+  // binning)) without building the table. InvalidArgumentError for an invalid camera or binning.
+  TimeSurface(const Camera& camera, int binning);
 
   // Image width, pixels.
   int width() const { return width_; }
@@ -140,6 +143,11 @@ class TimeSurface {
   std::vector<int64_t> last_t_ns_[3];
   int64_t num_dropped_ = 0;
   int64_t num_stored_ = 0;
+
+  // Sizes the look-up for `sensor` and `ideal` (every sensor pixel dropped), for SetIdealPixel.
+  void StartLookup(const Camera& sensor, const Camera& ideal);
+  // Maps sensor pixel (x, y) to the ideal pixel nearest to `ideal_pixel` (dropped outside).
+  void SetIdealPixel(int x, int y, const Eigen::Vector2f& ideal_pixel);
 };
 
 // The potential field 1 - T of one channel of a time surface at one time, optionally smoothed,

@@ -39,6 +39,34 @@ TEST(TimeSurface, EventOutsideTheSensorThrows) {
   EXPECT_THROW(surface.Insert(events, 0, events.size()), InvalidArgumentError);
 }
 
+TEST(TimeSurface, BuiltFromTheCameraMapsEveryPixelAsFromItsTable) {
+  // Barrel distortion strong enough that the corners leave the image (dropped), plain and binned.
+  Camera camera = Camera::Pinhole(64, 48, 50, 50, 31.5, 23.5);
+  camera.model = CameraModel::kRadialTangential;
+  camera.distortion = {-0.45, 0.1, 0.001, -0.002, 0.0};
+  for (const int binning : {1, 2, 3}) {
+    const TimeSurface from_table(UndistortionTable(camera, binning));
+    const TimeSurface from_camera(camera, binning);
+    ASSERT_EQ(from_camera.width(), from_table.width()) << binning;
+    ASSERT_EQ(from_camera.height(), from_table.height()) << binning;
+    int dropped = 0;
+    for (int y = 0; y < 48; ++y) {
+      for (int x = 0; x < 64; ++x) {
+        EXPECT_EQ(from_camera.IdealPixelIndex(x, y), from_table.IdealPixelIndex(x, y))
+            << binning << ": " << x << ", " << y;
+        dropped += from_camera.IdealPixelIndex(x, y) < 0 ? 1 : 0;
+      }
+    }
+    if (binning == 1) {
+      EXPECT_GT(dropped, 0);
+    }
+  }
+  Camera invalid = camera;
+  invalid.fx = -1;
+  EXPECT_THROW(TimeSurface(invalid, 1), InvalidArgumentError);
+  EXPECT_THROW(TimeSurface(camera, 0), InvalidArgumentError);
+}
+
 TEST(TimeSurface, UndistortsEventsThroughTheTable) {
   Camera camera = Camera::Pinhole(64, 48, 50, 50, 31.5, 23.5);
   camera.model = CameraModel::kRadialTangential;

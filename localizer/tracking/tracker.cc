@@ -44,7 +44,7 @@ Tracker::Tracker(std::unique_ptr<const MapSource> owned, const MapSource* borrow
       decay_{options.decay_time_s * 1e9, options.empty_threshold},
       polarity_options_{options.polarity_neutral_band_deg, options.gradient_probe_depth_fraction,
                         options.min_flow_px},
-      surface_(UndistortionTable(camera, ResolveBinning(options, camera.width, camera.height))),
+      surface_(camera, ResolveBinning(options, camera.width, camera.height)),
       filter_(SensorSize{camera.width, camera.height}, options.event_filter),
       motion_(std::llround(options.velocity_window_s * 1e9),
               std::llround(options.stamp_velocity_window_s * 1e9)) {
