@@ -38,13 +38,13 @@ Tracker::Tracker(std::unique_ptr<const MapSource> owned, const MapSource* borrow
       source_(borrowed != nullptr ? borrowed : owned_source_.get()),
       options_((options.Check(), options)),
       sensor_camera_(camera),
-      ideal_camera_(UndistortionTable::BinnedIdealCamera(
-          camera, ResolveBinning(options, camera.width, camera.height))),
+      binning_(ResolveBinning(options, camera.width, camera.height)),
+      ideal_camera_(UndistortionTable::BinnedIdealCamera(camera, binning_)),
       intrinsics_(PinholeIntrinsics::FromCamera(ideal_camera_)),
       decay_{options.decay_time_s * 1e9, options.empty_threshold},
       polarity_options_{options.polarity_neutral_band_deg, options.gradient_probe_depth_fraction,
                         options.min_flow_px},
-      surface_(camera, ResolveBinning(options, camera.width, camera.height)),
+      surface_(camera, binning_),
       filter_(SensorSize{camera.width, camera.height}, options.event_filter),
       motion_(std::llround(options.velocity_window_s * 1e9),
               std::llround(options.stamp_velocity_window_s * 1e9)) {

@@ -431,10 +431,12 @@ class Tracker {
   MapPoints points_;
   uint64_t source_generation_ = 0;
   TrackerOptions options_;
-  // The sensor's camera and the ideal pinhole camera the surfaces live in (binned with
-  // options_.binning). The undistortion table itself is only needed to build the surface's
-  // sensor-to-pixel look-up: not kept (18 MB at 1280x720).
+  // The sensor's camera, the binning resolved for it (ResolveBinning: options_.binning, or the
+  // automatic choice), and the ideal pinhole camera the surfaces live in. The undistortion table
+  // itself is only needed to build the surface's sensor-to-pixel look-up: not kept (18 MB at
+  // 1280x720).
   Camera sensor_camera_;
+  int binning_;
   Camera ideal_camera_;
   PinholeIntrinsics intrinsics_;
   // The decay of the current step (options_.decay_time_s unless the decay is adaptive).
