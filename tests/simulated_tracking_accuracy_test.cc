@@ -213,7 +213,11 @@ TEST(NoiseFilters, TrackingNoisyEventsIsBetterWithTheFiltersOn) {
   EXPECT_LE(hot_only.counts.masked_pixels, hot_count * 2);
   EXPECT_EQ(filtered.lost_steps, 0);
   EXPECT_GT(filtered.coverage, 0.95);
-  EXPECT_LT(hot_only.ate_cm, unfiltered.ate_cm);
+  // Masking the hot pixels alone helped while a DAVIS240's surface had holes (0.629 against
+  // 0.653 cm); since the holes are filled (TimeSurface::FillHoles) the tracker without filters
+  // is as good on this scene (0.5133 against 0.5131 cm, docs/accuracy.md "Noise filters"): the
+  // mask must not hurt, and the two filters together must help.
+  EXPECT_LT(hot_only.ate_cm, unfiltered.ate_cm * 1.01);
   EXPECT_LT(filtered.ate_cm, unfiltered.ate_cm);
   std::filesystem::remove_all(folder);
 }

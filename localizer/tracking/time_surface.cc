@@ -44,6 +44,7 @@ TimeSurface::TimeSurface(const UndistortionTable& table) {
       if (entry != nullptr) SetIdealPixel(x, y, entry->ideal_pixel);
     }
   }
+  FillHoles(table.camera(), table.ideal_camera());
   Clear();
 }
 
@@ -56,6 +57,7 @@ TimeSurface::TimeSurface(const Camera& camera, int binning) {
       [this](int x, int y, const Eigen::Vector2f&, const Eigen::Vector2f& ideal_pixel) {
         SetIdealPixel(x, y, ideal_pixel);
       });
+  FillHoles(camera, ideal);
   Clear();
 }
 
@@ -74,6 +76,39 @@ void TimeSurface::SetIdealPixel(int x, int y, const Eigen::Vector2f& ideal_pixel
   sensor_to_pixel_[static_cast<size_t>(y) * sensor_width_ + x] = ideal_y * width_ + ideal_x;
 }
 
+void TimeSurface::FillHoles(const Camera& sensor, const Camera& ideal) {
+  const size_t num_sensor = static_cast<size_t>(sensor_width_) * sensor_height_;
+  std::vector<uint8_t> mapped(static_cast<size_t>(width_) * height_, 0);
+  for (const int32_t pixel : sensor_to_pixel_) {
+    if (pixel >= 0) mapped[pixel] = 1;
+  }
+  // (sensor pixel, hole) pairs, in hole order; then grouped by sensor pixel.
+  std::vector<std::pair<uint32_t, int32_t>> fills;
+  for (int v = 0; v < height_; ++v) {
+    for (int u = 0; u < width_; ++u) {
+      const int32_t index = v * width_ + u;
+      if (mapped[index]) continue;
+      const Eigen::Vector3d ray((u - ideal.cx) / ideal.fx, (v - ideal.cy) / ideal.fy, 1.0);
+      Eigen::Vector2d sensor_pixel;
+      if (!sensor.Project(ray, &sensor_pixel)) continue;
+      const long x = std::lround(sensor_pixel.x());
+      const long y = std::lround(sensor_pixel.y());
+      if (x < 0 || y < 0 || x >= sensor_width_ || y >= sensor_height_) continue;
+      fills.emplace_back(static_cast<uint32_t>(y * sensor_width_ + x), index);
+    }
+  }
+  hole_begin_.clear();
+  holes_.clear();
+  if (fills.empty()) return;
+  std::stable_sort(fills.begin(), fills.end(),
+                   [](const auto& a, const auto& b) { return a.first < b.first; });
+  hole_begin_.assign(num_sensor + 1, 0);
+  for (const auto& [sensor_index, hole] : fills) ++hole_begin_[sensor_index + 1];
+  for (size_t s = 0; s < num_sensor; ++s) hole_begin_[s + 1] += hole_begin_[s];
+  holes_.reserve(fills.size());
+  for (const auto& [sensor_index, hole] : fills) holes_.push_back(hole);
+}
+
 void TimeSurface::Clear() {
   for (std::vector<int64_t>& channel : last_t_ns_) {
     channel.assign(static_cast<size_t>(width_) * height_, kNeverFired);
@@ -88,6 +123,9 @@ void TimeSurface::Insert(const EventBuffer& events, size_t begin, size_t end) {
   const uint16_t* ys = events.y.data();
   const int8_t* polarity = events.polarity.data();
   const int32_t* lookup = sensor_to_pixel_.data();
+  const bool has_holes = !holes_.empty();
+  const uint32_t* hole_begin = hole_begin_.data();
+  const int32_t* holes = holes_.data();
   int64_t* all = last_t_ns_[0].data();
   int64_t* on = last_t_ns_[1].data();
   int64_t* off = last_t_ns_[2].data();
@@ -105,13 +143,26 @@ void TimeSurface::Insert(const EventBuffer& events, size_t begin, size_t end) {
                                  std::to_string(sensor_width) + "x" +
                                  std::to_string(sensor_height) + " sensor.");
     }
-    const int32_t pixel = lookup[y * sensor_width + x];
-    if (pixel < 0) [[unlikely]] {
-      ++dropped;
-      continue;
+    const uint32_t sensor = y * sensor_width + x;
+    const int32_t pixel = lookup[sensor];
+    int64_t* signed_channel = polarity[i] > 0 ? on : off;
+    bool stored = false;
+    if (pixel >= 0) [[likely]] {
+      all[pixel] = t_ns[i];
+      signed_channel[pixel] = t_ns[i];
+      stored = true;
     }
-    all[pixel] = t_ns[i];
-    (polarity[i] > 0 ? on : off)[pixel] = t_ns[i];
+    if (has_holes) {
+      const uint32_t first = hole_begin[sensor];
+      const uint32_t last = hole_begin[sensor + 1];
+      for (uint32_t k = first; k < last; ++k) {
+        all[holes[k]] = t_ns[i];
+        signed_channel[holes[k]] = t_ns[i];
+      }
+      stored |= first != last;
+    }
+    if (!stored) [[unlikely]]
+      ++dropped;
   }
   num_dropped_ += dropped;
   num_stored_ += static_cast<int64_t>(end - begin) - dropped;

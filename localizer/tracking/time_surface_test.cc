@@ -60,11 +60,85 @@ TEST(TimeSurface, BuiltFromTheCameraMapsEveryPixelAsFromItsTable) {
     if (binning == 1) {
       EXPECT_GT(dropped, 0);
     }
+    // Both fill the same holes, from the same sensor pixels.
+    ASSERT_EQ(from_camera.num_filled_holes(), from_table.num_filled_holes()) << binning;
+    for (int y = 0; y < 48; ++y) {
+      for (int x = 0; x < 64; ++x) {
+        std::vector<int32_t> a, b;
+        from_camera.ForEachIdealPixel(x, y, [&a](int32_t index) { a.push_back(index); });
+        from_table.ForEachIdealPixel(x, y, [&b](int32_t index) { b.push_back(index); });
+        EXPECT_EQ(a, b) << binning << ": " << x << ", " << y;
+      }
+    }
   }
   Camera invalid = camera;
   invalid.fx = -1;
   EXPECT_THROW(TimeSurface(invalid, 1), InvalidArgumentError);
   EXPECT_THROW(TimeSurface(camera, 0), InvalidArgumentError);
+}
+
+TEST(TimeSurface, BarrelDistortionLeavesNoHoleInsideTheSensorsFootprint) {
+  // The DAVIS240C of the Event Camera Dataset: its periphery is stretched by the undistortion,
+  // so that rounding each sensor pixel to its ideal pixel skips a fifth of the ideal pixels.
+  Camera camera =
+      Camera::Pinhole(240, 180, 199.092366542, 198.82882047, 132.192071378, 110.712660011);
+  camera.model = CameraModel::kRadialTangential;
+  camera.distortion = {-0.368436311798, 0.150947243557, -0.000296130534385, -0.000759431726241,
+                       0.0};
+  const TimeSurface surface(camera, 1);
+  std::vector<int> fills(static_cast<size_t>(surface.width()) * surface.height(), 0);
+  int rounded = 0;
+  for (int y = 0; y < camera.height; ++y) {
+    for (int x = 0; x < camera.width; ++x) {
+      rounded += surface.IdealPixelIndex(x, y) >= 0 ? 1 : 0;
+      surface.ForEachIdealPixel(x, y, [&fills](int32_t index) { ++fills[index]; });
+    }
+  }
+  EXPECT_GT(surface.num_filled_holes(), 0.15 * rounded);
+  // Every ideal pixel whose ray falls on the sensor (more than half a pixel inside its border, so
+  // that rounding cannot leave it) is filled, exactly once.
+  int inside = 0;
+  for (int v = 0; v < surface.height(); ++v) {
+    for (int u = 0; u < surface.width(); ++u) {
+      Eigen::Vector2d pixel;
+      const Eigen::Vector3d ray((u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy, 1.0);
+      if (!camera.Project(ray, &pixel) || !camera.IsInside(pixel, 1.0)) continue;
+      ++inside;
+      EXPECT_EQ(fills[static_cast<size_t>(v) * surface.width() + u], 1) << u << ", " << v;
+    }
+  }
+  EXPECT_GT(inside, 30000);
+
+  // An event at a sensor pixel that fills holes reaches them in both its channels.
+  int sensor_x = -1, sensor_y = -1;
+  std::vector<int32_t> targets;
+  for (int y = 0; y < camera.height && targets.size() < 2; ++y) {
+    for (int x = 0; x < camera.width && targets.size() < 2; ++x) {
+      targets.clear();
+      surface.ForEachIdealPixel(x, y, [&targets](int32_t index) { targets.push_back(index); });
+      sensor_x = x;
+      sensor_y = y;
+    }
+  }
+  ASSERT_GE(targets.size(), 2u);
+  TimeSurface inserted(camera, 1);
+  const EventBuffer events =
+      MakeEvents({{700, static_cast<uint16_t>(sensor_x), static_cast<uint16_t>(sensor_y), -1}});
+  inserted.Insert(events, 0, events.size());
+  for (const int32_t index : targets) {
+    const int u = index % inserted.width();
+    const int v = index / inserted.width();
+    EXPECT_EQ(inserted.LastTimestamp(SurfaceChannel::kAll, u, v), 700);
+    EXPECT_EQ(inserted.LastTimestamp(SurfaceChannel::kOff, u, v), 700);
+    EXPECT_EQ(inserted.LastTimestamp(SurfaceChannel::kOn, u, v), kNeverFired);
+  }
+  EXPECT_EQ(inserted.num_stored(), 1);
+
+  // A pinhole sensor has none.
+  EXPECT_EQ(TimeSurface(Camera::Pinhole(240, 180, 200, 200, 119.5, 89.5), 1).num_filled_holes(),
+            0u);
+  EXPECT_EQ(TimeSurface(Camera::Pinhole(1280, 720, 1000, 1000, 639.5, 359.5), 2).num_filled_holes(),
+            0u);
 }
 
 TEST(TimeSurface, UndistortsEventsThroughTheTable) {

@@ -218,8 +218,7 @@ std::optional<PoseEstimate> Tracker::AddFrame(int64_t t_ns, const cv::Mat& gray)
     const uint8_t* row = sensor_edges.ptr<uint8_t>(y);
     for (int x = 0; x < sensor_edges.cols; ++x) {
       if (row[x] == 0) continue;
-      const int32_t index = surface_.IdealPixelIndex(x, y);
-      if (index >= 0) ideal[index] = 255;
+      surface_.ForEachIdealPixel(x, y, [ideal](int32_t index) { ideal[index] = 255; });
     }
   }
   const cv::Mat distance_field =
