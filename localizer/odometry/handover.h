@@ -7,8 +7,9 @@
 // the map is in view of the odometry pose again, the map tracker is given that pose as a hint
 // (Tracker::Reset) and its poses are reported again (source: map) once they are verified: as many
 // consecutive TRACKING steps as the relocalization search's verification asks
-// (TrackerOptions::relocalization_verify_steps), each with enough map points and consistent with
-// the odometry within its covariance. One pose per map step, never a gap. Not thread-safe.
+// (TrackerOptions::relocalization_verify_steps), each with enough map points, the search's
+// verification alignment (relocalization_verify_min_alignment) and consistent with the odometry
+// within its covariance. One pose per map step, never a gap. Not thread-safe.
 #pragma once
 
 #include <cstdint>
