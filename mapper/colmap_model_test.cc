@@ -1,3 +1,4 @@
+
 #include "mapper/colmap_model.h"
 
 #include <gtest/gtest.h>
@@ -5,6 +6,7 @@
 #include <fstream>
 
 #include "core/camera/calibration_file.h"
+#include "core/camera/testing/ecd_davis240.h"
 #include "core/common/error.h"
 #include "core/common/test_data.h"
 #include "mapper/colmap_runner.h"
@@ -105,11 +107,8 @@ TEST(ColmapModel, TrackToUnknownImageIsRejected) {
 TEST(ColmapModel, TheCamerasTxtTheMapperWritesIsACalibrationFile) {
   // evloc writes cameras.txt (WriteColmapTextModel, for COLMAP's point_triangulator); --calib
   // reads it back to the same cameras, the radtan one through FULL_OPENCV.
-  Camera radtan =
-      Camera::Pinhole(240, 180, 199.092366542, 198.82882047, 132.192071378, 110.712660011);
-  radtan.model = CameraModel::kRadialTangential;
-  radtan.distortion = {-0.368436311798, 0.150947243557, -0.000296130534385, -0.000759431726241,
-                       0.0125};
+  Camera radtan = testing::EcdDavis240Camera();
+  radtan.distortion[4] = 0.0125;
   Camera fisheye = Camera::Pinhole(346, 260, 163.2, 163.5, 172.9, 129.4);
   fisheye.model = CameraModel::kEquidistant;
   fisheye.distortion = {-0.0273, 0.0401, -0.0297, 0.0089};

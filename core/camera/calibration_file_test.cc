@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "core/camera/colmap_camera.h"
+#include "core/camera/testing/ecd_davis240.h"
 #include "core/common/error.h"
 #include "core/common/file_util.h"
 #include "core/common/test_data.h"
@@ -32,14 +33,7 @@ Camera SliderDepthCamera() {
   return camera;
 }
 
-Camera SnippetsCamera() {
-  Camera camera =
-      Camera::Pinhole(240, 180, 199.092366542, 198.82882047, 132.192071378, 110.712660011);
-  camera.model = CameraModel::kRadialTangential;
-  camera.distortion = {-0.368436311798, 0.150947243557, -0.000296130534385, -0.000759431726241,
-                       0.0};
-  return camera;
-}
+Camera SnippetsCamera() { return testing::EcdDavis240Camera(); }
 
 // Writes `text` to a fresh temporary file and returns its path.
 std::filesystem::path WriteTemp(const std::string& name, const std::string& text) {

@@ -11,6 +11,7 @@
 #include <opencv2/calib3d.hpp>
 #include <opencv2/core.hpp>
 
+#include "core/camera/testing/ecd_davis240.h"
 #include "core/common/error.h"
 #include "core/common/file_util.h"
 #include "core/common/test_data.h"
@@ -20,16 +21,8 @@ namespace {
 
 Camera MakeRadialTangential() {
   // DAVIS240C of the ECD snippets, with a non-zero k3 so that every coefficient is exercised.
-  Camera camera;
-  camera.model = CameraModel::kRadialTangential;
-  camera.width = 240;
-  camera.height = 180;
-  camera.fx = 199.092366542;
-  camera.fy = 198.82882047;
-  camera.cx = 132.192071378;
-  camera.cy = 110.712660011;
-  camera.distortion = {-0.368436311798, 0.150947243557, -0.000296130534385, -0.000759431726241,
-                       -0.01};
+  Camera camera = testing::EcdDavis240Camera();
+  camera.distortion[4] = -0.01;
   return camera;
 }
 

@@ -6,25 +6,14 @@
 #include <limits>
 #include <vector>
 
+#include "core/camera/testing/ecd_davis240.h"
 #include "core/common/error.h"
 #include "core/common/test_data.h"
 
 namespace evloc {
 namespace {
 
-Camera MakeDavisRadialTangential() {
-  Camera camera;
-  camera.model = CameraModel::kRadialTangential;
-  camera.width = 240;
-  camera.height = 180;
-  camera.fx = 199.092366542;
-  camera.fy = 198.82882047;
-  camera.cx = 132.192071378;
-  camera.cy = 110.712660011;
-  camera.distortion = {-0.368436311798, 0.150947243557, -0.000296130534385, -0.000759431726241,
-                       0.0};
-  return camera;
-}
+Camera MakeDavisRadialTangential() { return testing::EcdDavis240Camera(); }
 
 Camera MakeWideEquidistant() {
   Camera camera;

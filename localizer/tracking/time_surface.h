@@ -119,7 +119,7 @@ class TimeSurface {
   }
 
   // Calls visit(index) for every ideal pixel sensor pixel (x, y) fills: its own (IdealPixelIndex,
-  // when it has one), then the holes it also fills (see sensor_to_holes_). Unchecked.
+  // when it has one), then the holes it also fills (see holes_). Unchecked.
   template <typename Visit>
   void ForEachIdealPixel(int x, int y, Visit&& visit) const {
     const size_t sensor = static_cast<size_t>(y) * sensor_width_ + x;

@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 
+#include "core/camera/testing/ecd_davis240.h"
 #include "core/common/error.h"
 
 namespace evloc::tracking {
@@ -80,11 +81,7 @@ TEST(TimeSurface, BuiltFromTheCameraMapsEveryPixelAsFromItsTable) {
 TEST(TimeSurface, BarrelDistortionLeavesNoHoleInsideTheSensorsFootprint) {
   // The DAVIS240C of the Event Camera Dataset: its periphery is stretched by the undistortion,
   // so that rounding each sensor pixel to its ideal pixel skips a fifth of the ideal pixels.
-  Camera camera =
-      Camera::Pinhole(240, 180, 199.092366542, 198.82882047, 132.192071378, 110.712660011);
-  camera.model = CameraModel::kRadialTangential;
-  camera.distortion = {-0.368436311798, 0.150947243557, -0.000296130534385, -0.000759431726241,
-                       0.0};
+  const Camera camera = testing::EcdDavis240Camera();
   const TimeSurface surface(camera, 1);
   std::vector<int> fills(static_cast<size_t>(surface.width()) * surface.height(), 0);
   int rounded = 0;
