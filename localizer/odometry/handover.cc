@@ -280,7 +280,20 @@ std::vector<HandoverEstimate> MapOdometryHandover::Report(
         verified_steps_ = 0;
         probing_ = false;
       }
-      if (verified_steps_ >= std::max(1, map_tracker_.options().relocalization_verify_steps)) {
+      bool verified =
+          verified_steps_ >= std::max(1, map_tracker_.options().relocalization_verify_steps);
+      if (verified && !map_tracker_.ProbeLastPose().unique) {
+        // The steps agree with the odometry, but so does another fit near them: the search's
+        // judgement (its probes and margin) refuses what a hint alone cannot tell apart (the
+        // rendered room turned 60 degrees left: returns 3-67 cm off, each with a probe at
+        // another place as well aligned; docs/accuracy.md, "Hand-over"). The next probe
+        // starts afresh.
+        ++counts_.ambiguous_returns;
+        verified = false;
+        verified_steps_ = 0;
+        probing_ = false;
+      }
+      if (verified) {
         source_ = PoseSource::kMap;
         ++counts_.to_map;
         last_good_map_ = map_step;

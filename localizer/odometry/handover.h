@@ -92,6 +92,9 @@ struct HandoverCounts {
   int64_t odometry_poses = 0;
   // Times the map tracker was given the odometry pose.
   int64_t map_probes = 0;
+  // Returns refused at the end of their verification because the relocalization search's
+  // probes found another fit of the map nearly as good (Tracker::ProbeLastPose).
+  int64_t ambiguous_returns = 0;
   // Hand-overs that could not start DEVO (no depth frame yet, or too few reference points).
   int64_t odometry_start_failures = 0;
   // DEVO started again from its last good pose after it lost its reference.

@@ -249,6 +249,27 @@ class Tracker {
   const EventFilter& event_filter() const { return filter_; }
   // The body-frame velocity of the motion prior, (v, omega) per second.
   const Vector6d& velocity() const { return motion_.velocity(); }
+
+  // What the relocalization search's probes find around the last good pose, on the surfaces of
+  // the last step: for a pose the search did not judge, such as a hand-over's return from an
+  // odometry hint (a drifted hint can settle on the wrong stripe of a repeated pattern and
+  // track there). The pose is registered again from itself and from each probe offset
+  // (relocalization_probe_depth_fraction), each as the search refines a hypothesis (chamfer
+  // stages, then the unsigned solve). The tracking state is left as it was: the next step
+  // runs as if this had not been called.
+  struct ProbeCheck {
+    // Alignment of the registration from the pose itself (0 when it is not good).
+    double alignment = 0;
+    // The best alignment of the probes that ended at another place (DistinctPlaces), 0 if none.
+    double distinct_alignment = 0;
+    // Probes registered.
+    int probes = 0;
+    // The search's judgement: the pose's own registration is good and beats every distinct
+    // probe by relocalization_min_alignment_margin.
+    bool unique = false;
+  };
+  // Runs the check at the last step (kTracking; otherwise returns an empty, non-unique check).
+  ProbeCheck ProbeLastPose();
   // The time span of the poses that velocity was measured over, ns (0 after a reset).
   int64_t velocity_span_ns() const { return motion_.velocity_span_ns(); }
 

@@ -820,6 +820,38 @@ std::vector<Rigid3d> Tracker::ProbeOffsets(const Rigid3d& world_from_cam) {
   return offsets;
 }
 
+Tracker::ProbeCheck Tracker::ProbeLastPose() {
+  ProbeCheck check;
+  if (status_ != TrackingStatus::kTracking || !has_pose_ || !SurfacesFull(last_step_t_ns_)) {
+    return check;
+  }
+  // Refine selects points: the step's selection is put back after the probes.
+  const std::vector<uint32_t> selected = selected_;
+  const Rigid3d selection_world_from_cam = selection_world_from_cam_;
+  const int steps_since_selection = steps_since_selection_;
+  const bool has_selection = has_selection_;
+  const int64_t t_ns = last_step_t_ns_;
+  BuildChamferFields(t_ns);
+  const Refinement reference = Refine(last_good_world_from_cam_, t_ns);
+  if (reference.good) {
+    check.alignment = reference.alignment;
+    for (const Rigid3d& offset : ProbeOffsets(reference.world_from_cam)) {
+      const Refinement probe = Refine(reference.world_from_cam * offset, t_ns);
+      ++check.probes;
+      if (probe.points_used >= options_.min_points && DistinctPlaces(probe, reference)) {
+        check.distinct_alignment = std::max(check.distinct_alignment, probe.alignment);
+      }
+    }
+    check.unique = reference.alignment - check.distinct_alignment >=
+                   options_.relocalization_min_alignment_margin;
+  }
+  selected_ = selected;
+  selection_world_from_cam_ = selection_world_from_cam;
+  steps_since_selection_ = steps_since_selection;
+  has_selection_ = has_selection;
+  return check;
+}
+
 bool Tracker::JudgeProbedRound(Refinement* accepted) {
   const Refinement* winner = BestRefinement(/*with_probes=*/false);
   bool superseded = false;

@@ -426,6 +426,69 @@ const LargeScene& NoisyLargeScene() {
   return scene;
 }
 
+// The search's probes around a pose it did not judge (a hand-over's return from an odometry
+// hint): around a pose of the rectangle scene, which every probe registers back to, the fit is
+// unique; on a wall of long horizontal bars, a shift along them fits as well; and the
+// check leaves the tracking as it was.
+TEST(TrackerSearch, ProbesOfTheLastPoseTellAUniqueFitFromAnAmbiguousOne) {
+  constexpr int64_t kCheckNs = 300'000'000;
+  const EventBuffer all = SceneEvents(600'000'000);
+  EventBuffer before;
+  EventBuffer after;
+  for (size_t i = 0; i < all.size(); ++i) {
+    (all.t_ns[i] < kCheckNs ? before : after).push_back(all[i]);
+  }
+  TrackerOptions options;
+  Tracker checked(SceneMap(), nullptr, kCamera, options);
+  Tracker unchecked(SceneMap(), nullptr, kCamera, options);
+  checked.Reset(testing::SmoothMotion(0), 0);
+  unchecked.Reset(testing::SmoothMotion(0), 0);
+  const std::vector<PoseEstimate> first = checked.AddEvents(before);
+  unchecked.AddEvents(before);
+  ASSERT_FALSE(first.empty());
+  ASSERT_EQ(first.back().status, TrackingStatus::kTracking);
+  const Tracker::ProbeCheck check = checked.ProbeLastPose();
+  std::cout << "rectangle scene: alignment " << check.alignment << ", best distinct probe "
+            << check.distinct_alignment << " of " << check.probes << " probes\n";
+  EXPECT_EQ(check.probes, 6);
+  EXPECT_GE(check.alignment, options.min_alignment);
+  EXPECT_TRUE(check.unique);
+  // The same poses after the check as without it.
+  const std::vector<PoseEstimate> checked_after = checked.AddEvents(after);
+  const std::vector<PoseEstimate> unchecked_after = unchecked.AddEvents(after);
+  ASSERT_EQ(checked_after.size(), unchecked_after.size());
+  ASSERT_FALSE(checked_after.empty());
+  for (size_t i = 0; i < checked_after.size(); ++i) {
+    EXPECT_EQ(checked_after[i].world_from_cam.translation,
+              unchecked_after[i].world_from_cam.translation)
+        << i;
+    EXPECT_EQ(checked_after[i].world_from_cam.rotation.coeffs(),
+              unchecked_after[i].world_from_cam.rotation.coeffs())
+        << i;
+  }
+
+  // Long horizontal bars across the whole view (a wall of stripes): sliding along them changes
+  // nothing the events see.
+  std::vector<testing::Rectangle> bars;
+  for (int i = -2; i <= 2; ++i) {
+    bars.push_back(
+        {{0.0, 0.35 * i, 5.0}, Eigen::Vector3d::UnitX(), Eigen::Vector3d::UnitY(), 10.0, 0.07});
+  }
+  const Map flat = testing::MakeRectangleMap(bars, 0.01);
+  const EventBuffer flat_events = testing::SimulateEdgeEvents(
+      flat, kCamera, [](int64_t t_ns) { return testing::SmoothMotion(t_ns, 0.3); }, 0, kCheckNs);
+  Tracker on_flat(flat, nullptr, kCamera, options);
+  on_flat.Reset(testing::SmoothMotion(0, 0.3), 0);
+  const std::vector<PoseEstimate> flat_estimates = on_flat.AddEvents(flat_events);
+  ASSERT_FALSE(flat_estimates.empty());
+  ASSERT_EQ(flat_estimates.back().status, TrackingStatus::kTracking);
+  const Tracker::ProbeCheck flat_check = on_flat.ProbeLastPose();
+  std::cout << "horizontal bars: alignment " << flat_check.alignment << ", best distinct probe "
+            << flat_check.distinct_alignment << " of " << flat_check.probes << " probes\n";
+  EXPECT_GE(flat_check.alignment, options.min_alignment);
+  EXPECT_FALSE(flat_check.unique);
+}
+
 TEST(TrackerSearch, AtTensOfMetresRefinementsOfOnePlaceAreNotRivals) {
   const Map& map = NoisyLargeScene().map;
   const EventBuffer& events = NoisyLargeScene().events;
