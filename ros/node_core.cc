@@ -31,22 +31,15 @@
 namespace evloc::ros_node {
 namespace {
 
-EventBuffer ToBuffer(EventColumns columns) {
+// A copy: EventColumns (a C++17 header's plain vectors) and EventBuffer (arrays that skip the
+// zero-fill on resize) have different allocators, so the arrays cannot be moved across.
+EventBuffer ToBuffer(const EventColumns& columns) {
   EventBuffer events;
-  events.t_ns = std::move(columns.t_ns);
-  events.x = std::move(columns.x);
-  events.y = std::move(columns.y);
-  events.polarity = std::move(columns.polarity);
+  events.t_ns.assign(columns.t_ns.begin(), columns.t_ns.end());
+  events.x.assign(columns.x.begin(), columns.x.end());
+  events.y.assign(columns.y.begin(), columns.y.end());
+  events.polarity.assign(columns.polarity.begin(), columns.polarity.end());
   return events;
-}
-
-EventColumns ToColumns(EventBuffer events) {
-  EventColumns columns;
-  columns.t_ns = std::move(events.t_ns);
-  columns.x = std::move(events.x);
-  columns.y = std::move(events.y);
-  columns.polarity = std::move(events.polarity);
-  return columns;
 }
 
 Rigid3d ToRigid(const PoseFields& pose) {
@@ -507,7 +500,7 @@ std::vector<StepOutput> NodeCore::AddEventArray(uint32_t width, uint32_t height,
       events.y.resize(kept);
       events.polarity.resize(kept);
     }
-    return HandleEvents(std::move(events));
+    return HandleEvents(ToBuffer(events));
   } catch (...) {
     ++counters_.rejected_messages;
     throw;
@@ -529,17 +522,16 @@ std::vector<StepOutput> NodeCore::AddEventPacket(uint32_t width, uint32_t height
                             encoding == "mono" ? bounds : state_->sensor_size,
                             "event packets (EVT 3.0)", &events, &dropped, &state_->evt3);
     counters_.decoder_dropped_events += dropped;
-    return HandleEvents(ToColumns(std::move(events)));
+    return HandleEvents(std::move(events));
   } catch (...) {
     ++counters_.rejected_messages;
     throw;
   }
 }
 
-std::vector<StepOutput> NodeCore::HandleEvents(EventColumns columns) {
+std::vector<StepOutput> NodeCore::HandleEvents(EventBuffer events) {
   State& s = *state_;
-  if (columns.t_ns.empty()) return {};
-  EventBuffer events = ToBuffer(std::move(columns));
+  if (events.empty()) return {};
   if (!std::is_sorted(events.t_ns.begin(), events.t_ns.end())) {
     throw InvalidArgumentError("the message's events are not in time order");
   }

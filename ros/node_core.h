@@ -199,7 +199,7 @@ class NodeCore {
 
  private:
   struct State;
-  std::vector<StepOutput> HandleEvents(EventColumns events);
+  std::vector<StepOutput> HandleEvents(EventBuffer events);
   std::vector<StepOutput> TryStart();
   std::vector<StepOutput> Track(const EventBuffer& events);
   // Service mode: opens the Track stream (SessionStart, SessionStarted) and its reader thread.

@@ -1,5 +1,6 @@
 #include "core/events/event.h"
 
+#include <algorithm>
 #include <string>
 
 #include "core/common/error.h"
@@ -39,10 +40,17 @@ void EventBuffer::Append(const EventBuffer& other, size_t begin, size_t count) {
 
 void EventBuffer::Append(const int64_t* t_ns_values, const uint16_t* x_values,
                          const uint16_t* y_values, const int8_t* polarity_values, size_t count) {
-  t_ns.insert(t_ns.end(), t_ns_values, t_ns_values + count);
-  x.insert(x.end(), x_values, x_values + count);
-  y.insert(y.end(), y_values, y_values + count);
-  polarity.insert(polarity.end(), polarity_values, polarity_values + count);
+  // Grown without a fill, then copied as bytes: `insert` with EventArray's allocator would
+  // construct element by element (std::vector copies as one memmove only with std::allocator).
+  const size_t base = size();
+  t_ns.resize(base + count);
+  x.resize(base + count);
+  y.resize(base + count);
+  polarity.resize(base + count);
+  std::copy_n(t_ns_values, count, t_ns.data() + base);
+  std::copy_n(x_values, count, x.data() + base);
+  std::copy_n(y_values, count, y.data() + base);
+  std::copy_n(polarity_values, count, polarity.data() + base);
 }
 
 void EventBuffer::AppendEvery(const EventBuffer& other, size_t begin, size_t end, size_t stride) {

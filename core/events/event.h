@@ -4,6 +4,10 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <memory>
+#include <new>
+#include <type_traits>
+#include <utility>
 #include <vector>
 
 namespace evloc {
@@ -39,18 +43,50 @@ struct SensorSize {
   friend bool operator==(const SensorSize&, const SensorSize&) = default;
 };
 
+// An allocator that default-initialises where std::allocator value-initialises: `resize` of a
+// vector of plain numbers leaves the new elements unwritten instead of zeroing them. Every
+// decoder sizes an EventBuffer first and then writes each new element; the zero-fill before
+// that was a tenth of reading an uncompressed AEDAT4 file (docs/benchmarks.md, "Events").
+// Written here because the standard library has no such option (Boost.Container's
+// default_init_t would, but Boost is not one of evloc's dependencies).
+template <typename T>
+class DefaultInitAllocator : public std::allocator<T> {
+ public:
+  template <typename U>
+  struct rebind {
+    using other = DefaultInitAllocator<U>;
+  };
+  DefaultInitAllocator() noexcept = default;
+  template <typename U>
+  DefaultInitAllocator(const DefaultInitAllocator<U>&) noexcept {}
+
+  // Default-initialises (nothing for plain numbers).
+  template <typename U>
+  void construct(U* where) noexcept(std::is_nothrow_default_constructible_v<U>) {
+    ::new (static_cast<void*>(where)) U;
+  }
+  template <typename U, typename... Args>
+  void construct(U* where, Args&&... args) {
+    ::new (static_cast<void*>(where)) U(std::forward<Args>(args)...);
+  }
+};
+
+// One array of an EventBuffer: a std::vector whose resize does not zero the new elements.
+template <typename T>
+using EventArray = std::vector<T, DefaultInitAllocator<T>>;
+
 // A sequence of events stored as a structure of arrays: the four vectors always have the same
 // length, element i of each describing event i.
 class EventBuffer {
  public:
   // Time stamps, nanoseconds.
-  std::vector<int64_t> t_ns;
+  EventArray<int64_t> t_ns;
   // Pixel columns.
-  std::vector<uint16_t> x;
+  EventArray<uint16_t> x;
   // Pixel rows.
-  std::vector<uint16_t> y;
+  EventArray<uint16_t> y;
   // +1 ON, -1 OFF.
-  std::vector<int8_t> polarity;
+  EventArray<int8_t> polarity;
 
   // Number of events.
   size_t size() const { return t_ns.size(); }

@@ -32,11 +32,11 @@ TEST(EventBuffer, AppendEveryTakesEveryKthEventOfARange) {
   ASSERT_EQ(buffer.size(), 4u);
   EXPECT_TRUE(buffer.IsConsistent());
   EXPECT_EQ(buffer[0], (Event{1, 0, 0, -1}));
-  EXPECT_EQ(buffer.x, (std::vector<uint16_t>{0, 2, 5, 8}));
+  EXPECT_EQ(buffer.x, (EventArray<uint16_t>{0, 2, 5, 8}));
   buffer.AppendEvery(source, 9, 10, 4);  // one
   buffer.AppendEvery(source, 1, 1, 2);   // an empty range
   buffer.AppendEvery(source, 3, 2, 2);   // a start past the end
-  EXPECT_EQ(buffer.x, (std::vector<uint16_t>{0, 2, 5, 8, 9}));
+  EXPECT_EQ(buffer.x, (EventArray<uint16_t>{0, 2, 5, 8, 9}));
 }
 
 TEST(SensorSize, ContainsAndCheck) {

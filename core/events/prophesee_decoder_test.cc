@@ -67,8 +67,8 @@ TEST(Evt3Decoder, ExpandsVectorWordsFromTheBaseAddress) {
   const auto bytes = Evt3Bytes({0x8000, 0x6010, 0x0021, 0x3064, 0x4805, 0x5081, 0x3803, 0x5002});
   Evt3Decoder decoder;
   const EventBuffer events = DecodeAll(decoder, bytes);
-  const std::vector<uint16_t> expected_x = {100, 102, 111, 112, 119, 4};
-  const std::vector<int8_t> expected_polarity = {-1, -1, -1, -1, -1, 1};
+  const EventArray<uint16_t> expected_x = {100, 102, 111, 112, 119, 4};
+  const EventArray<int8_t> expected_polarity = {-1, -1, -1, -1, -1, 1};
   EXPECT_EQ(events.x, expected_x);
   EXPECT_EQ(events.polarity, expected_polarity);
   for (size_t i = 0; i < events.size(); ++i) {

@@ -120,11 +120,11 @@ TEST(PacketDecoder, RawTimesGoingBackSlightlyAreRaisedAndLargerStepsRefused) {
   packet.set_data(evt2({{100, 1}, {97, 2}, {100, 3}}));  // 3 us back inside a packet.
   packet.set_end_t_ns(100'000);
   decoder.Decode(packet, &decoded);
-  EXPECT_EQ(decoded.t_ns, (std::vector<int64_t>{100'000, 100'000, 100'000}));
+  EXPECT_EQ(decoded.t_ns, (EventArray<int64_t>{100'000, 100'000, 100'000}));
   packet.set_data(evt2({{100, 4}, {101, 5}}));  // The same microsecond after the end.
   packet.set_end_t_ns(101'000);
   decoder.Decode(packet, &decoded);
-  EXPECT_EQ(decoded.t_ns, (std::vector<int64_t>{100'001, 101'000}));
+  EXPECT_EQ(decoded.t_ns, (EventArray<int64_t>{100'001, 101'000}));
   EXPECT_EQ(decoder.raw_time_adjustments(), 2u);
   // A packet refused after a raise (its last event lies after its end) adds no adjustment
   // (found by evloc_session_packets_fuzzer).

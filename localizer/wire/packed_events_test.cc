@@ -114,7 +114,7 @@ TEST(ThinEvents, KeepsEveryKthEventOfTheRangeOnlyWhenOverTheRate) {
   // Events 2..9 (8 of them) in 1 ms at 3,000 events/s: 3 allowed, every 3rd kept.
   EXPECT_EQ(ThinEvents(events, 2, 10, 1'000'000, 3'000, &kept), 3u);
   ASSERT_EQ(kept.size(), 3u);
-  EXPECT_EQ(kept.x, (std::vector<uint16_t>{2, 5, 8}));
+  EXPECT_EQ(kept.x, (EventArray<uint16_t>{2, 5, 8}));
   // Within the rate: stride 1, `kept` untouched.
   EXPECT_EQ(ThinEvents(events, 0, 10, 1'000'000, 10'000, &kept), 1u);
   EXPECT_EQ(kept.size(), 3u);
