@@ -27,6 +27,10 @@ void HandoverOptions::Check() const {
   if (!(map_probe_interval_s >= 0) || !std::isfinite(map_probe_interval_s)) {
     fail("map_probe_interval_s must be >= 0");
   }
+  if (search_after_failed_probes < 0 || !(search_min_radius_m > 0) ||
+      !std::isfinite(search_min_radius_m)) {
+    fail("search_after_failed_probes must be >= 0 and search_min_radius_m positive");
+  }
   if (!(verify_sigmas > 0) || !(verify_min_distance_m >= 0) || !(verify_min_angle_deg >= 0)) {
     fail("verify_sigmas must be positive and the verification floors >= 0");
   }
@@ -158,6 +162,8 @@ bool MapOdometryHandover::StartOdometry(const Rigid3d& world_from_cam, int64_t t
   last_probe_t_ns_.reset();
   verified_steps_ = 0;
   probing_ = false;
+  failed_probes_ = 0;
+  searching_ = false;
   source_ = PoseSource::kOdometry;
   ++counts_.to_odometry;
   return true;
@@ -191,6 +197,29 @@ Matrix6d MapOdometryHandover::DriftCovariance(int64_t t_ns) const {
   drift.topLeftCorner<3, 3>().diagonal().setConstant(position_sigma * position_sigma);
   drift.bottomRightCorner<3, 3>().diagonal().setConstant(rotation_sigma * rotation_sigma);
   return drift;
+}
+
+void MapOdometryHandover::ReturnToMap(const tracking::PoseEstimate& map_step,
+                                      std::vector<HandoverEstimate>* reported) {
+  if (searching_) {
+    searching_ = false;
+    map_tracker_.ClearSearchPrior();
+    map_tracker_.ClearSearchHint();
+  }
+  source_ = PoseSource::kMap;
+  ++counts_.to_map;
+  last_good_map_ = map_step;
+  last_good_velocity_ = map_tracker_.velocity();
+  devo_->Stop();
+  pending_odometry_.clear();
+  reported->push_back({map_step, PoseSource::kMap});
+}
+
+double MapOdometryHandover::SearchRadius(const tracking::PoseEstimate& odometry) const {
+  const Matrix6d& covariance = odometry.covariance;
+  const double position_sigma =
+      std::sqrt(std::max({covariance(0, 0), covariance(1, 1), covariance(2, 2)}));
+  return std::max(options_.search_min_radius_m, options_.verify_sigmas * position_sigma);
 }
 
 bool MapOdometryHandover::ConsistentWithOdometry(const tracking::PoseEstimate& map_step,
@@ -267,6 +296,14 @@ std::vector<HandoverEstimate> MapOdometryHandover::Report(
     odometry.covariance = handover_covariance_ + DriftCovariance(map_step.t_ns);
     // Back on the map? The map tracker's steps since it was given the odometry pose must be
     // verified: enough consecutive good ones, each consistent with the odometry.
+    if (searching_ && MapSeen(map_step) &&
+        (map_step.world_from_cam.translation - odometry.world_from_cam.translation).norm() <=
+            SearchRadius(odometry)) {
+      // The search found the map near the odometry and verified it (its own probes, margin
+      // and verification steps).
+      ReturnToMap(map_step, &reported);
+      continue;
+    }
     if (probing_) {
       // Each step also as well aligned as the relocalization search's verification asks: on a
       // wall of repeated stripes a probe from a drifted odometry pose can settle on the wrong
@@ -279,6 +316,7 @@ std::vector<HandoverEstimate> MapOdometryHandover::Report(
       } else {
         verified_steps_ = 0;
         probing_ = false;
+        ++failed_probes_;
       }
       bool verified =
           verified_steps_ >= std::max(1, map_tracker_.options().relocalization_verify_steps);
@@ -289,18 +327,13 @@ std::vector<HandoverEstimate> MapOdometryHandover::Report(
         // another place as well aligned; docs/accuracy.md, "Hand-over"). The next probe
         // starts afresh.
         ++counts_.ambiguous_returns;
+        ++failed_probes_;
         verified = false;
         verified_steps_ = 0;
         probing_ = false;
       }
       if (verified) {
-        source_ = PoseSource::kMap;
-        ++counts_.to_map;
-        last_good_map_ = map_step;
-        last_good_velocity_ = map_tracker_.velocity();
-        devo_->Stop();
-        pending_odometry_.clear();
-        reported.push_back({map_step, PoseSource::kMap});
+        ReturnToMap(map_step, &reported);
         continue;
       }
     }
@@ -312,11 +345,33 @@ std::vector<HandoverEstimate> MapOdometryHandover::Report(
         (!last_probe_t_ns_ || static_cast<double>(map_step.t_ns - *last_probe_t_ns_) * 1e-9 >=
                                   options_.map_probe_interval_s)) {
       last_probe_t_ns_ = map_step.t_ns;
-      if (VisibleMapPoints(odometry.world_from_cam) >= options_.min_map_points) {
-        map_tracker_.Reset(odometry.world_from_cam, map_step.t_ns, devo_->tracker().velocity());
-        probing_ = true;
-        verified_steps_ = 0;
-        ++counts_.map_probes;
+      if (searching_) {
+        // The prior follows the odometry (a prior set during a round applies from the next).
+        map_tracker_.SetSearchPrior(odometry.world_from_cam.translation, SearchRadius(odometry));
+        map_tracker_.SetSearchHint(odometry.world_from_cam);
+        // A pose the search verified but the return refused (too few points, or beyond the
+        // prior by now): search again.
+        if (map_tracker_.status() == tracking::TrackingStatus::kTracking) {
+          map_tracker_.StartWithoutPose(map_step.t_ns +
+                                        std::llround(1e9 / map_tracker_.options().step_rate_hz));
+          ++counts_.map_searches;
+        }
+      } else if (VisibleMapPoints(odometry.world_from_cam) >= options_.min_map_points) {
+        if (options_.search_after_failed_probes > 0 &&
+            failed_probes_ >= options_.search_after_failed_probes) {
+          map_tracker_.SetSearchPrior(odometry.world_from_cam.translation, SearchRadius(odometry));
+          map_tracker_.SetSearchHint(odometry.world_from_cam);
+          // The search's first step is the map tracker's next one.
+          map_tracker_.StartWithoutPose(map_step.t_ns +
+                                        std::llround(1e9 / map_tracker_.options().step_rate_hz));
+          searching_ = true;
+          ++counts_.map_searches;
+        } else {
+          map_tracker_.Reset(odometry.world_from_cam, map_step.t_ns, devo_->tracker().velocity());
+          probing_ = true;
+          verified_steps_ = 0;
+          ++counts_.map_probes;
+        }
       }
     }
   }

@@ -52,6 +52,13 @@ struct HandoverOptions {
   // most this often, seconds; when at least min_map_points project into the image the map
   // tracker is given the odometry pose.
   double map_probe_interval_s = 0.05;
+  // After this many probes from the odometry pose failed, the map tracker searches instead
+  // (Tracker::StartWithoutPose) within a prior around the odometry position of radius
+  // max(search_min_radius_m, verify_sigmas x its standard deviation), updated at every probe
+  // interval; its own verification (probes and margin) judges the pose it finds. A drifted
+  // odometry pose is farther than one step can pull in, the search is not. 0 = hints only.
+  int search_after_failed_probes = 2;
+  double search_min_radius_m = 0.5;
   // The map tracker's pose must lie within this many standard deviations of the odometry's ...
   double verify_sigmas = 3.0;
   // ... and at least within these bounds (the odometry's own error right after a hand-over),
@@ -92,6 +99,8 @@ struct HandoverCounts {
   int64_t odometry_poses = 0;
   // Times the map tracker was given the odometry pose.
   int64_t map_probes = 0;
+  // Times the map tracker started searching around the odometry (search_after_failed_probes).
+  int64_t map_searches = 0;
   // Returns refused at the end of their verification because the relocalization search's
   // probes found another fit of the map nearly as good (Tracker::ProbeLastPose).
   int64_t ambiguous_returns = 0;
@@ -154,6 +163,10 @@ class MapOdometryHandover {
   Matrix6d DriftCovariance(int64_t t_ns) const;
   // Number of map points that project into the image from `world_from_cam`.
   int VisibleMapPoints(const Rigid3d& world_from_cam) const;
+  // Back to the map at `map_step` (verified): reports it, stops DEVO and ends a search.
+  void ReturnToMap(const tracking::PoseEstimate& map_step, std::vector<HandoverEstimate>* reported);
+  // The radius of the search prior around the odometry pose (search_after_failed_probes).
+  double SearchRadius(const tracking::PoseEstimate& odometry) const;
   // True when the map step agrees with the odometry pose within the gate.
   bool ConsistentWithOdometry(const tracking::PoseEstimate& map_step,
                               const tracking::PoseEstimate& odometry) const;
@@ -191,6 +204,10 @@ class MapOdometryHandover {
   std::optional<int64_t> last_probe_t_ns_;
   int verified_steps_ = 0;
   bool probing_ = false;
+  // Probes that failed since the hand-over (or the last search), and whether the map tracker is
+  // searching around the odometry.
+  int failed_probes_ = 0;
+  bool searching_ = false;
 };
 
 }  // namespace evloc::odometry

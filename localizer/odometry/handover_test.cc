@@ -148,6 +148,41 @@ TEST(MapOdometryHandover, KeepsAPoseAwayFromTheMapAndComesBackVerified) {
           1e3);
 }
 
+// When the odometry pose is not good enough a hint (here: a gate so tight that no hinted return
+// can pass it), the map tracker searches around the odometry instead, and its own verification
+// brings the session back.
+TEST(MapOdometryHandover, WhenHintsFailTheMapTrackerSearchesAroundTheOdometry) {
+  HandoverOptions options;
+  options.verify_sigmas = 1e-3;
+  options.verify_min_distance_m = 1e-5;
+  options.verify_min_angle_deg = 1e-4;
+  HandoverCounts counts;
+  const std::vector<HandoverEstimate> reported = RunScene(options, &counts);
+  ASSERT_FALSE(reported.empty());
+  EXPECT_GE(counts.map_searches, 1);
+  EXPECT_GE(counts.to_map, 1);
+  int64_t return_t = -1;
+  for (const HandoverEstimate& estimate : reported) {
+    if (estimate.source == PoseSource::kMap && estimate.estimate.t_ns > testing::kReturnNs &&
+        return_t < 0) {
+      return_t = estimate.estimate.t_ns;
+    }
+  }
+  ASSERT_GT(return_t, testing::kReturnNs);
+  const HandoverEstimate& last = reported.back();
+  EXPECT_EQ(last.source, PoseSource::kMap);
+  const double final_m =
+      (last.estimate.world_from_cam.translation - HandoverMotion(last.estimate.t_ns).translation)
+          .norm();
+  EXPECT_LT(final_m, 0.02);
+  const int64_t visible_t = MapVisibleAgainNs(testing::HandoverMap(), testing::kReturnNs, 500);
+  std::printf(
+      "hints refused: %lld searches, back on the map at %.3f s (map visible again at %.3f s), "
+      "final error %.1f mm\n",
+      static_cast<long long>(counts.map_searches), return_t * 1e-9, visible_t * 1e-9,
+      final_m * 1e3);
+}
+
 TEST(MapOdometryHandover, WithoutDepthFramesTheMapTrackerReportsAsBefore) {
   HandoverCounts counts;
   // Until the map is out of view (the hand-over would have happened by then).
@@ -175,6 +210,14 @@ TEST(MapOdometryHandover, RefusesBadDepthFramesAndOptions) {
   EXPECT_THROW(bad.Check(), InvalidArgumentError);
   bad = HandoverOptions();
   bad.drift_fraction = -1;
+  EXPECT_THROW(bad.Check(), InvalidArgumentError);
+  bad = HandoverOptions();
+  bad.search_after_failed_probes = -1;
+  EXPECT_THROW(bad.Check(), InvalidArgumentError);
+  bad = HandoverOptions();
+  bad.search_min_radius_m = 0;
+  EXPECT_THROW(bad.Check(), InvalidArgumentError);
+  bad.search_after_failed_probes = 0;  // hints only: the radius is still checked
   EXPECT_THROW(bad.Check(), InvalidArgumentError);
 }
 

@@ -797,8 +797,8 @@ OfflineTrackingResult RunTrackCommand(const TrackCommandOptions& options, std::o
       log << "evloc-track: hand-over: " << run.counts.to_odometry << " to odometry, "
           << run.counts.to_map << " back to the map (verified), " << run.counts.odometry_poses
           << " poses from odometry, " << run.counts.map_probes << " map probes ("
-          << run.counts.ambiguous_returns << " refused as ambiguous), "
-          << run.counts.odometry_start_failures << " failed odometry starts, "
+          << run.counts.ambiguous_returns << " refused as ambiguous), " << run.counts.map_searches
+          << " map searches, " << run.counts.odometry_start_failures << " failed odometry starts, "
           << run.counts.depth_frames << " depth frames\n";
     }
   } else if (events_mode) {

@@ -201,6 +201,13 @@ class Tracker {
   void SetSearchPrior(const Eigen::Vector3d& center, double radius_m);
   // Removes the search prior (the whole map is searched again from the next round).
   void ClearSearchPrior();
+  // A pose each search round refines when the map offers no viewpoint (no keyframe, or none
+  // within the prior): a hand-over's odometry pose (docs/tracking.md, "Hand-over"), judged as
+  // the search judges its refinements (margin, probes, verification). Takes effect at the next
+  // round. Throws InvalidArgumentError for a non-finite pose.
+  void SetSearchHint(const Rigid3d& world_from_cam);
+  // Removes the hint of SetSearchHint.
+  void ClearSearchHint() { search_hint_.reset(); }
 
   // Adds poses located from an image of the events to the global search's rounds
   // (docs/relocalization.md, "Hypotheses from an image of the events"); they are refined and
@@ -550,6 +557,8 @@ class Tracker {
 
   // Selection state.
   std::vector<uint32_t> candidates_;
+  // SetSearchHint's pose.
+  std::optional<Rigid3d> search_hint_;
   std::vector<uint32_t> selected_;
   Rigid3d selection_world_from_cam_;
   int steps_since_selection_ = 0;

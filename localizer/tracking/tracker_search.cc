@@ -65,6 +65,13 @@ void Tracker::SetSearchPrior(const Eigen::Vector3d& center, double radius_m) {
   refresh_viewpoints_ = true;
 }
 
+void Tracker::SetSearchHint(const Rigid3d& world_from_cam) {
+  if (!world_from_cam.translation.allFinite() || !world_from_cam.rotation.coeffs().allFinite()) {
+    throw InvalidArgumentError("Tracker::SetSearchHint: the pose is not finite");
+  }
+  search_hint_ = world_from_cam;
+}
+
 void Tracker::ClearSearchPrior() {
   search_center_.reset();
   search_radius_m_ = 0;
@@ -706,7 +713,19 @@ void Tracker::SearchWork(int64_t t_ns) {
         AddRefinement(Refine(pose, t_ns));
         ++progress.refined;
       }
-      if (!viewpoints_.empty()) search_phase_ = SearchPhase::kPrescore;
+      if (!viewpoints_.empty()) {
+        search_phase_ = SearchPhase::kPrescore;
+      } else if (search_hint_) {
+        // No viewpoint (a map without keyframes, or none within the prior): the hint stands in
+        // for them, judged at the next step. Only then: beside the viewpoints, a hint that
+        // drifted onto a false fit of a repeated pattern becomes the right pose's rival and the
+        // margin refuses both (the rendered room turned 60 degrees right, docs/accuracy.md).
+        AddRefinement(Refine(*search_hint_, t_ns));
+        ++progress.refined;
+        hypotheses_.clear();
+        next_refinement_ = 0;
+        search_phase_ = SearchPhase::kRefine;
+      }
     }
   }
   if (search_phase_ == SearchPhase::kPrescore) {
