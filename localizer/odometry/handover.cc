@@ -7,6 +7,16 @@
 #include "core/common/error.h"
 
 namespace evloc::odometry {
+namespace {
+
+// The largest standard deviation of the three diagonal entries of `covariance` from `first`
+// (0: position, 3: rotation).
+double LargestSigma(const Matrix6d& covariance, int first) {
+  return std::sqrt(std::max({covariance(first, first), covariance(first + 1, first + 1),
+                             covariance(first + 2, first + 2)}));
+}
+
+}  // namespace
 
 const char* PoseSourceName(PoseSource source) {
   switch (source) {
@@ -216,19 +226,28 @@ void MapOdometryHandover::ReturnToMap(const tracking::PoseEstimate& map_step,
 }
 
 double MapOdometryHandover::SearchRadius(const tracking::PoseEstimate& odometry) const {
-  const Matrix6d& covariance = odometry.covariance;
-  const double position_sigma =
-      std::sqrt(std::max({covariance(0, 0), covariance(1, 1), covariance(2, 2)}));
-  return std::max(options_.search_min_radius_m, options_.verify_sigmas * position_sigma);
+  return std::max(options_.search_min_radius_m,
+                  options_.verify_sigmas * LargestSigma(odometry.covariance, 0));
+}
+
+void MapOdometryHandover::SearchAround(const tracking::PoseEstimate& odometry, int64_t t_ns) {
+  // The prior follows the odometry (a prior set during a round applies from the next).
+  map_tracker_.SetSearchPrior(odometry.world_from_cam.translation, SearchRadius(odometry));
+  map_tracker_.SetSearchHint(odometry.world_from_cam);
+  // A search starts; or one already under way verified a pose the return refused (too few
+  // points, or beyond the prior by now): it searches again. Its first step is the map
+  // tracker's next one.
+  if (!searching_ || map_tracker_.status() == tracking::TrackingStatus::kTracking) {
+    map_tracker_.StartWithoutPose(t_ns + std::llround(1e9 / map_tracker_.options().step_rate_hz));
+    ++counts_.map_searches;
+  }
+  searching_ = true;
 }
 
 bool MapOdometryHandover::ConsistentWithOdometry(const tracking::PoseEstimate& map_step,
                                                  const tracking::PoseEstimate& odometry) const {
-  const Matrix6d& covariance = odometry.covariance;
-  const double position_sigma =
-      std::sqrt(std::max({covariance(0, 0), covariance(1, 1), covariance(2, 2)}));
-  const double rotation_sigma =
-      std::sqrt(std::max({covariance(3, 3), covariance(4, 4), covariance(5, 5)}));
+  const double position_sigma = LargestSigma(odometry.covariance, 0);
+  const double rotation_sigma = LargestSigma(odometry.covariance, 3);
   const double max_distance =
       std::max(options_.verify_min_distance_m, options_.verify_sigmas * position_sigma);
   const double max_angle = std::max(options_.verify_min_angle_deg * M_PI / 180.0,
@@ -294,16 +313,16 @@ std::vector<HandoverEstimate> MapOdometryHandover::Report(
     // The hand-over's covariance plus the drift since (DEVO's step covariances are relative to
     // its current reference frame, not to the map: they do not accumulate).
     odometry.covariance = handover_covariance_ + DriftCovariance(map_step.t_ns);
-    // Back on the map? The map tracker's steps since it was given the odometry pose must be
-    // verified: enough consecutive good ones, each consistent with the odometry.
+    // Back on the map? From a search around the odometry: its first good step within the
+    // prior (the search verified it: its own probes, margin and verification steps).
     if (searching_ && MapSeen(map_step) &&
         (map_step.world_from_cam.translation - odometry.world_from_cam.translation).norm() <=
             SearchRadius(odometry)) {
-      // The search found the map near the odometry and verified it (its own probes, margin
-      // and verification steps).
       ReturnToMap(map_step, &reported);
       continue;
     }
+    // From a probe (the map tracker given the odometry pose): enough consecutive good steps,
+    // each consistent with the odometry.
     if (probing_) {
       // Each step also as well aligned as the relocalization search's verification asks: on a
       // wall of repeated stripes a probe from a drifted odometry pose can settle on the wrong
@@ -346,26 +365,11 @@ std::vector<HandoverEstimate> MapOdometryHandover::Report(
                                   options_.map_probe_interval_s)) {
       last_probe_t_ns_ = map_step.t_ns;
       if (searching_) {
-        // The prior follows the odometry (a prior set during a round applies from the next).
-        map_tracker_.SetSearchPrior(odometry.world_from_cam.translation, SearchRadius(odometry));
-        map_tracker_.SetSearchHint(odometry.world_from_cam);
-        // A pose the search verified but the return refused (too few points, or beyond the
-        // prior by now): search again.
-        if (map_tracker_.status() == tracking::TrackingStatus::kTracking) {
-          map_tracker_.StartWithoutPose(map_step.t_ns +
-                                        std::llround(1e9 / map_tracker_.options().step_rate_hz));
-          ++counts_.map_searches;
-        }
+        SearchAround(odometry, map_step.t_ns);
       } else if (VisibleMapPoints(odometry.world_from_cam) >= options_.min_map_points) {
         if (options_.search_after_failed_probes > 0 &&
             failed_probes_ >= options_.search_after_failed_probes) {
-          map_tracker_.SetSearchPrior(odometry.world_from_cam.translation, SearchRadius(odometry));
-          map_tracker_.SetSearchHint(odometry.world_from_cam);
-          // The search's first step is the map tracker's next one.
-          map_tracker_.StartWithoutPose(map_step.t_ns +
-                                        std::llround(1e9 / map_tracker_.options().step_rate_hz));
-          searching_ = true;
-          ++counts_.map_searches;
+          SearchAround(odometry, map_step.t_ns);
         } else {
           map_tracker_.Reset(odometry.world_from_cam, map_step.t_ns, devo_->tracker().velocity());
           probing_ = true;

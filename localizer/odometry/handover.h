@@ -167,6 +167,9 @@ class MapOdometryHandover {
   void ReturnToMap(const tracking::PoseEstimate& map_step, std::vector<HandoverEstimate>* reported);
   // The radius of the search prior around the odometry pose (search_after_failed_probes).
   double SearchRadius(const tracking::PoseEstimate& odometry) const;
+  // Sets the map tracker's search prior and hint to the odometry pose, and starts its search
+  // at the step after t_ns unless one is already under way.
+  void SearchAround(const tracking::PoseEstimate& odometry, int64_t t_ns);
   // True when the map step agrees with the odometry pose within the gate.
   bool ConsistentWithOdometry(const tracking::PoseEstimate& map_step,
                               const tracking::PoseEstimate& odometry) const;

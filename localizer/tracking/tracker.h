@@ -256,6 +256,8 @@ class Tracker {
   const EventFilter& event_filter() const { return filter_; }
   // The body-frame velocity of the motion prior, (v, omega) per second.
   const Vector6d& velocity() const { return motion_.velocity(); }
+  // The time span of the poses that velocity was measured over, ns (0 after a reset).
+  int64_t velocity_span_ns() const { return motion_.velocity_span_ns(); }
 
   // What the relocalization search's probes find around the last good pose, on the surfaces of
   // the last step: for a pose the search did not judge, such as a hand-over's return from an
@@ -277,8 +279,6 @@ class Tracker {
   };
   // Runs the check at the last step (kTracking; otherwise returns an empty, non-unique check).
   ProbeCheck ProbeLastPose();
-  // The time span of the poses that velocity was measured over, ns (0 after a reset).
-  int64_t velocity_span_ns() const { return motion_.velocity_span_ns(); }
 
  private:
   // The state after a Reset (the motion model already set): TRACKING at the pose, the next step
@@ -524,6 +524,8 @@ class Tracker {
   double search_decay_ns_ = 0;
   std::optional<Eigen::Vector3d> search_center_;
   double search_radius_m_ = 0;
+  // SetSearchHint's pose.
+  std::optional<Rigid3d> search_hint_;
   // Base viewpoints of the episode (regenerated when empty) and their pre-score points.
   std::vector<Rigid3d> viewpoints_;
   // The search prior changed: the next round asks the source for viewpoints again.
@@ -557,8 +559,6 @@ class Tracker {
 
   // Selection state.
   std::vector<uint32_t> candidates_;
-  // SetSearchHint's pose.
-  std::optional<Rigid3d> search_hint_;
   std::vector<uint32_t> selected_;
   Rigid3d selection_world_from_cam_;
   int steps_since_selection_ = 0;
