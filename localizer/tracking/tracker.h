@@ -201,13 +201,17 @@ class Tracker {
   void SetSearchPrior(const Eigen::Vector3d& center, double radius_m);
   // Removes the search prior (the whole map is searched again from the next round).
   void ClearSearchPrior();
-  // A pose each search round refines when the map offers no viewpoint (no keyframe, or none
-  // within the prior): a hand-over's odometry pose (docs/tracking.md, "Hand-over"), judged as
-  // the search judges its refinements (margin, probes, verification). Takes effect at the next
-  // round. Throws InvalidArgumentError for a non-finite pose.
+  // A hand-over's odometry pose (docs/tracking.md, "Hand-over"): each search round also tries
+  // every viewpoint's position with the hint's orientation, and refines the hint itself when the
+  // map offers no viewpoint (no keyframe, or none within the prior); all judged as the search
+  // judges its refinements (margin, probes, verification). Takes effect at the next round.
+  // Throws InvalidArgumentError for a non-finite pose.
   void SetSearchHint(const Rigid3d& world_from_cam);
-  // Removes the hint of SetSearchHint.
-  void ClearSearchHint() { search_hint_.reset(); }
+  // Removes the hint of SetSearchHint (from the next round).
+  void ClearSearchHint() {
+    search_hint_.reset();
+    refresh_viewpoints_ = true;
+  }
 
   // Adds poses located from an image of the events to the global search's rounds
   // (docs/relocalization.md, "Hypotheses from an image of the events"); they are refined and

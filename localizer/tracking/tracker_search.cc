@@ -70,6 +70,8 @@ void Tracker::SetSearchHint(const Rigid3d& world_from_cam) {
     throw InvalidArgumentError("Tracker::SetSearchHint: the pose is not finite");
   }
   search_hint_ = world_from_cam;
+  // At the next round: the hint's orientation makes viewpoints of its own.
+  refresh_viewpoints_ = true;
 }
 
 void Tracker::ClearSearchPrior() {
@@ -219,6 +221,21 @@ void Tracker::GenerateHypotheses() {
     query.search_center = search_center_;
     query.search_radius_m = search_radius_m_;
     source_->CandidateViewpoints(query, &viewpoints_);
+    if (search_hint_) {
+      // Each viewpoint's position also with the hint's orientation, where that is turned from
+      // the viewpoint's beyond the perturbations: an odometry drifts in position by tens of
+      // centimetres but in orientation by a few degrees, and a camera turning back to the map
+      // sees it long before it faces the way a keyframe did (the rendered room: the map in view
+      // 50 degrees from the keyframes' orientation, found from the keyframes only at 7 degrees;
+      // docs/accuracy.md, "Hand-over").
+      const size_t base_viewpoints = viewpoints_.size();
+      for (size_t i = 0; i < base_viewpoints; ++i) {
+        if (AngleBetween(viewpoints_[i].rotation, search_hint_->rotation) >
+            options_.relocalization_perturbation_deg * kRadiansPerDegree) {
+          viewpoints_.push_back(Rigid3d(search_hint_->rotation, viewpoints_[i].translation));
+        }
+      }
+    }
     if (has_pose_ &&
         (!search_center_ ||
          (last_good_world_from_cam_.translation - *search_center_).norm() <= search_radius_m_)) {

@@ -489,6 +489,47 @@ TEST(TrackerSearch, ProbesOfTheLastPoseTellAUniqueFitFromAnAmbiguousOne) {
   EXPECT_FALSE(flat_check.unique);
 }
 
+// A hand-over's search (docs/tracking.md, "Hand-over"): the map's keyframes all face 25 degrees
+// away from where the camera looks, beyond what the search's turns and refinement reach, so
+// from the keyframes alone it never finds the camera. An odometry hint that drifted 25 cm but
+// only 1.5 degrees lends its orientation to the keyframes' positions, and the search finds the
+// camera, every TRACKING pose right.
+TEST(TrackerSearch, AHintsOrientationReachesWhereTheKeyframesFaceAway) {
+  constexpr int64_t kEndNs = 600'000'000;
+  constexpr int64_t kHintPeriodNs = 50'000'000;
+  const Map map =
+      MapWithKeyframes(testing::DefaultRectangles(), Eigen::Vector3d::Zero(),
+                       (Vector6d() << 0.06, -0.03, 0.0, 0.0, 25 * kDegree, 0).finished());
+  const EventBuffer events = testing::SimulateEdgeEvents(
+      map, kCamera, [](int64_t t_ns) { return testing::SmoothMotion(t_ns); }, 0, kEndNs);
+  const Vector6d drift = (Vector6d() << 0.2, -0.1, 0.1, 1.5 * kDegree, 0.0, 0.0).finished();
+  const TrackerOptions options;
+  // Events in the hand-over's probe intervals; before each, the prior (and the hint) follow the
+  // drifted odometry.
+  auto search = [&](bool with_hint) {
+    Tracker tracker(map, nullptr, kCamera, options);
+    tracker.StartWithoutPose(0);
+    std::vector<PoseEstimate> estimates;
+    for (int64_t t_ns = 0; t_ns < kEndNs; t_ns += kHintPeriodNs) {
+      const Rigid3d odometry = testing::SmoothMotion(t_ns) * ExpSE3(drift);
+      tracker.SetSearchPrior(odometry.translation, 0.5);
+      if (with_hint) tracker.SetSearchHint(odometry);
+      for (const PoseEstimate& estimate :
+           tracker.AddEvents(testing::EventsBetween(events, t_ns, t_ns + kHintPeriodNs - 1))) {
+        estimates.push_back(estimate);
+      }
+    }
+    return estimates;
+  };
+  EXPECT_LT(CheckEstimates(search(false), options), 0) << "found from the keyframes alone";
+  const std::vector<PoseEstimate> estimates = search(true);
+  const int64_t first_tracking_ns = CheckEstimates(estimates, options);
+  ASSERT_GE(first_tracking_ns, 0) << "never TRACKING with the hint";
+  std::cout << "keyframes facing away, with the hint's orientation: TRACKING at "
+            << first_tracking_ns * 1e-9 << " s\n";
+  EXPECT_EQ(estimates.back().status, TrackingStatus::kTracking);
+}
+
 TEST(TrackerSearch, AtTensOfMetresRefinementsOfOnePlaceAreNotRivals) {
   const Map& map = NoisyLargeScene().map;
   const EventBuffer& events = NoisyLargeScene().events;
