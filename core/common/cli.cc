@@ -132,6 +132,17 @@ std::pair<double, double> ParseDoublePairFlag(std::string_view flag, std::string
           ParseDoubleFlag(flag, text.substr(comma + 1))};
 }
 
+std::vector<double> ParseDoubleListFlag(std::string_view flag, std::string_view text) {
+  std::vector<double> values;
+  size_t begin = 0;
+  while (true) {
+    const size_t comma = text.find(',', begin);
+    values.push_back(ParseDoubleFlag(flag, text.substr(begin, comma - begin)));
+    if (comma == std::string_view::npos) return values;
+    begin = comma + 1;
+  }
+}
+
 void ParseSizeFlag(std::string_view flag, std::string_view text, int* width, int* height) {
   const size_t x = text.find('x');
   if (x == std::string_view::npos) {

@@ -105,6 +105,10 @@ int ParseIntFlag(std::string_view flag, std::string_view text);
 // UsageError.
 std::pair<double, double> ParseDoublePairFlag(std::string_view flag, std::string_view text);
 
+// Parses "A,B,...", one or more finite numbers as ParseDoubleFlag does ("--segments 0.5,1,2").
+// Throws UsageError.
+std::vector<double> ParseDoubleListFlag(std::string_view flag, std::string_view text);
+
 // Parses a size "WIDTHxHEIGHT" of two positive integers. Throws UsageError.
 void ParseSizeFlag(std::string_view flag, std::string_view text, int* width, int* height);
 

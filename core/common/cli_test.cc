@@ -79,6 +79,16 @@ TEST(ParseIntFlag, RejectsValuesBeyondInt) {
   EXPECT_THROW(ParseIntFlag("--n", "4294967296"), UsageError);
 }
 
+TEST(ParseDoubleListFlag, OneOrMoreNumbersSplitAtCommas) {
+  EXPECT_EQ(ParseDoubleListFlag("--segments", "2"), std::vector<double>({2.0}));
+  EXPECT_EQ(ParseDoubleListFlag("--segments", "0.5,1,2e1"), std::vector<double>({0.5, 1.0, 20.0}));
+  EXPECT_THROW(ParseDoubleListFlag("--segments", ""), UsageError);
+  EXPECT_THROW(ParseDoubleListFlag("--segments", "1,"), UsageError);
+  EXPECT_THROW(ParseDoubleListFlag("--segments", ",1"), UsageError);
+  EXPECT_THROW(ParseDoubleListFlag("--segments", "1,,2"), UsageError);
+  EXPECT_THROW(ParseDoubleListFlag("--segments", "1,nan"), UsageError);
+}
+
 TEST(ParseDoublePairFlag, TwoNumbersSplitAtTheComma) {
   EXPECT_EQ(ParseDoublePairFlag("--motion-prior", "2,0"), std::make_pair(2.0, 0.0));
   EXPECT_EQ(ParseDoublePairFlag("--motion-prior", "-1.5,2e1"), std::make_pair(-1.5, 20.0));

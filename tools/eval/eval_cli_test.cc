@@ -107,6 +107,26 @@ TEST_F(EvalCliTest, BadCommandLineFailsWithUsageHint) {
   result = RunEval("--gt " + PathOf("gt.txt") + " --est " + PathOf("est.txt") + " --delta x",
                    directory_);
   EXPECT_EQ(result.exit_code, 2);
+  for (const char* segments : {"1,x", "1,-2", "0"}) {
+    result = RunEval(
+        "--gt " + PathOf("gt.txt") + " --est " + PathOf("est.txt") + " --segments " + segments,
+        directory_);
+    EXPECT_EQ(result.exit_code, 2) << segments;
+    EXPECT_NE(result.output.find("segments"), std::string::npos) << result.output;
+  }
+}
+
+TEST_F(EvalCliTest, SegmentsAddTheDriftOverPathLengths) {
+  const CommandResult result = RunEval("--gt " + PathOf("gt.txt") + " --est " + PathOf("est.txt") +
+                                           " --segments 0.1,1000 --json " + PathOf("drift.json"),
+                                       directory_);
+  ASSERT_EQ(result.exit_code, 0) << result.output;
+  EXPECT_NE(result.output.find("drift over 0.10 m"), std::string::npos) << result.output;
+  EXPECT_NE(result.output.find("n/a (the path is shorter)"), std::string::npos) << result.output;
+  const nlohmann::json json = nlohmann::json::parse(ReadFileToString(PathOf("drift.json")));
+  ASSERT_EQ(json["drift"].size(), 2u);
+  EXPECT_GT(json["drift"][0]["segments"].get<int>(), 0);
+  EXPECT_TRUE(json["drift"][1]["t_percent"].is_null());
 }
 
 }  // namespace

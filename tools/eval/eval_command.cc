@@ -48,6 +48,13 @@ std::unique_ptr<CommandLine> DeclareEvalCommandLine(EvalCommandOptions* options)
       .Add("--coverage-gap", "SECONDS",
            "estimates further apart than this leave the time between uncovered (default 0.1)",
            &evaluation.coverage_max_gap_s)
+      .Add("--segments", "M,M,...",
+           "also the drift over these path lengths of the ground truth, metres: the mean "
+           "translation error in % of the length and rotation error in deg/m over every "
+           "segment (odometry benchmarks' figure; default: none)",
+           [&evaluation](const std::string& flag, const std::string& value) {
+             evaluation.segment_lengths_m = ParseDoubleListFlag(flag, value);
+           })
       .Add("--json", "PATH", "write the figures as JSON", &options->json_path)
       .Add("--plot", "PATH", "write a PNG: top view of both trajectories and the error over time",
            &options->plot_path)

@@ -29,6 +29,13 @@ size_t ClosestIndex(const std::vector<int64_t>& times_ns, int64_t t_ns) {
   return (t_ns - times_ns[index - 1] <= times_ns[index] - t_ns) ? index - 1 : index;
 }
 
+// The relative pose error of the pair (i, j): E = (gt_i^-1 gt_j)^-1 (est_i^-1 est_j).
+Rigid3d RelativeError(const MatchedPose& i, const MatchedPose& j) {
+  const Rigid3d gt_relative = i.gt_world_from_cam.Inverse() * j.gt_world_from_cam;
+  const Rigid3d est_relative = i.est_world_from_cam.Inverse() * j.est_world_from_cam;
+  return gt_relative.Inverse() * est_relative;
+}
+
 std::string FormatNumber(double value, int decimals) {
   char buffer[64];
   std::snprintf(buffer, sizeof(buffer), "%.*f", decimals, value);
@@ -68,6 +75,9 @@ void EvaluationOptions::Check() const {
   check_positive(max_dt_s, "max_dt_s (--max-dt)");
   check_positive(fail_cm, "fail_cm (--fail-cm)");
   check_positive(coverage_max_gap_s, "coverage_max_gap_s (--coverage-gap)");
+  for (const double length : segment_lengths_m) {
+    check_positive(length, "each of segment_lengths_m (--segments)");
+  }
 }
 
 std::vector<MatchedPose> Associate(const Trajectory& ground_truth, const Trajectory& estimate,
@@ -146,11 +156,7 @@ std::vector<RelativePoseError> ComputeRelativePoseErrors(const std::vector<Match
     const int64_t target_ns = times_ns[i] + delta_ns;
     const size_t j = ClosestIndex(times_ns, target_ns);
     if (j <= i || std::abs(times_ns[j] - target_ns) > tolerance_ns) continue;
-    const Rigid3d gt_relative =
-        matches[i].gt_world_from_cam.Inverse() * matches[j].gt_world_from_cam;
-    const Rigid3d est_relative =
-        matches[i].est_world_from_cam.Inverse() * matches[j].est_world_from_cam;
-    const Rigid3d error = gt_relative.Inverse() * est_relative;
+    const Rigid3d error = RelativeError(matches[i], matches[j]);
     RelativePoseError pair;
     pair.t_i_ns = times_ns[i];
     pair.t_j_ns = times_ns[j];
@@ -159,6 +165,41 @@ std::vector<RelativePoseError> ComputeRelativePoseErrors(const std::vector<Match
     errors.push_back(pair);
   }
   return errors;
+}
+
+std::vector<SegmentDrift> ComputeSegmentDrift(const std::vector<MatchedPose>& matches,
+                                              const std::vector<double>& lengths_m) {
+  // Distance travelled along the ground truth up to each matched pose.
+  std::vector<double> travelled_m(matches.size(), 0.0);
+  for (size_t k = 1; k < matches.size(); ++k) {
+    travelled_m[k] = travelled_m[k - 1] + (matches[k].gt_world_from_cam.translation -
+                                           matches[k - 1].gt_world_from_cam.translation)
+                                              .norm();
+  }
+  std::vector<SegmentDrift> drift;
+  for (const double length_m : lengths_m) {
+    SegmentDrift figures;
+    figures.length_m = length_m;
+    double translation_sum = 0.0;
+    double rotation_sum = 0.0;
+    for (size_t i = 0; i < matches.size(); ++i) {
+      const auto end = std::lower_bound(travelled_m.begin() + static_cast<std::ptrdiff_t>(i),
+                                        travelled_m.end(), travelled_m[i] + length_m);
+      if (end == travelled_m.end()) break;
+      const size_t j = static_cast<size_t>(end - travelled_m.begin());
+      const Rigid3d error = RelativeError(matches[i], matches[j]);
+      translation_sum += error.translation.norm() / length_m;
+      rotation_sum += LogSO3(error.rotation).norm() / length_m;
+      ++figures.segments;
+    }
+    if (figures.segments > 0) {
+      const double count = static_cast<double>(figures.segments);
+      figures.translation_percent = 100.0 * translation_sum / count;
+      figures.rotation_deg_per_m = kRadiansToDegrees * rotation_sum / count;
+    }
+    drift.push_back(figures);
+  }
+  return drift;
 }
 
 double ComputeCoverage(const Trajectory& ground_truth, const Trajectory& estimate,
@@ -226,6 +267,7 @@ EvaluationResult EvaluateTrajectory(const Trajectory& ground_truth, const Trajec
     result.rpe_rotation_rmse_deg_s =
         kRadiansToDegrees * RootMeanSquare(rotations_rad) / options.delta_s;
   }
+  result.drift = ComputeSegmentDrift(matches, options.segment_lengths_m);
   result.coverage =
       ComputeCoverage(ground_truth, estimate, SecondsToNanoseconds(options.coverage_max_gap_s));
   return result;
@@ -252,6 +294,15 @@ nlohmann::json EvaluationToJson(const EvaluationResult& result) {
   json["fail_cm"] = result.options.fail_cm;
   json["coverage_max_gap_s"] = result.options.coverage_max_gap_s;
   json["rpe_pairs"] = result.rpe_pairs;
+  json["drift"] = nlohmann::json::array();
+  for (const SegmentDrift& figures : result.drift) {
+    const bool measured = figures.segments > 0;
+    json["drift"].push_back(
+        {{"length_m", figures.length_m},
+         {"segments", figures.segments},
+         {"t_percent", measured ? nlohmann::json(figures.translation_percent) : nullptr},
+         {"r_deg_per_m", measured ? nlohmann::json(figures.rotation_deg_per_m) : nullptr}});
+  }
   return json;
 }
 
@@ -281,6 +332,13 @@ std::string FormatEvaluationTable(const EvaluationResult& result) {
       optional_text(result.rpe_translation_rmse_cm_s, "cm/s", "n/a (no pair spans delta)"));
   row("RPE rotation RMSE",
       optional_text(result.rpe_rotation_rmse_deg_s, "deg/s", "n/a (no pair spans delta)"));
+  for (const SegmentDrift& figures : result.drift) {
+    row("drift over " + FormatNumber(figures.length_m, 2) + " m",
+        figures.segments > 0 ? FormatNumber(figures.translation_percent, 3) + " %, " +
+                                   FormatNumber(figures.rotation_deg_per_m, 3) + " deg/m (" +
+                                   std::to_string(figures.segments) + " segments)"
+                             : "n/a (the path is shorter)");
+  }
   row("coverage", FormatNumber(100.0 * result.coverage, 1) + " % (gaps over " +
                       FormatNumber(options.coverage_max_gap_s, 3) + " s uncovered)");
   row("failed at", optional_text(result.failed_at_s, "s", "never") + " (error over " +

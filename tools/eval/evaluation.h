@@ -1,6 +1,6 @@
 // Trajectory accuracy against ground truth: association, alignment, absolute trajectory error
-// (ATE), relative pose error (RPE) over a fixed time step, coverage and the failure time. The
-// definitions are in docs/accuracy.md, "How evloc measures accuracy".
+// (ATE), relative pose error (RPE) over a fixed time step, drift over path lengths, coverage and
+// the failure time. The definitions are in docs/accuracy.md, "How evloc measures accuracy".
 #pragma once
 
 #include <cstdint>
@@ -45,6 +45,9 @@ struct EvaluationOptions {
   // Coverage: consecutive estimates at most this far apart, seconds, cover the time between
   // them (--coverage-gap).
   double coverage_max_gap_s = 0.1;
+  // Path lengths of the ground truth over which the drift is measured, metres (--segments);
+  // none: no drift figures.
+  std::vector<double> segment_lengths_m;
 
   // Throws InvalidArgumentError unless every value is finite and positive.
   void Check() const;
@@ -106,6 +109,26 @@ struct RelativePoseError {
 std::vector<RelativePoseError> ComputeRelativePoseErrors(const std::vector<MatchedPose>& matches,
                                                          int64_t delta_ns);
 
+// Drift over one path length, as odometry benchmarks measure it (KITTI's translational and
+// rotational error): from every matched pose i, j is the first matched pose at which the ground
+// truth has travelled `length_m` further along its path; the segment's error is the relative
+// pose error of (i, j), E = (gt_i^-1 gt_j)^-1 (est_i^-1 est_j), divided by the length.
+struct SegmentDrift {
+  // Path length of the segments, metres.
+  double length_m = 0.0;
+  // Segments measured (0: the path is shorter than length_m).
+  size_t segments = 0;
+  // Mean |translation(E)| / length_m, percent.
+  double translation_percent = 0.0;
+  // Mean rotation angle of E / length_m, degrees per metre.
+  double rotation_deg_per_m = 0.0;
+};
+
+// The drift over each of `lengths_m` (in that order). Estimates are taken as given (align them
+// first).
+std::vector<SegmentDrift> ComputeSegmentDrift(const std::vector<MatchedPose>& matches,
+                                              const std::vector<double>& lengths_m);
+
 // Fraction of [gt start, gt end] covered by the estimate: the union of the intervals between
 // consecutive estimates at most `max_gap_ns` apart, clipped to the ground-truth span, divided by
 // its length. 0 when the ground truth spans no time or there are fewer than 2 estimates.
@@ -130,6 +153,8 @@ struct EvaluationResult {
   std::optional<double> rpe_rotation_rmse_deg_s;
   // Number of RPE pose pairs.
   size_t rpe_pairs = 0;
+  // Drift over each of options.segment_lengths_m.
+  std::vector<SegmentDrift> drift;
   // Coverage in [0, 1], see ComputeCoverage().
   double coverage = 0.0;
   // Seconds from the ground-truth start to the first matched estimate whose translation error
@@ -148,8 +173,9 @@ EvaluationResult EvaluateTrajectory(const Trajectory& ground_truth, const Trajec
 
 // The JSON report: ate_t_rmse_cm, ate_t_mean_cm, ate_t_median_cm, ate_t_max_cm, ate_r_rmse_deg,
 // rpe_t_rmse_cm_s, rpe_r_rmse_deg_s, coverage, failed_at_s, alignment, delta_s, matched_poses,
-// and, to state the conditions, max_dt_s, fail_cm, coverage_max_gap_s and rpe_pairs. Unavailable
-// values are null.
+// drift (one object per segment length: length_m, segments, t_percent, r_deg_per_m; null
+// figures when the path is shorter), and, to state the conditions, max_dt_s, fail_cm,
+// coverage_max_gap_s and rpe_pairs. Unavailable values are null.
 nlohmann::json EvaluationToJson(const EvaluationResult& result);
 
 // A readable table of the same figures, one per line, with units and conditions.

@@ -93,6 +93,56 @@ TEST(EvaluateTrajectory, ConstantOffsetGivesAteEqualToOffsetAndZeroRpe) {
   EXPECT_FALSE(result.failed_at_s.has_value());
 }
 
+TEST(EvaluateTrajectory, DriftOverPathLengths) {
+  const Trajectory ground_truth = Sample(StraightLine, 5.0, 100.0);
+  EvaluationOptions options;
+  options.segment_lengths_m = {1.0, 2.0, 10.0};
+  // A scale error of 1 %: every segment's translation is 1 % too long.
+  const Trajectory scaled = Sample(
+      [](double t) {
+        return Rigid3d(Eigen::Quaterniond::Identity(), 1.01 * StraightLine(t).translation);
+      },
+      5.0, 100.0);
+  const EvaluationResult result = EvaluateTrajectory(ground_truth, scaled, options);
+  ASSERT_EQ(result.drift.size(), 3u);
+  EXPECT_DOUBLE_EQ(result.drift[0].length_m, 1.0);
+  // Segments start at every pose from which the path goes on 1 m (t <= 4 s): 401 of 501.
+  EXPECT_NEAR(static_cast<double>(result.drift[0].segments), 401.0, 1.0);
+  EXPECT_NEAR(result.drift[0].translation_percent, 1.0, 0.02);
+  EXPECT_NEAR(result.drift[0].rotation_deg_per_m, 0.0, 1e-9);
+  EXPECT_NEAR(static_cast<double>(result.drift[1].segments), 301.0, 1.0);
+  EXPECT_NEAR(result.drift[1].translation_percent, 1.0, 0.02);
+  // The path is 5 m long: no 10 m segment.
+  EXPECT_EQ(result.drift[2].segments, 0u);
+  const nlohmann::json json = EvaluationToJson(result);
+  ASSERT_EQ(json["drift"].size(), 3u);
+  EXPECT_NEAR(json["drift"][0]["t_percent"].get<double>(), 1.0, 0.02);
+  EXPECT_TRUE(json["drift"][2]["t_percent"].is_null());
+  const std::string table = FormatEvaluationTable(result);
+  EXPECT_NE(table.find("drift over 1.00 m"), std::string::npos) << table;
+  EXPECT_NE(table.find("n/a (the path is shorter)"), std::string::npos) << table;
+
+  // A constant offset drifts nothing; a heading that turns by 2 degrees per second (per metre
+  // at 1 m/s) drifts 2 deg/m.
+  const Trajectory offset = Sample(
+      [](double t) {
+        return Rigid3d(Eigen::Quaterniond::Identity(),
+                       StraightLine(t).translation + Eigen::Vector3d(0.05, 0.0, 0.0));
+      },
+      5.0, 100.0);
+  EXPECT_NEAR(EvaluateTrajectory(ground_truth, offset, options).drift[0].translation_percent, 0.0,
+              1e-9);
+  const Trajectory turning = Sample(
+      [](double t) { return Rigid3d(AboutZ(2.0 * kDegree * t), StraightLine(t).translation); }, 5.0,
+      100.0);
+  EXPECT_NEAR(EvaluateTrajectory(ground_truth, turning, options).drift[1].rotation_deg_per_m, 2.0,
+              0.03);
+  // No lengths: no drift figures.
+  EXPECT_TRUE(EvaluateTrajectory(ground_truth, scaled, EvaluationOptions()).drift.empty());
+  options.segment_lengths_m = {1.0, 0.0};
+  EXPECT_THROW(options.Check(), InvalidArgumentError);
+}
+
 TEST(EvaluateTrajectory, KnownRotationOffset) {
   // The estimate is rotated by 2 degrees about the camera z axis; positions are exact.
   const Trajectory ground_truth = Sample(StraightLine, 5.0, 100.0);
