@@ -15,9 +15,11 @@
 # at 640x480). Prints one table row per run: ATE and RPE (evloc-eval, no alignment, delta 1 s;
 # RPE also as a percentage of the path's 30.5 cm/s), the first time beyond 10 cm, LOST steps,
 # and for DEVO its reference frames and their build CPU time (pin the script with taskset -c N
-# for comparable times).
+# for comparable times). The drift column is evloc-eval --segments 1,2,4: the mean translation
+# error over 1, 2 and 4 m of the path, in % of the length (docs/accuracy.md, "Drift over path
+# lengths").
 set -euo pipefail
-if [ $# -lt 2 ]; then sed -n 2,18p "$0"; exit 2; fi
+if [ $# -lt 2 ]; then sed -n 2,20p "$0"; exit 2; fi
 BUILD=$(realpath "$1"); OUT=$2; shift 2
 RUNS=("$@")
 [ ${#RUNS[@]} -gt 0 ] || RUNS=(devo-bright devo-dark devo-hdr devo-vga vo-bright vo-dark vo-hdr)
@@ -42,8 +44,8 @@ generate() {  # NAME CAMERA LIGHT -> dataset folder (rendered when missing)
   echo "$dir"
 }
 
-echo "| run | ATE cm | ATE ° | RPE cm/s (% of path) | RPE °/s | beyond 10 cm | LOST / steps | reference frames | build CPU ms median / max |"
-echo "|---|---|---|---|---|---|---|---|---|"
+echo "| run | ATE cm | ATE ° | RPE cm/s (% of path) | RPE °/s | drift % over 1 / 2 / 4 m | beyond 10 cm | LOST / steps | reference frames | build CPU ms median / max |"
+echo "|---|---|---|---|---|---|---|---|---|---|"
 for run in "${RUNS[@]}"; do
   mode=${run%%-*}; light=${run#*-}
   case $mode in devo | vo) ;; *) echo "odometry_30s: unknown run '$run'" >&2; exit 2 ;; esac
@@ -59,7 +61,7 @@ for run in "${RUNS[@]}"; do
   "$TRACK" --mode "$mode" --dataset "$dataset" --out "$result/estimate.txt" \
     --stats "$result/stats.json" ${TRACK_FLAGS:-} > "$result/track.log" 2>&1
   "$EVAL" --gt "$dataset/groundtruth.txt" --est "$result/estimate.txt" \
-    --json "$result/eval.json" --plot "$result/plot.png" > /dev/null
+    --json "$result/eval.json" --plot "$result/plot.png" --segments 1,2,4 > /dev/null
   /usr/bin/python3 - "$run" "$result" "$dataset/groundtruth.txt" <<'EOF'
 import json, math, re, statistics, sys
 run, result, truth = sys.argv[1:4]
@@ -73,9 +75,10 @@ log = open(result + "/track.log").read()
 builds = [float(v) for v in re.findall(r"\(([0-9.]+) ms CPU\)", log)]
 frames = re.search(r"evloc-track: (\d+) (?:reference frames|keyframes)", log)
 failed = e["failed_at_s"]
-print("| %s | %.2f | %.2f | %.3f (%.1f %%) | %.2f | %s | %d / %d | %s | %s |" % (
+drift = " / ".join("-" if d["t_percent"] is None else "%.2f" % d["t_percent"] for d in e["drift"])
+print("| %s | %.2f | %.2f | %.3f (%.1f %%) | %.2f | %s | %s | %d / %d | %s | %s |" % (
     run, e["ate_t_rmse_cm"], e["ate_r_rmse_deg"], e["rpe_t_rmse_cm_s"],
-    100 * e["rpe_t_rmse_cm_s"] / speed_cm_s, e["rpe_r_rmse_deg_s"],
+    100 * e["rpe_t_rmse_cm_s"] / speed_cm_s, e["rpe_r_rmse_deg_s"], drift,
     "never" if failed is None else "%.2f s" % failed, s["lost_steps"], s["steps"],
     frames.group(1) if frames else "-",
     "%.1f / %.1f" % (statistics.median(builds), max(builds)) if builds else "-"))
