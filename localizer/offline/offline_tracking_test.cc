@@ -433,6 +433,8 @@ TEST(TrackCommandLine, ParsesStartingWithoutAPoseAndTheBlackout) {
                                                              "2",
                                                              "--search-distinct-depth",
                                                              "0.03",
+                                                             "--search-probe-margin",
+                                                             "0.08",
                                                              "--search-verify-s-per-m",
                                                              "0.01",
                                                              "--motion-prior",
@@ -445,6 +447,7 @@ TEST(TrackCommandLine, ParsesStartingWithoutAPoseAndTheBlackout) {
   EXPECT_EQ(options.tracking.tracker.lost_steps_before_relocalization, 12);
   EXPECT_EQ(options.tracking.tracker.relocalization_give_up_s, 2.0);
   EXPECT_EQ(options.tracking.tracker.relocalization_distinct_depth_fraction, 0.03);
+  EXPECT_EQ(options.tracking.tracker.relocalization_probe_margin, 0.08);
   EXPECT_EQ(options.tracking.tracker.relocalization_verify_s_per_depth_m, 0.01);
   EXPECT_EQ(options.tracking.tracker.motion_prior_velocity_sigma_mps, 2.0);
   EXPECT_EQ(options.tracking.tracker.motion_prior_angular_velocity_sigma_dps, 15.0);
@@ -459,6 +462,7 @@ TEST(TrackCommandLine, ParsesStartingWithoutAPoseAndTheBlackout) {
                                                      {"--blackout", "2:1"},
                                                      {"--blackout", "1"},
                                                      {"--search-distinct-depth", "0.9"},
+                                                     {"--search-probe-margin", "1.5"},
                                                      {"--search-verify-s-per-m", "-0.1"},
                                                      {"--motion-prior", "2"},
                                                      {"--motion-prior", "-1,0"},

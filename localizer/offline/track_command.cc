@@ -381,6 +381,9 @@ Options:
                          docs/relocalization.md)
   --search-probe F       probe each round's winner from starts shifted by F of the median
                          depth it sees (default 0.03; 0: none; docs/relocalization.md)
+  --search-probe-margin A
+                         the winner must be aligned A better than its probes that end elsewhere
+                         (default 0.05; fits elsewhere: the margin 0.15; docs/relocalization.md)
   --search-distinct-depth F
                          two refinements of a search round are one place unless farther apart
                          than F of the median depth they see (or 5 cm, or 3 degrees; default
@@ -480,6 +483,8 @@ bool ApplySearchFlag(const std::string& flag, const std::string& value, TrackerO
     tracker->relocalization_cpu_share = ParseDoubleFlag(flag, value);
   } else if (flag == "--search-probe") {
     tracker->relocalization_probe_depth_fraction = ParseDoubleFlag(flag, value);
+  } else if (flag == "--search-probe-margin") {
+    tracker->relocalization_probe_margin = ParseDoubleFlag(flag, value);
   } else if (flag == "--search-distinct-depth") {
     tracker->relocalization_distinct_depth_fraction = ParseDoubleFlag(flag, value);
   } else if (flag == "--search-verify-s-per-m") {

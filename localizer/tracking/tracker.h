@@ -278,7 +278,7 @@ class Tracker {
     // Probes registered.
     int probes = 0;
     // The search's judgement: the pose's own registration is good and beats every distinct
-    // probe by relocalization_min_alignment_margin.
+    // probe by relocalization_probe_margin.
     bool unique = false;
   };
   // Runs the check at the last step (kTracking; otherwise returns an empty, non-unique check).
@@ -347,6 +347,8 @@ class Tracker {
     bool good = false;
     // Refined from a start around the round's winner (kProbe).
     bool probe = false;
+    // The round's winner the probes started around.
+    bool probed = false;
     // Median depth of the points selected at its pose, metres (0 when it selected too few): the
     // scale of its place (relocalization_distinct_depth_fraction).
     double depth_m = 0;
@@ -450,7 +452,8 @@ class Tracker {
   // Keeps the best distinct refinements of the round (relocalization_rivals) for the next one.
   void KeepRivals();
   // Judges the refinements of a finished round: true (and `accepted`) when the best is good and
-  // clearly better than the best distinct one.
+  // clearly better than every distinct one: by relocalization_min_alignment_margin, and within
+  // the probed winner's neighbourhood (the winner and its probes) by relocalization_probe_margin.
   bool JudgeRound(Refinement* accepted);
   bool InsideImage(const Eigen::Vector2d& pixel) const;
   bool NearEdge(const Eigen::Vector2d& pixel) const;

@@ -175,6 +175,9 @@ void TrackerOptions::Check() const {
               relocalization_probe_depth_fraction >= 0 &&
               relocalization_probe_depth_fraction <= 0.5,
           "relocalization_probe_depth_fraction must be in [0, 0.5].");
+  Require(std::isfinite(relocalization_probe_margin) && relocalization_probe_margin >= 0 &&
+              relocalization_probe_margin <= 1,
+          "relocalization_probe_margin must be in [0, 1].");
   Require(std::isfinite(relocalization_image_blur_px) && relocalization_image_blur_px >= 0 &&
               relocalization_image_blur_px <= 10,
           "relocalization_image_blur_px must be in [0, 10].");

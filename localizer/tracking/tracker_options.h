@@ -296,6 +296,16 @@ struct TrackerOptions {
   // replaces the winner, and the other probes are judged as any refinement (a neighbourhood of
   // similar fits fails the margin); docs/relocalization.md. 0: no probes.
   double relocalization_probe_depth_fraction = 0.03;
+  // The winner must beat each of its probes that ended at another place by this much (and a
+  // probe that won must beat the winner and the other probes by it); fits elsewhere are judged
+  // with relocalization_min_alignment_margin. The probes ask whether the winner is the peak of
+  // its own neighbourhood: along a flat valley (a wall of long bars) they end as well aligned as
+  // the winner and the round is refused. The right pose's neighbourhood need not be steep: on the
+  // rendered room at 240x180, turning back to the map, the probes around the right pose ended
+  // 6-8 cm beside it 0.04-0.1 below, and the full margin refused three of the four right rounds
+  // before one passed 0.8 s later (docs/accuracy.md, "Hand-over"). Above the step-to-step
+  // spread of one pose's alignment (about 0.02).
+  double relocalization_probe_margin = 0.05;
   // Two refined poses farther apart than this are distinct hypotheses, metres...
   double relocalization_distinct_m = 0.05;
   // ...or than this fraction of the median depth of the points the reference refinement sees,

@@ -566,16 +566,27 @@ bool Tracker::JudgeRound(Refinement* accepted) {
     KeepRivals();
     return false;
   }
+  // The probes and the winner they started around are one neighbourhood, judged with the probe
+  // margin (is the best its peak?); any other distinct fit with the full margin.
+  const bool local_best = best->probe || best->probed;
   double second = 0;
+  double second_local = 0;
   for (const Refinement& other : refinements_) {
     if (other.points_used >= options_.min_points && DistinctPlaces(other, *best)) {
-      second = std::max(second, other.alignment);
+      if (local_best && (other.probe || other.probed)) {
+        second_local = std::max(second_local, other.alignment);
+      } else {
+        second = std::max(second, other.alignment);
+      }
     }
   }
   search_progress_.best_alignment = best->alignment;
-  search_progress_.second_alignment = second;
+  search_progress_.second_alignment = std::max(second, second_local);
   KeepRivals();
-  if (best->alignment - second < options_.relocalization_min_alignment_margin) return false;
+  if (best->alignment - second < options_.relocalization_min_alignment_margin ||
+      best->alignment - second_local < options_.relocalization_probe_margin) {
+    return false;
+  }
   *accepted = *best;
   return true;
 }
@@ -878,8 +889,8 @@ Tracker::ProbeCheck Tracker::ProbeLastPose() {
         check.distinct_alignment = std::max(check.distinct_alignment, probe.alignment);
       }
     }
-    check.unique = reference.alignment - check.distinct_alignment >=
-                   options_.relocalization_min_alignment_margin;
+    check.unique =
+        reference.alignment - check.distinct_alignment >= options_.relocalization_probe_margin;
   }
   selected_ = selected;
   selection_world_from_cam_ = selection_world_from_cam;
@@ -889,7 +900,7 @@ Tracker::ProbeCheck Tracker::ProbeLastPose() {
 }
 
 bool Tracker::JudgeProbedRound(Refinement* accepted) {
-  const Refinement* winner = BestRefinement(/*with_probes=*/false);
+  Refinement* winner = BestRefinement(/*with_probes=*/false);
   bool superseded = false;
   for (const Refinement& refinement : refinements_) {
     superseded =
@@ -901,7 +912,11 @@ bool Tracker::JudgeProbedRound(Refinement* accepted) {
   // The other probes stay: fits around the winner nearly as good as it are an ambiguity the
   // judgement's margin refuses (kept only to polish the winner, they let the 10.6 cm winner of
   // docs/relocalization.md through).
-  if (superseded) refinements_.erase(refinements_.begin() + (winner - refinements_.data()));
+  if (superseded) {
+    refinements_.erase(refinements_.begin() + (winner - refinements_.data()));
+  } else if (winner) {
+    winner->probed = true;
+  }
   search_progress_.probe_replaced = superseded;
   return JudgeRound(accepted);
 }

@@ -897,6 +897,11 @@ TEST(TrackerSearch, RejectsABadPriorAndFrameTrackers) {
     bad_probe.relocalization_probe_depth_fraction = value;
     EXPECT_THROW(bad_probe.Check(), InvalidArgumentError) << value;
   }
+  for (const double value : {-0.01, 1.5, std::nan("")}) {
+    TrackerOptions bad_margin;
+    bad_margin.relocalization_probe_margin = value;
+    EXPECT_THROW(bad_margin.Check(), InvalidArgumentError) << value;
+  }
 }
 
 TEST(StaticMapSource, GivesKeyframesAndViewpointsBetweenThemWithinThePrior) {
