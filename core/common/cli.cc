@@ -122,16 +122,6 @@ int ParseIntFlag(std::string_view flag, std::string_view text) {
   return static_cast<int>(value);
 }
 
-std::pair<double, double> ParseDoublePairFlag(std::string_view flag, std::string_view text) {
-  const size_t comma = text.find(',');
-  if (comma == std::string_view::npos) {
-    throw UsageError(std::string(flag) + " expects two numbers A,B, got '" + std::string(text) +
-                     "'");
-  }
-  return {ParseDoubleFlag(flag, text.substr(0, comma)),
-          ParseDoubleFlag(flag, text.substr(comma + 1))};
-}
-
 std::vector<double> ParseDoubleListFlag(std::string_view flag, std::string_view text) {
   std::vector<double> values;
   size_t begin = 0;
@@ -141,6 +131,15 @@ std::vector<double> ParseDoubleListFlag(std::string_view flag, std::string_view 
     if (comma == std::string_view::npos) return values;
     begin = comma + 1;
   }
+}
+
+std::pair<double, double> ParseDoublePairFlag(std::string_view flag, std::string_view text) {
+  const std::vector<double> values = ParseDoubleListFlag(flag, text);
+  if (values.size() != 2) {
+    throw UsageError(std::string(flag) + " expects two numbers A,B, got '" + std::string(text) +
+                     "'");
+  }
+  return {values[0], values[1]};
 }
 
 void ParseSizeFlag(std::string_view flag, std::string_view text, int* width, int* height) {

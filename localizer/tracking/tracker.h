@@ -347,8 +347,6 @@ class Tracker {
     bool good = false;
     // Refined from a start around the round's winner (kProbe).
     bool probe = false;
-    // The round's winner the probes started around.
-    bool probed = false;
     // Median depth of the points selected at its pose, metres (0 when it selected too few): the
     // scale of its place (relocalization_distinct_depth_fraction).
     double depth_m = 0;
@@ -453,8 +451,10 @@ class Tracker {
   void KeepRivals();
   // Judges the refinements of a finished round: true (and `accepted`) when the best is good and
   // clearly better than every distinct one: by relocalization_min_alignment_margin, and within
-  // the probed winner's neighbourhood (the winner and its probes) by relocalization_probe_margin.
-  bool JudgeRound(Refinement* accepted);
+  // the neighbourhood of `probed_winner` (it and the probes, when the best is one of them) by
+  // relocalization_probe_margin. `probed_winner`: the refinement the probes started around, if
+  // it is still among the refinements.
+  bool JudgeRound(Refinement* accepted, const Refinement* probed_winner = nullptr);
   bool InsideImage(const Eigen::Vector2d& pixel) const;
   bool NearEdge(const Eigen::Vector2d& pixel) const;
   PotentialField* Field(SurfaceChannel channel);

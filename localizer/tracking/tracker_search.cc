@@ -556,7 +556,7 @@ void Tracker::KeepRivals() {
   }
 }
 
-bool Tracker::JudgeRound(Refinement* accepted) {
+bool Tracker::JudgeRound(Refinement* accepted, const Refinement* probed_winner) {
   // The best good refinement, against the best distinct one that registered enough points
   // (good or not: an ambiguity need not pass every threshold to make the best one doubtful).
   const Refinement* best = BestRefinement();
@@ -568,12 +568,15 @@ bool Tracker::JudgeRound(Refinement* accepted) {
   }
   // The probes and the winner they started around are one neighbourhood, judged with the probe
   // margin (is the best its peak?); any other distinct fit with the full margin.
-  const bool local_best = best->probe || best->probed;
+  const auto local = [probed_winner](const Refinement& refinement) {
+    return refinement.probe || &refinement == probed_winner;
+  };
+  const bool local_best = local(*best);
   double second = 0;
   double second_local = 0;
   for (const Refinement& other : refinements_) {
     if (other.points_used >= options_.min_points && DistinctPlaces(other, *best)) {
-      if (local_best && (other.probe || other.probed)) {
+      if (local_best && local(other)) {
         second_local = std::max(second_local, other.alignment);
       } else {
         second = std::max(second, other.alignment);
@@ -900,7 +903,7 @@ Tracker::ProbeCheck Tracker::ProbeLastPose() {
 }
 
 bool Tracker::JudgeProbedRound(Refinement* accepted) {
-  Refinement* winner = BestRefinement(/*with_probes=*/false);
+  const Refinement* winner = BestRefinement(/*with_probes=*/false);
   bool superseded = false;
   for (const Refinement& refinement : refinements_) {
     superseded =
@@ -912,13 +915,9 @@ bool Tracker::JudgeProbedRound(Refinement* accepted) {
   // The other probes stay: fits around the winner nearly as good as it are an ambiguity the
   // judgement's margin refuses (kept only to polish the winner, they let the 10.6 cm winner of
   // docs/relocalization.md through).
-  if (superseded) {
-    refinements_.erase(refinements_.begin() + (winner - refinements_.data()));
-  } else if (winner) {
-    winner->probed = true;
-  }
+  if (superseded) refinements_.erase(refinements_.begin() + (winner - refinements_.data()));
   search_progress_.probe_replaced = superseded;
-  return JudgeRound(accepted);
+  return JudgeRound(accepted, superseded ? nullptr : winner);
 }
 
 void Tracker::FinishSearchStep(int64_t t_ns, PoseEstimate* estimate) {
