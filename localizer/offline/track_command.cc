@@ -439,6 +439,10 @@ Options:
                          with polarity and occlusion: points claim edge pixels of their
                          predicted polarity (default on)
   --velocity-window S    constant-velocity window, seconds (default 0.02)
+  --velocity-decay-time S
+                         the step's prediction takes the velocity to decay with this time
+                         constant, seconds (default 0: constant; an experiment,
+                         docs/accuracy.md "DEVO on turning paths")
   --motion-prior V,W     the constant-velocity prediction as a prior in each tracking solve,
                          its velocity trusted to V m/s and W deg/s (default 0,0: none; a
                          vehicle: docs/tracking.md, "Motion prior")
@@ -544,6 +548,8 @@ bool ApplyTrackerFlag(const std::string& flag, const std::string& value, Tracker
     tracker->max_depth_m = ParseDoubleFlag(flag, value);
   } else if (flag == "--velocity-window") {
     tracker->velocity_window_s = ParseDoubleFlag(flag, value);
+  } else if (flag == "--velocity-decay-time") {
+    tracker->velocity_decay_time_s = ParseDoubleFlag(flag, value);
   } else if (flag == "--motion-prior") {
     ParseMotionPriorFlag(flag, value, tracker);
   } else if (flag == "--polarity-band") {

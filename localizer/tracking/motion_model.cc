@@ -1,6 +1,7 @@
 #include "localizer/tracking/motion_model.h"
 
 #include <algorithm>
+#include <cmath>
 #include <tuple>
 
 #include "core/common/error.h"
@@ -71,15 +72,26 @@ std::pair<Vector6d, int64_t> ConstantVelocityModel::TwistOver(int64_t window_ns)
           span_ns};
 }
 
-Rigid3d ConstantVelocityModel::Predict(int64_t t_ns) const { return Extrapolate(velocity_, t_ns); }
-
-Rigid3d ConstantVelocityModel::PredictSmooth(int64_t t_ns) const {
-  return Extrapolate(smooth_velocity_, t_ns);
+Rigid3d ConstantVelocityModel::Predict(int64_t t_ns) const {
+  double dt_s = SecondsSinceLast(t_ns);
+  if (decay_time_ns_ > 0) {
+    // The distance a velocity decaying as exp(-t / tau) covers in dt: tau * (1 - exp(-dt / tau)).
+    const double tau_s = static_cast<double>(decay_time_ns_) * 1e-9;
+    dt_s = -tau_s * std::expm1(-dt_s / tau_s);
+  }
+  return Extrapolate(velocity_, dt_s);
 }
 
-Rigid3d ConstantVelocityModel::Extrapolate(const Vector6d& velocity, int64_t t_ns) const {
+Rigid3d ConstantVelocityModel::PredictSmooth(int64_t t_ns) const {
+  return Extrapolate(smooth_velocity_, SecondsSinceLast(t_ns));
+}
+
+double ConstantVelocityModel::SecondsSinceLast(int64_t t_ns) const {
+  return last_t_ns_ ? static_cast<double>(t_ns - *last_t_ns_) * 1e-9 : 0.0;
+}
+
+Rigid3d ConstantVelocityModel::Extrapolate(const Vector6d& velocity, double dt_s) const {
   if (!last_t_ns_) return last_world_from_cam_;
-  const double dt_s = static_cast<double>(t_ns - *last_t_ns_) * 1e-9;
   return last_world_from_cam_ * ExpSE3(velocity * dt_s);
 }
 

@@ -19,9 +19,15 @@ namespace evloc::tracking {
 class ConstantVelocityModel {
  public:
   // `window_ns` = 0 takes the velocity from the last two poses only. `smooth_window_ns` is the
-  // window of smooth_velocity() (at least `window_ns` is used).
-  explicit ConstantVelocityModel(int64_t window_ns = 0, int64_t smooth_window_ns = 0)
-      : window_ns_(window_ns), smooth_window_ns_(std::max(window_ns, smooth_window_ns)) {}
+  // window of smooth_velocity() (at least `window_ns` is used). `decay_time_ns` > 0 damps
+  // Predict(): the velocity is taken to decay exponentially with that time constant (a
+  // first-order Gauss-Markov velocity), so the prediction moves by
+  // velocity * tau * (1 - exp(-dt / tau)) instead of velocity * dt; 0 = constant velocity.
+  explicit ConstantVelocityModel(int64_t window_ns = 0, int64_t smooth_window_ns = 0,
+                                 int64_t decay_time_ns = 0)
+      : window_ns_(window_ns),
+        smooth_window_ns_(std::max(window_ns, smooth_window_ns)),
+        decay_time_ns_(std::max<int64_t>(decay_time_ns, 0)) {}
 
   // Forgets the history and sets the pose at t_ns; the velocity becomes zero.
   void Reset(const Rigid3d& world_from_cam, int64_t t_ns);
@@ -57,20 +63,24 @@ class ConstantVelocityModel {
   // The smooth window, ns.
   int64_t smooth_window_ns() const { return smooth_window_ns_; }
 
-  // The pose predicted at t_ns (the last pose when not initialized or at the same time).
+  // The pose predicted at t_ns (the last pose when not initialized or at the same time), damped
+  // by the decay time when there is one.
   Rigid3d Predict(int64_t t_ns) const;
-  // The same along smooth_velocity() (the motion prior's centre).
+  // The same along smooth_velocity(), undamped (the motion prior's centre).
   Rigid3d PredictSmooth(int64_t t_ns) const;
 
  private:
   // The twist from the oldest pose of `history_` that is at least `window_ns` older than the
   // newest (at least the previous pose; the oldest when none is), and that span.
   std::pair<Vector6d, int64_t> TwistOver(int64_t window_ns) const;
-  // The last pose moved on to t_ns by `velocity`.
-  Rigid3d Extrapolate(const Vector6d& velocity, int64_t t_ns) const;
+  // The last pose moved on by `velocity` for `dt_s` seconds.
+  Rigid3d Extrapolate(const Vector6d& velocity, double dt_s) const;
+  // The time from the last pose to t_ns, seconds (0 when not initialized).
+  double SecondsSinceLast(int64_t t_ns) const;
 
   int64_t window_ns_ = 0;
   int64_t smooth_window_ns_ = 0;
+  int64_t decay_time_ns_ = 0;
   Rigid3d last_world_from_cam_;
   std::optional<int64_t> last_t_ns_;
   Vector6d velocity_ = Vector6d::Zero();

@@ -168,5 +168,37 @@ TEST(ConstantVelocityModel, RejectsUpdatesThatDoNotMoveForwardInTime) {
   EXPECT_THROW(model.Update(Rigid3d(), 10), InvalidArgumentError);
 }
 
+// With a decay time the prediction moves by velocity * tau * (1 - exp(-dt / tau)): short steps
+// nearly by velocity * dt, long gaps at most by velocity * tau. The smooth prediction (the motion
+// prior's centre) and the velocity itself are not damped.
+TEST(ConstantVelocityModel, ADecayTimeDampsThePredictionOnly) {
+  Vector6d twist;
+  twist << 1.0, -0.5, 0.25, 0.0, 0.0, 0.0;  // translation only: the distances are exact.
+  ConstantVelocityModel constant(20'000'000, 100'000'000);
+  ConstantVelocityModel damped(20'000'000, 100'000'000, 25'000'000);
+  const Rigid3d start(Eigen::Quaterniond::Identity(), Eigen::Vector3d(1, 2, 3));
+  constant.Reset(start, 0, twist);
+  damped.Reset(start, 0, twist);
+  EXPECT_EQ(damped.velocity(), constant.velocity());
+  for (const int64_t dt_ns : {3'333'333LL, 25'000'000LL, 1'000'000'000LL}) {
+    const double dt = static_cast<double>(dt_ns) * 1e-9;
+    const double moved = (damped.Predict(dt_ns).translation - start.translation).norm();
+    EXPECT_NEAR(moved, twist.head<3>().norm() * 0.025 * (1 - std::exp(-dt / 0.025)), 1e-12);
+    EXPECT_NEAR((constant.Predict(dt_ns).translation - start.translation).norm(),
+                twist.head<3>().norm() * dt, 1e-12);
+    EXPECT_EQ(damped.PredictSmooth(dt_ns).translation, constant.PredictSmooth(dt_ns).translation);
+  }
+  // One step at 300 Hz keeps 93.6 % of the constant velocity's motion; a second at most tau's.
+  EXPECT_NEAR((damped.Predict(3'333'333).translation - start.translation).norm() /
+                  (constant.Predict(3'333'333).translation - start.translation).norm(),
+              0.936, 0.001);
+  EXPECT_LT((damped.Predict(1'000'000'000).translation - start.translation).norm(),
+            twist.head<3>().norm() * 0.025 + 1e-12);
+  // No decay time is the constant velocity, bit for bit.
+  ConstantVelocityModel zero(20'000'000, 100'000'000, 0);
+  zero.Reset(start, 0, twist);
+  EXPECT_EQ(zero.Predict(7'000'000).translation, constant.Predict(7'000'000).translation);
+}
+
 }  // namespace
 }  // namespace evloc::tracking

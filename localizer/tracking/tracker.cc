@@ -47,7 +47,8 @@ Tracker::Tracker(std::unique_ptr<const MapSource> owned, const MapSource* borrow
       surface_(camera, binning_),
       filter_(SensorSize{camera.width, camera.height}, options.event_filter),
       motion_(std::llround(options.velocity_window_s * 1e9),
-              std::llround(options.stamp_velocity_window_s * 1e9)) {
+              std::llround(options.stamp_velocity_window_s * 1e9),
+              std::llround(options.velocity_decay_time_s * 1e9)) {
   if (ideal_camera_.width < 8 || ideal_camera_.height < 8) {
     throw InvalidArgumentError("Tracker: the camera image must be at least 8x8 pixels.");
   }

@@ -95,6 +95,9 @@ void TrackerOptions::Check() const {
           "on_edge_radius_px must be in [0, 10].");
   Require(std::isfinite(velocity_window_s) && velocity_window_s >= 0 && velocity_window_s <= 1,
           "velocity_window_s must be in [0, 1] seconds.");
+  Require(std::isfinite(velocity_decay_time_s) && velocity_decay_time_s >= 0 &&
+              velocity_decay_time_s <= 10,
+          "velocity_decay_time_s must be in [0, 10] seconds (0 = constant velocity).");
   Require(std::isfinite(motion_prior_velocity_sigma_mps) && motion_prior_velocity_sigma_mps >= 0,
           "motion_prior_velocity_sigma_mps must be finite and >= 0 (0 = no prior).");
   Require(std::isfinite(motion_prior_angular_velocity_sigma_dps) &&

@@ -189,6 +189,15 @@ struct TrackerOptions {
   // long before it (seconds; 0 = the last two steps). Pose noise divided by one step period
   // swamps the velocity; the polarity prediction needs its direction.
   double velocity_window_s = 0.02;
+  // The step's starting pose extrapolates a velocity that decays with this time constant
+  // (seconds; ConstantVelocityModel, a first-order Gauss-Markov velocity); 0 = constant velocity,
+  // the default everywhere. An experiment, not a default: along a direction the points do not
+  // constrain (a wall of vertical stripes) a constant velocity re-measures its own error from
+  // the poses it produced; a decay damps that, but on Canny-DEVO's 34 turning paths no time
+  // constant from 5 to 33 ms lost fewer paths beyond 10 cm for certain (4-10 against 10;
+  // docs/accuracy.md, "DEVO on turning paths"). With polarity it costs accuracy (the synthetic
+  // scene's worst error 1.4 -> 2.9 cm at 25 ms): the polarities follow the predicted flow.
+  double velocity_decay_time_s = 0.0;
   // The motion prior (docs/tracking.md, "Motion prior"): the last pose moved on by the smooth
   // velocity (measured over stamp_velocity_window_s) enters each tracking solve as a prior once
   // that velocity spans its whole window since the last Reset; recovery solves go without. The
