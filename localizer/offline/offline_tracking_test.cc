@@ -438,7 +438,9 @@ TEST(TrackCommandLine, ParsesStartingWithoutAPoseAndTheBlackout) {
                                                              "--search-verify-s-per-m",
                                                              "0.01",
                                                              "--motion-prior",
-                                                             "2,15"});
+                                                             "2,15",
+                                                             "--velocity-decay-time",
+                                                             "0.015"});
   EXPECT_TRUE(options.no_initial_pose);
   EXPECT_FALSE(options.initial_world_from_cam.has_value());
   EXPECT_EQ(options.start_s, 0.5);
@@ -451,6 +453,7 @@ TEST(TrackCommandLine, ParsesStartingWithoutAPoseAndTheBlackout) {
   EXPECT_EQ(options.tracking.tracker.relocalization_verify_s_per_depth_m, 0.01);
   EXPECT_EQ(options.tracking.tracker.motion_prior_velocity_sigma_mps, 2.0);
   EXPECT_EQ(options.tracking.tracker.motion_prior_angular_velocity_sigma_dps, 15.0);
+  EXPECT_EQ(options.tracking.tracker.velocity_decay_time_s, 0.015);
   EXPECT_FALSE(options.gnss.has_value());
   const TrackCommandOptions with_fix =
       ParseTrackCommandLine({"--map", "m", "--dataset", "d", "--out", "o", "--init-pose", "none",
@@ -467,6 +470,7 @@ TEST(TrackCommandLine, ParsesStartingWithoutAPoseAndTheBlackout) {
                                                      {"--motion-prior", "2"},
                                                      {"--motion-prior", "-1,0"},
                                                      {"--motion-prior", "2,x"},
+                                                     {"--velocity-decay-time", "-1"},
                                                      {"--init-pose", "none", "--mode", "frames"},
                                                      {"--gnss", "47.3,8.5,400,3"},
                                                      {"--init-pose", "none", "--gnss", "47.3,8.5"},

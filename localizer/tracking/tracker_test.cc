@@ -440,6 +440,11 @@ TEST(TrackerOptions, CheckAndVariants) {
   options = TrackerOptions{};
   options.informative_seed_fraction = 0;
   EXPECT_THROW(options.Check(), InvalidArgumentError);
+  for (const double decay : {-0.01, 11.0, std::nan("")}) {
+    options = TrackerOptions{};
+    options.velocity_decay_time_s = decay;
+    EXPECT_THROW(options.Check(), InvalidArgumentError) << decay;
+  }
   for (const int binning : {-1, 9}) {
     options = TrackerOptions{};
     options.binning = binning;
