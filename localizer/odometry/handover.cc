@@ -34,6 +34,7 @@ void HandoverOptions::Check() const {
     throw InvalidArgumentError("HandoverOptions: " + what);
   };
   if (min_map_points < 1) fail("min_map_points must be >= 1");
+  if (leave_map_points < 0) fail("leave_map_points must be >= 0 (0 = min_map_points)");
   if (!(map_probe_interval_s >= 0) || !std::isfinite(map_probe_interval_s)) {
     fail("map_probe_interval_s must be >= 0");
   }
@@ -269,11 +270,13 @@ std::vector<HandoverEstimate> MapOdometryHandover::Report(
       if (MapSeen(map_step)) {
         last_good_map_ = map_step;
         last_good_velocity_ = map_tracker_.velocity();
-        reported.push_back({map_step, PoseSource::kMap});
-        continue;
+        if (map_step.quality.points_used >= options_.leave_map_points) {
+          reported.push_back({map_step, PoseSource::kMap});
+          continue;
+        }
       }
-      // The map is no longer seen: DEVO from the last good map pose, moved on by the velocity
-      // the tracker had then (this step registered too few points to be trusted).
+      // The map is no longer seen (or is sliding out of view: leave_map_points): DEVO from the
+      // last good map pose, moved on by the velocity the tracker had then.
       bool started = false;
       if (last_good_map_) {
         const double dt_s = static_cast<double>(map_step.t_ns - last_good_map_->t_ns) * 1e-9;

@@ -48,6 +48,10 @@ struct HandoverOptions {
   // The map is not seen when a map step registers fewer map points than this (points_used; or
   // is not TRACKING): a step on a few points can be TRACKING yet centimetres to decimetres off.
   int min_map_points = 500;
+  // The hand-over to odometry happens when a map step registers fewer map points than this
+  // (0 = min_map_points): a higher value leaves the map earlier as it slides out of view, while
+  // returns still need min_map_points (hysteresis).
+  int leave_map_points = 0;
   // While on odometry, the map is looked for (its points projected from the odometry pose) at
   // most this often, seconds; when at least min_map_points project into the image the map
   // tracker is given the odometry pose.

@@ -1,5 +1,6 @@
 #include "localizer/odometry/handover.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -146,6 +147,23 @@ TEST(MapOdometryHandover, KeepsAPoseAwayFromTheMapAndComesBackVerified) {
       (last.estimate.world_from_cam.translation - HandoverMotion(last.estimate.t_ns).translation)
               .norm() *
           1e3);
+}
+
+// leave_map_points above what the map tracker registers hands over while the map is still in
+// full view (the default hands over only once it leaves: the test above).
+TEST(MapOdometryHandover, ALeaveThresholdAboveTheMapsPointsHandsOverAtOnce) {
+  HandoverOptions options;
+  options.leave_map_points = 1'000'000;
+  HandoverCounts counts;
+  const std::vector<HandoverEstimate> reported = RunScene(options, &counts);
+  const auto first_odometry = std::find_if(
+      reported.begin(), reported.end(),
+      [](const HandoverEstimate& estimate) { return estimate.source == PoseSource::kOdometry; });
+  ASSERT_NE(first_odometry, reported.end());
+  EXPECT_LT(first_odometry->estimate.t_ns, testing::kLeaveNs);
+  HandoverOptions bad;
+  bad.leave_map_points = -1;
+  EXPECT_THROW(bad.Check(), InvalidArgumentError);
 }
 
 // When the odometry pose is not good enough a hint (here: a gate so tight that no hinted return

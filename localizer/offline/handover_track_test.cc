@@ -70,6 +70,17 @@ TEST(TrackWithHandover, NeedsDepthAndMapTrackingOfEvents) {
   EXPECT_THROW(ParseTrackCommandLine({"--map", "m", "--dataset", "d", "--out", "o", "--handover",
                                       "--events-per-step", "1000"}),
                InvalidArgumentError);
+  // The hand-over's leave threshold: 0 (the default) is min_map_points, a negative one is refused.
+  const TrackCommandOptions leave =
+      ParseTrackCommandLine({"--map", "m", "--dataset", "d", "--out", "o", "--handover",
+                             "--handover-leave-points", "900"});
+  EXPECT_EQ(leave.handover_options.leave_map_points, 900);
+  EXPECT_EQ(ParseTrackCommandLine({"--map", "m", "--dataset", "d", "--out", "o", "--handover"})
+                .handover_options.leave_map_points,
+            0);
+  EXPECT_THROW(ParseTrackCommandLine({"--map", "m", "--dataset", "d", "--out", "o", "--handover",
+                                      "--handover-leave-points", "-1"}),
+               InvalidArgumentError);
   fs::remove_all(root);
 }
 

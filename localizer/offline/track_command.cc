@@ -405,6 +405,9 @@ Options:
                          by Canny-DEVO from the last good pose and come back to the map once it is
                          seen again and verified; --stats gives each step's source (map, odometry)
                          (docs/tracking.md, "Hand-over")
+  --handover-leave-points N
+                         hand over when a map step registers fewer than N map points (default
+                         500, the points a return needs too)
   --rate HZ              tracking steps per second of event time (default 300)
   --events-per-step N    a step every N events instead of a fixed rate
   --variant NAME         EVT (default), EVT-PR, EVT-OH or EVT-- (docs/tracking.md, "Variants")
@@ -597,6 +600,9 @@ TrackCommandOptions ParseTrackCommandLine(const std::vector<std::string>& argume
     const std::string& value = TakeFlagValue(arguments, &i);
     if (flag == "--map") {
       options.map_path = value;
+    } else if (flag == "--handover-leave-points") {
+      options.handover_options.leave_map_points = ParseIntFlag(flag, value);
+      options.handover_options.Check();
     } else if (flag == "--tile-radius") {
       options.tiles.radius_m = ParseDoubleFlag(flag, value);
     } else if (flag == "--tile-lookahead") {
@@ -802,7 +808,7 @@ OfflineTrackingResult RunTrackCommand(const TrackCommandOptions& options, std::o
   if (options.handover) {
     const HandoverTrackResult run =
         TrackWithHandover(dataset, map, &visibility, *initial_world_from_cam, initial_t_ns,
-                          tracking, odometry::HandoverOptions(), on_step);
+                          tracking, options.handover_options, on_step);
     result = run.result;
     if (!options.quiet) {
       log << "evloc-track: hand-over: " << run.counts.to_odometry << " to odometry, "

@@ -11,6 +11,7 @@
 #include "core/dataset/dataset.h"
 #include "core/geo/gnss_prior.h"
 #include "core/geometry/rigid3.h"
+#include "localizer/odometry/handover.h"
 #include "localizer/odometry/odometry_run.h"
 #include "localizer/offline/offline_tracking.h"
 #include "localizer/tracking/tiled_map_source.h"
@@ -82,6 +83,8 @@ struct TrackCommandOptions {
   // Map tracking with the hand-over to Canny-DEVO where the map is not seen (--handover; events
   // mode, a whole map and a dataset with depth).
   bool handover = false;
+  // The hand-over's own options (--handover-leave-points).
+  odometry::HandoverOptions handover_options;
   // The offline run's options (--mode, --rate, --events-per-step, --polarity, --occlusion,
   // --variant, --max-points, --tau).
   OfflineTrackingOptions tracking;

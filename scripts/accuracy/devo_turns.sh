@@ -8,6 +8,8 @@
 #   OUT_DIR     where the renders (reused when present) and results go, outside the repository
 #   TAG         names this run's results (OUT_DIR/results/TAG-PATH.*; default "default")
 #   FLAG...     added to `evloc-track --mode devo` (e.g. --velocity-window 0.1)
+# HANDOVER=1 runs the hand-over instead (`evloc-track --map PATH/gt_map --handover`: the map of
+# the first 1.5 s, DEVO while it is not seen) and adds when each path is back on the map for good.
 # The 34 paths: handover_path.py with --turn 2.0 and --yaw +-60/+-90/+-120, --turn 1.0 and 3.0
 # with +-90/+-120, --turn 1.5 and 2.5 with +-60/+-75/+-90/+-105/+-120 (positive = right), each
 # rendered as `evloc-sim render --camera davis240 --trajectory P --depth-camera --map-until 1.5`
@@ -16,7 +18,7 @@
 # Prints one row per path (ATE RMSE and max, cm; when the error first exceeds 10 cm, and how the
 # error moves in the camera frame over the next 0.3 s) and a summary line.
 set -euo pipefail
-if [ $# -lt 2 ]; then sed -n 2,17p "$0"; exit 2; fi
+if [ $# -lt 2 ]; then sed -n 2,19p "$0"; exit 2; fi
 BUILD=$(realpath "$1"); OUT=$(realpath -m "$2"); shift 2
 TAG=${1:-default}; [ $# -gt 0 ] && shift
 JOBS=${JOBS:-2}
@@ -46,7 +48,9 @@ render() {  # NAME
 run() {  # NAME CORE
   local name=$1 result=$OUT/results/$TAG-$1
   render "$name"
-  taskset -c "$2" "$TRACK" --mode devo --dataset "$OUT/$name" --out "$result.txt" \
+  local mode=(--mode devo)
+  [ "${HANDOVER:-0}" = 1 ] && mode=(--map "$OUT/$name/gt_map" --handover)
+  taskset -c "$2" "$TRACK" "${mode[@]}" --dataset "$OUT/$name" --out "$result.txt" \
     --stats "$result.stats.json" --quiet "${FLAGS[@]}" > "$result.log" 2>&1
   "$EVAL" --gt "$OUT/$name/groundtruth.txt" --est "$result.txt" --json "$result.eval.json" \
     > /dev/null
@@ -58,11 +62,11 @@ for ((i = 0; i < ${#PATHS[@]}; i += JOBS)); do
   wait
 done
 
-/usr/bin/python3 - "$OUT" "$TAG" "${PATHS[@]}" <<'EOF'
+/usr/bin/python3 - "$OUT" "$TAG" "${HANDOVER:-0}" "${PATHS[@]}" <<'EOF'
 import json, statistics, sys
 import numpy as np
 
-out, tag, names = sys.argv[1], sys.argv[2], sys.argv[3:]
+out, tag, handover, names = sys.argv[1], sys.argv[2], sys.argv[3] == "1", sys.argv[4:]
 
 
 def rotation_matrix(q):  # x, y, z, w
@@ -72,9 +76,10 @@ def rotation_matrix(q):  # x, y, z, w
                      [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
 
 
-print("| path | ATE cm | max cm | beyond 10 cm at | error moves over the next 0.3 s (camera x, y, z; cm) |")
-print("|---|---|---|---|---|")
-ates = []
+print("| path | ATE cm | max cm | beyond 10 cm at | error moves over the next 0.3 s (camera x, y, z; cm) |"
+      + (" back on the map at |" if handover else ""))
+print("|---|---|---|---|---|" + ("---|" if handover else ""))
+ates, back = [], 0
 for name in names:
     e = json.load(open(f"{out}/results/{tag}-{name}.eval.json"))
     ates.append(e["ate_t_rmse_cm"])
@@ -91,7 +96,18 @@ for name in names:
         later = np.searchsorted(estimate[:, 0], estimate[beyond, 0] + 0.3)
         move = 100 * (errors[min(later, len(errors) - 1)] - errors[beyond])
         when, moves = f"{estimate[beyond, 0]:.2f} s", "%+.0f, %+.0f, %+.0f" % tuple(move)
-    print(f"| {name} | {e['ate_t_rmse_cm']:.1f} | {e['ate_t_max_cm']:.0f} | {when} | {moves} |")
+    row = f"| {name} | {e['ate_t_rmse_cm']:.1f} | {e['ate_t_max_cm']:.0f} | {when} | {moves} |"
+    if handover:
+        # The first step of the last stretch from the map, if the odometry ran before it.
+        steps = json.load(open(f"{out}/results/{tag}-{name}.stats.json"))["per_step"]
+        k = len(steps)
+        while k > 0 and steps[k - 1].get("source") == "map":
+            k -= 1
+        returned = 0 < k < len(steps) and any(s.get("source") == "odometry" for s in steps[:k])
+        back += returned
+        row += f" {steps[k]['t_s']:.2f} s |" if returned else " never |"
+    print(row)
 print(f"{tag}: {len(ates)} paths, ATE median {statistics.median(ates):.2f} cm, mean "
-      f"{statistics.mean(ates):.1f} cm, {sum(a > 10 for a in ates)} beyond 10 cm")
+      f"{statistics.mean(ates):.1f} cm, {sum(a > 10 for a in ates)} beyond 10 cm"
+      + (f", {back} back on the map by the end" if handover else ""))
 EOF
