@@ -318,6 +318,7 @@ void TrackCommandOptions::Check() const {
     throw InvalidArgumentError("--ecd-size must be WIDTHxHEIGHT with positive sizes");
   }
   tiles.Check();
+  handover_options.Check();
   if (map_memory_bytes == 0) throw InvalidArgumentError("--map-memory must be more than 0 bytes");
   tracking.Check();
 }
@@ -602,7 +603,6 @@ TrackCommandOptions ParseTrackCommandLine(const std::vector<std::string>& argume
       options.map_path = value;
     } else if (flag == "--handover-leave-points") {
       options.handover_options.leave_map_points = ParseIntFlag(flag, value);
-      options.handover_options.Check();
     } else if (flag == "--tile-radius") {
       options.tiles.radius_m = ParseDoubleFlag(flag, value);
     } else if (flag == "--tile-lookahead") {
